@@ -1,0 +1,194 @@
+//! The lock-step barrier: which agents a cycle waits for, and what each batch means.
+//!
+//! Pure bookkeeping, no I/O, so every rule is unit tested here:
+//! - a batch counts only for the cycle it names: a stop for `f-1` arriving during `f` is
+//!   *late* and never completes `f` (the "wrong frame" bug of lock-step systems);
+//! - a batch naming a future cycle is a protocol violation and is dropped;
+//! - a batch after the agent's stop of the same cycle is late too;
+//! - the cycle is complete when every awaited agent stopped.
+
+/// How one agent's part of a cycle ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum AgentOutcome {
+    /// The agent's stop for this cycle arrived in time.
+    Stopped,
+    /// The stop timeout passed before the agent's stop arrived.
+    TimedOut,
+    /// No frame was published to this agent this cycle (not connected), so it was not
+    /// waited for.
+    NotAwaited,
+    /// Async mode: commands were taken as they arrived; stops are ignored.
+    Async,
+}
+
+impl AgentOutcome {
+    /// Lowercase name for logs and summaries.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Stopped => "stopped",
+            Self::TimedOut => "timed_out",
+            Self::NotAwaited => "not_awaited",
+            Self::Async => "async",
+        }
+    }
+}
+
+/// What the barrier made of one received batch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BatchVerdict {
+    /// Belongs to this cycle: apply its commands. `stop` = it ended the agent's cycle.
+    Accept {
+        /// Whether this batch carried the stop.
+        stop: bool,
+    },
+    /// For an earlier cycle, or after the agent's stop: dropped and counted.
+    Late,
+    /// Names a cycle that has not started: dropped and counted.
+    Future,
+    /// The agent was not awaited this cycle: dropped.
+    NotAwaited,
+}
+
+/// Barrier state of one cycle over `n` agent slots.
+#[derive(Debug, Clone)]
+pub struct CycleBarrier {
+    cycle: u64,
+    awaited: Vec<bool>,
+    stopped: Vec<bool>,
+    pending: usize,
+}
+
+impl CycleBarrier {
+    /// A barrier over `slots` agents.
+    pub fn new(slots: usize) -> Self {
+        Self {
+            cycle: 0,
+            awaited: vec![false; slots],
+            stopped: vec![false; slots],
+            pending: 0,
+        }
+    }
+
+    /// Starts cycle `cycle` with nobody awaited yet.
+    pub fn begin(&mut self, cycle: u64) {
+        self.cycle = cycle;
+        self.awaited.fill(false);
+        self.stopped.fill(false);
+        self.pending = 0;
+    }
+
+    /// The current cycle.
+    pub fn cycle(&self) -> u64 {
+        self.cycle
+    }
+
+    /// Marks `slot` as awaited (its frame was published this cycle).
+    pub fn await_slot(&mut self, slot: usize) {
+        if let Some(a) = self.awaited.get_mut(slot)
+            && !*a
+        {
+            *a = true;
+            self.pending += 1;
+        }
+    }
+
+    /// Classifies a batch from `slot` that names `batch_cycle`.
+    pub fn on_batch(&mut self, slot: usize, batch_cycle: u64, stop: bool) -> BatchVerdict {
+        if batch_cycle < self.cycle {
+            return BatchVerdict::Late;
+        }
+        if batch_cycle > self.cycle {
+            return BatchVerdict::Future;
+        }
+        match (self.awaited.get(slot), self.stopped.get(slot)) {
+            (Some(true), Some(true)) => BatchVerdict::Late,
+            (Some(true), Some(false)) => {
+                if stop {
+                    self.stopped[slot] = true;
+                    self.pending -= 1;
+                }
+                BatchVerdict::Accept { stop }
+            }
+            _ => BatchVerdict::NotAwaited,
+        }
+    }
+
+    /// Whether every awaited agent stopped.
+    pub fn is_complete(&self) -> bool {
+        self.pending == 0
+    }
+
+    /// Number of awaited agents that have not stopped.
+    pub fn pending(&self) -> usize {
+        self.pending
+    }
+
+    /// Slots still awaited.
+    pub fn pending_slots(&self) -> impl Iterator<Item = usize> + '_ {
+        (0..self.awaited.len()).filter(|&s| self.awaited[s] && !self.stopped[s])
+    }
+
+    /// Outcome of `slot` if the cycle ended now.
+    pub fn outcome(&self, slot: usize) -> AgentOutcome {
+        match (self.awaited.get(slot), self.stopped.get(slot)) {
+            (Some(true), Some(true)) => AgentOutcome::Stopped,
+            (Some(true), _) => AgentOutcome::TimedOut,
+            _ => AgentOutcome::NotAwaited,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cycle_completes_when_every_awaited_agent_stopped() {
+        let mut b = CycleBarrier::new(3);
+        b.begin(7);
+        b.await_slot(0);
+        b.await_slot(2);
+        b.await_slot(2); // idempotent
+        assert_eq!(b.pending(), 2);
+        assert_eq!(b.on_batch(0, 7, false), BatchVerdict::Accept { stop: false });
+        assert!(!b.is_complete());
+        assert_eq!(b.on_batch(0, 7, true), BatchVerdict::Accept { stop: true });
+        assert_eq!(b.on_batch(2, 7, true), BatchVerdict::Accept { stop: true });
+        assert!(b.is_complete());
+        assert_eq!(b.outcome(0), AgentOutcome::Stopped);
+        assert_eq!(b.outcome(1), AgentOutcome::NotAwaited);
+    }
+
+    #[test]
+    fn a_late_stop_never_completes_the_next_cycle() {
+        let mut b = CycleBarrier::new(2);
+        b.begin(10);
+        b.await_slot(0);
+        b.await_slot(1);
+        assert_eq!(b.on_batch(0, 10, true), BatchVerdict::Accept { stop: true });
+        // agent 1 misses cycle 10: timeout
+        assert_eq!(b.outcome(1), AgentOutcome::TimedOut);
+        assert_eq!(b.pending_slots().collect::<Vec<_>>(), [1]);
+        b.begin(11);
+        b.await_slot(0);
+        b.await_slot(1);
+        // its stop for 10 arrives now
+        assert_eq!(b.on_batch(1, 10, true), BatchVerdict::Late);
+        assert_eq!(b.pending(), 2);
+        assert!(!b.is_complete());
+        assert_eq!(b.on_batch(1, 12, true), BatchVerdict::Future);
+        assert_eq!(b.on_batch(1, 11, true), BatchVerdict::Accept { stop: true });
+        assert_eq!(b.on_batch(1, 11, false), BatchVerdict::Late, "after its stop");
+        assert_eq!(b.pending(), 1);
+    }
+
+    #[test]
+    fn batches_from_agents_not_awaited_are_dropped() {
+        let mut b = CycleBarrier::new(2);
+        b.begin(0);
+        b.await_slot(0);
+        assert_eq!(b.on_batch(1, 0, true), BatchVerdict::NotAwaited);
+        assert_eq!(b.on_batch(5, 0, true), BatchVerdict::NotAwaited);
+        assert_eq!(b.pending(), 1);
+    }
+}

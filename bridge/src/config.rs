@@ -1,0 +1,746 @@
+//! Configuration: TOML → typed, validated [`Config`].
+//!
+//! Every key is documented in `config/default.toml`. Unknown keys, wrong types and
+//! invalid values are rejected with a [`ConfigLoadError`] that names the file, the line
+//! and the key. The original system's names `SyncMode` and `SimulationTimePerFrame` are
+//! accepted as aliases.
+
+use std::collections::BTreeSet;
+use std::net::SocketAddr;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::wire::{CAMERA_NAME_LEN, MAX_CAMERAS, PixelFormat};
+
+/// Highest agent id accepted (ids are also iceoryx2 event ids).
+pub const MAX_AGENT_ID: u32 = 250;
+/// Largest accepted image side in pixels.
+pub const MAX_IMAGE_SIDE_PX: u32 = 8192;
+
+/// Transport selected by `[transport] kind`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum TransportKind {
+    /// iceoryx2 shared memory (default).
+    #[default]
+    Shm,
+    /// TCP, for remote agents and as a baseline.
+    Tcp,
+}
+
+impl TransportKind {
+    /// The config spelling.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Shm => "shm",
+            Self::Tcp => "tcp",
+        }
+    }
+}
+
+/// One camera of an agent.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CameraConfig {
+    /// Name (≤ 16 bytes), e.g. `left`, `right`, `main`.
+    pub name: String,
+    /// Width in pixels.
+    pub width_px: u32,
+    /// Height in pixels (given, or derived from the fields of view).
+    pub height_px: u32,
+    /// Pixel format.
+    pub format: PixelFormat,
+    /// Horizontal field of view in degrees.
+    pub fov_horizontal_deg: f32,
+    /// Vertical field of view in degrees.
+    pub fov_vertical_deg: f32,
+}
+
+impl CameraConfig {
+    /// Bytes per row.
+    pub fn stride_bytes(&self) -> usize {
+        self.width_px as usize * self.format.bytes_per_pixel()
+    }
+
+    /// Bytes of one image.
+    pub fn image_bytes(&self) -> usize {
+        self.stride_bytes() * self.height_px as usize
+    }
+}
+
+/// One agent: its id and cameras.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AgentConfig {
+    /// Agent id (`0..=250`).
+    pub id: u32,
+    /// Cameras, in image order.
+    pub cameras: Vec<CameraConfig>,
+}
+
+impl AgentConfig {
+    /// Bytes of all images of one sensor frame of this agent.
+    pub fn frame_bytes(&self) -> usize {
+        crate::host::image_layout(&self.cameras).1
+    }
+}
+
+/// `[sync]` section.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SyncConfig {
+    /// Lock-step mode (`sync_mode`, alias `SyncMode`).
+    pub sync_mode: bool,
+    /// Simulated time per cycle (`simulation_time_per_frame`, alias `SimulationTimePerFrame`).
+    pub simulation_time_per_frame: Duration,
+    /// How long the host waits for all stops of a cycle (`stop_timeout`).
+    pub stop_timeout: Duration,
+    /// How long the host waits for agents to connect, and agents for the host (`connect_timeout`).
+    pub connect_timeout: Duration,
+}
+
+/// `[transport]` section.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TransportConfig {
+    /// Which transport.
+    pub kind: TransportKind,
+    /// TCP listen address of the host (and the address agents connect to).
+    pub tcp_listen: SocketAddr,
+    /// Most commands an agent may send in one cycle.
+    pub max_commands_per_cycle: u32,
+}
+
+/// The validated configuration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Config {
+    /// Where it was loaded from (`<embedded>` for built-in configs).
+    pub source: PathBuf,
+    /// Session name: prefixes every service (`vrsync/<session>/…`).
+    pub session: String,
+    /// Seed of every random choice in the simulator.
+    pub seed: u64,
+    /// `[sync]`.
+    pub sync: SyncConfig,
+    /// `[transport]`.
+    pub transport: TransportConfig,
+    /// `[[agent]]` entries, sorted by id.
+    pub agents: Vec<AgentConfig>,
+    /// The `[world]` table, left to the simulator to interpret.
+    pub world: Option<toml::Table>,
+}
+
+/// Why a configuration could not be loaded.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ConfigLoadError {
+    /// The file could not be read.
+    #[error("cannot read config file {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// TOML syntax error, unknown key or wrong type.
+    #[error("{path}:{line}:{column}: {message} (at key `{key}`)")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: usize,
+        /// 1-based column.
+        column: usize,
+        /// Dotted key at that line (table header + key), `?` if none.
+        key: String,
+        /// What the TOML parser said (names the key).
+        message: String,
+    },
+    /// A value is out of range or inconsistent.
+    #[error("{path}:{line}: invalid `{key}`: {reason}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line of the value.
+        line: usize,
+        /// Dotted key, e.g. `sync.stop_timeout`.
+        key: String,
+        /// Why it is invalid.
+        reason: String,
+    },
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConfig {
+    session: Option<Spanned<String>>,
+    #[serde(default)]
+    seed: u64,
+    #[serde(default)]
+    sync: Option<RawSync>,
+    #[serde(default)]
+    transport: Option<RawTransport>,
+    #[serde(default)]
+    agent: Vec<Spanned<RawAgent>>,
+    #[serde(default)]
+    world: Option<toml::Table>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSync {
+    #[serde(alias = "SyncMode")]
+    sync_mode: Option<bool>,
+    #[serde(alias = "SimulationTimePerFrame")]
+    simulation_time_per_frame: Option<Spanned<f64>>,
+    #[serde(alias = "SyncModeFrameTimeOut")]
+    stop_timeout: Option<Spanned<f64>>,
+    connect_timeout: Option<Spanned<f64>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTransport {
+    kind: Option<TransportKind>,
+    tcp_listen: Option<Spanned<String>>,
+    max_commands_per_cycle: Option<Spanned<i64>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawAgent {
+    id: Spanned<i64>,
+    #[serde(default)]
+    camera: Vec<Spanned<RawCamera>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCamera {
+    name: Spanned<String>,
+    width: Spanned<i64>,
+    height: Option<Spanned<i64>>,
+    #[serde(default)]
+    format: Option<Spanned<String>>,
+    #[serde(default = "default_fov_h")]
+    fov_horizontal_deg: Spanned<f64>,
+    #[serde(default = "default_fov_v")]
+    fov_vertical_deg: Spanned<f64>,
+}
+
+fn default_fov_h() -> Spanned<f64> {
+    Spanned::new(0..0, 120.0)
+}
+fn default_fov_v() -> Spanned<f64> {
+    Spanned::new(0..0, 90.0)
+}
+
+/// The built-in default configuration (`config/default.toml`).
+pub const DEFAULT_CONFIG_TOML: &str = include_str!("../../config/default.toml");
+
+struct Ctx<'a> {
+    path: &'a Path,
+    text: &'a str,
+}
+
+impl Ctx<'_> {
+    fn line_of(&self, span: Range<usize>) -> usize {
+        let end = span.start.min(self.text.len());
+        self.text.as_bytes()[..end]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count()
+            + 1
+    }
+
+    fn invalid(&self, span: Range<usize>, key: &str, reason: impl Into<String>) -> ConfigLoadError {
+        ConfigLoadError::Invalid {
+            path: self.path.to_path_buf(),
+            line: self.line_of(span),
+            key: key.to_string(),
+            reason: reason.into(),
+        }
+    }
+
+    fn seconds(
+        &self,
+        value: Option<Spanned<f64>>,
+        key: &str,
+        default: f64,
+    ) -> Result<Duration, ConfigLoadError> {
+        let Some(v) = value else {
+            return Ok(Duration::from_secs_f64(default));
+        };
+        let (span, secs) = (v.span(), *v.get_ref());
+        if !secs.is_finite() || secs <= 0.0 {
+            return Err(self.invalid(span, key, format!("must be a positive number of seconds, found {secs}")));
+        }
+        if secs > 86_400.0 {
+            return Err(self.invalid(span, key, format!("{secs} s is more than a day")));
+        }
+        Ok(Duration::from_secs_f64(secs))
+    }
+}
+
+impl Config {
+    /// Loads and validates a config file.
+    ///
+    /// # Errors
+    /// [`ConfigLoadError`] naming the file, line and key.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, ConfigLoadError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigLoadError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_toml_str(&text, path)
+    }
+
+    /// The embedded default configuration.
+    ///
+    /// # Errors
+    /// Only if the embedded file is broken, which a unit test rules out.
+    pub fn embedded_default() -> Result<Self, ConfigLoadError> {
+        Self::from_toml_str(DEFAULT_CONFIG_TOML, Path::new("<embedded default.toml>"))
+    }
+
+    /// Parses and validates TOML text; `path` is used in error messages.
+    ///
+    /// # Errors
+    /// [`ConfigLoadError`] naming the file, line and key.
+    pub fn from_toml_str(text: &str, path: &Path) -> Result<Self, ConfigLoadError> {
+        let ctx = Ctx { path, text };
+        let raw: RawConfig = toml::from_str(text).map_err(|e| {
+            let (line, column) = match e.span() {
+                Some(span) => {
+                    let line = ctx.line_of(span.clone());
+                    let line_start = text[..span.start.min(text.len())]
+                        .rfind('\n')
+                        .map_or(0, |i| i + 1);
+                    (line, span.start.saturating_sub(line_start) + 1)
+                }
+                None => (1, 1),
+            };
+            ConfigLoadError::Parse {
+                path: path.to_path_buf(),
+                line,
+                column,
+                key: key_at_line(text, line),
+                message: e.message().trim().to_string(),
+            }
+        })?;
+
+        let session = match raw.session {
+            None => "default".to_string(),
+            Some(s) => {
+                let span = s.span();
+                let s = s.into_inner();
+                if s.is_empty()
+                    || s.len() > 64
+                    || !s
+                        .bytes()
+                        .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_' || b == b'.')
+                {
+                    return Err(ctx.invalid(
+                        span,
+                        "session",
+                        format!("{s:?}: use 1 to 64 characters from A-Z a-z 0-9 - _ ."),
+                    ));
+                }
+                s
+            }
+        };
+
+        let rs = raw.sync.unwrap_or(RawSync {
+            sync_mode: None,
+            simulation_time_per_frame: None,
+            stop_timeout: None,
+            connect_timeout: None,
+        });
+        let sync = SyncConfig {
+            sync_mode: rs.sync_mode.unwrap_or(true),
+            simulation_time_per_frame: ctx.seconds(
+                rs.simulation_time_per_frame,
+                "sync.simulation_time_per_frame",
+                0.1,
+            )?,
+            stop_timeout: ctx.seconds(rs.stop_timeout, "sync.stop_timeout", 5.0)?,
+            connect_timeout: ctx.seconds(rs.connect_timeout, "sync.connect_timeout", 30.0)?,
+        };
+
+        let rt = raw.transport.unwrap_or(RawTransport {
+            kind: None,
+            tcp_listen: None,
+            max_commands_per_cycle: None,
+        });
+        let tcp_listen = match rt.tcp_listen {
+            None => SocketAddr::from(([127, 0, 0, 1], 7400)),
+            Some(s) => s.get_ref().parse().map_err(|e| {
+                ctx.invalid(
+                    s.span(),
+                    "transport.tcp_listen",
+                    format!("{:?} is not an address like 127.0.0.1:7400 ({e})", s.get_ref()),
+                )
+            })?,
+        };
+        let max_commands_per_cycle = match rt.max_commands_per_cycle {
+            None => 64,
+            Some(v) => {
+                let n = *v.get_ref();
+                if !(1..=4096).contains(&n) {
+                    return Err(ctx.invalid(
+                        v.span(),
+                        "transport.max_commands_per_cycle",
+                        format!("must be 1..=4096, found {n}"),
+                    ));
+                }
+                n as u32
+            }
+        };
+        let transport = TransportConfig {
+            kind: rt.kind.unwrap_or_default(),
+            tcp_listen,
+            max_commands_per_cycle,
+        };
+
+        if raw.agent.is_empty() {
+            return Err(ConfigLoadError::Invalid {
+                path: path.to_path_buf(),
+                line: 1,
+                key: "agent".into(),
+                reason: "no [[agent]] entries: at least one agent is needed".into(),
+            });
+        }
+        let mut seen = BTreeSet::new();
+        let mut agents = Vec::with_capacity(raw.agent.len());
+        for a in raw.agent {
+            let agent_span = a.span();
+            let a = a.into_inner();
+            let id = *a.id.get_ref();
+            if !(0..=i64::from(MAX_AGENT_ID)).contains(&id) {
+                return Err(ctx.invalid(
+                    a.id.span(),
+                    "agent.id",
+                    format!("must be 0..={MAX_AGENT_ID}, found {id}"),
+                ));
+            }
+            let id = id as u32;
+            if !seen.insert(id) {
+                return Err(ctx.invalid(a.id.span(), "agent.id", format!("duplicate agent id {id}")));
+            }
+            if a.camera.len() > MAX_CAMERAS {
+                return Err(ctx.invalid(
+                    agent_span,
+                    "agent.camera",
+                    format!("agent {id} has {} cameras, at most {MAX_CAMERAS}", a.camera.len()),
+                ));
+            }
+            let mut names = BTreeSet::new();
+            let mut cameras = Vec::with_capacity(a.camera.len());
+            for c in a.camera {
+                let c = c.into_inner();
+                cameras.push(ctx.camera(c, id, &mut names)?);
+            }
+            agents.push(AgentConfig { id, cameras });
+        }
+        agents.sort_by_key(|a| a.id);
+
+        Ok(Self {
+            source: path.to_path_buf(),
+            session,
+            seed: raw.seed,
+            sync,
+            transport,
+            agents,
+            world: raw.world,
+        })
+    }
+
+    /// The agent with this id.
+    pub fn agent(&self, id: u32) -> Option<&AgentConfig> {
+        self.agents.iter().find(|a| a.id == id)
+    }
+
+    /// Resizes the agent list to `count` agents with ids `0..count`: existing entries keep
+    /// their cameras, new ones copy the cameras of the last configured agent. Used by
+    /// `--agents` / `--spawn-agents`.
+    ///
+    /// # Errors
+    /// [`ConfigLoadError::Invalid`] if `count` is 0 or larger than the id space.
+    pub fn with_agent_count(mut self, count: u32) -> Result<Self, ConfigLoadError> {
+        if count == 0 || count > MAX_AGENT_ID + 1 {
+            return Err(ConfigLoadError::Invalid {
+                path: self.source.clone(),
+                line: 1,
+                key: "agent".into(),
+                reason: format!("agent count must be 1..={}, found {count}", MAX_AGENT_ID + 1),
+            });
+        }
+        let template = self.agents.last().map(|a| a.cameras.clone()).unwrap_or_default();
+        let mut agents = Vec::with_capacity(count as usize);
+        for id in 0..count {
+            let cameras = self
+                .agent(id)
+                .map_or_else(|| template.clone(), |a| a.cameras.clone());
+            agents.push(AgentConfig { id, cameras });
+        }
+        self.agents = agents;
+        Ok(self)
+    }
+
+    /// The config as TOML again (for handing the effective config to spawned agents).
+    pub fn to_toml_string(&self) -> String {
+        use std::fmt::Write;
+        let mut s = String::new();
+        let _ = writeln!(s, "# effective vrsync config (generated from {})", self.source.display());
+        let _ = writeln!(s, "session = {:?}\nseed = {}", self.session, self.seed);
+        let _ = writeln!(
+            s,
+            "\n[sync]\nsync_mode = {}\nsimulation_time_per_frame = {:?}\nstop_timeout = {:?}\nconnect_timeout = {:?}",
+            self.sync.sync_mode,
+            self.sync.simulation_time_per_frame.as_secs_f64(),
+            self.sync.stop_timeout.as_secs_f64(),
+            self.sync.connect_timeout.as_secs_f64()
+        );
+        let _ = writeln!(
+            s,
+            "\n[transport]\nkind = {:?}\ntcp_listen = \"{}\"\nmax_commands_per_cycle = {}",
+            self.transport.kind.as_str(),
+            self.transport.tcp_listen,
+            self.transport.max_commands_per_cycle
+        );
+        for a in &self.agents {
+            let _ = writeln!(s, "\n[[agent]]\nid = {}", a.id);
+            for c in &a.cameras {
+                let _ = writeln!(
+                    s,
+                    "[[agent.camera]]\nname = {:?}\nwidth = {}\nheight = {}\nformat = {:?}\nfov_horizontal_deg = {:?}\nfov_vertical_deg = {:?}",
+                    c.name,
+                    c.width_px,
+                    c.height_px,
+                    c.format.as_str(),
+                    f64::from(c.fov_horizontal_deg),
+                    f64::from(c.fov_vertical_deg)
+                );
+            }
+        }
+        if let Some(world) = &self.world {
+            let mut doc = toml::Table::new();
+            doc.insert("world".into(), toml::Value::Table(world.clone()));
+            if let Ok(text) = toml::to_string(&doc) {
+                let _ = writeln!(s, "\n{text}");
+            }
+        }
+        s
+    }
+}
+
+impl Ctx<'_> {
+    fn camera(
+        &self,
+        c: RawCamera,
+        agent: u32,
+        names: &mut BTreeSet<String>,
+    ) -> Result<CameraConfig, ConfigLoadError> {
+        let name = c.name.get_ref().clone();
+        if name.is_empty() || name.len() > CAMERA_NAME_LEN {
+            return Err(self.invalid(
+                c.name.span(),
+                "agent.camera.name",
+                format!("{name:?}: must be 1 to {CAMERA_NAME_LEN} bytes"),
+            ));
+        }
+        if !names.insert(name.clone()) {
+            return Err(self.invalid(
+                c.name.span(),
+                "agent.camera.name",
+                format!("agent {agent} has two cameras named {name:?}"),
+            ));
+        }
+        let fov_h = *c.fov_horizontal_deg.get_ref();
+        let fov_v = *c.fov_vertical_deg.get_ref();
+        for (v, key) in [
+            (&c.fov_horizontal_deg, "agent.camera.fov_horizontal_deg"),
+            (&c.fov_vertical_deg, "agent.camera.fov_vertical_deg"),
+        ] {
+            let deg = *v.get_ref();
+            if !(deg > 0.0 && deg < 180.0) {
+                return Err(self.invalid(v.span(), key, format!("must be in (0, 180) degrees, found {deg}")));
+            }
+        }
+        let side = |v: &Spanned<i64>, key: &str| -> Result<u32, ConfigLoadError> {
+            let n = *v.get_ref();
+            if !(1..=i64::from(MAX_IMAGE_SIDE_PX)).contains(&n) {
+                return Err(self.invalid(
+                    v.span(),
+                    key,
+                    format!("must be 1..={MAX_IMAGE_SIDE_PX} pixels, found {n}"),
+                ));
+            }
+            Ok(n as u32)
+        };
+        let width_px = side(&c.width, "agent.camera.width")?;
+        let height_px = match &c.height {
+            Some(h) => side(h, "agent.camera.height")?,
+            // The original derived the height from the fields of view.
+            None => derived_height(width_px, fov_h, fov_v),
+        };
+        let format = match &c.format {
+            None => PixelFormat::Rgb8,
+            Some(f) => match f.get_ref().as_str() {
+                "rgb8" => PixelFormat::Rgb8,
+                "rgba8" => PixelFormat::Rgba8,
+                "gray8" => PixelFormat::Gray8,
+                "depth32f" => PixelFormat::Depth32f,
+                other => {
+                    return Err(self.invalid(
+                        f.span(),
+                        "agent.camera.format",
+                        format!("{other:?}: expected one of rgb8, rgba8, gray8, depth32f"),
+                    ));
+                }
+            },
+        };
+        Ok(CameraConfig {
+            name,
+            width_px,
+            height_px,
+            format,
+            fov_horizontal_deg: fov_h as f32,
+            fov_vertical_deg: fov_v as f32,
+        })
+    }
+}
+
+/// The dotted key written on 1-based `line` of `text`: the last table header above it plus
+/// the key before `=` (e.g. `sync.stop_timeout`), or the table name on a header line.
+fn key_at_line(text: &str, line: usize) -> String {
+    let mut table = String::new();
+    for (i, raw) in text.lines().enumerate() {
+        let l = raw.trim();
+        if l.starts_with('[') {
+            table = l.trim_matches(|c| c == '[' || c == ']').trim().to_string();
+        }
+        if i + 1 == line {
+            if l.starts_with('[') {
+                return table;
+            }
+            let key = l.split('=').next().unwrap_or("").trim();
+            return match (table.is_empty(), key.is_empty()) {
+                (_, true) => "?".to_string(),
+                (true, false) => key.to_string(),
+                (false, false) => format!("{table}.{key}"),
+            };
+        }
+    }
+    "?".to_string()
+}
+
+/// Image height from width and fields of view, as the original system computed it:
+/// `H = round(W · tan(fov_v/2) / tan(fov_h/2))` (256 px at 120°×90° → 148 px).
+pub fn derived_height(width_px: u32, fov_h_deg: f64, fov_v_deg: f64) -> u32 {
+    let h = f64::from(width_px) * (fov_v_deg.to_radians() / 2.0).tan()
+        / (fov_h_deg.to_radians() / 2.0).tan();
+    (h.round() as u32).clamp(1, MAX_IMAGE_SIDE_PX)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Config, ConfigLoadError> {
+        Config::from_toml_str(text, Path::new("test.toml"))
+    }
+
+    const MINIMAL: &str = "session = \"t\"\n[[agent]]\nid = 0\n";
+
+    #[test]
+    fn embedded_default_matches_the_documented_defaults() {
+        let c = Config::embedded_default().unwrap();
+        assert_eq!(c.agents.len(), 2);
+        assert!(c.sync.sync_mode);
+        assert_eq!(c.sync.simulation_time_per_frame, Duration::from_millis(100));
+        assert_eq!(c.sync.stop_timeout, Duration::from_secs(5));
+        assert_eq!(c.transport.kind, TransportKind::Shm);
+        for a in &c.agents {
+            assert_eq!(a.cameras.len(), 2);
+            for cam in &a.cameras {
+                assert_eq!((cam.width_px, cam.height_px), (256, 148));
+                assert_eq!(cam.format, PixelFormat::Rgb8);
+            }
+        }
+    }
+
+    #[test]
+    fn original_names_are_aliases() {
+        let c = parse(
+            "[sync]\nSyncMode = false\nSimulationTimePerFrame = 0.05\n[[agent]]\nid = 0\n",
+        )
+        .unwrap();
+        assert!(!c.sync.sync_mode);
+        assert_eq!(c.sync.simulation_time_per_frame, Duration::from_millis(50));
+    }
+
+    #[test]
+    fn derived_height_matches_the_original() {
+        assert_eq!(derived_height(256, 120.0, 90.0), 148);
+        assert_eq!(derived_height(512, 120.0, 90.0), 296);
+        assert_eq!(derived_height(1024, 120.0, 90.0), 591);
+    }
+
+    fn expect_err(text: &str, line: usize, needle: &str) {
+        let e = parse(text).unwrap_err();
+        let msg = e.to_string();
+        assert!(msg.contains("test.toml"), "{msg}");
+        assert!(msg.contains(needle), "expected {needle:?} in {msg}");
+        match e {
+            ConfigLoadError::Parse { line: l, .. } | ConfigLoadError::Invalid { line: l, .. } => {
+                assert_eq!(l, line, "{msg}")
+            }
+            other => panic!("unexpected {other:?}"),
+        }
+    }
+
+    #[test]
+    fn bad_configs_name_file_line_and_key() {
+        expect_err("session = \"t\"\nbogus = 1\n[[agent]]\nid = 0\n", 2, "bogus");
+        expect_err("[sync]\nsync_mode = \"yes\"\n[[agent]]\nid = 0\n", 2, "sync_mode");
+        expect_err("[sync]\nstop_timeout = -1.0\n[[agent]]\nid = 0\n", 2, "sync.stop_timeout");
+        expect_err(
+            "[sync]\nsimulation_time_per_frame = 0\n[[agent]]\nid = 0\n",
+            2,
+            "sync.simulation_time_per_frame",
+        );
+        expect_err("[[agent]]\nid = 0\n[[agent]]\nid = 0\n", 4, "duplicate agent id 0");
+        expect_err("session = \"t\"\n", 1, "agent");
+        expect_err("[[agent]]\nid = 0\n[[agent.camera]]\nname = \"l\"\nwidth = 0\n", 5, "agent.camera.width");
+        expect_err(
+            "[[agent]]\nid = 0\n[[agent.camera]]\nname = \"l\"\nwidth = 64\nformat = \"bgr\"\n",
+            6,
+            "agent.camera.format",
+        );
+        expect_err("[transport]\nkind = \"udp\"\n[[agent]]\nid = 0\n", 2, "udp");
+        expect_err("[[agent]]\nid = 999\n", 2, "agent.id");
+        expect_err("session = \"a/b\"\n[[agent]]\nid = 0\n", 1, "session");
+    }
+
+    #[test]
+    fn agent_count_override_copies_the_last_agents_cameras() {
+        let c = Config::embedded_default().unwrap().with_agent_count(3).unwrap();
+        assert_eq!(c.agents.iter().map(|a| a.id).collect::<Vec<_>>(), [0, 1, 2]);
+        assert_eq!(c.agents[2].cameras, c.agents[1].cameras);
+        assert!(parse(MINIMAL).unwrap().with_agent_count(0).is_err());
+    }
+
+    #[test]
+    fn effective_config_round_trips() {
+        let c = Config::embedded_default().unwrap().with_agent_count(3).unwrap();
+        let text = c.to_toml_string();
+        let back = Config::from_toml_str(&text, Path::new("eff.toml")).unwrap();
+        assert_eq!(back.agents, c.agents);
+        assert_eq!(back.sync, c.sync);
+        assert_eq!(back.transport, c.transport);
+        assert_eq!(back.session, c.session);
+        assert_eq!(back.world, c.world);
+    }
+}

@@ -1,0 +1,674 @@
+//! The host API: what a simulator (vr-sim, or Unity through the C ABI) calls.
+//!
+//! One cycle, in order:
+//! 1. [`Host::loan_frame`] for each agent → write the header fields and render the images
+//!    straight into [`SensorFrameMut`] → [`Host::publish`];
+//! 2. [`Host::start`]: one broadcast *start*;
+//! 3. [`Host::collect`]: in sync mode block until every agent whose frame was published
+//!    sent its stop for this cycle, or `stop_timeout` passed; in async mode wait until the
+//!    next tick, taking commands as they arrive. The returned [`CycleReport`] lists each
+//!    agent's outcome and commands in (agent id, order sent) order; the cycle number then
+//!    advances and simulated time with it, by exactly `simulation_time_per_frame`.
+
+use std::time::{Duration, Instant};
+
+use tracing::{debug, info, warn};
+
+use crate::barrier::{AgentOutcome, BatchVerdict, CycleBarrier};
+use crate::config::{CameraConfig, Config, TransportKind};
+use crate::transport::shm::{ShmHost, ShmHostCreateError};
+use crate::transport::{FrameLoan, HostTransport, HostTransportError};
+use crate::wire::{
+    CAMERA_NAME_LEN, ImageDesc, MAX_CAMERAS, MotorCommand, PROTOCOL_VERSION, SENSOR_FLAG_SYNC_MODE,
+    SensorHeader, WireOutcome,
+};
+
+/// Alignment of every image in a sensor frame's payload, in bytes.
+pub const IMAGE_ALIGN: usize = 64;
+
+/// The image table for `cameras` and the total payload size in bytes. Images are packed in
+/// camera order, each starting at a multiple of [`IMAGE_ALIGN`].
+pub fn image_layout(cameras: &[CameraConfig]) -> ([ImageDesc; MAX_CAMERAS], usize) {
+    let mut descs = [ImageDesc::default(); MAX_CAMERAS];
+    let mut offset = 0usize;
+    for (i, (d, c)) in descs.iter_mut().zip(cameras).enumerate() {
+        let mut name = [0u8; CAMERA_NAME_LEN];
+        let n = c.name.len().min(CAMERA_NAME_LEN);
+        name[..n].copy_from_slice(&c.name.as_bytes()[..n]);
+        let len = c.image_bytes();
+        *d = ImageDesc {
+            name,
+            camera: i as u32,
+            format: c.format as u32,
+            width_px: c.width_px,
+            height_px: c.height_px,
+            stride_bytes: c.stride_bytes() as u32,
+            reserved: 0,
+            offset: offset as u64,
+            len: len as u64,
+        };
+        offset = (offset + len).next_multiple_of(IMAGE_ALIGN);
+    }
+    let total = cameras
+        .iter()
+        .take(MAX_CAMERAS)
+        .last()
+        .map_or(0, |_| {
+            let last = &descs[cameras.len().min(MAX_CAMERAS) - 1];
+            (last.offset + last.len) as usize
+        });
+    (descs, total)
+}
+
+/// One writable image of a loaned sensor frame.
+#[derive(Debug)]
+pub struct ImageMut<'a> {
+    /// Where and what the image is.
+    pub desc: ImageDesc,
+    /// The pixels, in shared memory on the shm transport.
+    pub data: &'a mut [u8],
+}
+
+/// Iterator over the writable images of a [`SensorFrameMut`].
+#[derive(Debug)]
+pub struct ImagesMut<'a> {
+    rest: &'a mut [u8],
+    consumed: usize,
+    descs: &'a [ImageDesc],
+}
+
+impl<'a> Iterator for ImagesMut<'a> {
+    type Item = ImageMut<'a>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        let (desc, tail) = self.descs.split_first()?;
+        self.descs = tail;
+        let skip = (desc.offset as usize).checked_sub(self.consumed)?;
+        let rest = core::mem::take(&mut self.rest);
+        if rest.len() < skip + desc.len as usize {
+            return None;
+        }
+        let (_, rest) = rest.split_at_mut(skip);
+        let (data, rest) = rest.split_at_mut(desc.len as usize);
+        self.rest = rest;
+        self.consumed = desc.offset as usize + desc.len as usize;
+        Some(ImageMut { desc: *desc, data })
+    }
+}
+
+/// A sensor frame loaned for one agent: write the header and the images, then hand it to
+/// [`Host::publish`]. Dropping it instead returns the memory unpublished.
+#[derive(Debug)]
+pub struct SensorFrameMut {
+    slot: usize,
+    agent_id: u32,
+    cycle: u64,
+    loan: FrameLoan,
+    descs: [ImageDesc; MAX_CAMERAS],
+    image_count: usize,
+}
+
+impl SensorFrameMut {
+    /// The agent this frame is for.
+    pub fn agent_id(&self) -> u32 {
+        self.agent_id
+    }
+
+    /// The header (pre-filled with cycle, time, agent id and image table).
+    pub fn header(&self) -> &SensorHeader {
+        self.loan.header()
+    }
+
+    /// The header, writable: pose, sensors, statuses, collisions, reward.
+    pub fn header_mut(&mut self) -> &mut SensorHeader {
+        self.loan.parts_mut().0
+    }
+
+    /// The images, writable, in camera order.
+    pub fn images_mut(&mut self) -> ImagesMut<'_> {
+        self.parts_mut().1
+    }
+
+    /// Header and images at once (to render while reading the pose from the header).
+    pub fn parts_mut(&mut self) -> (&mut SensorHeader, ImagesMut<'_>) {
+        let (header, payload) = self.loan.parts_mut();
+        (
+            header,
+            ImagesMut {
+                rest: payload,
+                consumed: 0,
+                descs: &self.descs[..self.image_count],
+            },
+        )
+    }
+}
+
+/// The commands and outcome of one agent in one cycle.
+#[derive(Debug, Clone)]
+pub struct AgentReport {
+    /// Agent id.
+    pub agent_id: u32,
+    /// How its cycle ended.
+    pub outcome: AgentOutcome,
+    commands: Vec<MotorCommand>,
+}
+
+impl AgentReport {
+    /// Commands received this cycle, in the order the agent sent them. Decode each with
+    /// [`MotorCommand::decode`]; the simulator decides what is out of range.
+    pub fn commands(&self) -> &[MotorCommand] {
+        &self.commands
+    }
+}
+
+/// The result of one cycle.
+#[derive(Debug, Clone)]
+pub struct CycleReport {
+    /// Cycle number.
+    pub cycle: u64,
+    /// Simulated time at the start of the cycle, ns.
+    pub sim_time_ns: u64,
+    /// Whether the cycle ended by the stop timeout.
+    pub timed_out: bool,
+    /// Batches for earlier cycles (or after a stop) dropped during this cycle.
+    pub late_batches: u32,
+    agents: Vec<AgentReport>,
+}
+
+impl CycleReport {
+    /// Every agent's report, in agent id order.
+    pub fn agents(&self) -> &[AgentReport] {
+        &self.agents
+    }
+
+    /// Ids of agents that timed out this cycle.
+    pub fn timed_out_agents(&self) -> impl Iterator<Item = u32> + '_ {
+        self.agents
+            .iter()
+            .filter(|a| a.outcome == AgentOutcome::TimedOut)
+            .map(|a| a.agent_id)
+    }
+}
+
+/// Counters since the host was created.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct HostStats {
+    /// Cycles completed.
+    pub cycles: u64,
+    /// Cycles that ended by the stop timeout.
+    pub stop_timeouts: u64,
+    /// Agent-cycles that timed out (one cycle with two missing agents counts 2).
+    pub agent_timeouts: u64,
+    /// Batches dropped because they named an earlier cycle or followed the stop.
+    pub late_batches: u64,
+    /// Batches dropped because they named a cycle that had not started.
+    pub future_batches: u64,
+    /// Commands received and handed over.
+    pub commands_received: u64,
+    /// Commands dropped because an agent exceeded `max_commands_per_cycle`.
+    pub commands_overflowed: u64,
+}
+
+/// Why the host could not be created.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum HostCreateError {
+    /// The shared-memory transport failed.
+    #[error(transparent)]
+    Shm(#[from] ShmHostCreateError),
+    /// The configured transport is not available in this build.
+    #[error("transport {0:?} is not supported yet; use kind = \"shm\"")]
+    UnsupportedTransport(&'static str),
+}
+
+/// Why waiting for agents failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum HostWaitError {
+    /// Some agents did not connect in time.
+    #[error("agents {missing:?} did not connect within {waited:?} (start them with `vr-agent --config <file> --id <id>`)")]
+    AgentsMissing {
+        /// Ids still missing.
+        missing: Vec<u32>,
+        /// How long we waited.
+        waited: Duration,
+    },
+    /// SIGINT/SIGTERM.
+    #[error("termination requested while waiting for agents")]
+    Terminated,
+    /// Transport failure.
+    #[error(transparent)]
+    Transport(#[from] HostTransportError),
+}
+
+/// Why a cycle operation failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum HostCycleError {
+    /// The agent id is not in the config.
+    #[error("agent {0} is not part of this session")]
+    UnknownAgent(u32),
+    /// The frame was loaned in another cycle.
+    #[error("frame for agent {agent} was loaned in cycle {loaned}, but the host is in cycle {current}")]
+    StaleFrame {
+        /// Agent id.
+        agent: u32,
+        /// The frame's cycle.
+        loaned: u64,
+        /// The host's cycle.
+        current: u64,
+    },
+    /// SIGINT/SIGTERM.
+    #[error("termination requested")]
+    Terminated,
+    /// Transport failure.
+    #[error(transparent)]
+    Transport(HostTransportError),
+}
+
+impl From<HostTransportError> for HostCycleError {
+    fn from(e: HostTransportError) -> Self {
+        match e {
+            HostTransportError::Terminated => Self::Terminated,
+            other => Self::Transport(other),
+        }
+    }
+}
+
+/// Builds a [`Host`] from a [`Config`].
+#[derive(Debug)]
+pub struct HostBuilder<'c> {
+    config: &'c Config,
+}
+
+impl<'c> HostBuilder<'c> {
+    /// A builder for `config`.
+    pub fn new(config: &'c Config) -> Self {
+        Self { config }
+    }
+
+    /// Creates the transport's services and the host's ports.
+    ///
+    /// # Errors
+    /// [`HostCreateError`].
+    pub fn create(self) -> Result<Host, HostCreateError> {
+        let config = self.config.clone();
+        let backend: Box<dyn HostTransport> = match config.transport.kind {
+            TransportKind::Shm => Box::new(ShmHost::create(&config)?),
+            TransportKind::Tcp => return Err(HostCreateError::UnsupportedTransport("tcp")),
+        };
+        let n = config.agents.len();
+        let cap = config.transport.max_commands_per_cycle as usize * 2;
+        let slots = config
+            .agents
+            .iter()
+            .map(|a| {
+                let (descs, _) = image_layout(&a.cameras);
+                SlotState {
+                    id: a.id,
+                    descs,
+                    image_count: a.cameras.len().min(MAX_CAMERAS),
+                    last_outcome: WireOutcome::None,
+                    last_rejected: 0,
+                }
+            })
+            .collect();
+        let agents = config
+            .agents
+            .iter()
+            .map(|a| AgentReport {
+                agent_id: a.id,
+                outcome: AgentOutcome::NotAwaited,
+                commands: Vec::with_capacity(cap),
+            })
+            .collect();
+        let dt_ns = config.sync.simulation_time_per_frame.as_nanos() as u64;
+        info!(
+            session = %config.session,
+            agents = n,
+            mode = if config.sync.sync_mode { "sync" } else { "async" },
+            transport = config.transport.kind.as_str(),
+            "host created"
+        );
+        Ok(Host {
+            backend,
+            slots,
+            barrier: CycleBarrier::new(n),
+            cycle: 0,
+            dt_ns,
+            report: CycleReport {
+                cycle: 0,
+                sim_time_ns: 0,
+                timed_out: false,
+                late_batches: 0,
+                agents,
+            },
+            stats: HostStats::default(),
+            next_tick: None,
+            config,
+        })
+    }
+}
+
+#[derive(Debug)]
+struct SlotState {
+    id: u32,
+    descs: [ImageDesc; MAX_CAMERAS],
+    image_count: usize,
+    last_outcome: WireOutcome,
+    last_rejected: u32,
+}
+
+/// The host side of a vrsync session.
+pub struct Host {
+    config: Config,
+    backend: Box<dyn HostTransport>,
+    slots: Vec<SlotState>,
+    barrier: CycleBarrier,
+    cycle: u64,
+    dt_ns: u64,
+    report: CycleReport,
+    stats: HostStats,
+    next_tick: Option<Instant>,
+}
+
+impl core::fmt::Debug for Host {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Host")
+            .field("session", &self.config.session)
+            .field("cycle", &self.cycle)
+            .field("stats", &self.stats)
+            .finish()
+    }
+}
+
+impl Host {
+    /// A builder for `config`.
+    pub fn builder(config: &Config) -> HostBuilder<'_> {
+        HostBuilder::new(config)
+    }
+
+    /// The configuration the host runs with.
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
+    /// Agent ids, ascending.
+    pub fn agent_ids(&self) -> impl Iterator<Item = u32> + '_ {
+        self.slots.iter().map(|s| s.id)
+    }
+
+    fn slot_of(&self, id: u32) -> Option<usize> {
+        self.slots.iter().position(|s| s.id == id)
+    }
+
+    /// The current cycle number.
+    pub fn cycle(&self) -> u64 {
+        self.cycle
+    }
+
+    /// Simulated time at the start of the current cycle: `cycle × simulation_time_per_frame`.
+    pub fn sim_time_ns(&self) -> u64 {
+        self.cycle.saturating_mul(self.dt_ns)
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> &HostStats {
+        &self.stats
+    }
+
+    /// Whether agent `id` is connected (its receiving side is attached).
+    pub fn is_connected(&self, id: u32) -> bool {
+        self.slot_of(id).is_some_and(|s| self.backend.is_connected(s))
+    }
+
+    /// Whether SIGINT/SIGTERM was received.
+    pub fn termination_requested(&self) -> bool {
+        self.backend.termination_requested()
+    }
+
+    /// Records how many of agent `id`'s commands the simulator rejected this cycle; the
+    /// agent sees the number in its next frame (`previous_rejected`).
+    pub fn set_rejected(&mut self, id: u32, rejected: u32) {
+        if let Some(s) = self.slot_of(id) {
+            self.slots[s].last_rejected = rejected;
+        }
+    }
+
+    /// Blocks until every configured agent is connected, logging which are still missing.
+    /// Notifications sent before an agent's listener exists are lost, so cycle 0 must not
+    /// start earlier.
+    ///
+    /// # Errors
+    /// [`HostWaitError::AgentsMissing`] naming the ids after `timeout`.
+    pub fn wait_for_agents(&mut self, timeout: Duration) -> Result<(), HostWaitError> {
+        let started = Instant::now();
+        let deadline = started + timeout;
+        let mut next_log = started + Duration::from_secs(2);
+        let mut logged_once = false;
+        loop {
+            let missing: Vec<u32> = (0..self.slots.len())
+                .filter(|&s| !self.backend.is_connected(s))
+                .map(|s| self.slots[s].id)
+                .collect();
+            if missing.is_empty() {
+                self.backend.update_connections();
+                info!(agents = self.slots.len(), waited_ms = started.elapsed().as_millis() as u64, "all agents connected");
+                return Ok(());
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Err(HostWaitError::AgentsMissing {
+                    missing,
+                    waited: started.elapsed(),
+                });
+            }
+            if !logged_once || now >= next_log {
+                info!(?missing, session = %self.config.session, "waiting for agents");
+                logged_once = true;
+                next_log = now + Duration::from_secs(2);
+            }
+            // Agents notify the stop event once their ports exist; the 1 s cap only paces
+            // the log line above.
+            match self
+                .backend
+                .wait_activity((deadline - now).min(Duration::from_secs(1)))
+            {
+                Ok(()) => {}
+                Err(HostTransportError::Terminated) => return Err(HostWaitError::Terminated),
+                Err(e) => return Err(e.into()),
+            }
+        }
+    }
+
+    /// Loans agent `id`'s sensor frame for the current cycle, header pre-filled (protocol
+    /// version, agent id, cycle, simulated time, mode, image table, previous outcome).
+    ///
+    /// # Errors
+    /// [`HostCycleError`].
+    pub fn loan_frame(&mut self, id: u32) -> Result<SensorFrameMut, HostCycleError> {
+        let slot = self.slot_of(id).ok_or(HostCycleError::UnknownAgent(id))?;
+        let mut loan = self.backend.loan(slot)?;
+        let s = &self.slots[slot];
+        let h = loan.parts_mut().0;
+        h.protocol_version = PROTOCOL_VERSION;
+        h.agent_id = id;
+        h.cycle = self.cycle;
+        h.sim_time_ns = self.sim_time_ns();
+        h.flags = if self.config.sync.sync_mode {
+            SENSOR_FLAG_SYNC_MODE
+        } else {
+            0
+        };
+        h.image_count = s.image_count as u32;
+        h.images = s.descs;
+        h.previous_outcome = s.last_outcome as u32;
+        h.previous_rejected = s.last_rejected;
+        Ok(SensorFrameMut {
+            slot,
+            agent_id: id,
+            cycle: self.cycle,
+            loan,
+            descs: s.descs,
+            image_count: s.image_count,
+        })
+    }
+
+    /// Publishes a frame; in sync mode its agent is then awaited this cycle.
+    ///
+    /// # Errors
+    /// [`HostCycleError`].
+    pub fn publish(&mut self, frame: SensorFrameMut) -> Result<(), HostCycleError> {
+        if frame.cycle != self.cycle {
+            return Err(HostCycleError::StaleFrame {
+                agent: frame.agent_id,
+                loaned: frame.cycle,
+                current: self.cycle,
+            });
+        }
+        let slot = frame.slot;
+        self.backend.publish(slot, frame.loan)?;
+        self.barrier.await_slot(slot);
+        Ok(())
+    }
+
+    /// Signals *start* to every agent. Call after all frames of the cycle are published.
+    ///
+    /// # Errors
+    /// [`HostCycleError`].
+    pub fn start(&mut self) -> Result<(), HostCycleError> {
+        self.backend.signal_start()?;
+        Ok(())
+    }
+
+    /// Ends the cycle. Sync mode: blocks until every agent whose frame was published this
+    /// cycle sent its stop, or `stop_timeout` passed (missing agents are logged and
+    /// counted). Async mode: waits until the next tick of `simulation_time_per_frame` real
+    /// time, taking every batch that arrives. Then advances the cycle number.
+    ///
+    /// # Errors
+    /// [`HostCycleError::Terminated`] on SIGINT/SIGTERM; transport failures.
+    pub fn collect(&mut self) -> Result<&CycleReport, HostCycleError> {
+        let cycle = self.cycle;
+        self.report.cycle = cycle;
+        self.report.sim_time_ns = self.sim_time_ns();
+        self.report.timed_out = false;
+        self.report.late_batches = 0;
+        for a in &mut self.report.agents {
+            a.commands.clear();
+            a.outcome = AgentOutcome::NotAwaited;
+        }
+        if self.config.sync.sync_mode {
+            self.collect_sync()?;
+        } else {
+            self.collect_async()?;
+        }
+        self.stats.cycles += 1;
+        self.cycle += 1;
+        self.barrier.begin(self.cycle);
+        Ok(&self.report)
+    }
+
+    fn drain(&mut self, sync: bool) -> Result<(), HostCycleError> {
+        let barrier = &mut self.barrier;
+        let report = &mut self.report;
+        let stats = &mut self.stats;
+        self.backend.drain(&mut |slot, header, commands| {
+            let verdict = if sync {
+                barrier.on_batch(slot, header.cycle, header.is_stop())
+            } else {
+                BatchVerdict::Accept { stop: false }
+            };
+            match verdict {
+                BatchVerdict::Accept { .. } => {
+                    let Some(a) = report.agents.get_mut(slot) else {
+                        return;
+                    };
+                    let room = a.commands.capacity() - a.commands.len();
+                    let take = commands.len().min(room);
+                    a.commands.extend_from_slice(&commands[..take]);
+                    stats.commands_received += take as u64;
+                    if take < commands.len() {
+                        stats.commands_overflowed += (commands.len() - take) as u64;
+                        warn!(agent = a.agent_id, dropped = commands.len() - take, "too many commands in one cycle");
+                    }
+                }
+                BatchVerdict::Late => {
+                    report.late_batches += 1;
+                    stats.late_batches += 1;
+                    debug!(slot, batch_cycle = header.cycle, "late batch dropped");
+                }
+                BatchVerdict::Future => {
+                    stats.future_batches += 1;
+                    warn!(slot, batch_cycle = header.cycle, "batch for a future cycle dropped");
+                }
+                BatchVerdict::NotAwaited => {}
+            }
+        })?;
+        Ok(())
+    }
+
+    fn collect_sync(&mut self) -> Result<(), HostCycleError> {
+        let deadline = Instant::now() + self.config.sync.stop_timeout;
+        loop {
+            self.drain(true)?;
+            if self.barrier.is_complete() {
+                break;
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                break;
+            }
+            self.backend.wait_activity(deadline - now)?;
+        }
+        let mut timed_out = 0u64;
+        for (slot, a) in self.report.agents.iter_mut().enumerate() {
+            a.outcome = self.barrier.outcome(slot);
+            self.slots[slot].last_outcome = match a.outcome {
+                AgentOutcome::Stopped => WireOutcome::Stopped,
+                AgentOutcome::TimedOut => WireOutcome::TimedOut,
+                _ => WireOutcome::None,
+            };
+            if a.outcome == AgentOutcome::TimedOut {
+                timed_out += 1;
+            }
+        }
+        if timed_out > 0 {
+            self.report.timed_out = true;
+            self.stats.stop_timeouts += 1;
+            self.stats.agent_timeouts += timed_out;
+            let missing: Vec<u32> = self.report.timed_out_agents().collect();
+            warn!(
+                cycle = self.cycle,
+                ?missing,
+                timeout_s = self.config.sync.stop_timeout.as_secs_f64(),
+                "stop timeout: cycle ends without these agents"
+            );
+        }
+        Ok(())
+    }
+
+    fn collect_async(&mut self) -> Result<(), HostCycleError> {
+        let period = self.config.sync.simulation_time_per_frame;
+        let now = Instant::now();
+        let tick = match self.next_tick {
+            // Keep a fixed rate; if we fell behind by more than a period, resynchronise
+            // instead of bursting to catch up.
+            Some(t) if t + period > now => t,
+            _ => now + period,
+        };
+        loop {
+            self.drain(false)?;
+            let now = Instant::now();
+            if now >= tick {
+                break;
+            }
+            self.backend.wait_activity(tick - now)?;
+        }
+        self.next_tick = Some(tick + period);
+        for a in &mut self.report.agents {
+            a.outcome = AgentOutcome::Async;
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,816 @@
+//! The shared-memory transport over iceoryx2.
+//!
+//! Services (all under `vrsync/<session>/`, see DESIGN §4):
+//!
+//! | service              | pattern                                 | writer → reader |
+//! |----------------------|-----------------------------------------|-----------------|
+//! | `agent/<id>/sensors` | pub-sub `[u8]` + [`SensorHeader`]       | host → agent    |
+//! | `agent/<id>/motor`   | pub-sub `[MotorCommand]` + [`MotorHeader`] | agent → host |
+//! | `start`              | event, id [`START_EVENT`]               | host → agents   |
+//! | `stop`               | event, id = agent id                    | agents → host   |
+//!
+//! The host `create`s every service; agents `open` them. Buffers are sized explicitly: the
+//! sensor publisher of an agent holds at most [`SENSOR_POOL_SAMPLES`] frames (one loaned by
+//! the host, one queued, two borrowed by the agent), so a 3×1080p rgb8 stream reserves
+//! ~75 MB instead of the ~280 MB iceoryx2's defaults would.
+
+use std::mem::MaybeUninit;
+use std::time::{Duration, Instant};
+
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::prelude::*;
+use iceoryx2::sample::Sample;
+use iceoryx2::sample_mut::SampleMut;
+use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as ps_factory};
+
+use super::{BatchSink, FrameLoan, HostTransport, HostTransportError};
+use crate::config::{Config, MAX_AGENT_ID};
+use crate::host::image_layout;
+use crate::wire::{
+    LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, SensorHeader,
+};
+
+type Svc = ipc::Service;
+
+/// Event id of *start* on the `start` service.
+pub const START_EVENT: usize = 0;
+/// Frames an agent may hold at once (the current one and the one being received).
+pub const AGENT_BORROWED_FRAMES: usize = 2;
+/// Sensor frames queued per agent: only the newest is kept (safe overflow).
+pub const SENSOR_QUEUE: usize = 1;
+/// Size of each agent's sensor sample pool: queued + borrowed + one loaned by the host.
+pub const SENSOR_POOL_SAMPLES: usize = SENSOR_QUEUE + AGENT_BORROWED_FRAMES + 1;
+/// Motor batches queued per agent at the host.
+pub const MOTOR_QUEUE: usize = 16;
+
+/// Service attribute key holding [`PROTOCOL_VERSION`].
+pub const ATTR_PROTOCOL: &str = "vrsync.protocol_version";
+/// Service attribute key holding [`LAYOUT_HASH`] (hex).
+pub const ATTR_LAYOUT: &str = "vrsync.layout_hash";
+
+/// Name of service `suffix` of a session.
+pub fn service_name(session: &str, suffix: &str) -> String {
+    format!("vrsync/{session}/{suffix}")
+}
+
+/// iceoryx2 node name of the host of a session.
+pub fn host_node_name(session: &str) -> String {
+    format!("vrsync-host.{session}")
+}
+
+/// iceoryx2 node name of agent `id` of a session.
+pub fn agent_node_name(session: &str, id: u32) -> String {
+    format!("vrsync-agent.{session}.{id}")
+}
+
+/// Bytes of shared memory the host's services of `config` reserve (sensor pools dominate).
+pub fn reserved_bytes(config: &Config) -> u64 {
+    let header = core::mem::size_of::<SensorHeader>() as u64 + 64;
+    config
+        .agents
+        .iter()
+        .map(|a| {
+            let frame = image_layout(&a.cameras).1.max(1) as u64 + header;
+            let motor = (u64::from(config.transport.max_commands_per_cycle)
+                * core::mem::size_of::<MotorCommand>() as u64
+                + 64)
+                * (MOTOR_QUEUE as u64 + 2);
+            frame * SENSOR_POOL_SAMPLES as u64 + motor
+        })
+        .sum()
+}
+
+fn svc_name(session: &str, suffix: &str) -> Result<ServiceName, String> {
+    let name = service_name(session, suffix);
+    ServiceName::new(&name).map_err(|e| format!("invalid service name {name:?}: {e:?}"))
+}
+
+fn attributes() -> Result<AttributeSpecifier, String> {
+    let key = |k: &str| AttributeKey::try_from(k).map_err(|e| format!("{e:?}"));
+    let val = |v: &str| AttributeValue::try_from(v).map_err(|e| format!("{e:?}"));
+    let (pk, pv) = (key(ATTR_PROTOCOL)?, val(&PROTOCOL_VERSION.to_string())?);
+    let (lk, lv) = (key(ATTR_LAYOUT)?, val(&format!("{LAYOUT_HASH:016x}"))?);
+    AttributeSpecifier::new()
+        .define(&pk, &pv)
+        .and_then(|s| s.define(&lk, &lv))
+        .map_err(|e| format!("{e:?}"))
+}
+
+use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
+
+/// Quiets iceoryx2's own logging unless `IOX2_LOG_LEVEL` asks for more. iceoryx2 logs
+/// through `tracing` (feature `tracing`), so what remains shows up in our logs.
+pub fn init_iceoryx2_logging() {
+    set_log_level_from_env_or(LogLevel::Error);
+}
+
+fn node(name: &str) -> Result<Node<Svc>, String> {
+    let node_name = NodeName::new(name).map_err(|e| format!("invalid node name {name:?}: {e:?}"))?;
+    NodeBuilder::new()
+        .name(&node_name)
+        .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+        .create::<Svc>()
+        .map_err(|e| format!("cannot create iceoryx2 node {name:?}: {e:?}"))
+}
+
+/// Whether a live host node exists for `session`, and a list of dead ones cleaned.
+pub fn host_alive(session: &str) -> bool {
+    let wanted = host_node_name(session);
+    let mut alive = false;
+    let _ = Node::<Svc>::list(Config2::global_config(), |state| {
+        if let NodeState::Alive(view) = &state {
+            use iceoryx2::node::NodeView;
+            if view
+                .details()
+                .as_ref()
+                .is_some_and(|d| d.name().as_str() == wanted)
+            {
+                alive = true;
+                return CallbackProgression::Stop;
+            }
+        }
+        CallbackProgression::Continue
+    });
+    alive
+}
+
+use iceoryx2::config::Config as Config2;
+
+/// Removes the stale resources of every dead iceoryx2 node on this machine (crashed runs).
+/// Returns how many nodes were cleaned.
+pub fn cleanup_dead_nodes() -> u64 {
+    let mut cleaned = 0;
+    let _ = Node::<Svc>::list(Config2::global_config(), |state| {
+        if let NodeState::Dead(view) = state
+            && view.try_remove_stale_resources().is_ok()
+        {
+            cleaned += 1;
+        }
+        CallbackProgression::Continue
+    });
+    cleaned
+}
+
+// ---------------------------------------------------------------------------------------
+// Host side
+// ---------------------------------------------------------------------------------------
+
+/// A loaned sensor sample, initialised (see [`ShmHost::loan`]).
+pub struct ShmFrameLoan {
+    sample: SampleMut<Svc, [u8], SensorHeader>,
+}
+
+impl core::fmt::Debug for ShmFrameLoan {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("ShmFrameLoan")
+            .field("header", self.sample.user_header())
+            .field("payload_len", &self.sample.payload().len())
+            .finish()
+    }
+}
+
+impl ShmFrameLoan {
+    /// Header and payload, both writable.
+    pub fn parts_mut(&mut self) -> (&mut SensorHeader, &mut [u8]) {
+        let payload = self.sample.payload_mut();
+        let (ptr, len) = (payload.as_mut_ptr(), payload.len());
+        let header = self.sample.user_header_mut();
+        // SAFETY: the user header and the payload are disjoint regions of the sample's chunk
+        // (iceoryx2 lays out header, user header and payload one after the other), so the two
+        // mutable borrows do not alias; both live as long as `&mut self`.
+        let payload = unsafe { core::slice::from_raw_parts_mut(ptr, len) };
+        (header, payload)
+    }
+
+    /// The header.
+    pub fn header(&self) -> &SensorHeader {
+        self.sample.user_header()
+    }
+}
+
+struct HostAgentPorts {
+    id: u32,
+    frame_bytes: usize,
+    sensor_pub: Publisher<Svc, [u8], SensorHeader>,
+    motor_service: ps_factory::PortFactory<Svc, [MotorCommand], MotorHeader>,
+    motor_sub: Subscriber<Svc, [MotorCommand], MotorHeader>,
+    sensor_service: ps_factory::PortFactory<Svc, [u8], SensorHeader>,
+    /// Addresses of pool chunks already written once: their bytes are initialised.
+    initialised: Vec<usize>,
+}
+
+/// The host side of the shared-memory transport.
+pub struct ShmHost {
+    node: Node<Svc>,
+    _start_service: event_factory::PortFactory<Svc>,
+    start: Notifier<Svc>,
+    _stop_service: event_factory::PortFactory<Svc>,
+    stop: Listener<Svc>,
+    agents: Vec<HostAgentPorts>,
+}
+
+impl core::fmt::Debug for ShmHost {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("ShmHost")
+            .field("agents", &self.agents.iter().map(|a| a.id).collect::<Vec<_>>())
+            .finish()
+    }
+}
+
+/// Why the shared-memory host could not be created.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ShmHostCreateError {
+    /// Another live host owns this session.
+    #[error(
+        "session {session:?} is already hosted by a running process (service {service} exists); \
+         stop it or choose another `session`"
+    )]
+    SessionInUse {
+        /// The session.
+        session: String,
+        /// The service that exists.
+        service: String,
+    },
+    /// iceoryx2 refused to create a node, service or port.
+    #[error("iceoryx2: {0}")]
+    Iceoryx(String),
+}
+
+impl ShmHost {
+    /// Creates every service of the session and the host's ports.
+    ///
+    /// # Errors
+    /// [`ShmHostCreateError`].
+    pub fn create(config: &Config) -> Result<Self, ShmHostCreateError> {
+        init_iceoryx2_logging();
+        let ice = ShmHostCreateError::Iceoryx;
+        let session = &config.session;
+        cleanup_dead_nodes();
+        if host_alive(session) {
+            return Err(ShmHostCreateError::SessionInUse {
+                session: session.clone(),
+                service: host_node_name(session),
+            });
+        }
+        let node = node(&host_node_name(session)).map_err(ice)?;
+        let attrs = attributes().map_err(ice)?;
+        let n = config.agents.len();
+        let max_ports = n + 4;
+        let exists = |name: &str, e: &dyn core::fmt::Debug| {
+            let s = format!("{e:?}");
+            if s.contains("AlreadyExists") {
+                ShmHostCreateError::SessionInUse {
+                    session: session.clone(),
+                    service: service_name(session, name),
+                }
+            } else {
+                ShmHostCreateError::Iceoryx(format!(
+                    "cannot create service {}: {s}",
+                    service_name(session, name)
+                ))
+            }
+        };
+
+        let start_service = node
+            .service_builder(&svc_name(session, "start").map_err(ice)?)
+            .event()
+            .max_listeners(max_ports)
+            .max_notifiers(2)
+            .max_nodes(max_ports)
+            .event_id_max_value(START_EVENT + 1)
+            .create_with_attributes(&attrs)
+            .map_err(|e| exists("start", &e))?;
+        let start = start_service
+            .notifier_builder()
+            .default_event_id(EventId::new(START_EVENT))
+            .create()
+            .map_err(|e| ice(format!("cannot create the start notifier: {e:?}")))?;
+        let stop_service = node
+            .service_builder(&svc_name(session, "stop").map_err(ice)?)
+            .event()
+            .max_listeners(2)
+            .max_notifiers(max_ports)
+            .max_nodes(max_ports)
+            .event_id_max_value(MAX_AGENT_ID as usize + 1)
+            .create_with_attributes(&attrs)
+            .map_err(|e| exists("stop", &e))?;
+        let stop = stop_service
+            .listener_builder()
+            .create()
+            .map_err(|e| ice(format!("cannot create the stop listener: {e:?}")))?;
+
+        let mut agents = Vec::with_capacity(n);
+        for a in &config.agents {
+            let (_, frame_bytes) = image_layout(&a.cameras);
+            let sensors = format!("agent/{}/sensors", a.id);
+            let mut builder = node
+                .service_builder(&svc_name(session, &sensors).map_err(ice)?)
+                .publish_subscribe::<[u8]>()
+                .user_header::<SensorHeader>()
+                .max_publishers(1)
+                .max_subscribers(1)
+                .max_nodes(4)
+                .history_size(0)
+                .subscriber_max_buffer_size(SENSOR_QUEUE)
+                .subscriber_max_borrowed_samples(AGENT_BORROWED_FRAMES)
+                .enable_safe_overflow(true);
+            if let Some(align) = Alignment::new(crate::host::IMAGE_ALIGN) {
+                builder = builder.payload_alignment(align);
+            }
+            let sensor_service = builder
+                .create_with_attributes(&attrs)
+                .map_err(|e| exists(&sensors, &e))?;
+            let sensor_pub = sensor_service
+                .publisher_builder()
+                .initial_max_slice_len(frame_bytes.max(1))
+                .allocation_strategy(AllocationStrategy::Static)
+                .max_loaned_samples(1)
+                .create()
+                .map_err(|e| ice(format!("cannot create the sensor publisher of agent {}: {e:?}", a.id)))?;
+            let motor = format!("agent/{}/motor", a.id);
+            let motor_service = node
+                .service_builder(&svc_name(session, &motor).map_err(ice)?)
+                .publish_subscribe::<[MotorCommand]>()
+                .user_header::<MotorHeader>()
+                .max_publishers(1)
+                .max_subscribers(1)
+                .max_nodes(4)
+                .history_size(0)
+                .subscriber_max_buffer_size(MOTOR_QUEUE)
+                .subscriber_max_borrowed_samples(1)
+                .enable_safe_overflow(true)
+                .create_with_attributes(&attrs)
+                .map_err(|e| exists(&motor, &e))?;
+            let motor_sub = motor_service
+                .subscriber_builder()
+                .buffer_size(MOTOR_QUEUE)
+                .create()
+                .map_err(|e| ice(format!("cannot create the motor subscriber of agent {}: {e:?}", a.id)))?;
+            agents.push(HostAgentPorts {
+                id: a.id,
+                frame_bytes,
+                sensor_service,
+                sensor_pub,
+                motor_service,
+                motor_sub,
+                initialised: Vec::with_capacity(SENSOR_POOL_SAMPLES * 2),
+            });
+        }
+        Ok(Self {
+            node,
+            _start_service: start_service,
+            start,
+            _stop_service: stop_service,
+            stop,
+            agents,
+        })
+    }
+
+    fn agent(&self, slot: usize) -> Result<&HostAgentPorts, HostTransportError> {
+        self.agents.get(slot).ok_or_else(|| HostTransportError::Loan {
+            agent: slot as u32,
+            reason: "no such agent slot".into(),
+        })
+    }
+}
+
+fn is_dyn_connected(p: &HostAgentPorts) -> bool {
+    use iceoryx2::service::port_factory::PortFactory as _;
+    p.sensor_service.dynamic_config().number_of_subscribers() > 0
+        && p.motor_service.dynamic_config().number_of_publishers() > 0
+}
+
+impl HostTransport for ShmHost {
+    fn is_connected(&self, slot: usize) -> bool {
+        self.agents.get(slot).is_some_and(is_dyn_connected)
+    }
+
+    fn loan(&mut self, slot: usize) -> Result<FrameLoan, HostTransportError> {
+        let id = self.agent(slot)?.id;
+        let Some(p) = self.agents.get_mut(slot) else {
+            return Err(HostTransportError::Loan {
+                agent: id,
+                reason: "no such agent slot".into(),
+            });
+        };
+        let mut sample = p
+            .sensor_pub
+            .loan_slice_uninit(p.frame_bytes)
+            .map_err(|e| HostTransportError::Loan {
+                agent: id,
+                reason: format!("{e:?}"),
+            })?;
+        let addr = sample.payload().as_ptr() as usize;
+        if !p.initialised.contains(&addr) {
+            // First use of this pool chunk: give every byte a defined value once. Later
+            // loans of the same chunk find the bytes of an earlier frame, so steady state
+            // costs no memset (zero copy, no per-cycle work proportional to image size).
+            sample.payload_mut().fill(MaybeUninit::new(0));
+            if p.initialised.len() < p.initialised.capacity() {
+                p.initialised.push(addr);
+            }
+        }
+        // SAFETY: every byte of this chunk was written (above, now or in an earlier loan of
+        // the same chunk); shared memory is never de-initialised by anyone afterwards.
+        let mut sample = unsafe { sample.assume_init() };
+        *sample.user_header_mut() = SensorHeader::default();
+        Ok(FrameLoan::Shm(ShmFrameLoan { sample }))
+    }
+
+    fn publish(&mut self, slot: usize, frame: FrameLoan) -> Result<(), HostTransportError> {
+        let id = self.agent(slot)?.id;
+        let FrameLoan::Shm(frame) = frame;
+        frame
+            .sample
+            .send()
+            .map(|_| ())
+            .map_err(|e| HostTransportError::Send {
+                what: format!("the sensor frame of agent {id}"),
+                reason: format!("{e:?}"),
+            })
+    }
+
+    fn signal_start(&mut self) -> Result<(), HostTransportError> {
+        self.start
+            .notify()
+            .map(|_| ())
+            .map_err(|e| HostTransportError::Send {
+                what: "start".into(),
+                reason: format!("{e:?}"),
+            })
+    }
+
+    fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError> {
+        for (slot, p) in self.agents.iter().enumerate() {
+            loop {
+                match p.motor_sub.receive() {
+                    Ok(Some(sample)) => sink(slot, sample.user_header(), sample.payload()),
+                    Ok(None) => break,
+                    Err(e) => {
+                        return Err(HostTransportError::Receive {
+                            agent: p.id,
+                            reason: format!("{e:?}"),
+                        });
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
+        match self.stop.timed_wait(|_| {}, timeout) {
+            Ok(_) => {}
+            Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => {}
+            Err(e) => {
+                return Err(HostTransportError::Receive {
+                    agent: u32::MAX,
+                    reason: format!("stop listener: {e:?}"),
+                });
+            }
+        }
+        // Drain every id that is already pending: counts merge and carry no information
+        // we rely on, and a pending id would make the next wait return at once.
+        let _ = self.stop.try_wait(|_| {});
+        if self.termination_requested() {
+            return Err(HostTransportError::Terminated);
+        }
+        Ok(())
+    }
+
+    fn update_connections(&mut self) {
+        for p in &self.agents {
+            let _ = p.sensor_pub.update_connections();
+            let _ = p.motor_sub.update_connections();
+        }
+    }
+
+    fn termination_requested(&self) -> bool {
+        self.node.wait(Duration::ZERO).is_err()
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Agent side
+// ---------------------------------------------------------------------------------------
+
+/// A received sensor frame in shared memory, owned by the agent until dropped.
+pub struct ShmFrame {
+    sample: Sample<Svc, [u8], SensorHeader>,
+}
+
+impl core::fmt::Debug for ShmFrame {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("ShmFrame")
+            .field("cycle", &self.sample.user_header().cycle)
+            .finish()
+    }
+}
+
+impl ShmFrame {
+    /// The header.
+    pub fn header(&self) -> &SensorHeader {
+        self.sample.user_header()
+    }
+    /// The image bytes, straight from shared memory.
+    pub fn payload(&self) -> &[u8] {
+        self.sample.payload()
+    }
+}
+
+/// Why an agent could not connect over shared memory.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ShmAgentConnectError {
+    /// The host's services did not appear before the deadline.
+    #[error(
+        "no host for session {session:?} within {waited:?}: service {service} does not exist \
+         (is `vr-sim run` running with the same config, and does it have agent {agent}?)"
+    )]
+    HostNotFound {
+        /// The session.
+        session: String,
+        /// The agent id.
+        agent: u32,
+        /// The missing service.
+        service: String,
+        /// How long we waited.
+        waited: Duration,
+    },
+    /// Host and agent were built with different wire layouts.
+    #[error(
+        "protocol mismatch: the host speaks vrsync protocol {host_protocol} (layout {host_layout}), \
+         this agent speaks protocol {agent_protocol} (layout {agent_layout}); rebuild the agent \
+         against the host's version"
+    )]
+    VersionMismatch {
+        /// The host's protocol version.
+        host_protocol: String,
+        /// The host's layout hash.
+        host_layout: String,
+        /// Ours.
+        agent_protocol: u32,
+        /// Ours.
+        agent_layout: String,
+    },
+    /// Another process already is this agent.
+    #[error("agent {agent} of session {session:?} is already connected by another process")]
+    AgentIdInUse {
+        /// The session.
+        session: String,
+        /// The agent id.
+        agent: u32,
+    },
+    /// iceoryx2 refused something else.
+    #[error("iceoryx2: {0}")]
+    Iceoryx(String),
+}
+
+/// The agent side of the shared-memory transport.
+pub struct ShmAgent {
+    id: u32,
+    session: String,
+    node: Node<Svc>,
+    _start_service: event_factory::PortFactory<Svc>,
+    start: Listener<Svc>,
+    _stop_service: event_factory::PortFactory<Svc>,
+    stop: Notifier<Svc>,
+    _sensor_service: ps_factory::PortFactory<Svc, [u8], SensorHeader>,
+    sensor_sub: Subscriber<Svc, [u8], SensorHeader>,
+    _motor_service: ps_factory::PortFactory<Svc, [MotorCommand], MotorHeader>,
+    motor_pub: Publisher<Svc, [MotorCommand], MotorHeader>,
+    max_commands: usize,
+}
+
+impl core::fmt::Debug for ShmAgent {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("ShmAgent")
+            .field("id", &self.id)
+            .field("session", &self.session)
+            .finish()
+    }
+}
+
+fn attr(attrs: &AttributeSet, key: &str) -> String {
+    AttributeKey::try_from(key)
+        .ok()
+        .and_then(|k| attrs.key_value(&k, 0).map(|v| v.to_string()))
+        .unwrap_or_else(|| "unknown".into())
+}
+
+impl ShmAgent {
+    /// Opens the session's services as agent `id`, retrying until the host created them or
+    /// `timeout` passed. Checks the protocol version and layout first.
+    ///
+    /// # Errors
+    /// [`ShmAgentConnectError`].
+    pub fn connect(config: &Config, id: u32, timeout: Duration) -> Result<Self, ShmAgentConnectError> {
+        use iceoryx2::service::port_factory::PortFactory as _;
+        init_iceoryx2_logging();
+        let ice = ShmAgentConnectError::Iceoryx;
+        let session = &config.session;
+        let deadline = Instant::now() + timeout;
+        let started = Instant::now();
+        let node = node(&agent_node_name(session, id)).map_err(ice)?;
+
+        // Retry with a short back-off: the host may start after us. Opening does not block
+        // in iceoryx2, so there is nothing to wait on but time.
+        let mut backoff = Duration::from_millis(5);
+        let start_service = loop {
+            match node
+                .service_builder(&svc_name(session, "start").map_err(ice)?)
+                .event()
+                .open()
+            {
+                Ok(s) => break s,
+                Err(iceoryx2::service::builder::event::EventOpenError::DoesNotExist)
+                | Err(iceoryx2::service::builder::event::EventOpenError::InsufficientPermissions)
+                | Err(iceoryx2::service::builder::event::EventOpenError::HangsInCreation) => {
+                    let now = Instant::now();
+                    if now >= deadline || node.wait(Duration::ZERO).is_err() {
+                        return Err(ShmAgentConnectError::HostNotFound {
+                            session: session.clone(),
+                            agent: id,
+                            service: service_name(session, "start"),
+                            waited: started.elapsed(),
+                        });
+                    }
+                    std::thread::sleep(backoff.min(deadline - now));
+                    backoff = (backoff * 2).min(Duration::from_millis(100));
+                }
+                Err(e) => return Err(ice(format!("cannot open the start service: {e:?}"))),
+            }
+        };
+        let host_protocol = attr(start_service.attributes(), ATTR_PROTOCOL);
+        let host_layout = attr(start_service.attributes(), ATTR_LAYOUT);
+        let agent_layout = format!("{LAYOUT_HASH:016x}");
+        if host_protocol != PROTOCOL_VERSION.to_string() || host_layout != agent_layout {
+            return Err(ShmAgentConnectError::VersionMismatch {
+                host_protocol,
+                host_layout,
+                agent_protocol: PROTOCOL_VERSION,
+                agent_layout,
+            });
+        }
+
+        let open_err = |what: &str, e: &dyn core::fmt::Debug| {
+            let s = format!("{e:?}");
+            if s.contains("DoesNotExist") {
+                ShmAgentConnectError::HostNotFound {
+                    session: session.clone(),
+                    agent: id,
+                    service: service_name(session, what),
+                    waited: started.elapsed(),
+                }
+            } else {
+                ice(format!("cannot open {}: {s}", service_name(session, what)))
+            }
+        };
+        let sensors = format!("agent/{id}/sensors");
+        let motor = format!("agent/{id}/motor");
+        let sensor_service = node
+            .service_builder(&svc_name(session, &sensors).map_err(ice)?)
+            .publish_subscribe::<[u8]>()
+            .user_header::<SensorHeader>()
+            .open()
+            .map_err(|e| open_err(&sensors, &e))?;
+        let motor_service = node
+            .service_builder(&svc_name(session, &motor).map_err(ice)?)
+            .publish_subscribe::<[MotorCommand]>()
+            .user_header::<MotorHeader>()
+            .open()
+            .map_err(|e| open_err(&motor, &e))?;
+        let stop_service = node
+            .service_builder(&svc_name(session, "stop").map_err(ice)?)
+            .event()
+            .open()
+            .map_err(|e| open_err("stop", &e))?;
+
+        let in_use = |e: &dyn core::fmt::Debug| {
+            let s = format!("{e:?}");
+            if s.contains("ExceedsMax") {
+                ShmAgentConnectError::AgentIdInUse {
+                    session: session.clone(),
+                    agent: id,
+                }
+            } else {
+                ice(s)
+            }
+        };
+        let max_commands = config.transport.max_commands_per_cycle as usize;
+        // Order matters: the host treats the agent as connected once the sensor subscriber
+        // exists, so everything else (stop notifier, motor publisher, start listener) is
+        // created first.
+        let stop = stop_service
+            .notifier_builder()
+            .default_event_id(EventId::new(id as usize))
+            .create()
+            .map_err(|e| in_use(&e))?;
+        let motor_pub = motor_service
+            .publisher_builder()
+            .initial_max_slice_len(max_commands)
+            .allocation_strategy(AllocationStrategy::Static)
+            .max_loaned_samples(1)
+            .create()
+            .map_err(|e| in_use(&e))?;
+        let start = start_service
+            .listener_builder()
+            .create()
+            .map_err(|e| in_use(&e))?;
+        let sensor_sub = sensor_service
+            .subscriber_builder()
+            .buffer_size(SENSOR_QUEUE)
+            .create()
+            .map_err(|e| in_use(&e))?;
+        // Tell the host we are here (it waits on the stop event while agents join).
+        let _ = stop.notify();
+        Ok(Self {
+            id,
+            session: session.clone(),
+            node,
+            _start_service: start_service,
+            start,
+            _stop_service: stop_service,
+            stop,
+            _sensor_service: sensor_service,
+            sensor_sub,
+            _motor_service: motor_service,
+            motor_pub,
+            max_commands,
+        })
+    }
+
+    /// The newest frame not yet received; older queued frames are dropped.
+    ///
+    /// # Errors
+    /// A string describing the iceoryx2 failure (e.g. too many frames held).
+    pub fn receive_newest(&mut self) -> Result<Option<ShmFrame>, String> {
+        let mut newest = None;
+        loop {
+            match self.sensor_sub.receive() {
+                Ok(Some(sample)) => newest = Some(ShmFrame { sample }),
+                Ok(None) => return Ok(newest),
+                Err(e) => {
+                    if newest.is_some() {
+                        return Ok(newest);
+                    }
+                    return Err(format!("{e:?}"));
+                }
+            }
+        }
+    }
+
+    /// Blocks until *start* may have been signalled, or `timeout` passed. Returns `false`
+    /// on SIGINT/SIGTERM.
+    pub fn wait_start(&mut self, timeout: Duration) -> bool {
+        let _ = self.start.timed_wait(|_| {}, timeout);
+        let _ = self.start.try_wait(|_| {});
+        self.node.wait(Duration::ZERO).is_ok()
+    }
+
+    /// Discards pending *start* notifications.
+    pub fn clear_start(&mut self) {
+        let _ = self.start.try_wait(|_| {});
+    }
+
+    /// Whether the host's node is alive.
+    pub fn host_alive(&self) -> bool {
+        host_alive(&self.session)
+    }
+
+    /// Whether SIGINT/SIGTERM was received.
+    pub fn termination_requested(&self) -> bool {
+        self.node.wait(Duration::ZERO).is_err()
+    }
+
+    /// Publishes a motor batch and, if it carries the stop flag, notifies *stop*.
+    ///
+    /// # Errors
+    /// A string describing the iceoryx2 failure.
+    pub fn send_batch(&mut self, header: &MotorHeader, commands: &[MotorCommand]) -> Result<(), String> {
+        let n = commands.len().min(self.max_commands);
+        let mut sample = self
+            .motor_pub
+            .loan_slice_uninit(n)
+            .map_err(|e| format!("cannot loan a motor batch: {e:?}"))?;
+        *sample.user_header_mut() = MotorHeader {
+            command_count: n as u32,
+            ..*header
+        };
+        let sample = sample.write_from_slice(&commands[..n]);
+        sample
+            .send()
+            .map_err(|e| format!("cannot send the motor batch: {e:?}"))?;
+        if header.is_stop() {
+            self.stop
+                .notify()
+                .map_err(|e| format!("cannot notify stop: {e:?}"))?;
+        }
+        Ok(())
+    }
+}

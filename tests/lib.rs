@@ -1,0 +1,1 @@
+//! Integration tests of vrsync live in `tests.rs`; this library is empty.
