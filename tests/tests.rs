@@ -1,1 +1,1 @@
-
+//! vrsync integration tests.

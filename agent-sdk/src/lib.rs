@@ -1,1 +1,40 @@
-//! x
+//! # vrsync-agent
+//!
+//! What an agent links to take part in a vrsync session: connect to the host, wait for
+//! *start*, read the sensor frame (images are `&[u8]` straight into shared memory), send
+//! motor commands, *stop*. The loop mirrors the original system's agents:
+//!
+//! ```no_run
+//! use std::time::Duration;
+//! use vrsync_agent::{Agent, Command};
+//! use vrsync_bridge::Config;
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let config = Config::load("config/default.toml")?;
+//! let mut agent = Agent::connect(&config, 0)?;
+//! loop {
+//!     let frame = match agent.wait_start(Some(Duration::from_secs(10))) {
+//!         Ok(frame) => frame,
+//!         Err(vrsync_agent::WaitStartError::HostClosed) => break,
+//!         Err(e) => return Err(e.into()),
+//!     };
+//!     let left = frame.image_by_name("left").ok_or("no left camera")?;
+//!     let brightness = left.data().iter().map(|&b| u64::from(b)).sum::<u64>();
+//!     drop(frame); // release the shared memory before the next cycle
+//!     if brightness > 0 {
+//!         agent.send(Command::Turn { angle_deg: 10.0 })?;
+//!     }
+//!     agent.stop()?;
+//! }
+//! # Ok(())
+//! # }
+//! ```
+
+mod agent;
+pub mod policy;
+
+pub use agent::{
+    Agent, AgentBuilder, AgentConnectError, Frame, HOST_LIVENESS_PERIOD, Image, SendError,
+    StopError, WaitStartError,
+};
+pub use vrsync_bridge::wire::{ActionState, Command, PixelFormat, Pose, SensorHeader};

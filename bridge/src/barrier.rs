@@ -150,7 +150,10 @@ mod tests {
         b.await_slot(2);
         b.await_slot(2); // idempotent
         assert_eq!(b.pending(), 2);
-        assert_eq!(b.on_batch(0, 7, false), BatchVerdict::Accept { stop: false });
+        assert_eq!(
+            b.on_batch(0, 7, false),
+            BatchVerdict::Accept { stop: false }
+        );
         assert!(!b.is_complete());
         assert_eq!(b.on_batch(0, 7, true), BatchVerdict::Accept { stop: true });
         assert_eq!(b.on_batch(2, 7, true), BatchVerdict::Accept { stop: true });
@@ -178,7 +181,11 @@ mod tests {
         assert!(!b.is_complete());
         assert_eq!(b.on_batch(1, 12, true), BatchVerdict::Future);
         assert_eq!(b.on_batch(1, 11, true), BatchVerdict::Accept { stop: true });
-        assert_eq!(b.on_batch(1, 11, false), BatchVerdict::Late, "after its stop");
+        assert_eq!(
+            b.on_batch(1, 11, false),
+            BatchVerdict::Late,
+            "after its stop"
+        );
         assert_eq!(b.pending(), 1);
     }
 

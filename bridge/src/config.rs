@@ -273,7 +273,11 @@ impl Ctx<'_> {
         };
         let (span, secs) = (v.span(), *v.get_ref());
         if !secs.is_finite() || secs <= 0.0 {
-            return Err(self.invalid(span, key, format!("must be a positive number of seconds, found {secs}")));
+            return Err(self.invalid(
+                span,
+                key,
+                format!("must be a positive number of seconds, found {secs}"),
+            ));
         }
         if secs > 86_400.0 {
             return Err(self.invalid(span, key, format!("{secs} s is more than a day")));
@@ -335,12 +339,7 @@ impl Config {
             Some(s) => {
                 let span = s.span();
                 let s = s.into_inner();
-                if s.is_empty()
-                    || s.len() > 64
-                    || !s
-                        .bytes()
-                        .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_' || b == b'.')
-                {
+                if !valid_session(&s) {
                     return Err(ctx.invalid(
                         span,
                         "session",
@@ -379,7 +378,10 @@ impl Config {
                 ctx.invalid(
                     s.span(),
                     "transport.tcp_listen",
-                    format!("{:?} is not an address like 127.0.0.1:7400 ({e})", s.get_ref()),
+                    format!(
+                        "{:?} is not an address like 127.0.0.1:7400 ({e})",
+                        s.get_ref()
+                    ),
                 )
             })?,
         };
@@ -426,13 +428,20 @@ impl Config {
             }
             let id = id as u32;
             if !seen.insert(id) {
-                return Err(ctx.invalid(a.id.span(), "agent.id", format!("duplicate agent id {id}")));
+                return Err(ctx.invalid(
+                    a.id.span(),
+                    "agent.id",
+                    format!("duplicate agent id {id}"),
+                ));
             }
             if a.camera.len() > MAX_CAMERAS {
                 return Err(ctx.invalid(
                     agent_span,
                     "agent.camera",
-                    format!("agent {id} has {} cameras, at most {MAX_CAMERAS}", a.camera.len()),
+                    format!(
+                        "agent {id} has {} cameras, at most {MAX_CAMERAS}",
+                        a.camera.len()
+                    ),
                 ));
             }
             let mut names = BTreeSet::new();
@@ -473,10 +482,17 @@ impl Config {
                 path: self.source.clone(),
                 line: 1,
                 key: "agent".into(),
-                reason: format!("agent count must be 1..={}, found {count}", MAX_AGENT_ID + 1),
+                reason: format!(
+                    "agent count must be 1..={}, found {count}",
+                    MAX_AGENT_ID + 1
+                ),
             });
         }
-        let template = self.agents.last().map(|a| a.cameras.clone()).unwrap_or_default();
+        let template = self
+            .agents
+            .last()
+            .map(|a| a.cameras.clone())
+            .unwrap_or_default();
         let mut agents = Vec::with_capacity(count as usize);
         for id in 0..count {
             let cameras = self
@@ -488,11 +504,33 @@ impl Config {
         Ok(self)
     }
 
+    /// Replaces the session name.
+    ///
+    /// # Errors
+    /// [`ConfigLoadError::Invalid`] if the name is not 1 to 64 characters from
+    /// `A-Z a-z 0-9 - _ .`.
+    pub fn with_session(mut self, session: &str) -> Result<Self, ConfigLoadError> {
+        if !valid_session(session) {
+            return Err(ConfigLoadError::Invalid {
+                path: self.source.clone(),
+                line: 1,
+                key: "session".into(),
+                reason: format!("{session:?}: use 1 to 64 characters from A-Z a-z 0-9 - _ ."),
+            });
+        }
+        self.session = session.to_string();
+        Ok(self)
+    }
+
     /// The config as TOML again (for handing the effective config to spawned agents).
     pub fn to_toml_string(&self) -> String {
         use std::fmt::Write;
         let mut s = String::new();
-        let _ = writeln!(s, "# effective vrsync config (generated from {})", self.source.display());
+        let _ = writeln!(
+            s,
+            "# effective vrsync config (generated from {})",
+            self.source.display()
+        );
         let _ = writeln!(s, "session = {:?}\nseed = {}", self.session, self.seed);
         let _ = writeln!(
             s,
@@ -565,7 +603,11 @@ impl Ctx<'_> {
         ] {
             let deg = *v.get_ref();
             if !(deg > 0.0 && deg < 180.0) {
-                return Err(self.invalid(v.span(), key, format!("must be in (0, 180) degrees, found {deg}")));
+                return Err(self.invalid(
+                    v.span(),
+                    key,
+                    format!("must be in (0, 180) degrees, found {deg}"),
+                ));
             }
         }
         let side = |v: &Spanned<i64>, key: &str| -> Result<u32, ConfigLoadError> {
@@ -610,6 +652,13 @@ impl Ctx<'_> {
             fov_vertical_deg: fov_v as f32,
         })
     }
+}
+
+fn valid_session(s: &str) -> bool {
+    !s.is_empty()
+        && s.len() <= 64
+        && s.bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_' || b == b'.')
 }
 
 /// The dotted key written on 1-based `line` of `text`: the last table header above it plus
@@ -673,10 +722,9 @@ mod tests {
 
     #[test]
     fn original_names_are_aliases() {
-        let c = parse(
-            "[sync]\nSyncMode = false\nSimulationTimePerFrame = 0.05\n[[agent]]\nid = 0\n",
-        )
-        .unwrap();
+        let c =
+            parse("[sync]\nSyncMode = false\nSimulationTimePerFrame = 0.05\n[[agent]]\nid = 0\n")
+                .unwrap();
         assert!(!c.sync.sync_mode);
         assert_eq!(c.sync.simulation_time_per_frame, Duration::from_millis(50));
     }
@@ -703,17 +751,37 @@ mod tests {
 
     #[test]
     fn bad_configs_name_file_line_and_key() {
-        expect_err("session = \"t\"\nbogus = 1\n[[agent]]\nid = 0\n", 2, "bogus");
-        expect_err("[sync]\nsync_mode = \"yes\"\n[[agent]]\nid = 0\n", 2, "sync_mode");
-        expect_err("[sync]\nstop_timeout = -1.0\n[[agent]]\nid = 0\n", 2, "sync.stop_timeout");
+        expect_err(
+            "session = \"t\"\nbogus = 1\n[[agent]]\nid = 0\n",
+            2,
+            "bogus",
+        );
+        expect_err(
+            "[sync]\nsync_mode = \"yes\"\n[[agent]]\nid = 0\n",
+            2,
+            "sync_mode",
+        );
+        expect_err(
+            "[sync]\nstop_timeout = -1.0\n[[agent]]\nid = 0\n",
+            2,
+            "sync.stop_timeout",
+        );
         expect_err(
             "[sync]\nsimulation_time_per_frame = 0\n[[agent]]\nid = 0\n",
             2,
             "sync.simulation_time_per_frame",
         );
-        expect_err("[[agent]]\nid = 0\n[[agent]]\nid = 0\n", 4, "duplicate agent id 0");
+        expect_err(
+            "[[agent]]\nid = 0\n[[agent]]\nid = 0\n",
+            4,
+            "duplicate agent id 0",
+        );
         expect_err("session = \"t\"\n", 1, "agent");
-        expect_err("[[agent]]\nid = 0\n[[agent.camera]]\nname = \"l\"\nwidth = 0\n", 5, "agent.camera.width");
+        expect_err(
+            "[[agent]]\nid = 0\n[[agent.camera]]\nname = \"l\"\nwidth = 0\n",
+            5,
+            "agent.camera.width",
+        );
         expect_err(
             "[[agent]]\nid = 0\n[[agent.camera]]\nname = \"l\"\nwidth = 64\nformat = \"bgr\"\n",
             6,
@@ -726,7 +794,10 @@ mod tests {
 
     #[test]
     fn agent_count_override_copies_the_last_agents_cameras() {
-        let c = Config::embedded_default().unwrap().with_agent_count(3).unwrap();
+        let c = Config::embedded_default()
+            .unwrap()
+            .with_agent_count(3)
+            .unwrap();
         assert_eq!(c.agents.iter().map(|a| a.id).collect::<Vec<_>>(), [0, 1, 2]);
         assert_eq!(c.agents[2].cameras, c.agents[1].cameras);
         assert!(parse(MINIMAL).unwrap().with_agent_count(0).is_err());
@@ -734,7 +805,10 @@ mod tests {
 
     #[test]
     fn effective_config_round_trips() {
-        let c = Config::embedded_default().unwrap().with_agent_count(3).unwrap();
+        let c = Config::embedded_default()
+            .unwrap()
+            .with_agent_count(3)
+            .unwrap();
         let text = c.to_toml_string();
         let back = Config::from_toml_str(&text, Path::new("eff.toml")).unwrap();
         assert_eq!(back.agents, c.agents);

@@ -49,14 +49,11 @@ pub fn image_layout(cameras: &[CameraConfig]) -> ([ImageDesc; MAX_CAMERAS], usiz
         };
         offset = (offset + len).next_multiple_of(IMAGE_ALIGN);
     }
-    let total = cameras
-        .iter()
-        .take(MAX_CAMERAS)
-        .last()
-        .map_or(0, |_| {
-            let last = &descs[cameras.len().min(MAX_CAMERAS) - 1];
-            (last.offset + last.len) as usize
-        });
+    let count = cameras.len().min(MAX_CAMERAS);
+    let total = match count {
+        0 => 0,
+        n => (descs[n - 1].offset + descs[n - 1].len) as usize,
+    };
     (descs, total)
 }
 
@@ -226,7 +223,9 @@ pub enum HostCreateError {
 #[non_exhaustive]
 pub enum HostWaitError {
     /// Some agents did not connect in time.
-    #[error("agents {missing:?} did not connect within {waited:?} (start them with `vr-agent --config <file> --id <id>`)")]
+    #[error(
+        "agents {missing:?} did not connect within {waited:?} (start them with `vr-agent --config <file> --id <id>`)"
+    )]
     AgentsMissing {
         /// Ids still missing.
         missing: Vec<u32>,
@@ -249,7 +248,9 @@ pub enum HostCycleError {
     #[error("agent {0} is not part of this session")]
     UnknownAgent(u32),
     /// The frame was loaned in another cycle.
-    #[error("frame for agent {agent} was loaned in cycle {loaned}, but the host is in cycle {current}")]
+    #[error(
+        "frame for agent {agent} was loaned in cycle {loaned}, but the host is in cycle {current}"
+    )]
     StaleFrame {
         /// Agent id.
         agent: u32,
@@ -419,7 +420,8 @@ impl Host {
 
     /// Whether agent `id` is connected (its receiving side is attached).
     pub fn is_connected(&self, id: u32) -> bool {
-        self.slot_of(id).is_some_and(|s| self.backend.is_connected(s))
+        self.slot_of(id)
+            .is_some_and(|s| self.backend.is_connected(s))
     }
 
     /// Whether SIGINT/SIGTERM was received.
@@ -453,7 +455,11 @@ impl Host {
                 .collect();
             if missing.is_empty() {
                 self.backend.update_connections();
-                info!(agents = self.slots.len(), waited_ms = started.elapsed().as_millis() as u64, "all agents connected");
+                info!(
+                    agents = self.slots.len(),
+                    waited_ms = started.elapsed().as_millis() as u64,
+                    "all agents connected"
+                );
                 return Ok(());
             }
             let now = Instant::now();
@@ -590,7 +596,11 @@ impl Host {
                     stats.commands_received += take as u64;
                     if take < commands.len() {
                         stats.commands_overflowed += (commands.len() - take) as u64;
-                        warn!(agent = a.agent_id, dropped = commands.len() - take, "too many commands in one cycle");
+                        warn!(
+                            agent = a.agent_id,
+                            dropped = commands.len() - take,
+                            "too many commands in one cycle"
+                        );
                     }
                 }
                 BatchVerdict::Late => {
@@ -600,7 +610,11 @@ impl Host {
                 }
                 BatchVerdict::Future => {
                     stats.future_batches += 1;
-                    warn!(slot, batch_cycle = header.cycle, "batch for a future cycle dropped");
+                    warn!(
+                        slot,
+                        batch_cycle = header.cycle,
+                        "batch for a future cycle dropped"
+                    );
                 }
                 BatchVerdict::NotAwaited => {}
             }

@@ -33,7 +33,16 @@ pub const CAMERA_NAME_LEN: usize = 16;
 /// Body pose: position and orientation in the world frame.
 #[repr(C)]
 #[derive(
-    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, IntoBytes, FromBytes, Immutable, KnownLayout,
+    Debug,
+    Clone,
+    Copy,
+    Default,
+    PartialEq,
+    ZeroCopySend,
+    IntoBytes,
+    FromBytes,
+    Immutable,
+    KnownLayout,
 )]
 #[type_name("vrsync::Pose/v1")]
 pub struct Pose {
@@ -66,7 +75,16 @@ impl Pose {
 /// Grid position sensor (the original `MsgGridPosition`): position and Euler rotation.
 #[repr(C)]
 #[derive(
-    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, IntoBytes, FromBytes, Immutable, KnownLayout,
+    Debug,
+    Clone,
+    Copy,
+    Default,
+    PartialEq,
+    ZeroCopySend,
+    IntoBytes,
+    FromBytes,
+    Immutable,
+    KnownLayout,
 )]
 #[type_name("vrsync::GridPosition/v1")]
 pub struct GridPosition {
@@ -79,7 +97,16 @@ pub struct GridPosition {
 /// Head motion sensor (the original `MsgHeadMotion`): differences per cycle.
 #[repr(C)]
 #[derive(
-    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, IntoBytes, FromBytes, Immutable, KnownLayout,
+    Debug,
+    Clone,
+    Copy,
+    Default,
+    PartialEq,
+    ZeroCopySend,
+    IntoBytes,
+    FromBytes,
+    Immutable,
+    KnownLayout,
 )]
 #[type_name("vrsync::HeadMotion/v1")]
 pub struct HeadMotion {
@@ -96,7 +123,16 @@ pub struct HeadMotion {
 /// Eye position sensor (the original `MsgEyePosition`).
 #[repr(C)]
 #[derive(
-    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, IntoBytes, FromBytes, Immutable, KnownLayout,
+    Debug,
+    Clone,
+    Copy,
+    Default,
+    PartialEq,
+    ZeroCopySend,
+    IntoBytes,
+    FromBytes,
+    Immutable,
+    KnownLayout,
 )]
 #[type_name("vrsync::EyePosition/v1")]
 pub struct EyePosition {
@@ -144,7 +180,16 @@ impl ActionState {
 /// One action status entry of a sensor frame.
 #[repr(C)]
 #[derive(
-    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, IntoBytes, FromBytes, Immutable, KnownLayout,
+    Debug,
+    Clone,
+    Copy,
+    Default,
+    PartialEq,
+    ZeroCopySend,
+    IntoBytes,
+    FromBytes,
+    Immutable,
+    KnownLayout,
 )]
 #[type_name("vrsync::ActionStatus/v1")]
 pub struct ActionStatus {
@@ -157,7 +202,16 @@ pub struct ActionStatus {
 /// One collision entry of a sensor frame.
 #[repr(C)]
 #[derive(
-    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, IntoBytes, FromBytes, Immutable, KnownLayout,
+    Debug,
+    Clone,
+    Copy,
+    Default,
+    PartialEq,
+    ZeroCopySend,
+    IntoBytes,
+    FromBytes,
+    Immutable,
+    KnownLayout,
 )]
 #[type_name("vrsync::Collision/v1")]
 pub struct Collision {
@@ -219,7 +273,16 @@ impl PixelFormat {
 /// Images are row-major, origin top-left, `stride_bytes` bytes per row.
 #[repr(C)]
 #[derive(
-    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, IntoBytes, FromBytes, Immutable, KnownLayout,
+    Debug,
+    Clone,
+    Copy,
+    Default,
+    PartialEq,
+    ZeroCopySend,
+    IntoBytes,
+    FromBytes,
+    Immutable,
+    KnownLayout,
 )]
 #[type_name("vrsync::ImageDesc/v1")]
 pub struct ImageDesc {
@@ -281,7 +344,16 @@ pub enum WireOutcome {
 /// whose payload is the images described by `images[..image_count]`.
 #[repr(C)]
 #[derive(
-    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, IntoBytes, FromBytes, Immutable, KnownLayout,
+    Debug,
+    Clone,
+    Copy,
+    Default,
+    PartialEq,
+    ZeroCopySend,
+    IntoBytes,
+    FromBytes,
+    Immutable,
+    KnownLayout,
 )]
 #[type_name("vrsync::SensorHeader/v1")]
 pub struct SensorHeader {
@@ -380,7 +452,16 @@ pub const MOTOR_FLAG_STOP: u32 = 1;
 /// payload is `[MotorCommand]`.
 #[repr(C)]
 #[derive(
-    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, IntoBytes, FromBytes, Immutable, KnownLayout,
+    Debug,
+    Clone,
+    Copy,
+    Default,
+    PartialEq,
+    ZeroCopySend,
+    IntoBytes,
+    FromBytes,
+    Immutable,
+    KnownLayout,
 )]
 #[type_name("vrsync::MotorHeader/v1")]
 pub struct MotorHeader {
@@ -442,7 +523,16 @@ pub mod kind {
 /// Use [`Command`] to build and read it: [`Command::encode`] / [`MotorCommand::decode`].
 #[repr(C)]
 #[derive(
-    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, IntoBytes, FromBytes, Immutable, KnownLayout,
+    Debug,
+    Clone,
+    Copy,
+    Default,
+    PartialEq,
+    ZeroCopySend,
+    IntoBytes,
+    FromBytes,
+    Immutable,
+    KnownLayout,
 )]
 #[type_name("vrsync::MotorCommand/v1")]
 pub struct MotorCommand {

@@ -1,1 +1,152 @@
-fn main(){}
+//! `vr-sim`: the headless simulator standing in for the Unity VR app.
+
+mod cli;
+mod render;
+mod run;
+mod spawn;
+mod world;
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::Context;
+use clap::Parser;
+use vrsync_bridge::{Config, ConfigLoadError};
+
+use crate::cli::{Cli, Command, DemoArgs, RunArgs};
+use crate::run::{RunOptions, print_summary};
+
+/// Exit code of bad usage or bad config.
+const EXIT_USAGE: u8 = 2;
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = e.print();
+            return if e.use_stderr() {
+                ExitCode::from(EXIT_USAGE)
+            } else {
+                ExitCode::SUCCESS
+            };
+        }
+    };
+    match run(cli) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("vr-sim: error: {e:#}");
+            if e.downcast_ref::<ConfigLoadError>().is_some() {
+                ExitCode::from(EXIT_USAGE)
+            } else {
+                ExitCode::from(1)
+            }
+        }
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<ExitCode> {
+    match cli.command {
+        Command::Demo(args) => demo(args),
+        Command::Run(args) => run_cmd(args),
+    }
+}
+
+fn write_summary(path: &Path, summary: &run::Summary) -> anyhow::Result<()> {
+    let text = serde_json::to_string_pretty(summary).context("serialise summary")?;
+    std::fs::write(path, text + "\n").with_context(|| format!("cannot write {}", path.display()))
+}
+
+fn demo(args: DemoArgs) -> anyhow::Result<ExitCode> {
+    let config = Config::embedded_default()?
+        .with_agent_count(args.agents)?
+        .with_session(&format!("demo-{}", std::process::id()))?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let config_path = args.out.join("config.toml");
+    std::fs::write(&config_path, config.to_toml_string())
+        .with_context(|| format!("cannot write {}", config_path.display()))?;
+    println!(
+        "vr-sim demo: {} agents, {} cycles, sync mode, shared memory (outputs in {})",
+        args.agents,
+        args.frames,
+        args.out.display()
+    );
+    let summary = run::run(RunOptions {
+        config,
+        agent_config_path: config_path,
+        frames: Some(args.frames),
+        spawn: true,
+        agent_args: vec!["--policy".into(), "wander".into()],
+        record: Some(args.out.join("record.jsonl")),
+        progress: true,
+    })?;
+    print_summary(&summary);
+    write_summary(&args.out.join("summary.json"), &summary)?;
+    println!("\n  outputs: {}", args.out.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// A temporary effective config, removed on drop.
+struct TempConfig(PathBuf);
+
+impl Drop for TempConfig {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
+fn run_cmd(args: RunArgs) -> anyhow::Result<ExitCode> {
+    let mut config = Config::load(&args.config)?;
+    let mut changed = false;
+    if let Some(n) = args.spawn_agents {
+        config = config.with_agent_count(n)?;
+        changed = true;
+    }
+    if let Some(s) = &args.session {
+        config = config.with_session(s)?;
+        changed = true;
+    }
+    if args.frames == Some(0) {
+        anyhow::bail!(ConfigLoadError::Invalid {
+            path: "--frames".into(),
+            line: 0,
+            key: "frames".into(),
+            reason: "must be at least 1".into(),
+        });
+    }
+    let mut _temp = None;
+    let agent_config_path = if changed {
+        let path = std::env::temp_dir().join(format!(
+            "vrsync-{}-{}.toml",
+            config.session,
+            std::process::id()
+        ));
+        std::fs::write(&path, config.to_toml_string())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        _temp = Some(TempConfig(path.clone()));
+        path
+    } else {
+        args.config.clone()
+    };
+    let summary = run::run(RunOptions {
+        config,
+        agent_config_path,
+        frames: args.frames,
+        spawn: args.spawn_agents.is_some(),
+        agent_args: args.agent_arg.clone(),
+        record: args.record.clone(),
+        progress: !args.quiet,
+    })?;
+    print_summary(&summary);
+    if let Some(path) = &args.summary_json {
+        write_summary(path, &summary)?;
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,1 +1,192 @@
-fn main(){}
+//! `vr-agent`: the example agent. Connects to a vrsync host and runs a policy.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::Context;
+use clap::Parser;
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use tracing::{info, warn};
+use vrsync_agent::policy::{Policy, PolicyKind};
+use vrsync_agent::{Agent, AgentBuilder, AgentConnectError, WaitStartError};
+use vrsync_bridge::Config;
+
+/// Example vrsync agent: waits for each cycle's start, reads its sensor frame from shared
+/// memory, sends motor commands chosen by a policy, and stops.
+///
+/// Exit codes: 0 when the host closed the session (or --frames were done), 1 on a runtime
+/// failure (host died, no start within the timeout, protocol mismatch), 2 on bad usage or
+/// a bad config.
+#[derive(Debug, Parser)]
+#[command(name = "vr-agent", version, about, long_about)]
+struct Args {
+    /// Config file (the same the host uses: session and transport are read from it).
+    #[arg(long, value_name = "FILE")]
+    config: PathBuf,
+    /// Agent id (0..=250).
+    #[arg(long, value_name = "N")]
+    id: u32,
+    /// What the agent does.
+    #[arg(long, value_enum, default_value = "wander")]
+    policy: PolicyKind,
+    /// Sleep a random 0..=MAX ms each cycle before stopping (simulated compute time, for
+    /// determinism tests). Drawn from a generator separate from the policy's.
+    #[arg(long, value_name = "MAX", default_value_t = 0)]
+    jitter_ms: u64,
+    /// Seed of the policy (default: the config's `seed`).
+    #[arg(long, value_name = "S")]
+    seed: Option<u64>,
+    /// Leave after this many cycles (default: run until the host closes the session).
+    #[arg(long, value_name = "N")]
+    frames: Option<u64>,
+    /// Give up when no start arrives for this many seconds (default: stop_timeout +
+    /// connect_timeout of the config).
+    #[arg(long, value_name = "SECONDS")]
+    start_timeout: Option<f64>,
+    /// Write one line per cycle to FILE: `cycle sim_time_ns skipped action_ids...`
+    /// (comma-separated action ids of the commands sent in that cycle).
+    #[arg(long, value_name = "FILE")]
+    log_cycles: Option<PathBuf>,
+    /// Testing aid: in this cycle, compute for twice the config's stop_timeout before
+    /// stopping, so the host times out and the stop arrives late.
+    #[arg(long, value_name = "CYCLE", hide = true)]
+    late_stop_at: Option<u64>,
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let args = match Args::try_parse() {
+        Ok(a) => a,
+        Err(e) => {
+            let _ = e.print();
+            return if e.use_stderr() {
+                ExitCode::from(2)
+            } else {
+                ExitCode::SUCCESS
+            };
+        }
+    };
+    match run(&args) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("vr-agent {}: error: {e:#}", args.id);
+            ExitCode::from(1)
+        }
+    }
+}
+
+fn run(args: &Args) -> anyhow::Result<ExitCode> {
+    let config = match Config::load(&args.config) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("vr-agent {}: error: {e}", args.id);
+            return Ok(ExitCode::from(2));
+        }
+    };
+    let start_timeout = match args.start_timeout {
+        Some(s) if s.is_finite() && s > 0.0 => Duration::from_secs_f64(s),
+        Some(s) => {
+            eprintln!(
+                "vr-agent {}: error: --start-timeout must be > 0, got {s}",
+                args.id
+            );
+            return Ok(ExitCode::from(2));
+        }
+        None => config.sync.stop_timeout + config.sync.connect_timeout,
+    };
+    let mut agent = match AgentBuilder::new(&config, args.id).connect() {
+        Ok(a) => a,
+        Err(e @ AgentConnectError::Shm(_)) | Err(e) => {
+            return Err(anyhow::Error::new(e).context(format!(
+                "cannot connect agent {} to session {:?}",
+                args.id, config.session
+            )));
+        }
+    };
+    info!(id = args.id, session = %config.session, policy = ?args.policy, "connected");
+    let seed = args.seed.unwrap_or(config.seed);
+    let mut policy = Policy::new(args.policy, seed, args.id);
+    let mut jitter = ChaCha8Rng::seed_from_u64(seed.wrapping_add(0x5EED) ^ u64::from(args.id));
+    let mut log = match &args.log_cycles {
+        Some(p) => Some(std::io::BufWriter::new(
+            std::fs::File::create(p).with_context(|| format!("cannot create {}", p.display()))?,
+        )),
+        None => None,
+    };
+    let mut sent = Vec::with_capacity(4);
+    let mut cycles = 0u64;
+    let outcome = loop {
+        if args.frames.is_some_and(|n| cycles >= n) {
+            break Ok(());
+        }
+        let frame = match agent.wait_start(Some(start_timeout)) {
+            Ok(f) => f,
+            Err(WaitStartError::HostClosed) => break Ok(()),
+            Err(WaitStartError::Terminated) => {
+                info!(id = args.id, "termination requested");
+                break Ok(());
+            }
+            Err(e) => break Err(e),
+        };
+        let cycle = frame.cycle();
+        let sim_time_ns = frame.header().sim_time_ns;
+        let decision = policy.decide(&frame);
+        drop(frame);
+        sent.clear();
+        for command in decision.iter() {
+            let action = agent.send(command).context("queue command")?;
+            policy.started(action);
+            sent.push(action);
+        }
+        if let Some(out) = &mut log {
+            use std::io::Write;
+            let ids: Vec<String> = sent.iter().map(u32::to_string).collect();
+            writeln!(
+                out,
+                "{cycle} {sim_time_ns} {} {}",
+                agent.frames_skipped(),
+                ids.join(",")
+            )
+            .context("write --log-cycles")?;
+            out.flush().context("write --log-cycles")?;
+        }
+        if args.jitter_ms > 0 {
+            let ms = jitter.random_range(0..=args.jitter_ms);
+            std::thread::sleep(Duration::from_millis(ms));
+        }
+        cycles += 1;
+        if args.late_stop_at == Some(cycle) {
+            warn!(
+                id = args.id,
+                cycle, "stopping late on purpose (--late-stop-at)"
+            );
+            std::thread::sleep(config.sync.stop_timeout * 2);
+        }
+        agent.stop().context("stop")?;
+    };
+    report(&agent, cycles);
+    match outcome {
+        Ok(()) => Ok(ExitCode::SUCCESS),
+        Err(e) => {
+            Err(anyhow::Error::new(e).context(format!("agent {} after {cycles} cycles", args.id)))
+        }
+    }
+}
+
+fn report(agent: &Agent, cycles: u64) {
+    info!(
+        id = agent.id(),
+        cycles,
+        last_cycle = ?agent.last_cycle(),
+        skipped = agent.frames_skipped(),
+        "agent finished"
+    );
+}

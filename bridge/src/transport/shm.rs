@@ -30,14 +30,14 @@ use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe 
 use super::{BatchSink, FrameLoan, HostTransport, HostTransportError};
 use crate::config::{Config, MAX_AGENT_ID};
 use crate::host::image_layout;
-use crate::wire::{
-    LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, SensorHeader,
-};
+use crate::wire::{LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, SensorHeader};
 
 type Svc = ipc::Service;
 
 /// Event id of *start* on the `start` service.
 pub const START_EVENT: usize = 0;
+/// Event id on the `start` service telling agents the host closed the session cleanly.
+pub const SHUTDOWN_EVENT: usize = 1;
 /// Frames an agent may hold at once (the current one and the one being received).
 pub const AGENT_BORROWED_FRAMES: usize = 2;
 /// Sensor frames queued per agent: only the newest is kept (safe overflow).
@@ -109,7 +109,8 @@ pub fn init_iceoryx2_logging() {
 }
 
 fn node(name: &str) -> Result<Node<Svc>, String> {
-    let node_name = NodeName::new(name).map_err(|e| format!("invalid node name {name:?}: {e:?}"))?;
+    let node_name =
+        NodeName::new(name).map_err(|e| format!("invalid node name {name:?}: {e:?}"))?;
     NodeBuilder::new()
         .name(&node_name)
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
@@ -216,7 +217,10 @@ pub struct ShmHost {
 impl core::fmt::Debug for ShmHost {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.debug_struct("ShmHost")
-            .field("agents", &self.agents.iter().map(|a| a.id).collect::<Vec<_>>())
+            .field(
+                "agents",
+                &self.agents.iter().map(|a| a.id).collect::<Vec<_>>(),
+            )
             .finish()
     }
 }
@@ -282,7 +286,7 @@ impl ShmHost {
             .max_listeners(max_ports)
             .max_notifiers(2)
             .max_nodes(max_ports)
-            .event_id_max_value(START_EVENT + 1)
+            .event_id_max_value(SHUTDOWN_EVENT + 1)
             .create_with_attributes(&attrs)
             .map_err(|e| exists("start", &e))?;
         let start = start_service
@@ -331,7 +335,12 @@ impl ShmHost {
                 .allocation_strategy(AllocationStrategy::Static)
                 .max_loaned_samples(1)
                 .create()
-                .map_err(|e| ice(format!("cannot create the sensor publisher of agent {}: {e:?}", a.id)))?;
+                .map_err(|e| {
+                    ice(format!(
+                        "cannot create the sensor publisher of agent {}: {e:?}",
+                        a.id
+                    ))
+                })?;
             let motor = format!("agent/{}/motor", a.id);
             let motor_service = node
                 .service_builder(&svc_name(session, &motor).map_err(ice)?)
@@ -350,7 +359,12 @@ impl ShmHost {
                 .subscriber_builder()
                 .buffer_size(MOTOR_QUEUE)
                 .create()
-                .map_err(|e| ice(format!("cannot create the motor subscriber of agent {}: {e:?}", a.id)))?;
+                .map_err(|e| {
+                    ice(format!(
+                        "cannot create the motor subscriber of agent {}: {e:?}",
+                        a.id
+                    ))
+                })?;
             agents.push(HostAgentPorts {
                 id: a.id,
                 frame_bytes,
@@ -372,10 +386,22 @@ impl ShmHost {
     }
 
     fn agent(&self, slot: usize) -> Result<&HostAgentPorts, HostTransportError> {
-        self.agents.get(slot).ok_or_else(|| HostTransportError::Loan {
-            agent: slot as u32,
-            reason: "no such agent slot".into(),
-        })
+        self.agents
+            .get(slot)
+            .ok_or_else(|| HostTransportError::Loan {
+                agent: slot as u32,
+                reason: "no such agent slot".into(),
+            })
+    }
+}
+
+impl Drop for ShmHost {
+    fn drop(&mut self) {
+        // Wake every agent at once with "session closed" instead of letting each find out
+        // by its liveness check.
+        let _ = self
+            .start
+            .notify_with_custom_event_id(EventId::new(SHUTDOWN_EVENT));
     }
 }
 
@@ -398,13 +424,12 @@ impl HostTransport for ShmHost {
                 reason: "no such agent slot".into(),
             });
         };
-        let mut sample = p
-            .sensor_pub
-            .loan_slice_uninit(p.frame_bytes)
-            .map_err(|e| HostTransportError::Loan {
+        let mut sample = p.sensor_pub.loan_slice_uninit(p.frame_bytes).map_err(|e| {
+            HostTransportError::Loan {
                 agent: id,
                 reason: format!("{e:?}"),
-            })?;
+            }
+        })?;
         let addr = sample.payload().as_ptr() as usize;
         if !p.initialised.contains(&addr) {
             // First use of this pool chunk: give every byte a defined value once. Later
@@ -498,6 +523,15 @@ impl HostTransport for ShmHost {
 // ---------------------------------------------------------------------------------------
 // Agent side
 // ---------------------------------------------------------------------------------------
+
+/// What [`ShmAgent::wait_start`] saw.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct StartSignal {
+    /// *start* was signalled.
+    pub start: bool,
+    /// The host closed the session.
+    pub shutdown: bool,
+}
 
 /// A received sensor frame in shared memory, owned by the agent until dropped.
 pub struct ShmFrame {
@@ -609,7 +643,11 @@ impl ShmAgent {
     ///
     /// # Errors
     /// [`ShmAgentConnectError`].
-    pub fn connect(config: &Config, id: u32, timeout: Duration) -> Result<Self, ShmAgentConnectError> {
+    pub fn connect(
+        config: &Config,
+        id: u32,
+        timeout: Duration,
+    ) -> Result<Self, ShmAgentConnectError> {
         use iceoryx2::service::port_factory::PortFactory as _;
         init_iceoryx2_logging();
         let ice = ShmAgentConnectError::Iceoryx;
@@ -765,17 +803,35 @@ impl ShmAgent {
         }
     }
 
-    /// Blocks until *start* may have been signalled, or `timeout` passed. Returns `false`
-    /// on SIGINT/SIGTERM.
-    pub fn wait_start(&mut self, timeout: Duration) -> bool {
-        let _ = self.start.timed_wait(|_| {}, timeout);
-        let _ = self.start.try_wait(|_| {});
-        self.node.wait(Duration::ZERO).is_ok()
+    /// Blocks until *start* may have been signalled, or `timeout` passed.
+    pub fn wait_start(&mut self, timeout: Duration) -> StartSignal {
+        let mut signal = StartSignal::default();
+        let mut record = |e: EventActivation| {
+            if e.id.as_value() == SHUTDOWN_EVENT {
+                signal.shutdown = true;
+            } else {
+                signal.start = true;
+            }
+        };
+        if let Ok(n) = self.start.timed_wait(&mut record, timeout)
+            && n > 0
+        {
+            let _ = self.start.try_wait(&mut record);
+        }
+        signal
     }
 
-    /// Discards pending *start* notifications.
-    pub fn clear_start(&mut self) {
-        let _ = self.start.try_wait(|_| {});
+    /// Discards pending *start* notifications; reports a pending shutdown.
+    pub fn clear_start(&mut self) -> StartSignal {
+        let mut signal = StartSignal::default();
+        let _ = self.start.try_wait(|e: EventActivation| {
+            if e.id.as_value() == SHUTDOWN_EVENT {
+                signal.shutdown = true;
+            } else {
+                signal.start = true;
+            }
+        });
+        signal
     }
 
     /// Whether the host's node is alive.
@@ -792,7 +848,11 @@ impl ShmAgent {
     ///
     /// # Errors
     /// A string describing the iceoryx2 failure.
-    pub fn send_batch(&mut self, header: &MotorHeader, commands: &[MotorCommand]) -> Result<(), String> {
+    pub fn send_batch(
+        &mut self,
+        header: &MotorHeader,
+        commands: &[MotorCommand],
+    ) -> Result<(), String> {
         let n = commands.len().min(self.max_commands);
         let mut sample = self
             .motor_pub

@@ -1,0 +1,74 @@
+//! Raw command-line arguments (clap). Validated and merged over the TOML config in
+//! `settings.rs`.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand};
+
+/// vr-sim: a headless, deterministic simulator that drives vrsync agents in lock-step.
+///
+/// Exit codes: 0 success, 1 runtime failure, 2 bad usage or bad config.
+/// Logging: set RUST_LOG (e.g. RUST_LOG=debug); default is info.
+#[derive(Debug, Parser)]
+#[command(name = "vr-sim", version, about, long_about)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Run the embedded default world with example agents spawned as separate processes,
+    /// show progress and print a summary. Needs no files.
+    Demo(DemoArgs),
+    /// Run a world from a config file, with spawned or external agents.
+    Run(RunArgs),
+}
+
+/// `vr-sim demo`.
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// Number of cycles.
+    #[arg(long, value_name = "N", default_value_t = 300)]
+    pub frames: u64,
+    /// Number of agents (each a `vr-agent --policy wander` process).
+    #[arg(long, value_name = "N", default_value_t = 2)]
+    pub agents: u32,
+    /// Folder for the demo's outputs (effective config, summary).
+    #[arg(long, value_name = "DIR", default_value = "vrsync-demo")]
+    pub out: PathBuf,
+}
+
+/// `vr-sim run`.
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// Config file (see config/default.toml for every key).
+    #[arg(long, value_name = "FILE")]
+    pub config: PathBuf,
+    /// Stop after N cycles (default: run until Ctrl-C).
+    #[arg(long, value_name = "N")]
+    pub frames: Option<u64>,
+    /// Start N `vr-agent` processes (ids 0..N, found next to this executable) and reap
+    /// them at the end. Resizes the config's agent list to N. Without it, vr-sim waits for
+    /// external agents and says which it waits for.
+    #[arg(long, value_name = "N")]
+    pub spawn_agents: Option<u32>,
+    /// Extra argument for every spawned agent (repeatable), e.g. --agent-arg=--jitter-ms
+    /// --agent-arg=20.
+    #[arg(long, value_name = "ARG", allow_hyphen_values = true)]
+    pub agent_arg: Vec<String>,
+    /// Override the config's session name.
+    #[arg(long, value_name = "NAME")]
+    pub session: Option<String>,
+    /// Write one JSON line per agent per cycle (cycle, sim time, pose, commands, statuses).
+    #[arg(long, value_name = "FILE")]
+    pub record: Option<PathBuf>,
+    /// Write the run summary as JSON.
+    #[arg(long, value_name = "FILE")]
+    pub summary_json: Option<PathBuf>,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}

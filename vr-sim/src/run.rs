@@ -1,0 +1,347 @@
+//! The host run loop: frame 1 (sensors + start), frame 2 (collect, apply, advance).
+
+use std::collections::BTreeSet;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use serde::Serialize;
+use tracing::{info, warn};
+use vrsync_bridge::{AgentOutcome, Config, Host, HostCycleError, HostWaitError};
+
+use crate::render::render_pattern;
+use crate::spawn::Agents;
+use crate::world::{World, WorldParams};
+
+/// What to run.
+#[derive(Debug)]
+pub struct RunOptions {
+    /// The validated config.
+    pub config: Config,
+    /// The file spawned agents are given.
+    pub agent_config_path: PathBuf,
+    /// Cycles to run (`None`: until Ctrl-C).
+    pub frames: Option<u64>,
+    /// Spawn `vr-agent` for every configured agent.
+    pub spawn: bool,
+    /// Extra arguments for spawned agents.
+    pub agent_args: Vec<String>,
+    /// JSON-lines recording.
+    pub record: Option<PathBuf>,
+    /// Show a progress bar.
+    pub progress: bool,
+}
+
+/// The run summary (DESIGN §8 keys, plus a few more).
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    /// `sync` or `async`.
+    pub mode: String,
+    /// `shm` or `tcp`.
+    pub transport: String,
+    /// Number of agents.
+    pub agents: usize,
+    /// Cycles completed.
+    pub frames: u64,
+    /// Simulated seconds.
+    pub sim_time_s: f64,
+    /// Wall-clock seconds of the cycle loop.
+    pub wall_s: f64,
+    /// Cycles per wall-clock second.
+    pub frames_per_s: f64,
+    /// Cycles that ended by the stop timeout.
+    pub stop_timeouts: u64,
+    /// Agent-cycles that timed out.
+    pub agent_timeouts: u64,
+    /// Late batches (stops for an earlier cycle) dropped.
+    pub late_stops: u64,
+    /// Agents evicted (dead).
+    pub evicted_agents: Vec<u32>,
+    /// Commands applied to the world.
+    pub commands_applied: u64,
+    /// Commands rejected (undecodable, out of range, unsupported).
+    pub commands_rejected: u64,
+    /// Hash of every agent's pose and status after every cycle (blake3, hex).
+    pub trajectory_hash: String,
+    /// Mean time to write sensors and render all agents' images per cycle, µs.
+    pub render_us: f64,
+    /// Whether the run ended early by SIGINT/SIGTERM.
+    pub interrupted: bool,
+}
+
+#[derive(Serialize)]
+struct RecordLine<'a> {
+    cycle: u64,
+    sim_time_s: f64,
+    agent: u32,
+    outcome: &'a str,
+    position: [f32; 3],
+    rotation: [f32; 4],
+    heading_deg: f32,
+    commands: Vec<(&'static str, u32)>,
+    rejected: u32,
+    statuses: Vec<(u32, u32)>,
+    collisions: Vec<(u32, u32)>,
+}
+
+/// Runs the world until `frames` cycles are done (or Ctrl-C).
+///
+/// # Errors
+/// Host creation, agents missing, transport failures, a spawned agent failing.
+pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
+    let config = &opts.config;
+    let mut host = Host::builder(config)
+        .create()
+        .context("cannot create the host")?;
+    let ids: Vec<u32> = host.agent_ids().collect();
+    let mut agents = if opts.spawn {
+        Agents::spawn(&opts.agent_config_path, &ids, &opts.agent_args)?
+    } else {
+        Agents::default()
+    };
+
+    // Wait for every agent, in slices so a spawned agent that fails is reported at once.
+    let wait_started = Instant::now();
+    loop {
+        let left = config
+            .sync
+            .connect_timeout
+            .saturating_sub(wait_started.elapsed());
+        match host.wait_for_agents(left.min(Duration::from_millis(500))) {
+            Ok(()) => break,
+            Err(HostWaitError::AgentsMissing { missing, .. }) => {
+                if let Some((id, status)) = agents.failed() {
+                    bail!("agent {id} exited before connecting ({status})");
+                }
+                if left.is_zero() {
+                    bail!(
+                        "agents {missing:?} did not connect within {:?}; start them with \
+                         `vr-agent --config {} --id <id>`",
+                        config.sync.connect_timeout,
+                        opts.agent_config_path.display()
+                    );
+                }
+            }
+            Err(HostWaitError::Terminated) => bail!("interrupted while waiting for agents"),
+            Err(e) => return Err(e).context("waiting for agents"),
+        }
+    }
+
+    let dt = config.sync.simulation_time_per_frame;
+    let mut world = World::new(WorldParams::default(), &ids, dt.as_secs_f32());
+    let mut record = match &opts.record {
+        Some(p) => Some(BufWriter::new(
+            File::create(p).with_context(|| format!("cannot create {}", p.display()))?,
+        )),
+        None => None,
+    };
+    let bar = opts.progress.then(|| {
+        let bar = match opts.frames {
+            Some(n) => indicatif::ProgressBar::new(n),
+            None => indicatif::ProgressBar::new_spinner(),
+        };
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} cycles {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        bar
+    });
+
+    let mut hasher = blake3::Hasher::new();
+    let mut applied = 0u64;
+    let mut rejected_total = 0u64;
+    let mut logged_rejections: BTreeSet<(u32, &'static str)> = BTreeSet::new();
+    let mut render_time = Duration::ZERO;
+    let mut interrupted = false;
+    let loop_started = Instant::now();
+    let mut done = 0u64;
+
+    while opts.frames.is_none_or(|n| done < n) {
+        // Frame 1: every connected agent's sensors, written in place, then one start.
+        let t = Instant::now();
+        for &id in &ids {
+            if !host.is_connected(id) {
+                continue;
+            }
+            let mut frame = host.loan_frame(id)?;
+            let cycle = frame.header().cycle;
+            let (header, images) = frame.parts_mut();
+            world.write_sensors(id, header);
+            render_pattern(images, cycle, &header.pose);
+            host.publish(frame)?;
+        }
+        render_time += t.elapsed();
+        host.start()?;
+
+        // Frame 2: collect, apply in (agent id, order sent) order, advance.
+        let report = match host.collect() {
+            Ok(r) => r,
+            Err(HostCycleError::Terminated) => {
+                interrupted = true;
+                break;
+            }
+            Err(e) => return Err(e).context("cycle failed"),
+        };
+        let cycle = report.cycle;
+        let mut per_agent = Vec::with_capacity(if record.is_some() { ids.len() } else { 0 });
+        let mut rejected_per_agent = Vec::with_capacity(ids.len());
+        for a in report.agents() {
+            let mut rejected = 0u32;
+            let mut names = Vec::new();
+            for wire in a.commands() {
+                let result = wire
+                    .decode()
+                    .map_err(crate::world::CommandRejected::from)
+                    .and_then(|cmd| world.apply(a.agent_id, wire.action_id, cmd).map(|()| cmd));
+                match result {
+                    Ok(cmd) => {
+                        applied += 1;
+                        if record.is_some() {
+                            names.push((cmd.name(), wire.action_id));
+                        }
+                    }
+                    Err(e) => {
+                        rejected += 1;
+                        let kind = vrsync_bridge::wire::kind_name(wire.kind);
+                        if logged_rejections.insert((a.agent_id, kind)) {
+                            warn!(
+                                agent = a.agent_id,
+                                cycle,
+                                "command rejected: {e} (further `{kind}` rejections of this agent are counted, not logged)"
+                            );
+                        }
+                    }
+                }
+            }
+            rejected_total += u64::from(rejected);
+            rejected_per_agent.push((a.agent_id, rejected));
+            if record.is_some() {
+                per_agent.push((a.agent_id, a.outcome, names, rejected));
+            }
+        }
+        for (id, n) in rejected_per_agent {
+            host.set_rejected(id, n);
+        }
+        world.step();
+        hasher.update(&cycle.to_le_bytes());
+        world.hash_into(&mut hasher);
+
+        if let Some(out) = &mut record {
+            let sim_time_s = (cycle as f64 + 1.0) * dt.as_secs_f64();
+            for (id, outcome, commands, rejected) in per_agent {
+                let Some(body) = world.bodies().iter().find(|b| b.id == id) else {
+                    continue;
+                };
+                let pose = body.pose();
+                let line = RecordLine {
+                    cycle,
+                    sim_time_s,
+                    agent: id,
+                    outcome: outcome.as_str(),
+                    position: pose.position,
+                    rotation: pose.rotation,
+                    heading_deg: body.heading_deg,
+                    commands,
+                    rejected,
+                    statuses: body
+                        .pending_statuses()
+                        .iter()
+                        .map(|&(a, s)| (a, s as u32))
+                        .collect(),
+                    collisions: body.pending_collisions().to_vec(),
+                };
+                serde_json::to_writer(&mut *out, &line).context("write record")?;
+                out.write_all(b"\n").context("write record")?;
+            }
+        }
+        done += 1;
+        if let Some(bar) = &bar {
+            bar.inc(1);
+        }
+        if let Some((id, status)) = agents.failed() {
+            bail!("agent {id} exited during cycle {cycle} ({status})");
+        }
+        if host.termination_requested() {
+            interrupted = true;
+            break;
+        }
+    }
+    let wall = loop_started.elapsed();
+    if let Some(bar) = bar {
+        bar.finish_and_clear();
+    }
+    if let Some(mut out) = record {
+        out.flush().context("write record")?;
+    }
+    let stats = host.stats().clone();
+    let sync_mode = config.sync.sync_mode;
+    drop(host); // tells the agents the session is closed
+    let failures = agents.finish(Duration::from_secs(5));
+    for (id, why) in &failures {
+        warn!(agent = id, "agent did not end cleanly: {why}");
+    }
+    if !interrupted && !failures.is_empty() {
+        bail!("spawned agents failed: {failures:?}");
+    }
+    let wall_s = wall.as_secs_f64();
+    let summary = Summary {
+        mode: if sync_mode { "sync" } else { "async" }.into(),
+        transport: config.transport.kind.as_str().into(),
+        agents: ids.len(),
+        frames: done,
+        sim_time_s: done as f64 * dt.as_secs_f64(),
+        wall_s,
+        frames_per_s: if wall_s > 0.0 {
+            done as f64 / wall_s
+        } else {
+            0.0
+        },
+        stop_timeouts: stats.stop_timeouts,
+        agent_timeouts: stats.agent_timeouts,
+        late_stops: stats.late_batches,
+        evicted_agents: Vec::new(),
+        commands_applied: applied,
+        commands_rejected: rejected_total,
+        trajectory_hash: hasher.finalize().to_hex().to_string(),
+        render_us: if done > 0 {
+            render_time.as_secs_f64() * 1e6 / done as f64
+        } else {
+            0.0
+        },
+        interrupted,
+    };
+    info!(frames = done, wall_s, "run finished");
+    let _ = AgentOutcome::Stopped;
+    Ok(summary)
+}
+
+/// Prints the summary as a table.
+pub fn print_summary(s: &Summary) {
+    let rows: [(&str, String); 14] = [
+        ("mode", s.mode.clone()),
+        ("transport", s.transport.clone()),
+        ("agents", s.agents.to_string()),
+        ("cycles", s.frames.to_string()),
+        ("simulated time", format!("{:.2} s", s.sim_time_s)),
+        ("wall time", format!("{:.2} s", s.wall_s)),
+        ("cycles per second", format!("{:.1}", s.frames_per_s)),
+        ("stop timeouts", s.stop_timeouts.to_string()),
+        ("late stops dropped", s.late_stops.to_string()),
+        ("evicted agents", format!("{:?}", s.evicted_agents)),
+        ("commands applied", s.commands_applied.to_string()),
+        ("commands rejected", s.commands_rejected.to_string()),
+        ("render per cycle", format!("{:.0} µs", s.render_us)),
+        ("trajectory hash", s.trajectory_hash[..16].to_string()),
+    ];
+    println!();
+    for (k, v) in rows {
+        println!("  {k:<20} {v}");
+    }
+    if s.interrupted {
+        println!("  (interrupted)");
+    }
+}
