@@ -1,1 +1,10 @@
-//! vrsync integration tests.
+//! vrsync integration tests: real `vr-sim` and `vr-agent` processes, one binary
+//! (`autotests = false`), a module per area, fixtures in `util.rs`.
+
+// Test code: panicking on a broken fixture is the right failure.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+mod util;
+
+mod config;
+mod sync;

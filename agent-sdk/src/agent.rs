@@ -4,7 +4,7 @@ use std::time::{Duration, Instant};
 
 use tracing::debug;
 use vrsync_bridge::config::{Config, TransportKind};
-use vrsync_bridge::transport::shm::{ShmAgent, ShmAgentConnectError, ShmFrame};
+use vrsync_bridge::transport::shm::{HostState, ShmAgent, ShmAgentConnectError, ShmFrame};
 use vrsync_bridge::wire::{
     Command, ImageDesc, MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION, PixelFormat,
     Pose, SensorHeader,
@@ -364,10 +364,16 @@ impl Agent {
             }
             let now = Instant::now();
             if now >= next_liveness {
-                if !self.backend.host_alive() {
-                    return Err(WaitStartError::HostGone {
-                        session: self.session.clone(),
-                    });
+                match self.backend.host_state() {
+                    HostState::Alive => {}
+                    // A clean exit removes the node; the shutdown notification may have
+                    // been sent while we were not listening.
+                    HostState::Absent => return Err(WaitStartError::HostClosed),
+                    HostState::Dead => {
+                        return Err(WaitStartError::HostGone {
+                            session: self.session.clone(),
+                        });
+                    }
                 }
                 next_liveness = now + HOST_LIVENESS_PERIOD;
             }

@@ -45,8 +45,9 @@ struct Args {
     /// connect_timeout of the config).
     #[arg(long, value_name = "SECONDS")]
     start_timeout: Option<f64>,
-    /// Write one line per cycle to FILE: `cycle sim_time_ns skipped action_ids...`
-    /// (comma-separated action ids of the commands sent in that cycle).
+    /// Write one line per cycle to FILE: `cycle sim_time_ns skipped action_ids` (action ids
+    /// of the commands sent in that cycle, comma-separated). `{id}` in FILE is replaced by
+    /// the agent id, so spawned agents can share one --agent-arg.
     #[arg(long, value_name = "FILE")]
     log_cycles: Option<PathBuf>,
     /// Testing aid: in this cycle, compute for twice the config's stop_timeout before
@@ -62,6 +63,7 @@ fn main() -> ExitCode {
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
         )
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
     let args = match Args::try_parse() {
         Ok(a) => a,
@@ -116,9 +118,13 @@ fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let mut policy = Policy::new(args.policy, seed, args.id);
     let mut jitter = ChaCha8Rng::seed_from_u64(seed.wrapping_add(0x5EED) ^ u64::from(args.id));
     let mut log = match &args.log_cycles {
-        Some(p) => Some(std::io::BufWriter::new(
-            std::fs::File::create(p).with_context(|| format!("cannot create {}", p.display()))?,
-        )),
+        Some(p) => {
+            let p = PathBuf::from(p.to_string_lossy().replace("{id}", &args.id.to_string()));
+            Some(std::io::BufWriter::new(
+                std::fs::File::create(&p)
+                    .with_context(|| format!("cannot create {}", p.display()))?,
+            ))
+        }
         None => None,
     };
     let mut sent = Vec::with_capacity(4);

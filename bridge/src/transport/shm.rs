@@ -118,25 +118,42 @@ fn node(name: &str) -> Result<Node<Svc>, String> {
         .map_err(|e| format!("cannot create iceoryx2 node {name:?}: {e:?}"))
 }
 
-/// Whether a live host node exists for `session`, and a list of dead ones cleaned.
-pub fn host_alive(session: &str) -> bool {
+/// What became of a session's host process, as iceoryx2's node registry tells.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HostState {
+    /// The host's node exists and its process is alive.
+    Alive,
+    /// The host's process died without removing its node (crash, SIGKILL).
+    Dead,
+    /// No host node: it never existed or it closed the session cleanly.
+    Absent,
+}
+
+/// The state of `session`'s host node.
+pub fn host_state(session: &str) -> HostState {
+    use iceoryx2::node::NodeView;
     let wanted = host_node_name(session);
-    let mut alive = false;
-    let _ = Node::<Svc>::list(Config2::global_config(), |state| {
-        if let NodeState::Alive(view) = &state {
-            use iceoryx2::node::NodeView;
-            if view
-                .details()
-                .as_ref()
-                .is_some_and(|d| d.name().as_str() == wanted)
-            {
-                alive = true;
+    let mut state = HostState::Absent;
+    let _ = Node::<Svc>::list(Config2::global_config(), |node| {
+        let (view_state, details) = match &node {
+            NodeState::Alive(view) => (HostState::Alive, view.details().clone()),
+            NodeState::Dead(view) => (HostState::Dead, view.details().clone()),
+            _ => return CallbackProgression::Continue,
+        };
+        if details.is_some_and(|d| d.name().as_str() == wanted) {
+            state = view_state;
+            if view_state == HostState::Alive {
                 return CallbackProgression::Stop;
             }
         }
         CallbackProgression::Continue
     });
-    alive
+    state
+}
+
+/// Whether a live host node exists for `session`.
+pub fn host_alive(session: &str) -> bool {
+    host_state(session) == HostState::Alive
 }
 
 use iceoryx2::config::Config as Config2;
@@ -280,20 +297,6 @@ impl ShmHost {
             }
         };
 
-        let start_service = node
-            .service_builder(&svc_name(session, "start").map_err(ice)?)
-            .event()
-            .max_listeners(max_ports)
-            .max_notifiers(2)
-            .max_nodes(max_ports)
-            .event_id_max_value(SHUTDOWN_EVENT + 1)
-            .create_with_attributes(&attrs)
-            .map_err(|e| exists("start", &e))?;
-        let start = start_service
-            .notifier_builder()
-            .default_event_id(EventId::new(START_EVENT))
-            .create()
-            .map_err(|e| ice(format!("cannot create the start notifier: {e:?}")))?;
         let stop_service = node
             .service_builder(&svc_name(session, "stop").map_err(ice)?)
             .event()
@@ -375,6 +378,22 @@ impl ShmHost {
                 initialised: Vec::with_capacity(SENSOR_POOL_SAMPLES * 2),
             });
         }
+        // `start` is created last: agents open it first, so once it exists every other
+        // service of the session does too.
+        let start_service = node
+            .service_builder(&svc_name(session, "start").map_err(ice)?)
+            .event()
+            .max_listeners(max_ports)
+            .max_notifiers(2)
+            .max_nodes(max_ports)
+            .event_id_max_value(SHUTDOWN_EVENT + 1)
+            .create_with_attributes(&attrs)
+            .map_err(|e| exists("start", &e))?;
+        let start = start_service
+            .notifier_builder()
+            .default_event_id(EventId::new(START_EVENT))
+            .create()
+            .map_err(|e| ice(format!("cannot create the start notifier: {e:?}")))?;
         Ok(Self {
             node,
             _start_service: start_service,
@@ -834,9 +853,9 @@ impl ShmAgent {
         signal
     }
 
-    /// Whether the host's node is alive.
-    pub fn host_alive(&self) -> bool {
-        host_alive(&self.session)
+    /// The state of the host's node.
+    pub fn host_state(&self) -> HostState {
+        host_state(&self.session)
     }
 
     /// Whether SIGINT/SIGTERM was received.

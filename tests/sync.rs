@@ -1,0 +1,397 @@
+//! The lock-step protocol with real processes: every cycle once and in order, stop
+//! timeouts, late stops, async mode, protocol mismatch, external agents.
+
+use std::time::Duration;
+
+use serde_json::Value;
+
+use crate::util::{self, Proc, RUN_DEADLINE, TestConfig, bin, cycle_log, record, summary};
+
+fn entries_for(rec: &[Value], agent: u64) -> Vec<&Value> {
+    rec.iter().filter(|v| v["agent"] == agent).collect()
+}
+
+fn action_ids(entry: &Value) -> Vec<u32> {
+    entry["commands"]
+        .as_array()
+        .expect("commands")
+        .iter()
+        .map(|c| c[1].as_u64().expect("action id") as u32)
+        .collect()
+}
+
+#[test]
+fn three_agents_500_cycles_see_every_cycle_once_in_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = TestConfig::new("sync500", 3);
+    let config = cfg.write(dir.path());
+    let s = dir.path().join("summary.json");
+    let rec = dir.path().join("record.jsonl");
+    let log = dir.path().join("agent-{id}.log");
+    let out = util::run(
+        "vr-sim",
+        &[
+            "run",
+            "--config",
+            config.to_str().unwrap(),
+            "--frames",
+            "500",
+            "--spawn-agents",
+            "3",
+            "--agent-arg=--policy",
+            "--agent-arg=circle",
+            &format!("--agent-arg=--log-cycles={}", log.display()),
+            "--summary-json",
+            s.to_str().unwrap(),
+            "--record",
+            rec.to_str().unwrap(),
+            "--quiet",
+        ],
+        RUN_DEADLINE,
+    );
+    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    let sum = summary(&s);
+    assert_eq!(sum["frames"], 500);
+    assert_eq!(sum["agents"], 3);
+    assert_eq!(sum["mode"], "sync");
+    assert_eq!(sum["transport"], "shm");
+    assert_eq!(sum["stop_timeouts"], 0);
+    assert_eq!(sum["late_stops"], 0);
+
+    let rec = record(&rec);
+    assert_eq!(rec.len(), 1500);
+    let mut total_sent = 0;
+    for agent in 0..3u64 {
+        let lines = cycle_log(&dir.path().join(format!("agent-{agent}.log")));
+        let cycles: Vec<u64> = lines.iter().map(|l| l.cycle).collect();
+        assert_eq!(cycles, (0..500).collect::<Vec<_>>(), "agent {agent} cycles");
+        for l in &lines {
+            assert_eq!(
+                l.sim_time_ns,
+                l.cycle * 100_000_000,
+                "sim time of cycle {}",
+                l.cycle
+            );
+            assert_eq!(l.skipped, 0);
+            assert_eq!(l.action_ids.len(), 1, "circle sends one command per cycle");
+        }
+        // The host got every batch, for the cycle the agent answered.
+        let host_side = entries_for(&rec, agent);
+        assert_eq!(host_side.len(), 500);
+        for (entry, l) in host_side.iter().zip(&lines) {
+            assert_eq!(entry["cycle"], l.cycle);
+            assert_eq!(entry["outcome"], "stopped");
+            assert_eq!(
+                action_ids(entry),
+                l.action_ids,
+                "agent {agent} cycle {}",
+                l.cycle
+            );
+        }
+        total_sent += lines.len() as u64;
+    }
+    assert_eq!(sum["commands_applied"], total_sent);
+}
+
+#[test]
+fn a_late_stop_times_out_its_cycle_and_never_completes_the_next() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = TestConfig::new("late", 2);
+    cfg.stop_timeout_s = 0.3;
+    let config = cfg.write(dir.path());
+    let config = config.to_str().unwrap();
+    let s = dir.path().join("summary.json");
+    let rec = dir.path().join("record.jsonl");
+    let mut host = Proc::spawn(
+        &bin("vr-sim"),
+        &[
+            "run",
+            "--config",
+            config,
+            "--frames",
+            "12",
+            "--summary-json",
+            s.to_str().unwrap(),
+            "--record",
+            rec.to_str().unwrap(),
+            "--quiet",
+        ],
+    );
+    host.wait_for_stderr("waiting for agents", Duration::from_secs(30));
+    let logs: Vec<_> = (0..2)
+        .map(|i| dir.path().join(format!("a{i}.log")))
+        .collect();
+    let a0 = Proc::spawn(
+        &bin("vr-agent"),
+        &[
+            "--config",
+            config,
+            "--id",
+            "0",
+            "--policy",
+            "circle",
+            "--log-cycles",
+            logs[0].to_str().unwrap(),
+        ],
+    );
+    let a1 = Proc::spawn(
+        &bin("vr-agent"),
+        &[
+            "--config",
+            config,
+            "--id",
+            "1",
+            "--policy",
+            "circle",
+            "--late-stop-at",
+            "5",
+            "--log-cycles",
+            logs[1].to_str().unwrap(),
+        ],
+    );
+    let out = host.wait(RUN_DEADLINE);
+    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    assert_eq!(a0.wait(Duration::from_secs(10)).code(), Some(0));
+    assert_eq!(a1.wait(Duration::from_secs(10)).code(), Some(0));
+
+    let timeout_line = out
+        .stderr
+        .lines()
+        .find(|l| l.contains("stop timeout"))
+        .unwrap_or_else(|| panic!("no stop timeout logged:\n{}", out.stderr));
+    assert!(timeout_line.contains("missing=[1]"), "{timeout_line}");
+
+    let sum = summary(&s);
+    assert_eq!(sum["frames"], 12);
+    assert_eq!(sum["stop_timeouts"], 1);
+    assert_eq!(sum["agent_timeouts"], 1);
+    assert_eq!(sum["late_stops"], 1);
+
+    let rec = record(&rec);
+    let agent1 = cycle_log(&logs[1]);
+    assert_eq!(
+        agent1.iter().map(|l| l.cycle).collect::<Vec<_>>(),
+        (0..12).collect::<Vec<_>>()
+    );
+    for entry in entries_for(&rec, 1) {
+        let cycle = entry["cycle"].as_u64().unwrap();
+        let sent = &agent1[cycle as usize].action_ids;
+        if cycle == 5 {
+            assert_eq!(entry["outcome"], "timed_out");
+            assert!(
+                action_ids(entry).is_empty(),
+                "late commands must not be applied"
+            );
+        } else {
+            assert_eq!(entry["outcome"], "stopped", "cycle {cycle}");
+            // Cycle 6 holds exactly what the agent sent for 6: nothing of its late batch.
+            assert_eq!(&action_ids(entry), sent, "cycle {cycle}");
+        }
+    }
+    for entry in entries_for(&rec, 0) {
+        assert_eq!(entry["outcome"], "stopped");
+    }
+}
+
+#[test]
+fn async_mode_a_slow_agent_always_reads_the_newest_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = TestConfig::new("async", 2);
+    cfg.sync_mode = false;
+    cfg.dt_s = 0.01;
+    let config = cfg.write(dir.path());
+    let s = dir.path().join("summary.json");
+    let mut host = Proc::spawn(
+        &bin("vr-sim"),
+        &[
+            "run",
+            "--config",
+            config.to_str().unwrap(),
+            "--frames",
+            "150",
+            "--summary-json",
+            s.to_str().unwrap(),
+            "--quiet",
+        ],
+    );
+    host.wait_for_stderr("waiting for agents", Duration::from_secs(30));
+    let fast_log = dir.path().join("fast.log");
+    let slow_log = dir.path().join("slow.log");
+    let config = config.to_str().unwrap();
+    let fast = Proc::spawn(
+        &bin("vr-agent"),
+        &[
+            "--config",
+            config,
+            "--id",
+            "0",
+            "--policy",
+            "circle",
+            "--log-cycles",
+            fast_log.to_str().unwrap(),
+        ],
+    );
+    let slow = Proc::spawn(
+        &bin("vr-agent"),
+        &[
+            "--config",
+            config,
+            "--id",
+            "1",
+            "--policy",
+            "circle",
+            "--jitter-ms",
+            "80",
+            "--log-cycles",
+            slow_log.to_str().unwrap(),
+        ],
+    );
+    let out = host.wait(RUN_DEADLINE);
+    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    assert_eq!(fast.wait(Duration::from_secs(10)).code(), Some(0));
+    assert_eq!(slow.wait(Duration::from_secs(10)).code(), Some(0));
+    let sum = summary(&s);
+    assert_eq!(sum["mode"], "async");
+    assert_eq!(sum["frames"], 150);
+
+    let slow = cycle_log(&slow_log);
+    assert!(!slow.is_empty());
+    // Never an older frame after a newer one, and nothing but skips in between: the agent
+    // does not work through a backlog (the subscriber keeps only the newest frame).
+    for w in slow.windows(2) {
+        assert!(w[1].cycle > w[0].cycle, "{:?} then {:?}", w[0], w[1]);
+    }
+    let last = slow.last().unwrap();
+    assert_eq!(
+        last.skipped + slow.len() as u64,
+        last.cycle + 1 - slow[0].cycle + slow[0].skipped
+    );
+    assert!(
+        last.skipped > 0,
+        "a slow agent in async mode must skip frames: {slow:?}"
+    );
+    assert!((slow.len() as u64) < sum["frames"].as_u64().unwrap());
+}
+
+#[test]
+fn a_protocol_mismatch_is_refused_at_connect_with_both_versions() {
+    use iceoryx2::prelude::*;
+    use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
+
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = TestConfig::new("mismatch", 1);
+    cfg.connect_timeout_s = 5.0;
+    let config = cfg.write(dir.path());
+
+    // A "host" of another protocol version: the start service with other attributes.
+    let node = NodeBuilder::new().create::<ipc::Service>().unwrap();
+    let name = ServiceName::new(&format!("vrsync/{}/start", cfg.session)).unwrap();
+    let attrs = AttributeSpecifier::new()
+        .define(
+            &AttributeKey::try_from("vrsync.protocol_version").unwrap(),
+            &AttributeValue::try_from("999").unwrap(),
+        )
+        .unwrap()
+        .define(
+            &AttributeKey::try_from("vrsync.layout_hash").unwrap(),
+            &AttributeValue::try_from("00000000deadbeef").unwrap(),
+        )
+        .unwrap();
+    let _service = node
+        .service_builder(&name)
+        .event()
+        .create_with_attributes(&attrs)
+        .unwrap();
+
+    let out = util::run(
+        "vr-agent",
+        &["--config", config.to_str().unwrap(), "--id", "0"],
+        Duration::from_secs(30),
+    );
+    assert_eq!(out.code(), Some(1), "stderr:\n{}", out.stderr);
+    assert!(out.stderr.contains("protocol 999"), "{}", out.stderr);
+    assert!(out.stderr.contains("00000000deadbeef"), "{}", out.stderr);
+    assert!(
+        out.stderr.contains(&format!(
+            "this agent speaks protocol {}",
+            vrsync_bridge::PROTOCOL_VERSION
+        )),
+        "{}",
+        out.stderr
+    );
+}
+
+#[test]
+fn without_spawn_the_host_says_which_agents_it_waits_for() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = TestConfig::new("external", 2);
+    let config = cfg.write(dir.path());
+    let config = config.to_str().unwrap();
+    let s = dir.path().join("summary.json");
+    let mut host = Proc::spawn(
+        &bin("vr-sim"),
+        &[
+            "run",
+            "--config",
+            config,
+            "--frames",
+            "20",
+            "--summary-json",
+            s.to_str().unwrap(),
+            "--quiet",
+        ],
+    );
+    let line = host.wait_for_stderr("waiting for agents", Duration::from_secs(30));
+    assert!(line.contains("[0, 1]"), "{line}");
+    // Start them in reverse order: the host starts cycle 0 only when both are there.
+    let a1 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "1"]);
+    let a0 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "0"]);
+    let out = host.wait(RUN_DEADLINE);
+    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    assert_eq!(a0.wait(Duration::from_secs(10)).code(), Some(0));
+    assert_eq!(a1.wait(Duration::from_secs(10)).code(), Some(0));
+    let sum = summary(&s);
+    assert_eq!(sum["frames"], 20);
+    assert_eq!(sum["stop_timeouts"], 0);
+}
+
+#[test]
+fn an_agent_without_a_host_fails_with_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = TestConfig::new("nohost", 1);
+    cfg.connect_timeout_s = 0.5;
+    let config = cfg.write(dir.path());
+    let out = util::run(
+        "vr-agent",
+        &["--config", config.to_str().unwrap(), "--id", "0"],
+        Duration::from_secs(30),
+    );
+    assert_eq!(out.code(), Some(1), "stderr:\n{}", out.stderr);
+    assert!(out.stderr.contains("no host for session"), "{}", out.stderr);
+    assert!(out.stderr.contains(&cfg.session), "{}", out.stderr);
+}
+
+#[test]
+fn the_demo_runs_and_writes_its_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("demo");
+    let out = util::run(
+        "vr-sim",
+        &[
+            "demo",
+            "--frames",
+            "30",
+            "--agents",
+            "2",
+            "--out",
+            out_dir.to_str().unwrap(),
+        ],
+        RUN_DEADLINE,
+    );
+    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    assert!(out.stdout.contains("trajectory hash"), "{}", out.stdout);
+    let sum = summary(&out_dir.join("summary.json"));
+    assert_eq!(sum["frames"], 30);
+    assert_eq!(sum["agents"], 2);
+    assert_eq!(sum["stop_timeouts"], 0);
+}
