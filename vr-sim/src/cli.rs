@@ -1,5 +1,4 @@
-//! Raw command-line arguments (clap). Validated and merged over the TOML config in
-//! `settings.rs`.
+//! Raw command-line arguments (clap), merged over the TOML config in `main.rs`.
 
 use std::path::PathBuf;
 
@@ -36,9 +35,16 @@ pub struct DemoArgs {
     /// Number of agents (each a `vr-agent --policy wander` process).
     #[arg(long, value_name = "N", default_value_t = 2)]
     pub agents: u32,
-    /// Folder for the demo's outputs (effective config, summary).
+    /// Folder for the demo's outputs: effective config, summary, recording, map.png and
+    /// a few camera frames in frames/.
     #[arg(long, value_name = "DIR", default_value = "vrsync-demo")]
     pub out: PathBuf,
+    /// Policy of the example agents (wander, seek, idle, circle).
+    #[arg(long, value_name = "NAME", default_value = "wander")]
+    pub policy: String,
+    /// Threads shading image rows (1: the host thread only; 0: one per core).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub render_threads: usize,
 }
 
 /// `vr-sim run`.
@@ -68,6 +74,21 @@ pub struct RunArgs {
     /// Write the run summary as JSON.
     #[arg(long, value_name = "FILE")]
     pub summary_json: Option<PathBuf>,
+    /// Write a top-down PNG map of the room with every agent's trajectory at the end.
+    #[arg(long, value_name = "FILE.png")]
+    pub map: Option<PathBuf>,
+    /// Write the agents' camera images as PNG files into DIR
+    /// (`c<cycle>_a<agent>_<camera>.png`; depth as 16-bit millimetres).
+    #[arg(long, value_name = "DIR")]
+    pub dump_frames: Option<PathBuf>,
+    /// With --dump-frames: write the images of every K-th cycle (0, K, 2K, ...).
+    #[arg(long, value_name = "K", default_value_t = 1, requires = "dump_frames",
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub every: u64,
+    /// Threads shading image rows (1: the host thread only; 0: one per core). The images
+    /// do not depend on it.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub render_threads: usize,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,

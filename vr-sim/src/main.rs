@@ -1,10 +1,13 @@
 //! `vr-sim`: the headless simulator standing in for the Unity VR app.
 
 mod cli;
+mod geometry;
+mod picture;
 mod render;
 mod run;
 mod spawn;
 mod world;
+mod world_config;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -43,7 +46,9 @@ fn main() -> ExitCode {
         Ok(code) => code,
         Err(e) => {
             eprintln!("vr-sim: error: {e:#}");
-            if e.downcast_ref::<ConfigLoadError>().is_some() {
+            if e.downcast_ref::<ConfigLoadError>().is_some()
+                || e.downcast_ref::<world_config::WorldConfigError>().is_some()
+            {
                 ExitCode::from(EXIT_USAGE)
             } else {
                 ExitCode::from(1)
@@ -74,23 +79,36 @@ fn demo(args: DemoArgs) -> anyhow::Result<ExitCode> {
     std::fs::write(&config_path, config.to_toml_string())
         .with_context(|| format!("cannot write {}", config_path.display()))?;
     println!(
-        "vr-sim demo: {} agents, {} cycles, sync mode, shared memory (outputs in {})",
+        "vr-sim demo: {} agents ({}), {} cycles, sync mode, shared memory (outputs in {})",
         args.agents,
+        args.policy,
         args.frames,
         args.out.display()
     );
+    let frames_dir = args.out.join("frames");
+    let map = args.out.join("map.png");
     let summary = run::run(RunOptions {
         config,
         agent_config_path: config_path,
         frames: Some(args.frames),
         spawn: true,
-        agent_args: vec!["--policy".into(), "wander".into()],
+        agent_args: vec!["--policy".into(), args.policy.clone()],
         record: Some(args.out.join("record.jsonl")),
         progress: true,
+        map: Some(map.clone()),
+        // Four moments of the run.
+        dump_frames: Some((frames_dir.clone(), (args.frames / 4).max(1))),
+        render_threads: args.render_threads,
     })?;
     print_summary(&summary);
     write_summary(&args.out.join("summary.json"), &summary)?;
     println!("\n  outputs: {}", args.out.display());
+    println!("    map         {}", map.display());
+    println!("    frames      {}", frames_dir.display());
+    println!(
+        "    recording   {}",
+        args.out.join("record.jsonl").display()
+    );
     Ok(ExitCode::SUCCESS)
 }
 
@@ -144,6 +162,9 @@ fn run_cmd(args: RunArgs) -> anyhow::Result<ExitCode> {
         agent_args: args.agent_arg.clone(),
         record: args.record.clone(),
         progress: !args.quiet,
+        map: args.map.clone(),
+        dump_frames: args.dump_frames.clone().map(|d| (d, args.every)),
+        render_threads: args.render_threads,
     })?;
     print_summary(&summary);
     if let Some(path) = &args.summary_json {

@@ -1,30 +1,399 @@
-//! A cheap placeholder renderer: a pattern that depends on the cycle and the pose, written
-//! straight into the loaned shared memory.
+//! The CPU renderer: ray casting of the room (walls, checkered floor, ceiling), its boxes
+//! and spheres and the other agents' bodies, flat-shaded, written **straight into the
+//! loaned sensor sample**: every pixel is computed and stored in its place in shared
+//! memory, with no intermediate image and no copy.
+//!
+//! Each camera ray is `forward + u·right + v·up`, so the ray parameter of a hit is its depth
+//! along the optical axis (what `depth32f` images hold, in metres; the far wall is always
+//! hit because the room is closed). Objects are culled per image by the screen rectangle
+//! of their bounding box, so a pixel only tests the few objects that can cover it.
+//!
+//! Rows are shaded in parallel on a rayon pool when it has more than one thread. Every
+//! pixel is a pure function of the world, so the images do not depend on the number of
+//! threads.
 
-use vrsync_bridge::host::ImagesMut;
-use vrsync_bridge::wire::{PixelFormat, Pose};
+use glam::Vec3;
+use rayon::prelude::*;
+use vrsync_bridge::host::{ImageMut, ImagesMut};
+use vrsync_bridge::wire::{ImageDesc, PixelFormat};
 
-/// Fills every image with a pattern of (`cycle`, `pose`).
-pub fn render_pattern(images: ImagesMut<'_>, cycle: u64, pose: &Pose) {
-    let shift = (pose.position[0] * 16.0) as i64 as u8 ^ (pose.position[2] * 16.0) as i64 as u8;
-    for (n, image) in images.enumerate() {
-        let d = image.desc;
-        let stride = d.stride_bytes as usize;
-        let bpp = d
-            .pixel_format()
-            .unwrap_or(PixelFormat::Rgb8)
-            .bytes_per_pixel();
-        for (y, row) in image.data.chunks_exact_mut(stride).enumerate() {
-            let base = (y as u8)
-                .wrapping_add(cycle as u8)
-                .wrapping_add(n as u8 * 64)
-                ^ shift;
-            for (x, px) in row[..d.width_px as usize * bpp]
-                .chunks_exact_mut(bpp)
-                .enumerate()
-            {
-                px.fill(base.wrapping_add(x as u8));
+use crate::geometry::{Camera, NEAR_M, enter_box, exit_box, hit_cylinder, hit_sphere, recip};
+use crate::world::{Body, CameraSpec, World};
+use crate::world_config::Shape;
+
+/// Colours of the agents' bodies, by agent id (modulo the length). None is red, so that
+/// only the red object looks red.
+pub const AGENT_COLORS: [[u8; 3]; 6] = [
+    [235, 200, 40],
+    [40, 185, 225],
+    [160, 95, 210],
+    [60, 175, 95],
+    [240, 140, 200],
+    [120, 120, 230],
+];
+
+/// Unit vector towards the light (from above, a little from the south-west).
+const LIGHT: Vec3 = Vec3::new(0.298, 0.795, -0.497);
+
+/// Why the renderer could not be created.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RendererCreateError {
+    /// The thread pool could not be built.
+    #[error("cannot start {threads} render threads: {source}")]
+    Pool {
+        /// Threads asked for.
+        threads: usize,
+        /// The pool error.
+        source: rayon::ThreadPoolBuildError,
+    },
+}
+
+#[derive(Debug, Clone, Copy)]
+enum PrimKind {
+    Sphere {
+        center: Vec3,
+        radius: f32,
+    },
+    Box {
+        min: Vec3,
+        max: Vec3,
+    },
+    Body {
+        base: Vec3,
+        radius: f32,
+        height: f32,
+    },
+}
+
+/// An object or body that may show up in the image, with its screen rectangle.
+#[derive(Debug, Clone, Copy)]
+struct Prim {
+    kind: PrimKind,
+    color: Vec3,
+    x0: u32,
+    x1: u32,
+    y0: u32,
+    y1: u32,
+}
+
+/// Everything shading one image needs; shared read-only by the row tasks.
+#[derive(Debug)]
+struct View<'a> {
+    cam: Camera,
+    room_min: Vec3,
+    room_max: Vec3,
+    floor: [Vec3; 2],
+    walls: [Vec3; 4],
+    ceiling: Vec3,
+    prims: &'a [Prim],
+}
+
+/// The renderer: a thread pool (or none) and scratch space reused every cycle.
+#[derive(Debug)]
+pub struct Renderer {
+    pool: Option<rayon::ThreadPool>,
+    prims: Vec<Prim>,
+}
+
+fn rgb(c: [u8; 3]) -> Vec3 {
+    Vec3::new(f32::from(c[0]), f32::from(c[1]), f32::from(c[2]))
+}
+
+fn shade(color: Vec3, normal: Vec3) -> Vec3 {
+    color * (0.7 + 0.3 * normal.dot(LIGHT))
+}
+
+impl Renderer {
+    /// A renderer using `threads` threads for rows (1: render on the calling thread;
+    /// 0: one per core).
+    ///
+    /// # Errors
+    /// [`RendererCreateError`] if the pool cannot be started.
+    pub fn new(threads: usize) -> Result<Self, RendererCreateError> {
+        let pool = if threads == 1 {
+            None
+        } else {
+            Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .thread_name(|i| format!("vr-sim-render-{i}"))
+                    .build()
+                    .map_err(|source| RendererCreateError::Pool { threads, source })?,
+            )
+        };
+        Ok(Self {
+            pool,
+            prims: Vec::with_capacity(64),
+        })
+    }
+
+    /// Threads shading rows.
+    pub fn threads(&self) -> usize {
+        self.pool
+            .as_ref()
+            .map_or(1, rayon::ThreadPool::current_num_threads)
+    }
+
+    /// Renders every image of agent `id`'s loaned frame in place.
+    pub fn render_agent(&mut self, world: &World, id: u32, images: ImagesMut<'_>) {
+        let Some(body) = world.bodies().iter().find(|b| b.id == id) else {
+            return;
+        };
+        for image in images {
+            self.render_image(world, body, image);
+        }
+    }
+
+    /// Renders one image of `body`'s cameras in place (the camera is chosen by the image's
+    /// camera index; its name selects the viewpoint: `left`, `right`, else the head).
+    pub fn render_image(&mut self, world: &World, body: &Body, image: ImageMut<'_>) {
+        let desc = image.desc;
+        let spec = match body.cameras().get(desc.camera as usize) {
+            Some(s) if s.width_px == desc.width_px && s.height_px == desc.height_px => s.clone(),
+            // A frame whose table does not match the config: render the described size.
+            _ => CameraSpec {
+                name: desc.name().to_string(),
+                width_px: desc.width_px,
+                height_px: desc.height_px,
+                fov_h_deg: 120.0,
+                fov_v_deg: 90.0,
+            },
+        };
+        if desc.width_px == 0 || desc.height_px == 0 {
+            return;
+        }
+        let cam = world.camera(body, &spec);
+        self.collect_prims(world, body, &cam);
+        let cfg = world.config();
+        let (room_min, room_max) = world.room_bounds();
+        let view = View {
+            cam,
+            room_min,
+            room_max,
+            floor: cfg.floor_colors.map(rgb),
+            walls: cfg.wall_colors.map(rgb),
+            ceiling: rgb(cfg.ceiling_color),
+            prims: &self.prims,
+        };
+        let format = desc.pixel_format().unwrap_or_default();
+        draw(&view, &desc, format, image.data, self.pool.as_ref());
+    }
+
+    fn collect_prims(&mut self, world: &World, me: &Body, cam: &Camera) {
+        self.prims.clear();
+        for o in world.objects() {
+            let (min, max) = o.bounds();
+            let Some((x0, x1, y0, y1)) = cam.screen_rect(min, max) else {
+                continue;
+            };
+            let kind = match o.shape {
+                Shape::Sphere { radius } => PrimKind::Sphere {
+                    center: o.position,
+                    radius,
+                },
+                Shape::Box { .. } => PrimKind::Box { min, max },
+            };
+            self.prims.push(Prim {
+                kind,
+                color: rgb(o.color),
+                x0,
+                x1,
+                y0,
+                y1,
+            });
+        }
+        let cfg = world.config();
+        let (r, h) = (cfg.agent_radius, cfg.body_height);
+        for b in world.bodies() {
+            if b.id == me.id {
+                continue;
+            }
+            let min = b.position - Vec3::new(r, 0.0, r);
+            let max = b.position + Vec3::new(r, h, r);
+            let Some((x0, x1, y0, y1)) = cam.screen_rect(min, max) else {
+                continue;
+            };
+            self.prims.push(Prim {
+                kind: PrimKind::Body {
+                    base: b.position,
+                    radius: r,
+                    height: h,
+                },
+                color: rgb(AGENT_COLORS[b.id as usize % AGENT_COLORS.len()]),
+                x0,
+                x1,
+                y0,
+                y1,
+            });
+        }
+    }
+}
+
+/// Shades every row of one image into `data`.
+fn draw(
+    view: &View<'_>,
+    desc: &ImageDesc,
+    format: PixelFormat,
+    data: &mut [u8],
+    pool: Option<&rayon::ThreadPool>,
+) {
+    let stride = desc.stride_bytes as usize;
+    let rows = data.chunks_exact_mut(stride).take(desc.height_px as usize);
+    match pool {
+        None => {
+            for (y, row) in rows.enumerate() {
+                shade_row(view, y as u32, format, row);
             }
         }
+        Some(pool) => {
+            let height = desc.height_px as usize;
+            pool.install(|| {
+                data[..stride * height]
+                    .par_chunks_exact_mut(stride)
+                    .with_min_len(4)
+                    .enumerate()
+                    .for_each(|(y, row)| shade_row(view, y as u32, format, row));
+            });
+        }
+    }
+}
+
+fn shade_row(view: &View<'_>, y: u32, format: PixelFormat, row: &mut [u8]) {
+    match format {
+        PixelFormat::Rgb8 => shade_row_as(view, y, row, 3, |px, c, _| {
+            px[0] = c.x as u8;
+            px[1] = c.y as u8;
+            px[2] = c.z as u8;
+        }),
+        PixelFormat::Rgba8 => shade_row_as(view, y, row, 4, |px, c, _| {
+            px[0] = c.x as u8;
+            px[1] = c.y as u8;
+            px[2] = c.z as u8;
+            px[3] = 255;
+        }),
+        PixelFormat::Gray8 => shade_row_as(view, y, row, 1, |px, c, _| {
+            px[0] = (0.299 * c.x + 0.587 * c.y + 0.114 * c.z) as u8;
+        }),
+        PixelFormat::Depth32f => shade_row_as(view, y, row, 4, |px, _, depth| {
+            px.copy_from_slice(&depth.to_ne_bytes());
+        }),
+    }
+}
+
+/// Shades row `y`: `write(pixel bytes, colour 0..=255, depth m)` stores one pixel.
+#[inline(always)]
+fn shade_row_as(
+    view: &View<'_>,
+    y: u32,
+    row: &mut [u8],
+    bpp: usize,
+    write: impl Fn(&mut [u8], Vec3, f32),
+) {
+    let cam = &view.cam;
+    let row_dir = cam.forward + cam.v_of(y as f32 + 0.5) * cam.up;
+    let du = 2.0 * cam.tan_half_h / cam.width_px as f32;
+    let u0 = -cam.tan_half_h + 0.5 * du;
+    let o = cam.origin;
+    // The primitives that can cover this row.
+    let mut active = [0u16; 64];
+    let mut n_active = 0;
+    let mut overflow = false;
+    for (i, p) in view.prims.iter().enumerate() {
+        if (p.y0..=p.y1).contains(&y) {
+            if n_active < active.len() {
+                active[n_active] = i as u16;
+                n_active += 1;
+            } else {
+                overflow = true;
+            }
+        }
+    }
+    let width = cam.width_px as usize;
+    for (x, px) in row.chunks_exact_mut(bpp).take(width).enumerate() {
+        let d = row_dir + (u0 + x as f32 * du) * cam.right;
+        let inv = recip(d);
+        let (mut t, axis, positive) = exit_box(o, inv, view.room_min, view.room_max);
+        let mut hit: Option<(usize, Option<Vec3>)> = None;
+        let xs = x as u32;
+        let test = |i: usize, t: &mut f32, hit: &mut Option<(usize, Option<Vec3>)>| {
+            let p = &view.prims[i];
+            if xs < p.x0 || xs > p.x1 {
+                return;
+            }
+            match p.kind {
+                PrimKind::Sphere { center, radius } => {
+                    if let Some(th) = hit_sphere(o, d, center, radius, NEAR_M)
+                        && th < *t
+                    {
+                        *t = th;
+                        *hit = Some((i, None));
+                    }
+                }
+                PrimKind::Box { min, max } => {
+                    if let Some((th, ax, pos)) = enter_box(o, inv, min, max, NEAR_M)
+                        && th < *t
+                    {
+                        let mut n = Vec3::ZERO;
+                        n[ax] = if pos { 1.0 } else { -1.0 };
+                        *t = th;
+                        *hit = Some((i, Some(n)));
+                    }
+                }
+                PrimKind::Body {
+                    base,
+                    radius,
+                    height,
+                } => {
+                    if let Some((th, top)) = hit_cylinder(o, d, base, radius, height, NEAR_M)
+                        && th < *t
+                    {
+                        let n = if top {
+                            Vec3::Y
+                        } else {
+                            let q = o + th * d - base;
+                            Vec3::new(q.x, 0.0, q.z) / radius
+                        };
+                        *t = th;
+                        *hit = Some((i, Some(n)));
+                    }
+                }
+            }
+        };
+        if overflow {
+            for i in 0..view.prims.len() {
+                test(i, &mut t, &mut hit);
+            }
+        } else {
+            for &i in &active[..n_active] {
+                test(i as usize, &mut t, &mut hit);
+            }
+        }
+        let color = match hit {
+            Some((i, normal)) => {
+                let p = &view.prims[i];
+                let n = match (normal, p.kind) {
+                    (Some(n), _) => n,
+                    (None, PrimKind::Sphere { center, radius }) => (o + t * d - center) / radius,
+                    (None, _) => Vec3::Y,
+                };
+                shade(p.color, n)
+            }
+            None => {
+                let q = o + t * d;
+                match (axis, positive) {
+                    (1, false) => {
+                        let parity = (q.x.floor() as i32 + q.z.floor() as i32) & 1;
+                        shade(view.floor[parity as usize], Vec3::Y)
+                    }
+                    (1, true) => view.ceiling,
+                    (0, true) => shade(view.walls[1], Vec3::NEG_X),
+                    (0, false) => shade(view.walls[3], Vec3::X),
+                    (_, true) => shade(view.walls[0], Vec3::NEG_Z),
+                    (_, false) => shade(view.walls[2], Vec3::Z),
+                }
+            }
+        };
+        write(px, color.min(Vec3::splat(255.0)), t);
     }
 }

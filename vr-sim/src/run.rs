@@ -11,9 +11,10 @@ use serde::Serialize;
 use tracing::{info, warn};
 use vrsync_bridge::{AgentOutcome, Config, Host, HostCycleError, HostWaitError};
 
-use crate::render::render_pattern;
+use crate::picture::{Trails, dump_image, write_map};
+use crate::render::Renderer;
 use crate::spawn::Agents;
-use crate::world::{World, WorldParams};
+use crate::world::World;
 
 /// What to run.
 #[derive(Debug)]
@@ -32,6 +33,12 @@ pub struct RunOptions {
     pub record: Option<PathBuf>,
     /// Show a progress bar.
     pub progress: bool,
+    /// Top-down map with every agent's trajectory, written at the end.
+    pub map: Option<PathBuf>,
+    /// Write every agent's camera images as PNG into this folder every `.1` cycles.
+    pub dump_frames: Option<(PathBuf, u64)>,
+    /// Threads shading image rows (1: the host thread only; 0: one per core).
+    pub render_threads: usize,
 }
 
 /// The run summary (DESIGN §8 keys, plus a few more).
@@ -67,6 +74,8 @@ pub struct Summary {
     pub trajectory_hash: String,
     /// Mean time to write sensors and render all agents' images per cycle, µs.
     pub render_us: f64,
+    /// Threads that shaded image rows.
+    pub render_threads: usize,
     /// Whether the run ended early by SIGINT/SIGTERM.
     pub interrupted: bool,
 }
@@ -80,10 +89,13 @@ struct RecordLine<'a> {
     position: [f32; 3],
     rotation: [f32; 4],
     heading_deg: f32,
+    eyes_deg: [f32; 3],
+    held: Option<u32>,
     commands: Vec<(&'static str, u32)>,
     rejected: u32,
     statuses: Vec<(u32, u32)>,
     collisions: Vec<(u32, u32)>,
+    reward: f32,
 }
 
 /// Runs the world until `frames` cycles are done (or Ctrl-C).
@@ -92,6 +104,13 @@ struct RecordLine<'a> {
 /// Host creation, agents missing, transport failures, a spawned agent failing.
 pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
     let config = &opts.config;
+    // The world first: a bad [world] section is a config error, reported before anything
+    // is started.
+    let mut world = World::from_config(config)?;
+    let mut renderer = Renderer::new(opts.render_threads)?;
+    if let Some((dir, _)) = &opts.dump_frames {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
     let mut host = Host::builder(config)
         .create()
         .context("cannot create the host")?;
@@ -130,7 +149,7 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
     }
 
     let dt = config.sync.simulation_time_per_frame;
-    let mut world = World::new(WorldParams::default(), &ids, dt.as_secs_f32());
+    let mut trails = opts.map.as_ref().map(|_| Trails::new(&world));
     let mut record = match &opts.record {
         Some(p) => Some(BufWriter::new(
             File::create(p).with_context(|| format!("cannot create {}", p.display()))?,
@@ -162,19 +181,26 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
 
     while opts.frames.is_none_or(|n| done < n) {
         // Frame 1: every connected agent's sensors, written in place, then one start.
-        let t = Instant::now();
         for &id in &ids {
             if !host.is_connected(id) {
                 continue;
             }
             let mut frame = host.loan_frame(id)?;
             let cycle = frame.header().cycle;
+            let t = Instant::now();
             let (header, images) = frame.parts_mut();
             world.write_sensors(id, header);
-            render_pattern(images, cycle, &header.pose);
+            renderer.render_agent(&world, id, images);
+            render_time += t.elapsed();
+            if let Some((dir, every)) = &opts.dump_frames
+                && cycle % every == 0
+            {
+                for image in frame.images_mut() {
+                    dump_image(dir, cycle, id, &image)?;
+                }
+            }
             host.publish(frame)?;
         }
-        render_time += t.elapsed();
         host.start()?;
 
         // Frame 2: collect, apply in (agent id, order sent) order, advance.
@@ -229,6 +255,9 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
         world.step();
         hasher.update(&cycle.to_le_bytes());
         world.hash_into(&mut hasher);
+        if let Some(t) = &mut trails {
+            t.push(&world);
+        }
 
         if let Some(out) = &mut record {
             let sim_time_s = (cycle as f64 + 1.0) * dt.as_secs_f64();
@@ -245,6 +274,12 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
                     position: pose.position,
                     rotation: pose.rotation,
                     heading_deg: body.heading_deg,
+                    eyes_deg: [
+                        body.eyes.pan_left_deg,
+                        body.eyes.pan_right_deg,
+                        body.eyes.tilt_deg,
+                    ],
+                    held: body.held,
                     commands,
                     rejected,
                     statuses: body
@@ -253,6 +288,7 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
                         .map(|&(a, s)| (a, s as u32))
                         .collect(),
                     collisions: body.pending_collisions().to_vec(),
+                    reward: body.pending_reward(),
                 };
                 serde_json::to_writer(&mut *out, &line).context("write record")?;
                 out.write_all(b"\n").context("write record")?;
@@ -276,6 +312,9 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
     }
     if let Some(mut out) = record {
         out.flush().context("write record")?;
+    }
+    if let (Some(path), Some(trails)) = (&opts.map, &trails) {
+        write_map(path, &world, trails)?;
     }
     let stats = host.stats().clone();
     let sync_mode = config.sync.sync_mode;
@@ -312,6 +351,7 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
         } else {
             0.0
         },
+        render_threads: renderer.threads(),
         interrupted,
     };
     info!(frames = done, wall_s, "run finished");
@@ -334,7 +374,10 @@ pub fn print_summary(s: &Summary) {
         ("evicted agents", format!("{:?}", s.evicted_agents)),
         ("commands applied", s.commands_applied.to_string()),
         ("commands rejected", s.commands_rejected.to_string()),
-        ("render per cycle", format!("{:.0} µs", s.render_us)),
+        (
+            "render per cycle",
+            format!("{:.0} µs ({} threads)", s.render_us, s.render_threads),
+        ),
         ("trajectory hash", s.trajectory_hash[..16].to_string()),
     ];
     println!();
