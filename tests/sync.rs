@@ -5,7 +5,9 @@ use std::time::Duration;
 
 use serde_json::Value;
 
-use crate::util::{self, Proc, RUN_DEADLINE, TestConfig, bin, cycle_log, record, summary};
+use crate::util::{
+    self, Proc, RUN_DEADLINE, TestConfig, Transport, bin, cycle_log, record, summary,
+};
 
 fn entries_for(rec: &[Value], agent: u64) -> Vec<&Value> {
     rec.iter().filter(|v| v["agent"] == agent).collect()
@@ -20,10 +22,9 @@ fn action_ids(entry: &Value) -> Vec<u32> {
         .collect()
 }
 
-#[test]
-fn three_agents_500_cycles_see_every_cycle_once_in_order() {
+fn three_agents_500_cycles_see_every_cycle_once_in_order(t: Transport) {
     let dir = tempfile::tempdir().unwrap();
-    let cfg = TestConfig::new("sync500", 3);
+    let cfg = TestConfig::with_transport("sync500", 3, t);
     let config = cfg.write(dir.path());
     let s = dir.path().join("summary.json");
     let rec = dir.path().join("record.jsonl");
@@ -54,7 +55,10 @@ fn three_agents_500_cycles_see_every_cycle_once_in_order() {
     assert_eq!(sum["frames"], 500);
     assert_eq!(sum["agents"], 3);
     assert_eq!(sum["mode"], "sync");
-    assert_eq!(sum["transport"], "shm");
+    assert_eq!(
+        sum["transport"],
+        if t == Transport::Tcp { "tcp" } else { "shm" }
+    );
     assert_eq!(sum["stop_timeouts"], 0);
     assert_eq!(sum["late_stops"], 0);
 
@@ -93,10 +97,9 @@ fn three_agents_500_cycles_see_every_cycle_once_in_order() {
     assert_eq!(sum["commands_applied"], total_sent);
 }
 
-#[test]
-fn a_late_stop_times_out_its_cycle_and_never_completes_the_next() {
+fn a_late_stop_times_out_its_cycle_and_never_completes_the_next(t: Transport) {
     let dir = tempfile::tempdir().unwrap();
-    let mut cfg = TestConfig::new("late", 2);
+    let mut cfg = TestConfig::with_transport("late", 2, t);
     cfg.stop_timeout_s = 0.3;
     let config = cfg.write(dir.path());
     let config = config.to_str().unwrap();
@@ -193,10 +196,9 @@ fn a_late_stop_times_out_its_cycle_and_never_completes_the_next() {
     }
 }
 
-#[test]
-fn async_mode_a_slow_agent_always_reads_the_newest_frame() {
+fn async_mode_a_slow_agent_always_reads_the_newest_frame(t: Transport) {
     let dir = tempfile::tempdir().unwrap();
-    let mut cfg = TestConfig::new("async", 2);
+    let mut cfg = TestConfig::with_transport("async", 2, t);
     cfg.sync_mode = false;
     cfg.dt_s = 0.01;
     let config = cfg.write(dir.path());
@@ -274,7 +276,7 @@ fn async_mode_a_slow_agent_always_reads_the_newest_frame() {
 }
 
 #[test]
-fn a_protocol_mismatch_is_refused_at_connect_with_both_versions() {
+fn a_protocol_mismatch_is_refused_at_connect_with_both_versions_shm() {
     use iceoryx2::prelude::*;
     use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
 
@@ -321,10 +323,9 @@ fn a_protocol_mismatch_is_refused_at_connect_with_both_versions() {
     );
 }
 
-#[test]
-fn without_spawn_the_host_says_which_agents_it_waits_for() {
+fn without_spawn_the_host_says_which_agents_it_waits_for(t: Transport) {
     let dir = tempfile::tempdir().unwrap();
-    let cfg = TestConfig::new("external", 2);
+    let cfg = TestConfig::with_transport("external", 2, t);
     let config = cfg.write(dir.path());
     let config = config.to_str().unwrap();
     let s = dir.path().join("summary.json");
@@ -355,10 +356,9 @@ fn without_spawn_the_host_says_which_agents_it_waits_for() {
     assert_eq!(sum["stop_timeouts"], 0);
 }
 
-#[test]
-fn an_agent_without_a_host_fails_with_a_clear_error() {
+fn an_agent_without_a_host_fails_with_a_clear_error(t: Transport) {
     let dir = tempfile::tempdir().unwrap();
-    let mut cfg = TestConfig::new("nohost", 1);
+    let mut cfg = TestConfig::with_transport("nohost", 1, t);
     cfg.connect_timeout_s = 0.5;
     let config = cfg.write(dir.path());
     let out = util::run(
@@ -367,8 +367,16 @@ fn an_agent_without_a_host_fails_with_a_clear_error() {
         Duration::from_secs(30),
     );
     assert_eq!(out.code(), Some(1), "stderr:\n{}", out.stderr);
-    assert!(out.stderr.contains("no host for session"), "{}", out.stderr);
-    assert!(out.stderr.contains(&cfg.session), "{}", out.stderr);
+    match t {
+        Transport::Shm => {
+            assert!(out.stderr.contains("no host for session"), "{}", out.stderr);
+            assert!(out.stderr.contains(&cfg.session), "{}", out.stderr);
+        }
+        Transport::Tcp => {
+            let addr = format!("no host at 127.0.0.1:{}", cfg.tcp_port);
+            assert!(out.stderr.contains(&addr), "{}", out.stderr);
+        }
+    }
 }
 
 #[test]
@@ -395,3 +403,67 @@ fn the_demo_runs_and_writes_its_summary() {
     assert_eq!(sum["agents"], 2);
     assert_eq!(sum["stop_timeouts"], 0);
 }
+
+#[test]
+fn a_protocol_mismatch_is_refused_at_connect_with_both_versions_tcp() {
+    use std::io::{Read, Write};
+
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = TestConfig::with_transport("mismatch-tcp", 1, Transport::Tcp);
+    cfg.connect_timeout_s = 5.0;
+    let config = cfg.write(dir.path());
+    // A "host" of another protocol version: reads the hello, answers a welcome for 999.
+    let listener = std::net::TcpListener::bind(("127.0.0.1", cfg.tcp_port)).unwrap();
+    let agent = Proc::spawn(
+        &bin("vr-agent"),
+        &["--config", config.to_str().unwrap(), "--id", "0"],
+    );
+    let (mut conn, _) = listener.accept().unwrap();
+    conn.set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap();
+    let mut prefix = [0u8; 8];
+    conn.read_exact(&mut prefix).unwrap();
+    let len = u32::from_le_bytes(prefix[..4].try_into().unwrap()) as usize;
+    let mut hello = vec![0u8; len];
+    conn.read_exact(&mut hello).unwrap();
+    assert_eq!(&hello[..4], b"VRSY");
+    let mut welcome = Vec::new();
+    welcome.extend_from_slice(&16u32.to_le_bytes());
+    welcome.extend_from_slice(&2u32.to_le_bytes()); // WELCOME
+    welcome.extend_from_slice(&999u32.to_le_bytes());
+    welcome.extend_from_slice(&0xdead_beefu64.to_le_bytes());
+    welcome.extend_from_slice(&1024u32.to_le_bytes());
+    conn.write_all(&welcome).unwrap();
+    let out = agent.wait(Duration::from_secs(30));
+    assert_eq!(out.code(), Some(1), "stderr:\n{}", out.stderr);
+    assert!(out.stderr.contains("protocol 999"), "{}", out.stderr);
+    assert!(out.stderr.contains("00000000deadbeef"), "{}", out.stderr);
+    assert!(
+        out.stderr.contains(&format!(
+            "this agent speaks protocol {}",
+            vrsync_bridge::PROTOCOL_VERSION
+        )),
+        "{}",
+        out.stderr
+    );
+}
+
+/// The barrier tests, written once, run over both transports (same assertions).
+macro_rules! for_both_transports {
+    ($($name:ident),* $(,)?) => {
+        mod shm {
+            $( #[test] fn $name() { super::$name(crate::util::Transport::Shm) } )*
+        }
+        mod tcp {
+            $( #[test] fn $name() { super::$name(crate::util::Transport::Tcp) } )*
+        }
+    };
+}
+
+for_both_transports!(
+    three_agents_500_cycles_see_every_cycle_once_in_order,
+    a_late_stop_times_out_its_cycle_and_never_completes_the_next,
+    async_mode_a_slow_agent_always_reads_the_newest_frame,
+    without_spawn_the_host_says_which_agents_it_waits_for,
+    an_agent_without_a_host_fails_with_a_clear_error,
+);

@@ -67,9 +67,26 @@ pub fn session(tag: &str) -> String {
     )
 }
 
+/// Which transport a test runs over.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Transport {
+    Shm,
+    Tcp,
+}
+
+/// A loopback port that was free a moment ago (bind port 0, read it, release it).
+pub fn free_tcp_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("bind 127.0.0.1:0")
+        .port()
+}
+
 /// Options of a generated test config.
 #[derive(Debug, Clone)]
 pub struct TestConfig {
+    pub transport: Transport,
+    pub tcp_port: u16,
     pub session: String,
     pub agents: u32,
     pub sync_mode: bool,
@@ -82,7 +99,17 @@ pub struct TestConfig {
 
 impl TestConfig {
     pub fn new(tag: &str, agents: u32) -> Self {
+        Self::with_transport(tag, agents, Transport::Shm)
+    }
+
+    pub fn with_transport(tag: &str, agents: u32, transport: Transport) -> Self {
         Self {
+            transport,
+            tcp_port: if transport == Transport::Tcp {
+                free_tcp_port()
+            } else {
+                0
+            },
             session: session(tag),
             agents,
             sync_mode: true,
@@ -105,6 +132,12 @@ impl TestConfig {
             self.stop_timeout_s,
             self.connect_timeout_s
         );
+        if self.transport == Transport::Tcp {
+            s += &format!(
+                "\n[transport]\nkind = \"tcp\"\ntcp_listen = \"127.0.0.1:{}\"\n",
+                self.tcp_port
+            );
+        }
         for id in 0..self.agents {
             s += &format!(
                 "\n[[agent]]\nid = {id}\n[[agent.camera]]\nname = \"left\"\nwidth = {w}\n\

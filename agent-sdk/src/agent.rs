@@ -5,6 +5,7 @@ use std::time::{Duration, Instant};
 use tracing::debug;
 use vrsync_bridge::config::{Config, TransportKind};
 use vrsync_bridge::transport::shm::{HostState, ShmAgent, ShmAgentConnectError, ShmFrame};
+use vrsync_bridge::transport::tcp::{TcpAgent, TcpAgentConnectError, TcpFrame, TcpWaitError};
 use vrsync_bridge::wire::{
     Command, ImageDesc, MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION, PixelFormat,
     Pose, SensorHeader,
@@ -20,9 +21,9 @@ pub enum AgentConnectError {
     /// The shared-memory transport refused (no host, version mismatch, id in use, …).
     #[error(transparent)]
     Shm(#[from] ShmAgentConnectError),
-    /// The configured transport is not available in this build.
-    #[error("transport {0:?} is not supported yet; use kind = \"shm\"")]
-    UnsupportedTransport(&'static str),
+    /// The TCP transport refused (no host, version mismatch, id in use, wrong token, …).
+    #[error(transparent)]
+    Tcp(#[from] TcpAgentConnectError),
 }
 
 /// Why [`Agent::wait_start`] returned without a frame.
@@ -87,6 +88,9 @@ pub enum StopError {
         /// The cycle.
         cycle: u64,
     },
+    /// The host closed the session before the stop could be sent (a normal end of a run).
+    #[error("the host closed the session")]
+    HostClosed,
     /// The transport failed.
     #[error("cannot send the stop: {0}")]
     Transport(String),
@@ -149,7 +153,32 @@ impl<'a> Image<'a> {
 /// [`Agent::wait_start`] (an agent may hold at most two frames).
 #[derive(Debug)]
 pub struct Frame {
-    inner: ShmFrame,
+    inner: FrameInner,
+}
+
+// The TCP variant carries its 592-byte header by value (a frame is moved once, from the
+// transport to the caller); boxing it would allocate every cycle.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug)]
+enum FrameInner {
+    Shm(ShmFrame),
+    Tcp(TcpFrame),
+}
+
+impl FrameInner {
+    fn header(&self) -> &SensorHeader {
+        match self {
+            Self::Shm(f) => f.header(),
+            Self::Tcp(f) => f.header(),
+        }
+    }
+
+    fn payload(&self) -> &[u8] {
+        match self {
+            Self::Shm(f) => f.payload(),
+            Self::Tcp(f) => f.payload(),
+        }
+    }
 }
 
 impl Frame {
@@ -266,8 +295,19 @@ impl<'c> AgentBuilder<'c> {
             .connect_timeout
             .unwrap_or(self.config.sync.connect_timeout);
         let backend = match self.config.transport.kind {
-            TransportKind::Shm => ShmAgent::connect(self.config, self.id, timeout)?,
-            TransportKind::Tcp => return Err(AgentConnectError::UnsupportedTransport("tcp")),
+            TransportKind::Shm => {
+                Backend::Shm(Box::new(ShmAgent::connect(self.config, self.id, timeout)?))
+            }
+            TransportKind::Tcp => Backend::Tcp(TcpAgent::connect(
+                self.config,
+                self.id,
+                timeout,
+                self.config
+                    .transport
+                    .tcp_token
+                    .as_deref()
+                    .map(str::as_bytes),
+            )?),
         };
         let max = self.config.transport.max_commands_per_cycle as usize;
         Ok(Agent {
@@ -284,12 +324,18 @@ impl<'c> AgentBuilder<'c> {
     }
 }
 
+#[derive(Debug)]
+enum Backend {
+    Shm(Box<ShmAgent>),
+    Tcp(TcpAgent),
+}
+
 /// A connected agent.
 #[derive(Debug)]
 pub struct Agent {
     id: u32,
     session: String,
-    backend: ShmAgent,
+    backend: Backend,
     queue: Vec<MotorCommand>,
     max_commands: usize,
     last_cycle: Option<u64>,
@@ -331,64 +377,46 @@ impl Agent {
     pub fn wait_start(&mut self, timeout: Option<Duration>) -> Result<Frame, WaitStartError> {
         let started = Instant::now();
         let deadline = timeout.map(|t| started + t);
-        let mut next_liveness = started + HOST_LIVENESS_PERIOD;
-        // Pending notifications carry nothing we rely on: the frame itself tells whether
-        // it is new. Clearing them first means a stale wake-up cannot return early, and a
-        // frame published after this point always comes with a fresh notification.
-        let mut shutdown = self.backend.clear_start().shutdown;
-        loop {
-            if let Some(frame) = self
-                .backend
-                .receive_newest()
-                .map_err(WaitStartError::Receive)?
-            {
-                let h = frame.header();
-                let cycle = h.cycle;
-                if self.last_cycle.is_none_or(|last| cycle > last) {
-                    validate(h, frame.payload().len(), self.id)
-                        .map_err(|reason| WaitStartError::BadFrame { cycle, reason })?;
-                    if let Some(last) = self.last_cycle {
-                        self.frames_skipped += cycle - last - 1;
-                    }
-                    self.last_cycle = Some(cycle);
-                    self.queue.clear();
-                    return Ok(Frame { inner: frame });
-                }
-                debug!(cycle, "old frame ignored");
+        let inner = match &mut self.backend {
+            Backend::Shm(shm) => {
+                FrameInner::Shm(wait_shm(shm, deadline, self.last_cycle, &self.session)?)
             }
-            if shutdown {
-                return Err(WaitStartError::HostClosed);
-            }
-            if self.backend.termination_requested() {
-                return Err(WaitStartError::Terminated);
-            }
-            let now = Instant::now();
-            if now >= next_liveness {
-                match self.backend.host_state() {
-                    HostState::Alive => {}
-                    // A clean exit removes the node; the shutdown notification may have
-                    // been sent while we were not listening.
-                    HostState::Absent => return Err(WaitStartError::HostClosed),
-                    HostState::Dead => {
-                        return Err(WaitStartError::HostGone {
-                            session: self.session.clone(),
-                        });
-                    }
-                }
-                next_liveness = now + HOST_LIVENESS_PERIOD;
-            }
-            let mut slice = next_liveness.saturating_duration_since(now);
-            if let Some(d) = deadline {
-                if now >= d {
-                    return Err(WaitStartError::Timeout {
+            Backend::Tcp(tcp) => loop {
+                let frame = tcp.wait_frame(deadline).map_err(|e| match e {
+                    TcpWaitError::Timeout => WaitStartError::Timeout {
                         waited: started.elapsed(),
                         last_cycle: self.last_cycle,
-                    });
+                    },
+                    TcpWaitError::HostClosed => WaitStartError::HostClosed,
+                    TcpWaitError::HostGone(_) => WaitStartError::HostGone {
+                        session: self.session.clone(),
+                    },
+                    TcpWaitError::Bad(reason) => WaitStartError::BadFrame {
+                        cycle: self.last_cycle.map_or(0, |c| c + 1),
+                        reason,
+                    },
+                    TcpWaitError::Terminated => WaitStartError::Terminated,
+                    other => WaitStartError::Receive(other.to_string()),
+                })?;
+                if self
+                    .last_cycle
+                    .is_none_or(|last| frame.header().cycle > last)
+                {
+                    break FrameInner::Tcp(frame);
                 }
-                slice = slice.min(d - now);
-            }
-            shutdown |= self.backend.wait_start(slice).shutdown;
+                debug!(cycle = frame.header().cycle, "old frame ignored");
+            },
+        };
+        let h = inner.header();
+        let cycle = h.cycle;
+        validate(h, inner.payload().len(), self.id)
+            .map_err(|reason| WaitStartError::BadFrame { cycle, reason })?;
+        if let Some(last) = self.last_cycle {
+            self.frames_skipped += cycle - last - 1;
         }
+        self.last_cycle = Some(cycle);
+        self.queue.clear();
+        Ok(Frame { inner })
     }
 
     /// Queues a command with a fresh action id (returned; statuses and collisions quote it).
@@ -433,11 +461,74 @@ impl Agent {
             flags: MOTOR_FLAG_STOP,
             command_count: self.queue.len() as u32,
         };
-        self.backend
-            .send_batch(&header, &self.queue)
-            .map_err(StopError::Transport)?;
+        let sent = match &mut self.backend {
+            Backend::Shm(shm) => shm.send_batch(&header, &self.queue),
+            Backend::Tcp(tcp) => tcp.send_batch(&header, &self.queue),
+        };
+        if let Err(e) = sent {
+            return Err(match &self.backend {
+                Backend::Tcp(tcp) if tcp.host_closed() => StopError::HostClosed,
+                _ => StopError::Transport(e),
+            });
+        }
         self.queue.clear();
         self.stopped_cycle = Some(cycle);
         Ok(())
+    }
+}
+
+/// Shared-memory wait: the newest frame newer than `last_cycle`.
+fn wait_shm(
+    shm: &mut ShmAgent,
+    deadline: Option<Instant>,
+    last_cycle: Option<u64>,
+    session: &str,
+) -> Result<ShmFrame, WaitStartError> {
+    let started = Instant::now();
+    let mut next_liveness = started + HOST_LIVENESS_PERIOD;
+    // Pending notifications carry nothing we rely on: the frame itself tells whether it is
+    // new. Clearing them first means a stale wake-up cannot return early, and a frame
+    // published after this point always comes with a fresh notification.
+    let mut shutdown = shm.clear_start().shutdown;
+    loop {
+        if let Some(frame) = shm.receive_newest().map_err(WaitStartError::Receive)? {
+            let cycle = frame.header().cycle;
+            if last_cycle.is_none_or(|last| cycle > last) {
+                return Ok(frame);
+            }
+            debug!(cycle, "old frame ignored");
+        }
+        if shutdown {
+            return Err(WaitStartError::HostClosed);
+        }
+        if shm.termination_requested() {
+            return Err(WaitStartError::Terminated);
+        }
+        let now = Instant::now();
+        if now >= next_liveness {
+            match shm.host_state() {
+                HostState::Alive => {}
+                // A clean exit removes the node; the shutdown notification may have been
+                // sent while we were not listening.
+                HostState::Absent => return Err(WaitStartError::HostClosed),
+                HostState::Dead => {
+                    return Err(WaitStartError::HostGone {
+                        session: session.to_string(),
+                    });
+                }
+            }
+            next_liveness = now + HOST_LIVENESS_PERIOD;
+        }
+        let mut slice = next_liveness.saturating_duration_since(now);
+        if let Some(d) = deadline {
+            if now >= d {
+                return Err(WaitStartError::Timeout {
+                    waited: started.elapsed(),
+                    last_cycle,
+                });
+            }
+            slice = slice.min(d - now);
+        }
+        shutdown |= shm.wait_start(slice).shutdown;
     }
 }

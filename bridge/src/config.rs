@@ -109,6 +109,8 @@ pub struct TransportConfig {
     pub tcp_listen: SocketAddr,
     /// Most commands an agent may send in one cycle.
     pub max_commands_per_cycle: u32,
+    /// Shared secret TCP agents must present in their hello (`tcp_token`); `None`: none.
+    pub tcp_token: Option<String>,
 }
 
 /// The validated configuration.
@@ -204,6 +206,7 @@ struct RawTransport {
     kind: Option<TransportKind>,
     tcp_listen: Option<Spanned<String>>,
     max_commands_per_cycle: Option<Spanned<i64>>,
+    tcp_token: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize)]
@@ -371,6 +374,7 @@ impl Config {
             kind: None,
             tcp_listen: None,
             max_commands_per_cycle: None,
+            tcp_token: None,
         });
         let tcp_listen = match rt.tcp_listen {
             None => SocketAddr::from(([127, 0, 0, 1], 7400)),
@@ -399,10 +403,28 @@ impl Config {
                 n as u32
             }
         };
+        let tcp_token = match rt.tcp_token {
+            None => None,
+            Some(t) => {
+                let len = t.get_ref().len();
+                if len == 0 || len > crate::transport::tcp::MAX_TOKEN {
+                    return Err(ctx.invalid(
+                        t.span(),
+                        "transport.tcp_token",
+                        format!(
+                            "must be 1..={} bytes, found {len}",
+                            crate::transport::tcp::MAX_TOKEN
+                        ),
+                    ));
+                }
+                Some(t.into_inner())
+            }
+        };
         let transport = TransportConfig {
             kind: rt.kind.unwrap_or_default(),
             tcp_listen,
             max_commands_per_cycle,
+            tcp_token,
         };
 
         if raw.agent.is_empty() {
@@ -547,6 +569,9 @@ impl Config {
             self.transport.tcp_listen,
             self.transport.max_commands_per_cycle
         );
+        if let Some(token) = &self.transport.tcp_token {
+            let _ = writeln!(s, "tcp_token = {token:?}");
+        }
         for a in &self.agents {
             let _ = writeln!(s, "\n[[agent]]\nid = {}", a.id);
             for c in &a.cameras {

@@ -17,6 +17,7 @@ use tracing::{debug, info, warn};
 use crate::barrier::{AgentOutcome, BatchVerdict, CycleBarrier};
 use crate::config::{CameraConfig, Config, TransportKind};
 use crate::transport::shm::{ShmHost, ShmHostCreateError};
+use crate::transport::tcp::{TcpHost, TcpHostCreateError};
 use crate::transport::{FrameLoan, HostTransport, HostTransportError};
 use crate::wire::{
     CAMERA_NAME_LEN, ImageDesc, MAX_CAMERAS, MotorCommand, PROTOCOL_VERSION, SENSOR_FLAG_SYNC_MODE,
@@ -204,6 +205,8 @@ pub struct HostStats {
     pub commands_received: u64,
     /// Commands dropped because an agent exceeded `max_commands_per_cycle`.
     pub commands_overflowed: u64,
+    /// Frames that reached no agent (not connected, or async TCP with a full socket).
+    pub frames_undelivered: u64,
 }
 
 /// Why the host could not be created.
@@ -213,9 +216,9 @@ pub enum HostCreateError {
     /// The shared-memory transport failed.
     #[error(transparent)]
     Shm(#[from] ShmHostCreateError),
-    /// The configured transport is not available in this build.
-    #[error("transport {0:?} is not supported yet; use kind = \"shm\"")]
-    UnsupportedTransport(&'static str),
+    /// The TCP transport failed.
+    #[error(transparent)]
+    Tcp(#[from] TcpHostCreateError),
 }
 
 /// Why waiting for agents failed.
@@ -296,7 +299,7 @@ impl<'c> HostBuilder<'c> {
         let config = self.config.clone();
         let backend: Box<dyn HostTransport> = match config.transport.kind {
             TransportKind::Shm => Box::new(ShmHost::create(&config)?),
-            TransportKind::Tcp => return Err(HostCreateError::UnsupportedTransport("tcp")),
+            TransportKind::Tcp => Box::new(TcpHost::create(&config)?),
         };
         let n = config.agents.len();
         let cap = config.transport.max_commands_per_cycle as usize * 2;
@@ -424,6 +427,12 @@ impl Host {
             .is_some_and(|s| self.backend.is_connected(s))
     }
 
+    /// The address TCP agents connect to (the bound port when `tcp_listen` has port 0);
+    /// `None` on shared memory.
+    pub fn tcp_local_addr(&self) -> Option<std::net::SocketAddr> {
+        self.backend.local_addr()
+    }
+
     /// Whether SIGINT/SIGTERM was received.
     pub fn termination_requested(&self) -> bool {
         self.backend.termination_requested()
@@ -520,7 +529,8 @@ impl Host {
         })
     }
 
-    /// Publishes a frame; in sync mode its agent is then awaited this cycle.
+    /// Publishes a frame; if it reached its agent, that agent is awaited this cycle (sync
+    /// mode). A frame for an agent that is not connected is dropped and counted.
     ///
     /// # Errors
     /// [`HostCycleError`].
@@ -533,8 +543,16 @@ impl Host {
             });
         }
         let slot = frame.slot;
-        self.backend.publish(slot, frame.loan)?;
-        self.barrier.await_slot(slot);
+        if self.backend.publish(slot, frame.loan)? {
+            self.barrier.await_slot(slot);
+        } else {
+            self.stats.frames_undelivered += 1;
+            debug!(
+                agent = frame.agent_id,
+                cycle = self.cycle,
+                "frame not delivered: agent not connected"
+            );
+        }
         Ok(())
     }
 

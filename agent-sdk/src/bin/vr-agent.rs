@@ -10,7 +10,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tracing::{info, warn};
 use vrsync_agent::policy::{Policy, PolicyKind};
-use vrsync_agent::{Agent, AgentBuilder, AgentConnectError, WaitStartError};
+use vrsync_agent::{Agent, AgentBuilder, AgentConnectError, StopError, WaitStartError};
 use vrsync_bridge::Config;
 
 /// Example vrsync agent: waits for each cycle's start, reads its sensor frame from shared
@@ -176,7 +176,11 @@ fn run(args: &Args) -> anyhow::Result<ExitCode> {
             );
             std::thread::sleep(config.sync.stop_timeout * 2);
         }
-        agent.stop().context("stop")?;
+        match agent.stop() {
+            Ok(()) => {}
+            Err(StopError::HostClosed) => break Ok(()),
+            Err(e) => return Err(anyhow::Error::new(e).context("stop")),
+        }
     };
     report(&agent, cycles);
     match outcome {

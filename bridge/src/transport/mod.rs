@@ -10,6 +10,7 @@
 //!   agent; a published frame is never modified again.
 //! - [`HostTransport::signal_start`] wakes every agent at once. It is called after every
 //!   frame of the cycle has been published, so an agent woken by *start* finds its frame.
+//!   (On TCP the frame record itself is the start.)
 //! - [`HostTransport::drain`] hands every motor batch that arrived since the last call to
 //!   the sink, per agent in the order the agent sent them, without blocking.
 //! - [`HostTransport::wait_activity`] blocks until a batch may have arrived or the timeout
@@ -28,6 +29,7 @@
 //!   after the batch is visible to the host.
 
 pub mod shm;
+pub mod tcp;
 
 use std::time::Duration;
 
@@ -38,6 +40,8 @@ use crate::wire::{MotorCommand, MotorHeader, SensorHeader};
 pub enum FrameLoan {
     /// A loaned iceoryx2 sample.
     Shm(shm::ShmFrameLoan),
+    /// A TCP record buffer.
+    Tcp(tcp::TcpFrameLoan),
 }
 
 impl FrameLoan {
@@ -45,6 +49,7 @@ impl FrameLoan {
     pub fn parts_mut(&mut self) -> (&mut SensorHeader, &mut [u8]) {
         match self {
             Self::Shm(s) => s.parts_mut(),
+            Self::Tcp(t) => t.parts_mut(),
         }
     }
 
@@ -52,6 +57,7 @@ impl FrameLoan {
     pub fn header(&self) -> &SensorHeader {
         match self {
             Self::Shm(s) => s.header(),
+            Self::Tcp(t) => t.header(),
         }
     }
 }
@@ -102,11 +108,13 @@ pub trait HostTransport {
     /// # Errors
     /// [`HostTransportError::Loan`].
     fn loan(&mut self, slot: usize) -> Result<FrameLoan, HostTransportError>;
-    /// Publishes a loaned frame to agent `slot`.
+    /// Publishes a loaned frame to agent `slot`. Returns whether it was delivered: `false`
+    /// when the agent is not connected (any more), or — async mode on TCP — its socket is
+    /// full and it misses this frame.
     ///
     /// # Errors
     /// [`HostTransportError::Send`].
-    fn publish(&mut self, slot: usize, frame: FrameLoan) -> Result<(), HostTransportError>;
+    fn publish(&mut self, slot: usize, frame: FrameLoan) -> Result<bool, HostTransportError>;
     /// Wakes every agent.
     ///
     /// # Errors
@@ -126,4 +134,8 @@ pub trait HostTransport {
     fn update_connections(&mut self);
     /// Whether SIGINT/SIGTERM was received.
     fn termination_requested(&self) -> bool;
+    /// The network address agents connect to, for network transports.
+    fn local_addr(&self) -> Option<std::net::SocketAddr> {
+        None
+    }
 }

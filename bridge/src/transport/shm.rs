@@ -466,13 +466,18 @@ impl HostTransport for ShmHost {
         Ok(FrameLoan::Shm(ShmFrameLoan { sample }))
     }
 
-    fn publish(&mut self, slot: usize, frame: FrameLoan) -> Result<(), HostTransportError> {
+    fn publish(&mut self, slot: usize, frame: FrameLoan) -> Result<bool, HostTransportError> {
         let id = self.agent(slot)?.id;
-        let FrameLoan::Shm(frame) = frame;
+        let FrameLoan::Shm(frame) = frame else {
+            return Err(HostTransportError::Send {
+                what: format!("the sensor frame of agent {id}"),
+                reason: "not a shared-memory frame".into(),
+            });
+        };
         frame
             .sample
             .send()
-            .map(|_| ())
+            .map(|receivers| receivers > 0)
             .map_err(|e| HostTransportError::Send {
                 what: format!("the sensor frame of agent {id}"),
                 reason: format!("{e:?}"),

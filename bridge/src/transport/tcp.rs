@@ -1,0 +1,1377 @@
+//! The TCP transport: the same protocol for agents on other hosts, and the baseline the
+//! shared-memory transport is measured against.
+//!
+//! Every record is `[len: u32 LE][kind: u32 LE][body: len bytes]`. Agents connect and send
+//! [`kind::HELLO`] (magic, protocol version, layout hash, agent id, optional token); the host
+//! answers [`kind::WELCOME`] (with the largest frame it will send) or [`kind::REJECT`] (a
+//! reason) and closes. Then the host sends one [`kind::FRAME`] per cycle (sensor header +
+//! images, which doubles as *start*), the agent answers [`kind::MOTOR`] batches (motor
+//! header + commands; the stop flag ends its cycle), and [`kind::SHUTDOWN`] closes the
+//! session.
+//!
+//! The host renders straight into a per-agent record buffer laid out exactly as it goes on
+//! the wire, and sends it with one write: no per-frame allocation, no extra copy. Sockets
+//! use `TCP_NODELAY`. Reads are bounded: a length beyond the peer's maximum is an error,
+//! never an allocation. The host never blocks on reading: it waits for readiness with
+//! `poll(2)` on all agent sockets at once.
+
+use std::io::{self, ErrorKind, Read, Write};
+use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::os::fd::AsRawFd;
+use std::time::{Duration, Instant};
+
+use tracing::{debug, info, warn};
+use zerocopy::{FromBytes, IntoBytes};
+
+use super::{BatchSink, FrameLoan, HostTransport, HostTransportError};
+use crate::config::Config;
+use crate::host::image_layout;
+use crate::wire::{LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, SensorHeader};
+
+/// Record kinds.
+pub mod kind {
+    /// agent → host: magic, protocol version, layout hash, agent id, token.
+    pub const HELLO: u32 = 1;
+    /// host → agent: protocol version, layout hash, max frame record length.
+    pub const WELCOME: u32 = 2;
+    /// host → agent: why the hello was refused (UTF-8), then the host closes.
+    pub const REJECT: u32 = 3;
+    /// host → agent: sensor header + images; also the *start* of the cycle.
+    pub const FRAME: u32 = 4;
+    /// agent → host: motor header + commands.
+    pub const MOTOR: u32 = 5;
+    /// host → agent: the session is closed.
+    pub const SHUTDOWN: u32 = 6;
+}
+
+/// Bytes of the record prefix (`len` + `kind`).
+pub const PREFIX: usize = 8;
+/// Magic at the start of a hello.
+pub const HELLO_MAGIC: [u8; 4] = *b"VRSY";
+/// Longest accepted token, bytes.
+pub const MAX_TOKEN: usize = 256;
+/// Longest hello body.
+pub const MAX_HELLO: usize = 4 + 4 + 8 + 4 + 4 + MAX_TOKEN;
+/// How long a new connection may take to say hello.
+pub const HELLO_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// A decoded hello.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Hello {
+    /// The agent's protocol version.
+    pub protocol_version: u32,
+    /// The agent's layout hash.
+    pub layout_hash: u64,
+    /// The agent id it claims.
+    pub agent_id: u32,
+    /// The shared secret it presents (empty if none).
+    pub token: Vec<u8>,
+}
+
+/// A malformed record or hello.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum DecodeError {
+    /// The length field exceeds what this side accepts.
+    #[error("record of {len} bytes exceeds the maximum of {max}")]
+    TooLong {
+        /// Announced length.
+        len: usize,
+        /// Maximum.
+        max: usize,
+    },
+    /// A record of an unexpected kind.
+    #[error("unexpected record kind {found} (expected {expected})")]
+    UnexpectedKind {
+        /// Found.
+        found: u32,
+        /// Expected.
+        expected: &'static str,
+    },
+    /// The body does not have the expected shape.
+    #[error("malformed {what}: {reason}")]
+    Malformed {
+        /// Record type.
+        what: &'static str,
+        /// Detail.
+        reason: String,
+    },
+}
+
+/// Encodes a hello body.
+pub fn encode_hello(hello: &Hello) -> Vec<u8> {
+    let token = &hello.token[..hello.token.len().min(MAX_TOKEN)];
+    let mut b = Vec::with_capacity(MAX_HELLO);
+    b.extend_from_slice(&HELLO_MAGIC);
+    b.extend_from_slice(&hello.protocol_version.to_le_bytes());
+    b.extend_from_slice(&hello.layout_hash.to_le_bytes());
+    b.extend_from_slice(&hello.agent_id.to_le_bytes());
+    b.extend_from_slice(&(token.len() as u32).to_le_bytes());
+    b.extend_from_slice(token);
+    b
+}
+
+fn le_u32(b: &[u8], at: usize) -> Option<u32> {
+    Some(u32::from_le_bytes(b.get(at..at + 4)?.try_into().ok()?))
+}
+
+fn le_u64(b: &[u8], at: usize) -> Option<u64> {
+    Some(u64::from_le_bytes(b.get(at..at + 8)?.try_into().ok()?))
+}
+
+/// Decodes a hello body. Never panics, never allocates beyond [`MAX_TOKEN`].
+///
+/// # Errors
+/// [`DecodeError::Malformed`].
+pub fn decode_hello(body: &[u8]) -> Result<Hello, DecodeError> {
+    let bad = |reason: &str| DecodeError::Malformed {
+        what: "hello",
+        reason: reason.to_string(),
+    };
+    if body.len() > MAX_HELLO {
+        return Err(bad("too long"));
+    }
+    if body.get(..4) != Some(&HELLO_MAGIC[..]) {
+        return Err(bad("not a vrsync hello (bad magic)"));
+    }
+    let protocol_version = le_u32(body, 4).ok_or_else(|| bad("truncated"))?;
+    let layout_hash = le_u64(body, 8).ok_or_else(|| bad("truncated"))?;
+    let agent_id = le_u32(body, 16).ok_or_else(|| bad("truncated"))?;
+    let token_len = le_u32(body, 20).ok_or_else(|| bad("truncated"))? as usize;
+    if token_len > MAX_TOKEN || body.len() != 24 + token_len {
+        return Err(bad("token length does not match the record"));
+    }
+    Ok(Hello {
+        protocol_version,
+        layout_hash,
+        agent_id,
+        token: body[24..].to_vec(),
+    })
+}
+
+/// Splits a record prefix into `(len, kind)`, checking `len <= max`.
+///
+/// # Errors
+/// [`DecodeError::TooLong`].
+pub fn decode_prefix(prefix: [u8; PREFIX], max: usize) -> Result<(usize, u32), DecodeError> {
+    let len = u32::from_le_bytes([prefix[0], prefix[1], prefix[2], prefix[3]]) as usize;
+    let kind = u32::from_le_bytes([prefix[4], prefix[5], prefix[6], prefix[7]]);
+    if len > max {
+        return Err(DecodeError::TooLong { len, max });
+    }
+    Ok((len, kind))
+}
+
+/// Decodes a motor record body into its header and commands (borrowed, no allocation).
+///
+/// # Errors
+/// [`DecodeError::Malformed`] if the body is not a header plus `command_count` commands.
+pub fn decode_motor(body: &[u8]) -> Result<(MotorHeader, &[MotorCommand]), DecodeError> {
+    let bad = |reason: String| DecodeError::Malformed {
+        what: "motor batch",
+        reason,
+    };
+    let hsize = core::mem::size_of::<MotorHeader>();
+    let (h, rest) = body
+        .split_at_checked(hsize)
+        .ok_or_else(|| bad(format!("{} bytes, shorter than the header", body.len())))?;
+    let header = MotorHeader::read_from_bytes(h).map_err(|_| bad("header".into()))?;
+    let n = header.command_count as usize;
+    if rest.len() != n * core::mem::size_of::<MotorCommand>() {
+        return Err(bad(format!(
+            "header announces {n} commands, body holds {} bytes",
+            rest.len()
+        )));
+    }
+    // MotorCommand has alignment 4; the body may sit at any offset, so copy-free access
+    // needs an aligned body: callers keep bodies 8-byte aligned (see `RecordBuf`).
+    let commands = <[MotorCommand]>::ref_from_bytes(rest)
+        .map_err(|_| bad("commands are misaligned".into()))?;
+    Ok((header, commands))
+}
+
+/// An 8-byte aligned, reusable record buffer: `[prefix][body]`.
+#[derive(Debug, Default)]
+pub struct RecordBuf {
+    words: Vec<u64>,
+    len: usize,
+}
+
+impl RecordBuf {
+    /// A buffer able to hold a body of `body_capacity` bytes without growing.
+    pub fn with_capacity(body_capacity: usize) -> Self {
+        Self {
+            words: vec![0; (PREFIX + body_capacity).div_ceil(8)],
+            len: 0,
+        }
+    }
+
+    /// Makes room for a body of `body_len` bytes (grows only beyond the capacity).
+    fn reserve_body(&mut self, body_len: usize) {
+        let words = (PREFIX + body_len).div_ceil(8);
+        if self.words.len() < words {
+            self.words.resize(words, 0);
+        }
+        self.len = PREFIX + body_len;
+    }
+
+    /// The whole record: prefix and body.
+    pub fn record(&self) -> &[u8] {
+        &self.words.as_bytes()[..self.len]
+    }
+
+    /// The body.
+    pub fn body(&self) -> &[u8] {
+        &self.words.as_bytes()[PREFIX..self.len]
+    }
+
+    fn bytes_mut(&mut self) -> &mut [u8] {
+        let len = self.len;
+        &mut self.words.as_mut_bytes()[..len]
+    }
+
+    /// Writes the prefix for a body of the current length.
+    fn set_prefix(&mut self, kind: u32) {
+        let body = (self.len - PREFIX) as u32;
+        let b = self.bytes_mut();
+        b[..4].copy_from_slice(&body.to_le_bytes());
+        b[4..8].copy_from_slice(&kind.to_le_bytes());
+    }
+}
+
+fn set_nodelay(s: &TcpStream) -> io::Result<()> {
+    s.set_nodelay(true)
+}
+
+fn write_record(stream: &mut TcpStream, kind: u32, body: &[u8]) -> io::Result<()> {
+    let mut prefix = [0u8; PREFIX];
+    prefix[..4].copy_from_slice(&(body.len() as u32).to_le_bytes());
+    prefix[4..].copy_from_slice(&kind.to_le_bytes());
+    // One vectored write for prefix + body; fall back to write_all for the remainder.
+    let bufs = [io::IoSlice::new(&prefix), io::IoSlice::new(body)];
+    let mut written = stream.write_vectored(&bufs)?;
+    if written < PREFIX {
+        stream.write_all(&prefix[written..])?;
+        written = PREFIX;
+    }
+    stream.write_all(&body[written - PREFIX..])
+}
+
+/// Reads exactly `buf.len()` bytes, with `deadline` for the whole read.
+fn read_exact_deadline(
+    stream: &mut TcpStream,
+    buf: &mut [u8],
+    deadline: Instant,
+) -> io::Result<()> {
+    let mut done = 0;
+    while done < buf.len() {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err(io::Error::new(
+                ErrorKind::TimedOut,
+                "peer stalled mid-record",
+            ));
+        }
+        stream.set_read_timeout(Some(left))?;
+        match stream.read(&mut buf[done..]) {
+            Ok(0) => {
+                return Err(io::Error::new(
+                    ErrorKind::UnexpectedEof,
+                    "connection closed",
+                ));
+            }
+            Ok(n) => done += n,
+            Err(e) if e.kind() == ErrorKind::Interrupted => {}
+            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(())
+}
+
+/// Waits until one of `fds` is readable or `timeout` passes; returns which are readable.
+fn poll_readable(fds: &[i32], timeout: Duration, ready: &mut Vec<bool>) -> io::Result<usize> {
+    let mut pfds: Vec<libc::pollfd> = fds
+        .iter()
+        .map(|&fd| libc::pollfd {
+            fd,
+            events: libc::POLLIN,
+            revents: 0,
+        })
+        .collect();
+    let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
+    // Round sub-millisecond timeouts up so a short wait does not spin.
+    let ms = if ms == 0 && !timeout.is_zero() { 1 } else { ms };
+    // SAFETY: `pfds` is a valid array of `pfds.len()` pollfd structs for the whole call.
+    let n = unsafe { libc::poll(pfds.as_mut_ptr(), pfds.len() as libc::nfds_t, ms) };
+    if n < 0 {
+        let e = io::Error::last_os_error();
+        if e.kind() == ErrorKind::Interrupted {
+            ready.clear();
+            ready.resize(fds.len(), false);
+            return Ok(0);
+        }
+        return Err(e);
+    }
+    ready.clear();
+    ready.extend(pfds.iter().map(|p| p.revents != 0));
+    Ok(n as usize)
+}
+
+// ---------------------------------------------------------------------------------------
+// Host side
+// ---------------------------------------------------------------------------------------
+
+/// A loaned TCP frame: the agent's record buffer, images written in place.
+#[derive(Debug)]
+pub struct TcpFrameLoan {
+    // Boxed (and reused across cycles) to keep `FrameLoan` small.
+    header: Box<SensorHeader>,
+    buf: RecordBuf,
+}
+
+const HEADER: usize = core::mem::size_of::<SensorHeader>();
+
+impl TcpFrameLoan {
+    /// Header and image bytes, both writable. The header is copied into the record when
+    /// the frame is published (592 bytes); the images are written where they are sent from.
+    pub fn parts_mut(&mut self) -> (&mut SensorHeader, &mut [u8]) {
+        let payload = &mut self.buf.bytes_mut()[PREFIX + HEADER..];
+        (&mut self.header, payload)
+    }
+
+    /// The header.
+    pub fn header(&self) -> &SensorHeader {
+        &self.header
+    }
+}
+
+/// REJECT reason codes.
+pub mod reject {
+    /// Protocol version or layout differ.
+    pub const VERSION: u32 = 1;
+    /// The agent id is not part of the session.
+    pub const UNKNOWN_AGENT: u32 = 2;
+    /// Another connection is this agent already.
+    pub const ID_IN_USE: u32 = 3;
+    /// The token does not match `tcp_token`.
+    pub const TOKEN: u32 = 4;
+    /// The hello could not be decoded.
+    pub const MALFORMED: u32 = 5;
+}
+
+/// Encodes a REJECT body: code, host protocol, host layout, message.
+pub fn encode_reject(code: u32, message: &str) -> Vec<u8> {
+    let mut b = Vec::with_capacity(16 + message.len());
+    b.extend_from_slice(&code.to_le_bytes());
+    b.extend_from_slice(&PROTOCOL_VERSION.to_le_bytes());
+    b.extend_from_slice(&LAYOUT_HASH.to_le_bytes());
+    b.extend_from_slice(message.as_bytes());
+    b
+}
+
+/// Decodes a REJECT body into `(code, host protocol, host layout, message)`.
+pub fn decode_reject(body: &[u8]) -> Option<(u32, u32, u64, String)> {
+    Some((
+        le_u32(body, 0)?,
+        le_u32(body, 4)?,
+        le_u64(body, 8)?,
+        String::from_utf8_lossy(body.get(16..)?).into_owned(),
+    ))
+}
+
+static TERMINATE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+extern "C" fn on_signal(_: libc::c_int) {
+    TERMINATE.store(true, std::sync::atomic::Ordering::SeqCst);
+}
+
+/// Turns SIGINT/SIGTERM into a termination request (as iceoryx2 does for the shm path).
+fn install_signal_handlers() {
+    let handler: extern "C" fn(libc::c_int) = on_signal;
+    // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
+    unsafe {
+        libc::signal(libc::SIGINT, handler as libc::sighandler_t);
+        libc::signal(libc::SIGTERM, handler as libc::sighandler_t);
+    }
+}
+
+/// Whether SIGINT/SIGTERM arrived since the handlers were installed.
+pub fn termination_requested() -> bool {
+    TERMINATE.load(std::sync::atomic::Ordering::SeqCst)
+}
+
+#[derive(Debug)]
+struct Conn {
+    stream: TcpStream,
+    peer: SocketAddr,
+    rbuf: RecordBuf,
+    fill: usize,
+}
+
+#[derive(Debug)]
+struct Pending {
+    stream: TcpStream,
+    peer: SocketAddr,
+    since: Instant,
+    buf: Vec<u8>,
+}
+
+#[derive(Debug)]
+struct TcpSlot {
+    id: u32,
+    conn: Option<Conn>,
+    buf: Option<RecordBuf>,
+    header: Option<Box<SensorHeader>>,
+    body_len: usize,
+}
+
+/// The host side of the TCP transport.
+#[derive(Debug)]
+pub struct TcpHost {
+    listener: TcpListener,
+    local_addr: SocketAddr,
+    sync_mode: bool,
+    write_timeout: Duration,
+    slots: Vec<TcpSlot>,
+    pending: Vec<Pending>,
+    max_motor_body: usize,
+    max_frame_body: usize,
+    token: Option<Vec<u8>>,
+    fds: Vec<i32>,
+    ready: Vec<bool>,
+}
+
+/// Why the TCP host could not be created.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum TcpHostCreateError {
+    /// Binding the listen address failed.
+    #[error("cannot listen on {addr}: {source} (set [transport] tcp_listen to a free address)")]
+    Bind {
+        /// The address.
+        addr: SocketAddr,
+        /// The error.
+        source: io::Error,
+    },
+}
+
+impl TcpHost {
+    /// Binds `transport.tcp_listen` and prepares one record buffer per agent.
+    ///
+    /// # Errors
+    /// [`TcpHostCreateError`].
+    pub fn create(config: &Config) -> Result<Self, TcpHostCreateError> {
+        install_signal_handlers();
+        let addr = config.transport.tcp_listen;
+        let bind = |source| TcpHostCreateError::Bind { addr, source };
+        let listener = TcpListener::bind(addr).map_err(bind)?;
+        listener.set_nonblocking(true).map_err(bind)?;
+        let local_addr = listener.local_addr().map_err(bind)?;
+        if !local_addr.ip().is_loopback() {
+            warn!(%local_addr, "TCP transport listens beyond loopback: any host that can reach it may connect");
+        }
+        let mut max_frame_body = 0;
+        let slots = config
+            .agents
+            .iter()
+            .map(|a| {
+                let body_len = HEADER + image_layout(&a.cameras).1;
+                max_frame_body = max_frame_body.max(body_len);
+                TcpSlot {
+                    id: a.id,
+                    conn: None,
+                    buf: Some(RecordBuf::with_capacity(body_len)),
+                    header: Some(Box::default()),
+                    body_len,
+                }
+            })
+            .collect();
+        let max_motor_body = core::mem::size_of::<MotorHeader>()
+            + config.transport.max_commands_per_cycle as usize
+                * core::mem::size_of::<MotorCommand>();
+        info!(%local_addr, "TCP host listening");
+        Ok(Self {
+            listener,
+            local_addr,
+            sync_mode: config.sync.sync_mode,
+            write_timeout: config.sync.stop_timeout.max(Duration::from_secs(1)),
+            slots,
+            pending: Vec::new(),
+            max_motor_body,
+            max_frame_body,
+            token: config.transport.tcp_token.clone().map(String::into_bytes),
+            fds: Vec::new(),
+            ready: Vec::new(),
+        })
+    }
+
+    /// The address actually bound (resolves port 0).
+    pub fn local_addr(&self) -> SocketAddr {
+        self.local_addr
+    }
+
+    fn drop_conn(&mut self, slot: usize, why: &str) {
+        if let Some(c) = self.slots[slot].conn.take() {
+            warn!(agent = self.slots[slot].id, peer = %c.peer, "TCP agent dropped: {why}");
+        }
+    }
+
+    fn accept_new(&mut self) {
+        loop {
+            match self.listener.accept() {
+                Ok((stream, peer)) => {
+                    if stream.set_nonblocking(true).is_err() || set_nodelay(&stream).is_err() {
+                        continue;
+                    }
+                    debug!(%peer, "TCP connection");
+                    self.pending.push(Pending {
+                        stream,
+                        peer,
+                        since: Instant::now(),
+                        buf: Vec::with_capacity(PREFIX + MAX_HELLO),
+                    });
+                }
+                Err(e) if e.kind() == ErrorKind::WouldBlock => return,
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                Err(e) => {
+                    warn!("TCP accept failed: {e}");
+                    return;
+                }
+            }
+        }
+    }
+
+    /// Reads pending hellos; admits, rejects or times out each connection.
+    fn handle_pending(&mut self) {
+        let mut i = 0;
+        while i < self.pending.len() {
+            match self.progress_hello(i) {
+                Ok(None) => {
+                    if self.pending[i].since.elapsed() > HELLO_TIMEOUT {
+                        let p = self.pending.swap_remove(i);
+                        warn!(peer = %p.peer, "TCP peer dropped: no hello within {HELLO_TIMEOUT:?}");
+                    } else {
+                        i += 1;
+                    }
+                }
+                Ok(Some(hello)) => {
+                    let p = self.pending.swap_remove(i);
+                    self.admit(p, hello);
+                }
+                Err(why) => {
+                    let mut p = self.pending.swap_remove(i);
+                    warn!(peer = %p.peer, "TCP peer dropped: {why}");
+                    let _ = p.stream.set_nonblocking(false);
+                    let _ = p.stream.set_write_timeout(Some(Duration::from_millis(200)));
+                    let _ = write_record(
+                        &mut p.stream,
+                        kind::REJECT,
+                        &encode_reject(reject::MALFORMED, &why),
+                    );
+                }
+            }
+        }
+    }
+
+    fn progress_hello(&mut self, i: usize) -> Result<Option<Hello>, String> {
+        let p = &mut self.pending[i];
+        let mut chunk = [0u8; PREFIX + MAX_HELLO];
+        loop {
+            let want = if p.buf.len() < PREFIX {
+                PREFIX - p.buf.len()
+            } else {
+                let (len, kind) =
+                    decode_prefix(p.buf[..PREFIX].try_into().map_err(|_| "prefix")?, MAX_HELLO)
+                        .map_err(|e| e.to_string())?;
+                if kind != kind::HELLO {
+                    return Err(format!("expected a hello, got record kind {kind}"));
+                }
+                if p.buf.len() == PREFIX + len {
+                    return decode_hello(&p.buf[PREFIX..])
+                        .map(Some)
+                        .map_err(|e| e.to_string());
+                }
+                PREFIX + len - p.buf.len()
+            };
+            match p.stream.read(&mut chunk[..want]) {
+                Ok(0) => return Err("closed before its hello".into()),
+                Ok(n) => p.buf.extend_from_slice(&chunk[..n]),
+                Err(e) if e.kind() == ErrorKind::WouldBlock => return Ok(None),
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                Err(e) => return Err(e.to_string()),
+            }
+        }
+    }
+
+    fn admit(&mut self, p: Pending, hello: Hello) {
+        let mut stream = p.stream;
+        let refuse = |stream: &mut TcpStream, code: u32, why: String| {
+            warn!(peer = %p.peer, agent = hello.agent_id, "TCP agent refused: {why}");
+            let _ = stream.set_nonblocking(false);
+            let _ = stream.set_write_timeout(Some(Duration::from_millis(200)));
+            let _ = write_record(stream, kind::REJECT, &encode_reject(code, &why));
+        };
+        if hello.protocol_version != PROTOCOL_VERSION || hello.layout_hash != LAYOUT_HASH {
+            return refuse(
+                &mut stream,
+                reject::VERSION,
+                format!(
+                    "agent speaks protocol {} (layout {:016x}), host speaks protocol {PROTOCOL_VERSION} (layout {LAYOUT_HASH:016x})",
+                    hello.protocol_version, hello.layout_hash
+                ),
+            );
+        }
+        if let Some(token) = &self.token
+            && !constant_time_eq(token, &hello.token)
+        {
+            return refuse(&mut stream, reject::TOKEN, "wrong tcp_token".into());
+        }
+        let Some(slot) = self.slots.iter().position(|s| s.id == hello.agent_id) else {
+            return refuse(
+                &mut stream,
+                reject::UNKNOWN_AGENT,
+                format!("agent {} is not part of this session", hello.agent_id),
+            );
+        };
+        if self.slots[slot].conn.is_some() {
+            return refuse(
+                &mut stream,
+                reject::ID_IN_USE,
+                format!("agent {} is already connected", hello.agent_id),
+            );
+        }
+        let mut welcome = [0u8; 16];
+        welcome[..4].copy_from_slice(&PROTOCOL_VERSION.to_le_bytes());
+        welcome[4..12].copy_from_slice(&LAYOUT_HASH.to_le_bytes());
+        welcome[12..].copy_from_slice(&(self.slots[slot].body_len as u32).to_le_bytes());
+        let sent = stream
+            .set_nonblocking(false)
+            .and_then(|()| stream.set_write_timeout(Some(Duration::from_secs(1))))
+            .and_then(|()| write_record(&mut stream, kind::WELCOME, &welcome))
+            .and_then(|()| stream.set_nonblocking(true));
+        if let Err(e) = sent {
+            warn!(peer = %p.peer, "TCP agent lost during welcome: {e}");
+            return;
+        }
+        info!(agent = hello.agent_id, peer = %p.peer, "TCP agent connected");
+        self.slots[slot].conn = Some(Conn {
+            stream,
+            peer: p.peer,
+            rbuf: RecordBuf::with_capacity(self.max_motor_body),
+            fill: 0,
+        });
+    }
+
+    /// Writes a whole record to a non-blocking socket, waiting for writability with a
+    /// deadline (a stalled agent cannot hold the host forever).
+    fn send_all(stream: &mut TcpStream, mut data: &[u8], deadline: Instant) -> io::Result<()> {
+        while !data.is_empty() {
+            match stream.write(data) {
+                Ok(0) => return Err(io::Error::new(ErrorKind::WriteZero, "connection closed")),
+                Ok(n) => data = &data[n..],
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                Err(e) if e.kind() == ErrorKind::WouldBlock => {
+                    let left = deadline.saturating_duration_since(Instant::now());
+                    if left.is_zero() {
+                        return Err(io::Error::new(ErrorKind::TimedOut, "agent does not read"));
+                    }
+                    let mut pfd = libc::pollfd {
+                        fd: stream.as_raw_fd(),
+                        events: libc::POLLOUT,
+                        revents: 0,
+                    };
+                    let ms = left.as_millis().clamp(1, i32::MAX as u128) as i32;
+                    // SAFETY: one valid pollfd for the duration of the call.
+                    unsafe { libc::poll(&mut pfd, 1, ms) };
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+
+    fn writable_now(stream: &TcpStream) -> bool {
+        let mut pfd = libc::pollfd {
+            fd: stream.as_raw_fd(),
+            events: libc::POLLOUT,
+            revents: 0,
+        };
+        // SAFETY: one valid pollfd for the duration of the call.
+        unsafe { libc::poll(&mut pfd, 1, 0) == 1 && pfd.revents & libc::POLLOUT != 0 }
+    }
+
+    /// Sets the shared secret agents must present.
+    pub fn set_token(&mut self, token: Option<Vec<u8>>) {
+        self.token = token;
+    }
+
+    /// Largest frame body any agent receives.
+    pub fn max_frame_body(&self) -> usize {
+        self.max_frame_body
+    }
+}
+
+/// Compares two byte strings in time independent of where they differ.
+pub fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    let mut diff = (a.len() ^ b.len()) as u8 | u8::from(a.len() != b.len());
+    for i in 0..a.len().max(b.len()) {
+        diff |= a.get(i).copied().unwrap_or(0) ^ b.get(i).copied().unwrap_or(0);
+    }
+    diff == 0
+}
+
+impl Drop for TcpHost {
+    fn drop(&mut self) {
+        for s in &mut self.slots {
+            if let Some(c) = &mut s.conn {
+                let deadline = Instant::now() + Duration::from_millis(200);
+                let mut rec = [0u8; PREFIX];
+                rec[4..].copy_from_slice(&kind::SHUTDOWN.to_le_bytes());
+                let _ = Self::send_all(&mut c.stream, &rec, deadline);
+            }
+        }
+    }
+}
+
+impl HostTransport for TcpHost {
+    fn is_connected(&self, slot: usize) -> bool {
+        self.slots.get(slot).is_some_and(|s| s.conn.is_some())
+    }
+
+    fn loan(&mut self, slot: usize) -> Result<FrameLoan, HostTransportError> {
+        let s = self
+            .slots
+            .get_mut(slot)
+            .ok_or_else(|| HostTransportError::Loan {
+                agent: slot as u32,
+                reason: "no such agent slot".into(),
+            })?;
+        let mut buf = s.buf.take().ok_or_else(|| HostTransportError::Loan {
+            agent: s.id,
+            reason: "the previous frame of this agent is still loaned".into(),
+        })?;
+        buf.reserve_body(s.body_len);
+        let mut header = s.header.take().unwrap_or_default();
+        *header = SensorHeader::default();
+        Ok(FrameLoan::Tcp(TcpFrameLoan { header, buf }))
+    }
+
+    fn publish(&mut self, slot: usize, frame: FrameLoan) -> Result<bool, HostTransportError> {
+        let FrameLoan::Tcp(TcpFrameLoan { header, mut buf }) = frame else {
+            return Err(HostTransportError::Send {
+                what: "frame".into(),
+                reason: "not a TCP frame".into(),
+            });
+        };
+        buf.bytes_mut()[PREFIX..PREFIX + HEADER].copy_from_slice(header.as_bytes());
+        buf.set_prefix(kind::FRAME);
+        let deadline = Instant::now() + self.write_timeout;
+        let sync = self.sync_mode;
+        let Some(s) = self.slots.get_mut(slot) else {
+            return Ok(false);
+        };
+        let result = match &mut s.conn {
+            None => Ok(false),
+            // Async mode: a slow agent whose socket is full misses this frame instead of
+            // stalling the host (it reads the newest when it catches up).
+            Some(c) if !sync && !Self::writable_now(&c.stream) => Ok(false),
+            Some(c) => Self::send_all(&mut c.stream, buf.record(), deadline).map(|()| true),
+        };
+        s.buf = Some(buf);
+        s.header = Some(header);
+        match result {
+            Ok(delivered) => Ok(delivered),
+            Err(e) => {
+                self.drop_conn(slot, &format!("cannot send its frame: {e}"));
+                Ok(false)
+            }
+        }
+    }
+
+    fn signal_start(&mut self) -> Result<(), HostTransportError> {
+        // On TCP the frame record is the start: each agent begins as soon as its frame is in.
+        Ok(())
+    }
+
+    fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError> {
+        let max = self.max_motor_body;
+        for slot in 0..self.slots.len() {
+            let mut failure = None;
+            if let Some(c) = &mut self.slots[slot].conn {
+                loop {
+                    // Fill the prefix, then the body, without blocking.
+                    let need = if c.fill < PREFIX {
+                        PREFIX
+                    } else {
+                        let b = c.rbuf.words.as_bytes();
+                        let prefix = [b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]];
+                        match decode_prefix(prefix, max) {
+                            Ok((len, kind::MOTOR)) => PREFIX + len,
+                            Ok((_, k)) => {
+                                failure =
+                                    Some(format!("sent record kind {k}, expected motor batches"));
+                                break;
+                            }
+                            Err(e) => {
+                                failure = Some(e.to_string());
+                                break;
+                            }
+                        }
+                    };
+                    if c.fill >= PREFIX && c.fill == need {
+                        c.rbuf.len = need;
+                        match decode_motor(c.rbuf.body()) {
+                            Ok((header, commands)) => sink(slot, &header, commands),
+                            Err(e) => {
+                                failure = Some(e.to_string());
+                                break;
+                            }
+                        }
+                        c.fill = 0;
+                        continue;
+                    }
+                    c.rbuf.reserve_body(need - PREFIX);
+                    let dst = &mut c.rbuf.words.as_mut_bytes()[c.fill..need];
+                    match c.stream.read(dst) {
+                        Ok(0) => {
+                            failure = Some("connection closed".into());
+                            break;
+                        }
+                        Ok(n) => c.fill += n,
+                        Err(e) if e.kind() == ErrorKind::WouldBlock => break,
+                        Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                        Err(e) => {
+                            failure = Some(e.to_string());
+                            break;
+                        }
+                    }
+                }
+            }
+            if let Some(why) = failure {
+                self.drop_conn(slot, &why);
+            }
+        }
+        Ok(())
+    }
+
+    fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
+        self.fds.clear();
+        self.fds.push(self.listener.as_raw_fd());
+        self.fds
+            .extend(self.pending.iter().map(|p| p.stream.as_raw_fd()));
+        self.fds.extend(
+            self.slots
+                .iter()
+                .filter_map(|s| s.conn.as_ref().map(|c| c.stream.as_raw_fd())),
+        );
+        // Pending hellos have their own deadline.
+        let timeout = if self.pending.is_empty() {
+            timeout
+        } else {
+            timeout.min(HELLO_TIMEOUT)
+        };
+        let mut ready = std::mem::take(&mut self.ready);
+        let result = poll_readable(&self.fds, timeout, &mut ready);
+        self.ready = ready;
+        result.map_err(|e| HostTransportError::Receive {
+            agent: u32::MAX,
+            reason: format!("poll: {e}"),
+        })?;
+        if self.ready.first().copied().unwrap_or(false) {
+            self.accept_new();
+        }
+        if !self.pending.is_empty() {
+            self.handle_pending();
+        }
+        if termination_requested() {
+            return Err(HostTransportError::Terminated);
+        }
+        Ok(())
+    }
+
+    fn update_connections(&mut self) {}
+
+    fn termination_requested(&self) -> bool {
+        termination_requested()
+    }
+
+    fn local_addr(&self) -> Option<SocketAddr> {
+        Some(self.local_addr)
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Agent side
+// ---------------------------------------------------------------------------------------
+
+type Pool = std::rc::Rc<std::cell::RefCell<Vec<RecordBuf>>>;
+
+/// A received TCP frame. Its buffer goes back to the agent's pool when dropped, so
+/// receiving allocates nothing in steady state.
+#[derive(Debug)]
+pub struct TcpFrame {
+    header: SensorHeader,
+    buf: Option<RecordBuf>,
+    pool: Pool,
+}
+
+impl TcpFrame {
+    /// The header.
+    pub fn header(&self) -> &SensorHeader {
+        &self.header
+    }
+
+    /// The image bytes.
+    pub fn payload(&self) -> &[u8] {
+        self.buf
+            .as_ref()
+            .and_then(|b| b.body().get(HEADER..))
+            .unwrap_or(&[])
+    }
+}
+
+impl Drop for TcpFrame {
+    fn drop(&mut self) {
+        if let Some(buf) = self.buf.take()
+            && let Ok(mut pool) = self.pool.try_borrow_mut()
+        {
+            pool.push(buf);
+        }
+    }
+}
+
+/// Why a TCP agent could not connect.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum TcpAgentConnectError {
+    /// Nobody accepted the connection before the deadline.
+    #[error(
+        "no host at {addr} within {waited:?}: {reason} (is `vr-sim run` running with the same config?)"
+    )]
+    HostNotFound {
+        /// The address.
+        addr: SocketAddr,
+        /// How long we tried.
+        waited: Duration,
+        /// The last error.
+        reason: String,
+    },
+    /// Host and agent were built with different wire layouts.
+    #[error(
+        "protocol mismatch: the host speaks vrsync protocol {host_protocol} (layout {host_layout:016x}), \
+         this agent speaks protocol {agent_protocol} (layout {agent_layout:016x}); rebuild the agent \
+         against the host's version"
+    )]
+    VersionMismatch {
+        /// The host's protocol.
+        host_protocol: u32,
+        /// The host's layout hash.
+        host_layout: u64,
+        /// Ours.
+        agent_protocol: u32,
+        /// Ours.
+        agent_layout: u64,
+    },
+    /// The host refused the hello.
+    #[error("the host refused agent {agent}: {reason}")]
+    Refused {
+        /// Agent id.
+        agent: u32,
+        /// The host's reason code ([`reject`]).
+        code: u32,
+        /// The host's message.
+        reason: String,
+    },
+    /// The connection failed during the handshake.
+    #[error("TCP handshake with {addr} failed: {reason}")]
+    Handshake {
+        /// The address.
+        addr: SocketAddr,
+        /// Detail.
+        reason: String,
+    },
+}
+
+/// Why [`TcpAgent::wait_frame`] returned without a frame.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum TcpWaitError {
+    /// No frame before the deadline.
+    #[error("timeout")]
+    Timeout,
+    /// The host sent shutdown.
+    #[error("host closed the session")]
+    HostClosed,
+    /// The connection broke without a shutdown.
+    #[error("connection to the host lost: {0}")]
+    HostGone(String),
+    /// A record violated the protocol.
+    #[error("protocol violation: {0}")]
+    Bad(String),
+    /// SIGINT/SIGTERM.
+    #[error("termination requested")]
+    Terminated,
+}
+
+/// The agent side of the TCP transport.
+#[derive(Debug)]
+pub struct TcpAgent {
+    id: u32,
+    stream: TcpStream,
+    max_frame_body: usize,
+    stall_timeout: Duration,
+    pool: Pool,
+    out: Vec<u8>,
+    closed: bool,
+}
+
+impl TcpAgent {
+    /// Connects to `transport.tcp_listen`, retrying until `timeout`, and says hello.
+    ///
+    /// # Errors
+    /// [`TcpAgentConnectError`].
+    pub fn connect(
+        config: &Config,
+        id: u32,
+        timeout: Duration,
+        token: Option<&[u8]>,
+    ) -> Result<Self, TcpAgentConnectError> {
+        install_signal_handlers();
+        let addr = config.transport.tcp_listen;
+        let started = Instant::now();
+        let deadline = started + timeout;
+        let mut backoff = Duration::from_millis(5);
+        let mut stream = loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match TcpStream::connect_timeout(&addr, left.max(Duration::from_millis(1))) {
+                Ok(s) => break s,
+                Err(e) => {
+                    let now = Instant::now();
+                    if now >= deadline || termination_requested() {
+                        return Err(TcpAgentConnectError::HostNotFound {
+                            addr,
+                            waited: started.elapsed(),
+                            reason: e.to_string(),
+                        });
+                    }
+                    // The host may start after us; there is nothing to wait on but time.
+                    std::thread::sleep(backoff.min(deadline - now));
+                    backoff = (backoff * 2).min(Duration::from_millis(100));
+                }
+            }
+        };
+        let hs = |reason: String| TcpAgentConnectError::Handshake { addr, reason };
+        set_nodelay(&stream).map_err(|e| hs(e.to_string()))?;
+        let hello = Hello {
+            protocol_version: PROTOCOL_VERSION,
+            layout_hash: LAYOUT_HASH,
+            agent_id: id,
+            token: token.map(<[u8]>::to_vec).unwrap_or_default(),
+        };
+        write_record(&mut stream, kind::HELLO, &encode_hello(&hello))
+            .map_err(|e| hs(e.to_string()))?;
+        let reply_deadline = Instant::now() + HELLO_TIMEOUT * 2;
+        let mut prefix = [0u8; PREFIX];
+        read_exact_deadline(&mut stream, &mut prefix, reply_deadline)
+            .map_err(|e| hs(e.to_string()))?;
+        let (len, k) = decode_prefix(prefix, 4096).map_err(|e| hs(e.to_string()))?;
+        let mut body = vec![0u8; len];
+        read_exact_deadline(&mut stream, &mut body, reply_deadline)
+            .map_err(|e| hs(e.to_string()))?;
+        match k {
+            kind::WELCOME => {
+                let (Some(proto), Some(layout), Some(max)) =
+                    (le_u32(&body, 0), le_u64(&body, 4), le_u32(&body, 12))
+                else {
+                    return Err(hs("malformed welcome".into()));
+                };
+                if proto != PROTOCOL_VERSION || layout != LAYOUT_HASH {
+                    return Err(TcpAgentConnectError::VersionMismatch {
+                        host_protocol: proto,
+                        host_layout: layout,
+                        agent_protocol: PROTOCOL_VERSION,
+                        agent_layout: LAYOUT_HASH,
+                    });
+                }
+                let max_frame_body = max as usize;
+                let pool: Pool = Default::default();
+                pool.borrow_mut()
+                    .push(RecordBuf::with_capacity(max_frame_body));
+                Ok(Self {
+                    id,
+                    stream,
+                    max_frame_body,
+                    stall_timeout: config.sync.stop_timeout.max(Duration::from_secs(5)),
+                    pool,
+                    out: Vec::with_capacity(
+                        PREFIX
+                            + core::mem::size_of::<MotorHeader>()
+                            + config.transport.max_commands_per_cycle as usize
+                                * core::mem::size_of::<MotorCommand>(),
+                    ),
+                    closed: false,
+                })
+            }
+            kind::REJECT => {
+                let (code, host_protocol, host_layout, reason) =
+                    decode_reject(&body).ok_or_else(|| hs("malformed reject".into()))?;
+                if code == reject::VERSION {
+                    return Err(TcpAgentConnectError::VersionMismatch {
+                        host_protocol,
+                        host_layout,
+                        agent_protocol: PROTOCOL_VERSION,
+                        agent_layout: LAYOUT_HASH,
+                    });
+                }
+                Err(TcpAgentConnectError::Refused {
+                    agent: id,
+                    code,
+                    reason,
+                })
+            }
+            other => Err(hs(format!("unexpected reply kind {other}"))),
+        }
+    }
+
+    /// Reads records until a frame arrived and nothing newer is pending; returns the newest.
+    ///
+    /// # Errors
+    /// [`TcpWaitError`].
+    pub fn wait_frame(&mut self, deadline: Option<Instant>) -> Result<TcpFrame, TcpWaitError> {
+        if self.closed {
+            return Err(TcpWaitError::HostClosed);
+        }
+        let mut newest: Option<TcpFrame> = None;
+        loop {
+            let more = newest.is_none() || self.readable_now();
+            if !more {
+                break;
+            }
+            // Wait for the first byte of the next record (bounded slices: termination).
+            let mut prefix = [0u8; PREFIX];
+            let mut got = 0;
+            while got == 0 {
+                if termination_requested() {
+                    return Err(TcpWaitError::Terminated);
+                }
+                let slice = match deadline {
+                    Some(d) => {
+                        let left = d.saturating_duration_since(Instant::now());
+                        if left.is_zero() {
+                            return newest.ok_or(TcpWaitError::Timeout);
+                        }
+                        left.min(Duration::from_millis(250))
+                    }
+                    None => Duration::from_millis(250),
+                };
+                self.stream
+                    .set_read_timeout(Some(slice))
+                    .map_err(|e| TcpWaitError::HostGone(e.to_string()))?;
+                match self.stream.read(&mut prefix) {
+                    Ok(0) => {
+                        return newest.ok_or_else(|| {
+                            TcpWaitError::HostGone("connection closed without shutdown".into())
+                        });
+                    }
+                    Ok(n) => got = n,
+                    Err(e)
+                        if matches!(
+                            e.kind(),
+                            ErrorKind::WouldBlock | ErrorKind::TimedOut | ErrorKind::Interrupted
+                        ) => {}
+                    Err(e) => return Err(TcpWaitError::HostGone(e.to_string())),
+                }
+            }
+            let stall = Instant::now() + self.stall_timeout;
+            read_exact_deadline(&mut self.stream, &mut prefix[got..], stall)
+                .map_err(|e| TcpWaitError::HostGone(e.to_string()))?;
+            let (len, k) = decode_prefix(prefix, self.max_frame_body)
+                .map_err(|e| TcpWaitError::Bad(e.to_string()))?;
+            match k {
+                kind::FRAME => {
+                    if len < HEADER {
+                        return Err(TcpWaitError::Bad(format!(
+                            "frame of {len} bytes has no header"
+                        )));
+                    }
+                    let mut buf = self.pool.borrow_mut().pop().unwrap_or_default();
+                    buf.reserve_body(len);
+                    let body = &mut buf.bytes_mut()[PREFIX..];
+                    read_exact_deadline(&mut self.stream, body, stall)
+                        .map_err(|e| TcpWaitError::HostGone(e.to_string()))?;
+                    let header = SensorHeader::read_from_bytes(&buf.body()[..HEADER])
+                        .map_err(|_| TcpWaitError::Bad("frame header".into()))?;
+                    // Dropping an older frame returns its buffer to the pool.
+                    newest = Some(TcpFrame {
+                        header,
+                        buf: Some(buf),
+                        pool: self.pool.clone(),
+                    });
+                }
+                kind::SHUTDOWN => {
+                    self.closed = true;
+                    return newest.ok_or(TcpWaitError::HostClosed);
+                }
+                other => return Err(TcpWaitError::Bad(format!("unexpected record kind {other}"))),
+            }
+        }
+        newest.ok_or(TcpWaitError::Timeout)
+    }
+
+    fn readable_now(&self) -> bool {
+        let mut ready = Vec::with_capacity(1);
+        poll_readable(&[self.stream.as_raw_fd()], Duration::ZERO, &mut ready).is_ok_and(|n| n > 0)
+    }
+
+    /// Sends a motor batch (the stop flag in the header ends the agent's cycle).
+    ///
+    /// # Errors
+    /// A string describing the I/O failure.
+    pub fn send_batch(
+        &mut self,
+        header: &MotorHeader,
+        commands: &[MotorCommand],
+    ) -> Result<(), String> {
+        let header = MotorHeader {
+            command_count: commands.len() as u32,
+            ..*header
+        };
+        let body = core::mem::size_of::<MotorHeader>() + core::mem::size_of_val(commands);
+        self.out.clear();
+        self.out.extend_from_slice(&(body as u32).to_le_bytes());
+        self.out.extend_from_slice(&kind::MOTOR.to_le_bytes());
+        self.out.extend_from_slice(header.as_bytes());
+        self.out.extend_from_slice(commands.as_bytes());
+        let sent = self
+            .stream
+            .set_write_timeout(Some(self.stall_timeout))
+            .and_then(|()| self.stream.write_all(&self.out));
+        if let Err(e) = sent {
+            // Did the host close the session cleanly? Its shutdown record would be waiting
+            // behind any frames not read yet.
+            self.look_for_shutdown();
+            return Err(format!("cannot send the motor batch to the host: {e}"));
+        }
+        Ok(())
+    }
+
+    /// Whether the host closed the session (its shutdown record was read).
+    pub fn host_closed(&self) -> bool {
+        self.closed
+    }
+
+    fn look_for_shutdown(&mut self) {
+        let deadline = Instant::now() + Duration::from_millis(200);
+        let mut prefix = [0u8; PREFIX];
+        let mut scratch = [0u8; 64 * 1024];
+        while read_exact_deadline(&mut self.stream, &mut prefix, deadline).is_ok() {
+            let Ok((mut len, k)) = decode_prefix(prefix, self.max_frame_body) else {
+                return;
+            };
+            if k == kind::SHUTDOWN {
+                self.closed = true;
+                return;
+            }
+            while len > 0 {
+                let n = len.min(scratch.len());
+                if read_exact_deadline(&mut self.stream, &mut scratch[..n], deadline).is_err() {
+                    return;
+                }
+                len -= n;
+            }
+        }
+    }
+
+    /// This agent's id.
+    pub fn id(&self) -> u32 {
+        self.id
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn hello_round_trips() {
+        let h = Hello {
+            protocol_version: 1,
+            layout_hash: 0xdead_beef,
+            agent_id: 3,
+            token: b"secret".to_vec(),
+        };
+        assert_eq!(decode_hello(&encode_hello(&h)), Ok(h));
+    }
+
+    #[test]
+    fn constant_time_eq_compares() {
+        assert!(constant_time_eq(b"abc", b"abc"));
+        assert!(!constant_time_eq(b"abc", b"abd"));
+        assert!(!constant_time_eq(b"abc", b"ab"));
+        assert!(constant_time_eq(b"", b""));
+    }
+
+    #[test]
+    fn motor_bodies_decode_without_copy() {
+        let cmds = [
+            crate::wire::Command::Turn { angle_deg: 5.0 }.encode(1),
+            crate::wire::Command::CancelMove.encode(2),
+        ];
+        let header = MotorHeader {
+            protocol_version: PROTOCOL_VERSION,
+            agent_id: 1,
+            cycle: 9,
+            flags: crate::wire::MOTOR_FLAG_STOP,
+            command_count: 2,
+        };
+        let mut buf = RecordBuf::with_capacity(256);
+        let body_len = 24 + 64;
+        buf.reserve_body(body_len);
+        buf.bytes_mut()[PREFIX..PREFIX + 24].copy_from_slice(header.as_bytes());
+        buf.bytes_mut()[PREFIX + 24..].copy_from_slice(cmds.as_bytes());
+        let (h, c) = decode_motor(buf.body()).unwrap();
+        assert_eq!(h, header);
+        assert_eq!(c, &cmds);
+        // A count that does not match the body is malformed, never an over-read.
+        let mut bad = header;
+        bad.command_count = 1000;
+        buf.bytes_mut()[PREFIX..PREFIX + 24].copy_from_slice(bad.as_bytes());
+        assert!(decode_motor(buf.body()).is_err());
+    }
+
+    proptest! {
+        #[test]
+        fn hello_decoder_never_panics(body in proptest::collection::vec(any::<u8>(), 0..400)) {
+            if let Ok(h) = decode_hello(&body) {
+                prop_assert!(h.token.len() <= MAX_TOKEN);
+            }
+        }
+
+        #[test]
+        fn prefix_decoder_bounds_lengths(prefix in any::<[u8; 8]>(), max in 0usize..1_000_000) {
+            match decode_prefix(prefix, max) {
+                Ok((len, _)) => prop_assert!(len <= max),
+                Err(DecodeError::TooLong { len, .. }) => prop_assert!(len > max),
+                Err(_) => prop_assert!(false),
+            }
+        }
+
+        #[test]
+        fn motor_decoder_never_panics(body in proptest::collection::vec(any::<u8>(), 0..300)) {
+            // Copy into an aligned buffer as the reader does.
+            let mut buf = RecordBuf::with_capacity(body.len());
+            buf.reserve_body(body.len());
+            buf.bytes_mut()[PREFIX..].copy_from_slice(&body);
+            if let Ok((h, c)) = decode_motor(buf.body()) {
+                prop_assert_eq!(h.command_count as usize, c.len());
+            }
+        }
+
+        #[test]
+        fn reject_decoder_never_panics(body in proptest::collection::vec(any::<u8>(), 0..64)) {
+            let _ = decode_reject(&body);
+        }
+    }
+}
