@@ -31,6 +31,7 @@
 //! ```
 
 mod agent;
+pub mod ffi;
 pub mod policy;
 
 pub use agent::{
