@@ -3,9 +3,9 @@
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use vrsync_bridge::wire::{ActionState, Command};
+use vrsync_bridge::wire::{ActionState, Command, PixelFormat};
 
-use crate::Frame;
+use crate::{Frame, Image};
 
 /// Which policy `vr-agent` runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -17,6 +17,11 @@ pub enum PolicyKind {
     /// Send one short move every cycle, heading advancing 7° per cycle (a steady stream of
     /// commands, for load and protocol tests).
     Circle,
+    /// Find the red object with the eyes and walk to it: tilt the eyes down, look for red
+    /// pixels in the left and right images, turn towards them, walk, stop near it. Turns
+    /// on the spot while nothing red is seen; steps aside after bumping into something
+    /// else.
+    Seek,
 }
 
 /// A policy instance.
@@ -27,6 +32,74 @@ pub struct Policy {
     running: Option<u32>,
     cycles_in_action: u32,
     heading_deg: f32,
+    seek: SeekState,
+}
+
+/// What `seek` remembers between frames.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct SeekState {
+    /// The eyes were tilted down.
+    eyes_set: bool,
+    /// Stopped near the target.
+    arrived: bool,
+    /// Cycles left of a detour around an obstacle.
+    detour_cycles: u32,
+    /// Direction of the search turn (+1 clockwise, -1 counter-clockwise).
+    search_sign: f32,
+}
+
+/// Eye tilt `seek` uses so that the target stays in view up close, degrees.
+pub const SEEK_TILT_DEG: f32 = -25.0;
+/// Fraction of red pixels at which `seek` considers itself arrived.
+pub const SEEK_NEAR_FRACTION: f32 = 0.06;
+/// Half the horizontal field of view `seek` assumes (the default 120° cameras), degrees.
+const SEEK_HALF_FOV_DEG: f32 = 60.0;
+
+/// Red pixels found in an image.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RedBlob {
+    /// Number of red pixels.
+    pub count: u32,
+    /// Their fraction of all pixels.
+    pub fraction: f32,
+    /// Mean column, -1 (left edge) to 1 (right edge).
+    pub center_x: f32,
+}
+
+/// Finds red pixels (`r > 90`, `r > 2g`, `r > 2b`) in raw `rgb8`/`rgba8` pixels, `stride`
+/// bytes per row. `None` when there are none or the format has no colour.
+pub fn find_red(
+    data: &[u8],
+    width: u32,
+    height: u32,
+    stride: usize,
+    format: PixelFormat,
+) -> Option<RedBlob> {
+    let bpp = match format {
+        PixelFormat::Rgb8 => 3,
+        PixelFormat::Rgba8 => 4,
+        PixelFormat::Gray8 | PixelFormat::Depth32f => return None,
+    };
+    let (mut count, mut sum_x) = (0u32, 0u64);
+    for row in data.chunks_exact(stride).take(height as usize) {
+        for (x, px) in row.chunks_exact(bpp).take(width as usize).enumerate() {
+            let (r, g, b) = (u16::from(px[0]), u16::from(px[1]), u16::from(px[2]));
+            if r > 90 && r > 2 * g && r > 2 * b {
+                count += 1;
+                sum_x += x as u64;
+            }
+        }
+    }
+    (count > 0).then(|| RedBlob {
+        count,
+        fraction: count as f32 / (width as f32 * height as f32),
+        center_x: ((sum_x as f32 / count as f32 + 0.5) / width as f32) * 2.0 - 1.0,
+    })
+}
+
+fn red_in(image: Option<Image<'_>>) -> Option<RedBlob> {
+    let i = image?;
+    find_red(i.data(), i.width(), i.height(), i.stride(), i.format())
 }
 
 /// What the policy wants to send this cycle (at most two commands).
@@ -68,6 +141,10 @@ impl Policy {
             running: None,
             cycles_in_action: 0,
             heading_deg: 0.0,
+            seek: SeekState {
+                search_sign: if agent_id.is_multiple_of(2) { 1.0 } else { -1.0 },
+                ..SeekState::default()
+            },
         }
     }
 
@@ -89,7 +166,7 @@ impl Policy {
                 });
                 return out;
             }
-            PolicyKind::Wander => {}
+            PolicyKind::Wander | PolicyKind::Seek => {}
         }
         let h = frame.header();
         let yaw = frame.pose().rotation().to_euler(glam::EulerRot::YXZ).0;
@@ -107,6 +184,10 @@ impl Policy {
             })
         });
         self.cycles_in_action += 1;
+        if self.kind == PolicyKind::Seek {
+            self.seek(frame, collided, finished, &mut out);
+            return out;
+        }
         if collided {
             let away = self.heading_deg + 180.0 + self.rng.random_range(-45.0f32..45.0);
             out.push(Command::Move {
@@ -127,5 +208,120 @@ impl Policy {
             }
         }
         out
+    }
+
+    /// One step of `seek`: a perception loop over the zero-copy left/right images.
+    fn seek(&mut self, frame: &Frame, collided: bool, finished: bool, out: &mut Decision) {
+        if !self.seek.eyes_set {
+            self.seek.eyes_set = true;
+            out.push(Command::EyeMovement {
+                pan_left_deg: 0.0,
+                pan_right_deg: 0.0,
+                tilt_deg: SEEK_TILT_DEG,
+            });
+        }
+        let mut blobs = [
+            red_in(frame.image_by_name("left")),
+            red_in(frame.image_by_name("right")),
+        ];
+        if blobs.iter().all(Option::is_none) && frame.image_by_name("left").is_none() {
+            blobs[0] = red_in(frame.image(0));
+        }
+        let seen: Vec<RedBlob> = blobs.into_iter().flatten().collect();
+        if self.seek.detour_cycles > 0 {
+            self.seek.detour_cycles -= 1;
+            if !finished && !collided {
+                return;
+            }
+        }
+        if seen.is_empty() {
+            self.seek.arrived = false;
+            // Search: turn on the spot, a bit less than the field of view at a time.
+            if finished || collided || self.cycles_in_action > 20 {
+                out.push(Command::Turn {
+                    angle_deg: 45.0 * self.seek.search_sign,
+                });
+            }
+            return;
+        }
+        let n = seen.len() as f32;
+        let center_x = seen.iter().map(|b| b.center_x).sum::<f32>() / n;
+        let fraction = seen.iter().map(|b| b.fraction).fold(0.0f32, f32::max);
+        let bearing_deg = (center_x * SEEK_HALF_FOV_DEG.to_radians().tan())
+            .atan()
+            .to_degrees();
+        let near = fraction >= SEEK_NEAR_FRACTION
+            || (collided && bearing_deg.abs() < 20.0 && fraction >= SEEK_NEAR_FRACTION / 3.0);
+        if near {
+            if !self.seek.arrived {
+                self.seek.arrived = true;
+                out.push(Command::CancelMove);
+            }
+            return;
+        }
+        if self.seek.arrived && fraction >= SEEK_NEAR_FRACTION / 2.0 {
+            return; // still close enough: no dithering at the threshold
+        }
+        self.seek.arrived = false;
+        if collided {
+            // Bumped into something that is not the target: step aside, then look again.
+            let side = if bearing_deg >= 0.0 { -90.0 } else { 90.0 };
+            out.push(Command::Move {
+                heading_deg: (self.heading_deg + side).rem_euclid(360.0),
+                distance: 0.8,
+            });
+            self.seek.detour_cycles = 6;
+        } else if bearing_deg.abs() > 12.0 {
+            out.push(Command::Turn {
+                angle_deg: bearing_deg,
+            });
+        } else {
+            out.push(Command::Move {
+                heading_deg: (self.heading_deg + bearing_deg).rem_euclid(360.0),
+                distance: 0.6,
+            });
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn image(width: u32, height: u32, red: &[(u32, u32)]) -> Vec<u8> {
+        let mut data = vec![128u8; (width * height * 3) as usize];
+        for &(x, y) in red {
+            let i = ((y * width + x) * 3) as usize;
+            data[i..i + 3].copy_from_slice(&[200, 20, 30]);
+        }
+        data
+    }
+
+    #[test]
+    fn finds_red_pixels_and_their_side() {
+        let data = image(10, 4, &[(8, 1), (9, 1), (8, 2), (9, 2)]);
+        let blob = find_red(&data, 10, 4, 30, PixelFormat::Rgb8).unwrap();
+        assert_eq!(blob.count, 4);
+        assert!((blob.fraction - 0.1).abs() < 1e-6);
+        assert!((blob.center_x - 0.8).abs() < 1e-6, "{}", blob.center_x);
+        let data = image(10, 4, &[(0, 0)]);
+        assert!(
+            find_red(&data, 10, 4, 30, PixelFormat::Rgb8)
+                .unwrap()
+                .center_x
+                < -0.8
+        );
+        assert!(find_red(&image(10, 4, &[]), 10, 4, 30, PixelFormat::Rgb8).is_none());
+        assert!(find_red(&data, 10, 4, 30, PixelFormat::Gray8).is_none());
+    }
+
+    #[test]
+    fn orange_grey_and_dark_pixels_are_not_red() {
+        let mut data = vec![0u8; 12];
+        data[..3].copy_from_slice(&[255, 140, 0]); // orange
+        data[3..6].copy_from_slice(&[200, 200, 200]); // grey
+        data[6..9].copy_from_slice(&[60, 5, 5]); // too dark
+        data[9..12].copy_from_slice(&[140, 95, 55]); // brown
+        assert!(find_red(&data, 4, 1, 12, PixelFormat::Rgb8).is_none());
     }
 }
