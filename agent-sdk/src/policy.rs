@@ -142,7 +142,11 @@ impl Policy {
             cycles_in_action: 0,
             heading_deg: 0.0,
             seek: SeekState {
-                search_sign: if agent_id.is_multiple_of(2) { 1.0 } else { -1.0 },
+                search_sign: if agent_id.is_multiple_of(2) {
+                    1.0
+                } else {
+                    -1.0
+                },
                 ..SeekState::default()
             },
         }
