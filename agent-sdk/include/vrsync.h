@@ -391,7 +391,7 @@ vrs_status_t vrs_agent_disconnect(struct vrs_agent_t *agent);
 // (0: just check, for a polling loop; negative: no limit, a dead host is still detected).
 // On `VRS_OK` the frame becomes the current frame and its scalar fields are written to
 // `*out_frame` (if not NULL). The previous frame ends when this is called, whatever it
-// returns.
+// returns. (Over the TCP transport a timeout below 1 ms currently waits up to 1 ms.)
 //
 // # Errors
 // `VRS_TIMEOUT` (no new frame yet), `VRS_SESSION_CLOSED` (the run is over),

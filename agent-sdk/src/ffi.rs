@@ -786,7 +786,10 @@ fn wait_start_impl(
         // The previous frame ends here, whatever this wait returns.
         st.frame = None;
         let timeout = timeout_arg(timeout_ms);
-        match st.agent.wait_start(timeout) {
+        match st
+            .agent
+            .wait_start(tcp_poll_workaround(st.transport, timeout))
+        {
             Ok(frame) => {
                 st.host_seen = Instant::now();
                 // SAFETY: null or writable by the caller's contract.
@@ -817,6 +820,18 @@ fn wait_start_impl(
             Err(e) => Err(e.into()),
         }
     })
+}
+
+/// The TCP agent returns `Timeout` without reading the socket when the deadline has
+/// already passed, so a zero-timeout poll would never see a frame (nor the host's end).
+/// Over TCP a poll therefore waits up to 1 ms: it returns at once when data is there.
+/// Remove once `TcpAgent::wait_frame` reads what is available before timing out.
+fn tcp_poll_workaround(transport: TransportKind, timeout: Option<Duration>) -> Option<Duration> {
+    const MIN_TCP_POLL: Duration = Duration::from_millis(1);
+    match (transport, timeout) {
+        (TransportKind::Tcp, Some(t)) if t < MIN_TCP_POLL => Some(MIN_TCP_POLL),
+        _ => timeout,
+    }
 }
 
 fn frame_impl(agent: *mut vrs_agent_t, out_frame: *mut vrs_frame_t) -> Result<(), FfiError> {
@@ -1088,7 +1103,7 @@ pub unsafe extern "C" fn vrs_agent_disconnect(agent: *mut vrs_agent_t) -> vrs_st
 /// (0: just check, for a polling loop; negative: no limit, a dead host is still detected).
 /// On `VRS_OK` the frame becomes the current frame and its scalar fields are written to
 /// `*out_frame` (if not NULL). The previous frame ends when this is called, whatever it
-/// returns.
+/// returns. (Over the TCP transport a timeout below 1 ms currently waits up to 1 ms.)
 ///
 /// # Errors
 /// `VRS_TIMEOUT` (no new frame yet), `VRS_SESSION_CLOSED` (the run is over),
