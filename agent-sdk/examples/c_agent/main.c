@@ -1,0 +1,67 @@
+/* A minimal vrsync agent in C: wait for start, read the frame, send, stop.
+ *
+ * usage: c_agent CONFIG AGENT_ID
+ * Walks a square: every 20 cycles it turns the walking heading by 90 degrees.
+ * Exit codes: 0 when the host closed the session, 1 on failure, 2 on bad usage. */
+#include <stdio.h>
+#include <stdlib.h>
+
+#include <vrsync.h>
+
+static int fail(const char *what, vrs_status_t st) {
+    fprintf(stderr, "c_agent: %s: %s: %s\n", what, vrs_status_name(st), vrs_last_error_message());
+    return 1;
+}
+
+int main(int argc, char **argv) {
+    if (argc != 3) {
+        fprintf(stderr, "usage: %s CONFIG AGENT_ID\n", argv[0]);
+        return 2;
+    }
+    const uint32_t id = (uint32_t)strtoul(argv[2], NULL, 10);
+    vrs_init_logging(NULL); /* the library's log on stderr, filtered by RUST_LOG */
+    vrs_agent_t *agent = NULL;
+    vrs_status_t st = vrs_agent_connect(argv[1], id, -1, &agent);
+    if (st != VRS_OK) return fail("connect", st);
+    fprintf(stderr, "c_agent %u: connected (vrsync %s)\n", id, vrs_version());
+
+    uint64_t cycles = 0, commands = 0;
+    int code = 0;
+    for (;;) {
+        vrs_frame_t frame;
+        st = vrs_agent_wait_start(agent, 10000, &frame);
+        if (st == VRS_SESSION_CLOSED) break;
+        if (st != VRS_OK) {
+            code = fail("wait_start", st);
+            break;
+        }
+        /* Read the left image in place: the mean of its first row. */
+        vrs_image_t left;
+        uint64_t sum = 0;
+        if (vrs_agent_image_by_name(agent, "left", &left) == VRS_OK) {
+            for (size_t i = 0; i < left.stride; ++i) sum += left.data[i];
+        }
+        (void)sum;
+        if (frame.cycle % 20 == 0) {
+            const float heading = (float)((frame.cycle / 20) % 4) * 90.0f;
+            uint32_t action = 0;
+            st = vrs_agent_send_move(agent, heading, 1.0f, &action);
+            if (st != VRS_OK) {
+                code = fail("send_move", st);
+                break;
+            }
+            ++commands;
+        }
+        st = vrs_agent_stop(agent);
+        if (st == VRS_SESSION_CLOSED) break; /* the host ended the run meanwhile */
+        if (st != VRS_OK) {
+            code = fail("stop", st);
+            break;
+        }
+        ++cycles;
+    }
+    vrs_agent_disconnect(agent);
+    printf("c_agent %u: %llu cycles, %llu commands\n", id, (unsigned long long)cycles,
+           (unsigned long long)commands);
+    return code;
+}
