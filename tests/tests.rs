@@ -7,5 +7,6 @@
 mod util;
 
 mod config;
+mod cpp;
 mod sync;
 mod world;
