@@ -19,7 +19,7 @@
 //
 // Differences from the original: nothing runs in background threads (the poll reads
 // shared memory directly), images are raw pixels (no PNG) and are views valid until
-// sendStopSync() or the next successful hasStartSyncReceivedAndResetState(); when the
+// sendStopSync() or the next hasStartSyncReceivedAndResetState(); when the
 // host ends the run, hasStartSyncReceivedAndResetState() throws vrsync::compat::SessionClosed
 // (catch it around the loop), and other failures throw vrsync::Error.
 #ifndef VRSYNC_COMPAT_HPP
@@ -61,7 +61,7 @@ enum ActionExecState : int {
 };
 
 /// An image, as the original AnnarImage, but a view: raw pixels in shared memory (no PNG,
-/// no copy), valid until sendStopSync() or the next frame.
+/// no copy), valid until sendStopSync() or the next hasStartSyncReceivedAndResetState().
 class AnnarImage {
 public:
     AnnarImage() = default;
@@ -120,24 +120,16 @@ public:
     ///     while (!receiver->hasStartSyncReceivedAndResetState()) MSLEEP(1);
     /// Throws SessionClosed when the run is over, vrsync::Error when the host is gone.
     bool hasStartSyncReceivedAndResetState() {
-        std::optional<Frame> f = agent_->try_wait_start(std::chrono::milliseconds(0));
-        if (!f) return false;
-        if (!*f) {
-            frame_ = Frame();
-            throw SessionClosed();
-        }
-        frame_ = std::move(*f);
-        return true;
+        return waitForStartSync(std::chrono::milliseconds(0));
     }
 
     /// Blocking variant (not in the original): waits up to `timeout` for the next frame.
     bool waitForStartSync(std::chrono::milliseconds timeout) {
+        // Any wait ends the current frame in the library: drop our views of it first.
+        frame_ = Frame();
         std::optional<Frame> f = agent_->try_wait_start(timeout);
         if (!f) return false;
-        if (!*f) {
-            frame_ = Frame();
-            throw SessionClosed();
-        }
+        if (!*f) throw SessionClosed();
         frame_ = std::move(*f);
         return true;
     }
