@@ -635,6 +635,47 @@ mod tests {
         }
     }
 
+    /// Render speed, for the numbers in the report (not an assertion: never assert a
+    /// duration). `cargo test --release -p vrsync-sim render_speed -- --ignored
+    /// --nocapture`.
+    #[test]
+    #[ignore = "measurement, run by hand in release mode"]
+    fn render_speed() {
+        for (w, h) in [(256, 148), (640, 480), (1920, 1080)] {
+            let world = test_world("rgb8", w, h);
+            let body = &world.bodies()[0];
+            for threads in [1, 2] {
+                let mut r = Renderer::new(threads).unwrap();
+                let mut bufs = [
+                    vec![0u8; (w * h * 3) as usize],
+                    vec![0u8; (w * h * 3) as usize],
+                ];
+                let cycles = (40_000_000 / (w * h)).clamp(5, 400);
+                let mut best = f64::MAX;
+                for _ in 0..3 {
+                    let t = std::time::Instant::now();
+                    for _ in 0..cycles {
+                        for (camera, buf) in bufs.iter_mut().enumerate() {
+                            let d = desc(
+                                camera as u32,
+                                if camera == 0 { "left" } else { "right" },
+                                PixelFormat::Rgb8,
+                                w,
+                                h,
+                            );
+                            r.render_image(&world, body, ImageMut { desc: d, data: buf });
+                        }
+                    }
+                    best = best.min(t.elapsed().as_secs_f64() * 1e6 / f64::from(cycles));
+                }
+                println!(
+                    "2 x {w}x{h} rgb8, {threads} thread(s): {best:.0} µs per cycle ({:.1} ns per pixel)",
+                    best * 1e3 / f64::from(2 * w * h)
+                );
+            }
+        }
+    }
+
     #[test]
     fn depth_is_the_distance_along_the_optical_axis() {
         // Agent 0 at z = -2 looks north at the wall at z = 4 over the sphere: the centre

@@ -596,6 +596,47 @@ mod tests {
         assert!(w.room_width > 10.0);
     }
 
+    /// The keys a table accepts, from serde's "unknown field" message.
+    fn accepted_keys(table: &str) -> Vec<String> {
+        let e = world(&format!("{table}zz_not_a_key = 1\n"))
+            .unwrap_err()
+            .to_string();
+        let list = e
+            .split("expected one of")
+            .nth(1)
+            .unwrap_or_else(|| panic!("{e}"));
+        list.split('`')
+            .skip(1)
+            .step_by(2)
+            .map(str::to_string)
+            .collect()
+    }
+
+    #[test]
+    fn default_toml_documents_every_world_key() {
+        let doc = vrsync_bridge::config::DEFAULT_CONFIG_TOML;
+        let mut n = 0;
+        for table in [
+            "",
+            "[[world.object]]\n",
+            "[[world.agent]]\n",
+            "[[world.goal]]\n",
+        ] {
+            for key in accepted_keys(table) {
+                let documented = doc.lines().any(|l| {
+                    let l = l.trim_start_matches(['#', ' ']);
+                    l.starts_with(&format!("{key} ")) || l.starts_with(&format!("{key}="))
+                }) || doc.contains(&format!("[[world.{key}]]"));
+                assert!(
+                    documented,
+                    "`{key}` of {table:?} is not documented in default.toml"
+                );
+                n += 1;
+            }
+        }
+        assert!(n > 25, "only {n} keys found");
+    }
+
     #[test]
     fn errors_name_the_key() {
         expect_key("bogus = 1\n", "world");
