@@ -320,6 +320,7 @@ impl<'c> AgentBuilder<'c> {
             stopped_cycle: None,
             next_action_id: 1,
             frames_skipped: 0,
+            next_liveness: Instant::now() + HOST_LIVENESS_PERIOD,
         })
     }
 }
@@ -342,6 +343,7 @@ pub struct Agent {
     stopped_cycle: Option<u64>,
     next_action_id: u32,
     frames_skipped: u64,
+    next_liveness: Instant,
 }
 
 impl Agent {
@@ -378,9 +380,13 @@ impl Agent {
         let started = Instant::now();
         let deadline = timeout.map(|t| started + t);
         let inner = match &mut self.backend {
-            Backend::Shm(shm) => {
-                FrameInner::Shm(wait_shm(shm, deadline, self.last_cycle, &self.session)?)
-            }
+            Backend::Shm(shm) => FrameInner::Shm(wait_shm(
+                shm,
+                deadline,
+                self.last_cycle,
+                &self.session,
+                &mut self.next_liveness,
+            )?),
             Backend::Tcp(tcp) => loop {
                 let frame = tcp.wait_frame(deadline).map_err(|e| match e {
                     TcpWaitError::Timeout => WaitStartError::Timeout {
@@ -477,19 +483,21 @@ impl Agent {
     }
 }
 
-/// Shared-memory wait: the newest frame newer than `last_cycle`.
+/// Shared-memory wait: the newest frame newer than `last_cycle`. `next_liveness` persists
+/// across calls so that zero-timeout polls also notice a dead host.
 fn wait_shm(
     shm: &mut ShmAgent,
     deadline: Option<Instant>,
     last_cycle: Option<u64>,
     session: &str,
+    next_liveness: &mut Instant,
 ) -> Result<ShmFrame, WaitStartError> {
     let started = Instant::now();
-    let mut next_liveness = started + HOST_LIVENESS_PERIOD;
     // Pending notifications carry nothing we rely on: the frame itself tells whether it is
     // new. Clearing them first means a stale wake-up cannot return early, and a frame
-    // published after this point always comes with a fresh notification.
-    let mut shutdown = shm.clear_start().shutdown;
+    // published after this point always comes with a fresh notification. A shutdown seen
+    // here is remembered by the transport even if a frame is returned first.
+    shm.clear_start();
     loop {
         if let Some(frame) = shm.receive_newest().map_err(WaitStartError::Receive)? {
             let cycle = frame.header().cycle;
@@ -498,26 +506,30 @@ fn wait_shm(
             }
             debug!(cycle, "old frame ignored");
         }
-        if shutdown {
+        if shm.shutdown_seen() {
+            debug!("host closed the session (shutdown event)");
             return Err(WaitStartError::HostClosed);
         }
         if shm.termination_requested() {
             return Err(WaitStartError::Terminated);
         }
         let now = Instant::now();
-        if now >= next_liveness {
+        if now >= *next_liveness {
             match shm.host_state() {
                 HostState::Alive => {}
-                // A clean exit removes the node; the shutdown notification may have been
-                // sent while we were not listening.
-                HostState::Absent => return Err(WaitStartError::HostClosed),
-                HostState::Dead => {
+                HostState::Absent | HostState::Dead => {
+                    // The shutdown event may have raced with the node's removal: look once
+                    // more before calling the host gone.
+                    shm.clear_start();
+                    if shm.shutdown_seen() {
+                        return Err(WaitStartError::HostClosed);
+                    }
                     return Err(WaitStartError::HostGone {
                         session: session.to_string(),
                     });
                 }
             }
-            next_liveness = now + HOST_LIVENESS_PERIOD;
+            *next_liveness = now + HOST_LIVENESS_PERIOD;
         }
         let mut slice = next_liveness.saturating_duration_since(now);
         if let Some(d) = deadline {
@@ -529,6 +541,18 @@ fn wait_shm(
             }
             slice = slice.min(d - now);
         }
-        shutdown |= shm.wait_start(slice).shutdown;
+        if shm.spins() {
+            // Busy-poll the subscriber (checked at the top of the loop) until the slice ends.
+            let until = Instant::now() + slice;
+            while Instant::now() < until {
+                if shm.has_frame() {
+                    break;
+                }
+                std::hint::spin_loop();
+            }
+            shm.clear_start();
+            continue;
+        }
+        shm.wait_start(slice);
     }
 }

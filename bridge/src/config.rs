@@ -42,6 +42,18 @@ impl TransportKind {
     }
 }
 
+/// How waiting parties wait (`[sync] wait`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum WaitMode {
+    /// Sleep on the event until woken (default): no CPU while waiting.
+    #[default]
+    Block,
+    /// Busy-poll: lowest latency, one core per waiting process. Only sensible when there
+    /// are at least as many free cores as waiting processes.
+    Spin,
+}
+
 /// One camera of an agent.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CameraConfig {
@@ -98,6 +110,8 @@ pub struct SyncConfig {
     pub stop_timeout: Duration,
     /// How long the host waits for agents to connect, and agents for the host (`connect_timeout`).
     pub connect_timeout: Duration,
+    /// Block on events or busy-poll (`wait`).
+    pub wait: WaitMode,
 }
 
 /// `[transport]` section.
@@ -198,6 +212,7 @@ struct RawSync {
     #[serde(alias = "SyncModeFrameTimeOut")]
     stop_timeout: Option<Spanned<f64>>,
     connect_timeout: Option<Spanned<f64>>,
+    wait: Option<WaitMode>,
 }
 
 #[derive(Deserialize)]
@@ -358,6 +373,7 @@ impl Config {
             simulation_time_per_frame: None,
             stop_timeout: None,
             connect_timeout: None,
+            wait: None,
         });
         let sync = SyncConfig {
             sync_mode: rs.sync_mode.unwrap_or(true),
@@ -368,6 +384,7 @@ impl Config {
             )?,
             stop_timeout: ctx.seconds(rs.stop_timeout, "sync.stop_timeout", 5.0)?,
             connect_timeout: ctx.seconds(rs.connect_timeout, "sync.connect_timeout", 30.0)?,
+            wait: rs.wait.unwrap_or_default(),
         };
 
         let rt = raw.transport.unwrap_or(RawTransport {
@@ -556,11 +573,15 @@ impl Config {
         let _ = writeln!(s, "session = {:?}\nseed = {}", self.session, self.seed);
         let _ = writeln!(
             s,
-            "\n[sync]\nsync_mode = {}\nsimulation_time_per_frame = {:?}\nstop_timeout = {:?}\nconnect_timeout = {:?}",
+            "\n[sync]\nsync_mode = {}\nsimulation_time_per_frame = {:?}\nstop_timeout = {:?}\nconnect_timeout = {:?}\nwait = {:?}",
             self.sync.sync_mode,
             self.sync.simulation_time_per_frame.as_secs_f64(),
             self.sync.stop_timeout.as_secs_f64(),
-            self.sync.connect_timeout.as_secs_f64()
+            self.sync.connect_timeout.as_secs_f64(),
+            match self.sync.wait {
+                WaitMode::Block => "block",
+                WaitMode::Spin => "spin",
+            }
         );
         let _ = writeln!(
             s,

@@ -44,8 +44,10 @@
 //! # }
 //! ```
 
+pub mod alloc_count;
 pub mod barrier;
 pub mod config;
+pub mod floor;
 pub mod host;
 pub mod transport;
 pub mod wire;

@@ -24,6 +24,27 @@ pub enum Command {
     Demo(DemoArgs),
     /// Run a world from a config file, with spawned or external agents.
     Run(RunArgs),
+    /// Benchmark full sync cycles over shared memory and TCP against the raw transport
+    /// floors (3 rgb8 images per agent; 1/2/4 agents; 320x240 up to 1920x1080). Build with
+    /// --release: it spawns `vr-bench-agent` from the same folder.
+    Bench(BenchArgs),
+}
+
+/// `vr-sim bench`.
+#[derive(Debug, Args)]
+pub struct BenchArgs {
+    /// Fewer cycles, 320x240 and 1920x1080 only, 1 and 4 agents (about a minute on 2 cores).
+    #[arg(long)]
+    pub quick: bool,
+    /// Write the rows as a JSON array.
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+    /// Write the rows as CSV.
+    #[arg(long, value_name = "FILE")]
+    pub csv: Option<PathBuf>,
+    /// Plot p50 cycle time vs image bytes (log-log, SVG; floors dashed).
+    #[arg(long, value_name = "FILE.svg")]
+    pub plot: Option<PathBuf>,
 }
 
 /// `vr-sim demo`.

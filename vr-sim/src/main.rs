@@ -1,5 +1,6 @@
 //! `vr-sim`: the headless simulator standing in for the Unity VR app.
 
+mod bench;
 mod cli;
 mod geometry;
 mod picture;
@@ -16,8 +17,13 @@ use anyhow::Context;
 use clap::Parser;
 use vrsync_bridge::{Config, ConfigLoadError};
 
-use crate::cli::{Cli, Command, DemoArgs, RunArgs};
+use crate::cli::{BenchArgs, Cli, Command, DemoArgs, RunArgs};
 use crate::run::{RunOptions, print_summary};
+
+// Counts allocations for `vr-sim bench` (allocs_per_cycle); one relaxed atomic add per
+// allocation otherwise.
+#[global_allocator]
+static ALLOC: vrsync_bridge::alloc_count::CountingAlloc = vrsync_bridge::alloc_count::CountingAlloc;
 
 /// Exit code of bad usage or bad config.
 const EXIT_USAGE: u8 = 2;
@@ -61,7 +67,21 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Demo(args) => demo(args),
         Command::Run(args) => run_cmd(args),
+        Command::Bench(args) => bench_cmd(args),
     }
+}
+
+fn bench_cmd(args: BenchArgs) -> anyhow::Result<ExitCode> {
+    if cfg!(debug_assertions) {
+        eprintln!("vr-sim bench: warning: this is a debug build; measure with --release");
+    }
+    bench::run(&bench::BenchOptions {
+        quick: args.quick,
+        json: args.json,
+        csv: args.csv,
+        plot: args.plot,
+    })?;
+    Ok(ExitCode::SUCCESS)
 }
 
 fn write_summary(path: &Path, summary: &run::Summary) -> anyhow::Result<()> {

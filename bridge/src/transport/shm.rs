@@ -224,6 +224,8 @@ struct HostAgentPorts {
 /// The host side of the shared-memory transport.
 pub struct ShmHost {
     node: Node<Svc>,
+    spin: bool,
+    spins: u32,
     _start_service: event_factory::PortFactory<Svc>,
     start: Notifier<Svc>,
     _stop_service: event_factory::PortFactory<Svc>,
@@ -396,6 +398,8 @@ impl ShmHost {
             .map_err(|e| ice(format!("cannot create the start notifier: {e:?}")))?;
         Ok(Self {
             node,
+            spin: config.sync.wait == crate::config::WaitMode::Spin,
+            spins: 0,
             _start_service: start_service,
             start,
             _stop_service: stop_service,
@@ -513,6 +517,17 @@ impl HostTransport for ShmHost {
     }
 
     fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
+        if self.spin {
+            // Busy-poll: the caller drains the subscribers again right away. Check for a
+            // termination request now and then only (it costs a syscall).
+            let _ = timeout;
+            std::hint::spin_loop();
+            self.spins = self.spins.wrapping_add(1);
+            if self.spins.is_multiple_of(4096) && self.termination_requested() {
+                return Err(HostTransportError::Terminated);
+            }
+            return Ok(());
+        }
         match self.stop.timed_wait(|_| {}, timeout) {
             Ok(_) => {}
             Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => {}
@@ -643,6 +658,8 @@ pub struct ShmAgent {
     _motor_service: ps_factory::PortFactory<Svc, [MotorCommand], MotorHeader>,
     motor_pub: Publisher<Svc, [MotorCommand], MotorHeader>,
     max_commands: usize,
+    spin: bool,
+    shutdown_seen: bool,
 }
 
 impl core::fmt::Debug for ShmAgent {
@@ -804,6 +821,8 @@ impl ShmAgent {
             _motor_service: motor_service,
             motor_pub,
             max_commands,
+            spin: config.sync.wait == crate::config::WaitMode::Spin,
+            shutdown_seen: false,
         })
     }
 
@@ -842,7 +861,24 @@ impl ShmAgent {
         {
             let _ = self.start.try_wait(&mut record);
         }
+        self.shutdown_seen |= signal.shutdown;
         signal
+    }
+
+    /// Whether the host's "session closed" event was ever seen (sticky: a call that
+    /// returned a frame may have consumed it).
+    pub fn shutdown_seen(&self) -> bool {
+        self.shutdown_seen
+    }
+
+    /// Whether a frame is waiting (cheap, non-blocking).
+    pub fn has_frame(&self) -> bool {
+        self.sensor_sub.has_samples().unwrap_or(true)
+    }
+
+    /// Whether this agent busy-polls (`[sync] wait = "spin"`).
+    pub fn spins(&self) -> bool {
+        self.spin
     }
 
     /// Discards pending *start* notifications; reports a pending shutdown.
@@ -855,6 +891,7 @@ impl ShmAgent {
                 signal.start = true;
             }
         });
+        self.shutdown_seen |= signal.shutdown;
         signal
     }
 

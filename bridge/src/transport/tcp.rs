@@ -289,16 +289,20 @@ fn read_exact_deadline(
     Ok(())
 }
 
-/// Waits until one of `fds` is readable or `timeout` passes; returns which are readable.
-fn poll_readable(fds: &[i32], timeout: Duration, ready: &mut Vec<bool>) -> io::Result<usize> {
-    let mut pfds: Vec<libc::pollfd> = fds
-        .iter()
-        .map(|&fd| libc::pollfd {
-            fd,
-            events: libc::POLLIN,
-            revents: 0,
-        })
-        .collect();
+/// Waits until one of `fds` is readable or `timeout` passes; marks which are readable.
+/// `pfds` is scratch space reused across calls (no allocation in steady state).
+fn poll_readable(
+    fds: &[i32],
+    timeout: Duration,
+    pfds: &mut Vec<libc::pollfd>,
+    ready: &mut Vec<bool>,
+) -> io::Result<usize> {
+    pfds.clear();
+    pfds.extend(fds.iter().map(|&fd| libc::pollfd {
+        fd,
+        events: libc::POLLIN,
+        revents: 0,
+    }));
     let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
     // Round sub-millisecond timeouts up so a short wait does not spin.
     let ms = if ms == 0 && !timeout.is_zero() { 1 } else { ms };
@@ -439,6 +443,7 @@ pub struct TcpHost {
     max_frame_body: usize,
     token: Option<Vec<u8>>,
     fds: Vec<i32>,
+    pfds: Vec<libc::pollfd>,
     ready: Vec<bool>,
 }
 
@@ -502,6 +507,7 @@ impl TcpHost {
             max_frame_body,
             token: config.transport.tcp_token.clone().map(String::into_bytes),
             fds: Vec::new(),
+            pfds: Vec::new(),
             ready: Vec::new(),
         })
     }
@@ -872,8 +878,10 @@ impl HostTransport for TcpHost {
             timeout.min(HELLO_TIMEOUT)
         };
         let mut ready = std::mem::take(&mut self.ready);
-        let result = poll_readable(&self.fds, timeout, &mut ready);
+        let mut pfds = std::mem::take(&mut self.pfds);
+        let result = poll_readable(&self.fds, timeout, &mut pfds, &mut ready);
         self.ready = ready;
+        self.pfds = pfds;
         result.map_err(|e| HostTransportError::Receive {
             agent: u32::MAX,
             reason: format!("poll: {e}"),
@@ -1159,9 +1167,15 @@ impl TcpAgent {
                     Some(d) => {
                         let left = d.saturating_duration_since(Instant::now());
                         if left.is_zero() {
-                            return newest.ok_or(TcpWaitError::Timeout);
+                            // Past the deadline (or a zero-timeout poll): still take what
+                            // has already arrived.
+                            if newest.is_some() || !self.readable_now() {
+                                return newest.ok_or(TcpWaitError::Timeout);
+                            }
+                            Duration::from_millis(1)
+                        } else {
+                            left.min(Duration::from_millis(250))
                         }
-                        left.min(Duration::from_millis(250))
                     }
                     None => Duration::from_millis(250),
                 };
@@ -1220,8 +1234,13 @@ impl TcpAgent {
     }
 
     fn readable_now(&self) -> bool {
-        let mut ready = Vec::with_capacity(1);
-        poll_readable(&[self.stream.as_raw_fd()], Duration::ZERO, &mut ready).is_ok_and(|n| n > 0)
+        let mut pfd = libc::pollfd {
+            fd: self.stream.as_raw_fd(),
+            events: libc::POLLIN,
+            revents: 0,
+        };
+        // SAFETY: one valid pollfd for the duration of the call.
+        unsafe { libc::poll(&mut pfd, 1, 0) == 1 }
     }
 
     /// Sends a motor batch (the stop flag in the header ends the agent's cycle).

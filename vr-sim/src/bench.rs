@@ -1,0 +1,647 @@
+//! `vr-sim bench`: full sync cycles (host publish → every agent stopped) over shared memory
+//! and TCP, against the raw transport floors measured in the same run.
+
+use std::io::{BufRead, BufReader, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use hdrhistogram::Histogram;
+use serde::Serialize;
+use vrsync_bridge::alloc_count::allocations;
+use vrsync_bridge::floor::{ShmFloorHost, TcpFloorHost};
+use vrsync_bridge::{Config, Host};
+
+/// What to run and where to write.
+#[derive(Debug)]
+pub struct BenchOptions {
+    /// Fewer cycles, 320×240 and 1920×1080 only, agents 1 and 4.
+    pub quick: bool,
+    /// JSON output.
+    pub json: Option<PathBuf>,
+    /// CSV output.
+    pub csv: Option<PathBuf>,
+    /// SVG plot.
+    pub plot: Option<PathBuf>,
+}
+
+/// One measured configuration (DESIGN §8 bench JSON keys, plus allocations).
+#[derive(Debug, Clone, Serialize)]
+pub struct Row {
+    /// `shm`, `shm-spin`, `tcp`, `floor-shm`, `floor-shm-spin`, `floor-tcp`.
+    pub transport: String,
+    /// Agents.
+    pub agents: u32,
+    /// Images per agent and frame.
+    pub cameras: u32,
+    /// Image width, px.
+    pub width: u32,
+    /// Image height, px.
+    pub height: u32,
+    /// Pixel format.
+    pub format: String,
+    /// Measured cycles (after warm-up).
+    pub frames: u64,
+    /// Median cycle time, µs.
+    pub p50_us: f64,
+    /// 99th percentile, µs.
+    pub p99_us: f64,
+    /// Mean, µs.
+    pub mean_us: f64,
+    /// Cycles per second at the mean.
+    pub frames_per_s: f64,
+    /// Host allocations per cycle in steady state.
+    pub allocs_per_cycle: f64,
+    /// Agent allocations per cycle in steady state (mean over agents).
+    pub agent_allocs_per_cycle: f64,
+}
+
+const CAMERAS: u32 = 3;
+const BPP: usize = 3;
+
+struct Case {
+    transport: &'static str,
+    agents: u32,
+    width: u32,
+    height: u32,
+    warmup: u64,
+    cycles: u64,
+}
+
+impl Case {
+    fn frame_bytes(&self) -> usize {
+        CAMERAS as usize * self.width as usize * self.height as usize * BPP
+    }
+}
+
+fn exe(name: &str) -> anyhow::Result<PathBuf> {
+    let me = std::env::current_exe().context("locate vr-sim")?;
+    let path = me
+        .parent()
+        .context("vr-sim has no folder")?
+        .join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
+    if !path.is_file() {
+        bail!(
+            "cannot find {} (build it with `cargo build --release -p vrsync-agent`)",
+            path.display()
+        );
+    }
+    Ok(path)
+}
+
+/// Spawned bench agents: their stdout carries `allocs_per_cycle`; killed on drop.
+struct Agents(Vec<Child>);
+
+impl Agents {
+    fn spawn(args_for: impl Fn(u32) -> Vec<String>, n: u32) -> anyhow::Result<Self> {
+        let exe = exe("vr-bench-agent")?;
+        let mut children = Vec::new();
+        for id in 0..n {
+            children.push(
+                Command::new(&exe)
+                    .args(args_for(id))
+                    .stdout(Stdio::piped())
+                    .stderr(Stdio::inherit())
+                    .spawn()
+                    .with_context(|| format!("start {}", exe.display()))?,
+            );
+        }
+        Ok(Self(children))
+    }
+
+    /// Waits for every agent (they leave when the host closes) and averages their
+    /// allocations per cycle.
+    fn finish(mut self) -> anyhow::Result<f64> {
+        let mut total = 0.0;
+        let n = self.0.len().max(1) as f64;
+        for child in &mut self.0 {
+            let mut allocs = None;
+            if let Some(out) = child.stdout.take() {
+                for line in BufReader::new(out).lines().map_while(Result::ok) {
+                    if let Some(v) = line.strip_prefix("allocs_per_cycle ") {
+                        allocs = v.trim().parse::<f64>().ok();
+                    }
+                }
+            }
+            let status = child.wait().context("wait for a bench agent")?;
+            if !status.success() {
+                bail!("a bench agent failed ({status})");
+            }
+            total += allocs.unwrap_or(f64::NAN);
+        }
+        self.0.clear();
+        Ok(total / n)
+    }
+}
+
+impl Drop for Agents {
+    fn drop(&mut self) {
+        for c in &mut self.0 {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+fn histogram() -> anyhow::Result<Histogram<u64>> {
+    Histogram::new_with_bounds(100, 600_000_000_000, 3).context("histogram")
+}
+
+fn row(case: &Case, hist: &Histogram<u64>, allocs: f64, agent_allocs: f64) -> Row {
+    let mean_us = hist.mean() / 1000.0;
+    Row {
+        transport: case.transport.to_string(),
+        agents: case.agents,
+        cameras: CAMERAS,
+        width: case.width,
+        height: case.height,
+        format: "rgb8".into(),
+        frames: hist.len(),
+        p50_us: hist.value_at_quantile(0.5) as f64 / 1000.0,
+        p99_us: hist.value_at_quantile(0.99) as f64 / 1000.0,
+        mean_us,
+        frames_per_s: if mean_us > 0.0 { 1e6 / mean_us } else { 0.0 },
+        allocs_per_cycle: allocs,
+        agent_allocs_per_cycle: agent_allocs,
+    }
+}
+
+fn config_text(case: &Case, session: &str) -> String {
+    let (kind, wait) = match case.transport {
+        "tcp" => ("tcp", "block"),
+        "shm-spin" => ("shm", "spin"),
+        _ => ("shm", "block"),
+    };
+    let mut s = format!(
+        "session = {session:?}\n[sync]\nsync_mode = true\nsimulation_time_per_frame = 0.01\n\
+         stop_timeout = 10.0\nconnect_timeout = 30.0\nwait = {wait:?}\n[transport]\nkind = {kind:?}\n\
+         tcp_listen = \"127.0.0.1:0\"\nmax_commands_per_cycle = 8\n"
+    );
+    for id in 0..case.agents {
+        s += &format!("[[agent]]\nid = {id}\n");
+        for c in 0..CAMERAS {
+            s += &format!(
+                "[[agent.camera]]\nname = \"c{c}\"\nwidth = {}\nheight = {}\nformat = \"rgb8\"\n",
+                case.width, case.height
+            );
+        }
+    }
+    s
+}
+
+/// A full vrsync cycle through the host API.
+fn bench_vrsync(case: &Case, session: &str, dir: &Path) -> anyhow::Result<Row> {
+    let text = config_text(case, session);
+    let mut config = Config::from_toml_str(&text, Path::new("<bench>"))?;
+    let mut host = Host::builder(&config)
+        .create()
+        .context("create the bench host")?;
+    if let Some(addr) = host.tcp_local_addr() {
+        config.transport.tcp_listen = addr;
+    }
+    let path = dir.join(format!("{session}.toml"));
+    std::fs::write(&path, config.to_toml_string()).context("write the bench config")?;
+    let warmup = case.warmup;
+    let agents = Agents::spawn(
+        |id| {
+            vec![
+                "--mode".into(),
+                "sdk".into(),
+                "--config".into(),
+                path.display().to_string(),
+                "--id".into(),
+                id.to_string(),
+                "--warmup".into(),
+                warmup.to_string(),
+            ]
+        },
+        case.agents,
+    )?;
+    host.wait_for_agents(Duration::from_secs(30))?;
+    let ids: Vec<u32> = host.agent_ids().collect();
+    let mut hist = histogram()?;
+    let mut allocs_start = 0;
+    for cycle in 0..case.warmup + case.cycles {
+        if cycle == case.warmup {
+            allocs_start = allocations();
+        }
+        let t0 = Instant::now();
+        for &id in &ids {
+            let mut frame = host.loan_frame(id)?;
+            // The host's part of "rendering": mark each image (the frame is already in
+            // shared memory; nothing is copied).
+            for image in frame.images_mut() {
+                if let Some(b) = image.data.first_mut() {
+                    *b = cycle as u8;
+                }
+            }
+            host.publish(frame)?;
+        }
+        host.start()?;
+        let report = host.collect()?;
+        let elapsed = t0.elapsed();
+        if report.timed_out {
+            bail!(
+                "{} agents={} {}x{}: cycle {cycle} timed out",
+                case.transport,
+                case.agents,
+                case.width,
+                case.height
+            );
+        }
+        if cycle >= case.warmup {
+            hist.record(elapsed.as_nanos() as u64).context("record")?;
+        }
+    }
+    let host_allocs = (allocations() - allocs_start) as f64 / case.cycles as f64;
+    drop(host);
+    let agent_allocs = agents.finish()?;
+    let _ = std::fs::remove_file(&path);
+    Ok(row(case, &hist, host_allocs, agent_allocs))
+}
+
+/// The raw iceoryx2 round trip.
+fn bench_floor_shm(case: &Case, session: &str, spin: bool) -> anyhow::Result<Row> {
+    let bytes = case.frame_bytes();
+    let mut host = ShmFloorHost::create(session, case.agents, bytes, spin)?;
+    let total = case.warmup + case.cycles;
+    let row_bytes = case.width as usize * BPP;
+    let agents = Agents::spawn(
+        |id| {
+            let mut a = vec![
+                "--mode".into(),
+                "floor-shm".into(),
+                "--session".into(),
+                session.to_string(),
+                "--id".into(),
+                id.to_string(),
+                "--cycles".into(),
+                total.to_string(),
+                "--row-bytes".into(),
+                row_bytes.to_string(),
+                "--warmup".into(),
+                case.warmup.to_string(),
+            ];
+            if spin {
+                a.push("--spin".into());
+            }
+            a
+        },
+        case.agents,
+    )?;
+    host.wait_connected(Duration::from_secs(30))?;
+    let mut hist = histogram()?;
+    let mut allocs_start = 0;
+    for cycle in 0..total {
+        if cycle == case.warmup {
+            allocs_start = allocations();
+        }
+        let t0 = Instant::now();
+        host.cycle(cycle, Duration::from_secs(10))?;
+        if cycle >= case.warmup {
+            hist.record(t0.elapsed().as_nanos() as u64)
+                .context("record")?;
+        }
+    }
+    let host_allocs = (allocations() - allocs_start) as f64 / case.cycles as f64;
+    let agent_allocs = agents.finish()?;
+    drop(host);
+    Ok(row(case, &hist, host_allocs, agent_allocs))
+}
+
+/// The raw TCP round trip.
+fn bench_floor_tcp(case: &Case) -> anyhow::Result<Row> {
+    let bytes = case.frame_bytes();
+    let mut host = TcpFloorHost::create(bytes)?;
+    let addr = host.addr()?;
+    let total = case.warmup + case.cycles;
+    let row_bytes = case.width as usize * BPP;
+    let agents = Agents::spawn(
+        |_| {
+            vec![
+                "--mode".into(),
+                "floor-tcp".into(),
+                "--addr".into(),
+                addr.to_string(),
+                "--frame-bytes".into(),
+                bytes.to_string(),
+                "--cycles".into(),
+                total.to_string(),
+                "--row-bytes".into(),
+                row_bytes.to_string(),
+                "--warmup".into(),
+                case.warmup.to_string(),
+            ]
+        },
+        case.agents,
+    )?;
+    host.accept(case.agents, Duration::from_secs(30))?;
+    let mut hist = histogram()?;
+    let mut allocs_start = 0;
+    for cycle in 0..total {
+        if cycle == case.warmup {
+            allocs_start = allocations();
+        }
+        let t0 = Instant::now();
+        host.cycle(cycle)?;
+        if cycle >= case.warmup {
+            hist.record(t0.elapsed().as_nanos() as u64)
+                .context("record")?;
+        }
+    }
+    let host_allocs = (allocations() - allocs_start) as f64 / case.cycles as f64;
+    let agent_allocs = agents.finish()?;
+    Ok(row(case, &hist, host_allocs, agent_allocs))
+}
+
+/// Runs the whole benchmark and writes the outputs.
+///
+/// # Errors
+/// Any failed measurement or output.
+pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
+    if let Some(p) = &opts.plot
+        && p.extension().is_none_or(|e| e != "svg")
+    {
+        bail!(
+            "--plot writes SVG: give a file name ending in .svg (got {})",
+            p.display()
+        );
+    }
+    let sets: &[(u32, u32)] = if opts.quick {
+        &[(320, 240), (1920, 1080)]
+    } else {
+        &[(320, 240), (640, 480), (1280, 720), (1920, 1080)]
+    };
+    let agent_counts: &[u32] = if opts.quick { &[1, 4] } else { &[1, 2, 4] };
+    let dir = std::env::temp_dir();
+    let mut rows = Vec::new();
+    let mut n = 0u32;
+    let session = |n: &mut u32| {
+        *n += 1;
+        format!("bench-{}-{n}", std::process::id())
+    };
+    let shm_cycles = if opts.quick { 400 } else { 3000 };
+    println!(
+        "vr-sim bench{}: 3 rgb8 images per agent; cycle = host publish -> every agent stopped",
+        if opts.quick { " --quick" } else { "" }
+    );
+    print_header();
+    for &(w, h) in sets {
+        let bytes = CAMERAS as u64 * u64::from(w) * u64::from(h) * BPP as u64;
+        // TCP moves every byte: size the run by volume (~1.5 GB quick, ~6 GB full).
+        let volume: u64 = if opts.quick {
+            1_500_000_000
+        } else {
+            6_000_000_000
+        };
+        for &agents in agent_counts {
+            let tcp_cycles = (volume / (bytes * u64::from(agents))).clamp(30, shm_cycles);
+            let mk = |transport: &'static str, cycles: u64| Case {
+                transport,
+                agents,
+                width: w,
+                height: h,
+                warmup: (cycles / 10).max(10),
+                cycles,
+            };
+            let mut cases = vec![mk("shm", shm_cycles), mk("floor-shm", shm_cycles)];
+            // Spinning needs a free core per waiting process: 1 agent + the host on 2 cores.
+            if agents == 1 {
+                cases.push(mk("shm-spin", shm_cycles));
+                cases.push(mk("floor-shm-spin", shm_cycles));
+            }
+            cases.push(mk("tcp", tcp_cycles));
+            cases.push(mk("floor-tcp", tcp_cycles));
+            for case in cases {
+                let r = match case.transport {
+                    "floor-shm" => bench_floor_shm(&case, &session(&mut n), false)?,
+                    "floor-shm-spin" => bench_floor_shm(&case, &session(&mut n), true)?,
+                    "floor-tcp" => bench_floor_tcp(&case)?,
+                    _ => bench_vrsync(&case, &session(&mut n), &dir)?,
+                };
+                print_row(&r);
+                rows.push(r);
+            }
+        }
+    }
+    print_ratios(&rows);
+    if let Some(p) = &opts.json {
+        let text = serde_json::to_string_pretty(&rows).context("serialise")?;
+        std::fs::write(p, text + "\n").with_context(|| format!("write {}", p.display()))?;
+    }
+    if let Some(p) = &opts.csv {
+        write_csv(p, &rows)?;
+    }
+    if let Some(p) = &opts.plot {
+        plot(p, &rows)?;
+    }
+    Ok(rows)
+}
+
+fn print_header() {
+    println!(
+        "{:<15} {:>6} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}",
+        "transport",
+        "agents",
+        "image",
+        "MB/agent",
+        "p50 µs",
+        "p99 µs",
+        "mean µs",
+        "allocs/c",
+        "agent a/c"
+    );
+}
+
+fn print_row(r: &Row) {
+    let mb = f64::from(r.cameras) * f64::from(r.width) * f64::from(r.height) * BPP as f64 / 1e6;
+    println!(
+        "{:<15} {:>6} {:>10} {:>10.2} {:>10.1} {:>10.1} {:>10.1} {:>10.2} {:>10.2}",
+        r.transport,
+        r.agents,
+        format!("{}x{}", r.width, r.height),
+        mb,
+        r.p50_us,
+        r.p99_us,
+        r.mean_us,
+        r.allocs_per_cycle,
+        r.agent_allocs_per_cycle
+    );
+    let _ = std::io::stdout().flush();
+}
+
+fn find<'a>(rows: &'a [Row], t: &str, agents: u32, w: u32) -> Option<&'a Row> {
+    rows.iter()
+        .find(|r| r.transport == t && r.agents == agents && r.width == w)
+}
+
+fn print_ratios(rows: &[Row]) {
+    println!("\nratios (targets in parentheses):");
+    let ratio = |a: Option<&Row>, b: Option<&Row>| match (a, b) {
+        (Some(a), Some(b)) if b.p50_us > 0.0 => Some(a.p50_us / b.p50_us),
+        _ => None,
+    };
+    let line = |what: &str, v: Option<f64>, target: &str| {
+        if let Some(v) = v {
+            println!("  {what:<52} {v:>8.2}  ({target})");
+        }
+    };
+    for agents in [1, 4] {
+        line(
+            &format!("shm / floor-shm, {agents} agent(s), 3x1920x1080"),
+            ratio(
+                find(rows, "shm", agents, 1920),
+                find(rows, "floor-shm", agents, 1920),
+            ),
+            "<= 2",
+        );
+    }
+    line(
+        "shm 3x1920x1080 / shm 3x320x240, 1 agent",
+        ratio(find(rows, "shm", 1, 1920), find(rows, "shm", 1, 320)),
+        "<= 1.5",
+    );
+    for agents in [1, 4] {
+        line(
+            &format!("tcp / shm, {agents} agent(s), 3x1920x1080"),
+            ratio(
+                find(rows, "tcp", agents, 1920),
+                find(rows, "shm", agents, 1920),
+            ),
+            if agents == 1 { ">= 200" } else { "report" },
+        );
+    }
+    line(
+        "shm 4 agents / shm 1 agent, 3x1920x1080",
+        ratio(find(rows, "shm", 4, 1920), find(rows, "shm", 1, 1920)),
+        "report; compare floors",
+    );
+    line(
+        "floor-shm 4 agents / floor-shm 1 agent, 3x1920x1080",
+        ratio(
+            find(rows, "floor-shm", 4, 1920),
+            find(rows, "floor-shm", 1, 1920),
+        ),
+        "report",
+    );
+    line(
+        "shm-spin / floor-shm-spin, 1 agent, 3x1920x1080",
+        ratio(
+            find(rows, "shm-spin", 1, 1920),
+            find(rows, "floor-shm-spin", 1, 1920),
+        ),
+        "<= 2",
+    );
+    let max_allocs = rows
+        .iter()
+        .filter(|r| r.transport.starts_with("shm"))
+        .map(|r| r.allocs_per_cycle.max(r.agent_allocs_per_cycle))
+        .fold(0.0, f64::max);
+    println!(
+        "  {:<52} {max_allocs:>8.2}  (0)",
+        "max allocations per cycle on the shm path"
+    );
+}
+
+fn write_csv(path: &Path, rows: &[Row]) -> anyhow::Result<()> {
+    let mut s = String::from(
+        "transport,agents,cameras,width,height,format,frames,p50_us,p99_us,mean_us,frames_per_s,allocs_per_cycle,agent_allocs_per_cycle\n",
+    );
+    for r in rows {
+        s += &format!(
+            "{},{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3}\n",
+            r.transport,
+            r.agents,
+            r.cameras,
+            r.width,
+            r.height,
+            r.format,
+            r.frames,
+            r.p50_us,
+            r.p99_us,
+            r.mean_us,
+            r.frames_per_s,
+            r.allocs_per_cycle,
+            r.agent_allocs_per_cycle
+        );
+    }
+    std::fs::write(path, s).with_context(|| format!("write {}", path.display()))
+}
+
+fn plot(path: &Path, rows: &[Row]) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+
+    let bytes =
+        |r: &Row| f64::from(r.cameras) * f64::from(r.width) * f64::from(r.height) * BPP as f64;
+    let (xmin, xmax) = rows
+        .iter()
+        .map(bytes)
+        .fold((f64::MAX, 0.0f64), |(lo, hi), b| (lo.min(b), hi.max(b)));
+    let (ymin, ymax) = rows
+        .iter()
+        .map(|r| r.p50_us)
+        .fold((f64::MAX, 0.0f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    let root = SVGBackend::new(path, (900, 600)).into_drawing_area();
+    root.fill(&WHITE)
+        .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "vrsync cycle time p50 vs image bytes per agent (log-log)",
+            ("sans-serif", 20),
+        )
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(
+            (xmin * 0.8..xmax * 1.25).log_scale(),
+            (ymin.max(0.1) * 0.7..ymax * 1.5).log_scale(),
+        )
+        .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+    chart
+        .configure_mesh()
+        .x_desc("bytes per agent and cycle (3 rgb8 images)")
+        .y_desc("p50 cycle time (µs)")
+        .draw()
+        .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+    let mut series: Vec<(String, u32)> = Vec::new();
+    for r in rows {
+        let key = (r.transport.clone(), r.agents);
+        if !series.contains(&key) {
+            series.push(key);
+        }
+    }
+    for (i, (transport, agents)) in series.iter().enumerate() {
+        let mut points: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| &r.transport == transport && r.agents == *agents)
+            .map(|r| (bytes(r), r.p50_us))
+            .collect();
+        points.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let color = Palette99::pick(i).to_rgba();
+        let floor = transport.starts_with("floor");
+        let label = format!("{transport} ×{agents}");
+        let style = ShapeStyle::from(&color).stroke_width(2);
+        let drawn = if floor {
+            chart.draw_series(DashedLineSeries::new(points.clone(), 6, 4, style))
+        } else {
+            chart.draw_series(LineSeries::new(points.clone(), style))
+        }
+        .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+        drawn
+            .label(label)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+        chart
+            .draw_series(points.iter().map(|&p| Circle::new(p, 3, color.filled())))
+            .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperLeft)
+        .draw()
+        .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+    root.present().map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+    Ok(())
+}
