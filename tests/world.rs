@@ -154,6 +154,19 @@ fn trajectory_hash_does_not_depend_on_agent_timing_or_start_order() {
         p0 != p1
     };
     assert!(moved(0) && moved(1), "wander agents walk");
+    // Wander turns away after a collision: the next cycle carries a new move.
+    let mut collisions = 0;
+    for (i, l) in lines.iter().enumerate().take(596) {
+        if !l["collisions"].as_array().unwrap().is_empty() {
+            collisions += 1;
+            let next = &lines[i + 2]["commands"];
+            assert_eq!(next[0][0], "move", "after the collision {l}: {next}");
+        }
+    }
+    assert!(
+        collisions > 0,
+        "300 cycles of wandering bump into something"
+    );
 
     // The pictures.
     let (w, h) = png_size(&map);

@@ -149,21 +149,25 @@ impl Renderer {
     /// camera index; its name selects the viewpoint: `left`, `right`, else the head).
     pub fn render_image(&mut self, world: &World, body: &Body, image: ImageMut<'_>) {
         let desc = image.desc;
-        let spec = match body.cameras().get(desc.camera as usize) {
-            Some(s) if s.width_px == desc.width_px && s.height_px == desc.height_px => s.clone(),
-            // A frame whose table does not match the config: render the described size.
-            _ => CameraSpec {
-                name: desc.name().to_string(),
-                width_px: desc.width_px,
-                height_px: desc.height_px,
-                fov_h_deg: 120.0,
-                fov_v_deg: 90.0,
-            },
-        };
         if desc.width_px == 0 || desc.height_px == 0 {
             return;
         }
-        let cam = world.camera(body, &spec);
+        let cam = match body.cameras().get(desc.camera as usize) {
+            Some(s) if s.width_px == desc.width_px && s.height_px == desc.height_px => {
+                world.camera(body, s)
+            }
+            // A frame whose table does not match the config: render the described size.
+            _ => world.camera(
+                body,
+                &CameraSpec {
+                    name: desc.name().to_string(),
+                    width_px: desc.width_px,
+                    height_px: desc.height_px,
+                    fov_h_deg: 120.0,
+                    fov_v_deg: 90.0,
+                },
+            ),
+        };
         self.collect_prims(world, body, &cam);
         let cfg = world.config();
         let (room_min, room_max) = world.room_bounds();

@@ -175,6 +175,8 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
     let mut rejected_total = 0u64;
     let mut logged_rejections: BTreeSet<(u32, &'static str)> = BTreeSet::new();
     let mut render_time = Duration::ZERO;
+    // Reused every cycle: no allocation per cycle in the steady state.
+    let mut rejected_per_agent: Vec<(u32, u32)> = Vec::with_capacity(ids.len());
     let mut interrupted = false;
     let loop_started = Instant::now();
     let mut done = 0u64;
@@ -214,7 +216,7 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
         };
         let cycle = report.cycle;
         let mut per_agent = Vec::with_capacity(if record.is_some() { ids.len() } else { 0 });
-        let mut rejected_per_agent = Vec::with_capacity(ids.len());
+        rejected_per_agent.clear();
         for a in report.agents() {
             let mut rejected = 0u32;
             let mut names = Vec::new();
@@ -249,7 +251,7 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
                 per_agent.push((a.agent_id, a.outcome, names, rejected));
             }
         }
-        for (id, n) in rejected_per_agent {
+        for &(id, n) in &rejected_per_agent {
             host.set_rejected(id, n);
         }
         world.step();

@@ -591,16 +591,19 @@ impl World {
 
     /// Region goals whose circle contains `p`.
     fn regions_containing(&self, p: Vec3) -> Vec<bool> {
-        self.cfg
-            .goals
-            .iter()
-            .map(|g| match g.kind {
-                GoalKind::Region { center, radius } => {
-                    Vec2::new(p.x - center.x, p.z - center.y).length_squared() <= radius * radius
-                }
-                GoalKind::Object { .. } => false,
-            })
+        (0..self.cfg.goals.len())
+            .map(|gi| self.in_region(gi, p))
             .collect()
+    }
+
+    /// Whether goal `gi` is a region containing `p`.
+    fn in_region(&self, gi: usize, p: Vec3) -> bool {
+        match self.cfg.goals[gi].kind {
+            GoalKind::Region { center, radius } => {
+                Vec2::new(p.x - center.x, p.z - center.y).length_squared() <= radius * radius
+            }
+            GoalKind::Object { .. } => false,
+        }
     }
 
     /// Applies one command of agent `agent`. Movements and eye movements start here and run
@@ -1176,16 +1179,16 @@ impl World {
     /// Head motion and eye sensors (differences per cycle), and region rewards.
     fn step_sensors(&mut self, bi: usize) {
         let dt = self.dt_s;
-        let now = self.regions_containing(self.bodies[bi].position);
-        let mut reward = 0.0;
-        for (gi, (&inside, &was)) in now.iter().zip(&self.bodies[bi].in_region).enumerate() {
-            if inside && !was {
-                reward += self.cfg.goals[gi].reward;
+        // Region rewards, updating the flags in place (no allocation per cycle).
+        for gi in 0..self.cfg.goals.len() {
+            let inside = self.in_region(gi, self.bodies[bi].position);
+            let body = &mut self.bodies[bi];
+            if inside && !body.in_region[gi] {
+                body.reward += self.cfg.goals[gi].reward;
             }
+            body.in_region[gi] = inside;
         }
         let body = &mut self.bodies[bi];
-        body.reward += reward;
-        body.in_region = now;
         let (p0, h0, e0) = body.previous;
         let velocity = (body.position - p0) / dt;
         let old = body.head_motion;
