@@ -285,6 +285,55 @@ fn shade_row(view: &View<'_>, y: u32, format: PixelFormat, row: &mut [u8]) {
     }
 }
 
+/// `x.floor() as i32` without a libm call.
+#[inline(always)]
+fn floor_i32(x: f32) -> i32 {
+    let i = x as i32;
+    if (i as f32) > x { i - 1 } else { i }
+}
+
+/// Where a ray hits a primitive (`t` at unit depth), if in front of the near plane.
+#[inline(always)]
+fn hit_prim(p: &Prim, o: Vec3, d: Vec3, inv: Vec3) -> Option<f32> {
+    match p.kind {
+        PrimKind::Sphere { center, radius } => hit_sphere(o, d, center, radius, NEAR_M),
+        PrimKind::Box { min, max } => enter_box(o, inv, min, max, NEAR_M).map(|h| h.0),
+        PrimKind::Body {
+            base,
+            radius,
+            height,
+        } => hit_cylinder(o, d, base, radius, height, NEAR_M).map(|h| h.0),
+    }
+}
+
+/// The surface normal of the nearest hit, at `t` (computed once per pixel, for the
+/// winner only).
+fn normal_at(p: &Prim, o: Vec3, d: Vec3, inv: Vec3, t: f32) -> Vec3 {
+    let q = o + t * d;
+    match p.kind {
+        PrimKind::Sphere { center, radius } => (q - center) / radius,
+        PrimKind::Box { min, max } => match enter_box(o, inv, min, max, NEAR_M) {
+            Some((_, axis, positive)) => {
+                let mut n = Vec3::ZERO;
+                n[axis] = if positive { 1.0 } else { -1.0 };
+                n
+            }
+            None => Vec3::Y,
+        },
+        PrimKind::Body {
+            base,
+            radius,
+            height,
+        } => {
+            if q.y >= base.y + height - 1e-4 {
+                Vec3::Y
+            } else {
+                Vec3::new(q.x - base.x, 0.0, q.z - base.z) / radius
+            }
+        }
+    }
+}
+
 /// Shades row `y`: `write(pixel bytes, colour 0..=255, depth m)` stores one pixel.
 #[inline(always)]
 fn shade_row_as(
@@ -299,95 +348,57 @@ fn shade_row_as(
     let du = 2.0 * cam.tan_half_h / cam.width_px as f32;
     let u0 = -cam.tan_half_h + 0.5 * du;
     let o = cam.origin;
-    // The primitives that can cover this row.
+    // The primitives that can cover this row (all of them past 64, which is only slower).
     let mut active = [0u16; 64];
     let mut n_active = 0;
-    let mut overflow = false;
     for (i, p) in view.prims.iter().enumerate() {
         if (p.y0..=p.y1).contains(&y) {
-            if n_active < active.len() {
-                active[n_active] = i as u16;
-                n_active += 1;
-            } else {
-                overflow = true;
+            if n_active == active.len() {
+                n_active = usize::MAX;
+                break;
             }
+            active[n_active] = i as u16;
+            n_active += 1;
         }
     }
+    let all: [u16; 0] = [];
+    let (candidates, all_prims) = if n_active == usize::MAX {
+        (&all[..], true)
+    } else {
+        (&active[..n_active], false)
+    };
     let width = cam.width_px as usize;
     for (x, px) in row.chunks_exact_mut(bpp).take(width).enumerate() {
         let d = row_dir + (u0 + x as f32 * du) * cam.right;
         let inv = recip(d);
         let (mut t, axis, positive) = exit_box(o, inv, view.room_min, view.room_max);
-        let mut hit: Option<(usize, Option<Vec3>)> = None;
+        let mut nearest = usize::MAX;
         let xs = x as u32;
-        let test = |i: usize, t: &mut f32, hit: &mut Option<(usize, Option<Vec3>)>| {
+        let mut consider = |i: usize| {
             let p = &view.prims[i];
-            if xs < p.x0 || xs > p.x1 {
-                return;
-            }
-            match p.kind {
-                PrimKind::Sphere { center, radius } => {
-                    if let Some(th) = hit_sphere(o, d, center, radius, NEAR_M)
-                        && th < *t
-                    {
-                        *t = th;
-                        *hit = Some((i, None));
-                    }
-                }
-                PrimKind::Box { min, max } => {
-                    if let Some((th, ax, pos)) = enter_box(o, inv, min, max, NEAR_M)
-                        && th < *t
-                    {
-                        let mut n = Vec3::ZERO;
-                        n[ax] = if pos { 1.0 } else { -1.0 };
-                        *t = th;
-                        *hit = Some((i, Some(n)));
-                    }
-                }
-                PrimKind::Body {
-                    base,
-                    radius,
-                    height,
-                } => {
-                    if let Some((th, top)) = hit_cylinder(o, d, base, radius, height, NEAR_M)
-                        && th < *t
-                    {
-                        let n = if top {
-                            Vec3::Y
-                        } else {
-                            let q = o + th * d - base;
-                            Vec3::new(q.x, 0.0, q.z) / radius
-                        };
-                        *t = th;
-                        *hit = Some((i, Some(n)));
-                    }
-                }
+            if xs >= p.x0
+                && xs <= p.x1
+                && let Some(th) = hit_prim(p, o, d, inv)
+                && th < t
+            {
+                t = th;
+                nearest = i;
             }
         };
-        if overflow {
-            for i in 0..view.prims.len() {
-                test(i, &mut t, &mut hit);
-            }
+        if all_prims {
+            (0..view.prims.len()).for_each(&mut consider);
         } else {
-            for &i in &active[..n_active] {
-                test(i as usize, &mut t, &mut hit);
-            }
+            candidates.iter().for_each(|&i| consider(usize::from(i)));
         }
+        let hit = (nearest != usize::MAX)
+            .then(|| (nearest, normal_at(&view.prims[nearest], o, d, inv, t)));
         let color = match hit {
-            Some((i, normal)) => {
-                let p = &view.prims[i];
-                let n = match (normal, p.kind) {
-                    (Some(n), _) => n,
-                    (None, PrimKind::Sphere { center, radius }) => (o + t * d - center) / radius,
-                    (None, _) => Vec3::Y,
-                };
-                shade(p.color, n)
-            }
+            Some((i, n)) => shade(view.prims[i].color, n),
             None => {
                 let q = o + t * d;
                 match (axis, positive) {
                     (1, false) => {
-                        let parity = (q.x.floor() as i32 + q.z.floor() as i32) & 1;
+                        let parity = (floor_i32(q.x) + floor_i32(q.z)) & 1;
                         shade(view.floor[parity as usize], Vec3::Y)
                     }
                     (1, true) => view.ceiling,
