@@ -60,8 +60,10 @@ pub struct DemoArgs {
     /// a few camera frames in frames/.
     #[arg(long, value_name = "DIR", default_value = "vrsync-demo")]
     pub out: PathBuf,
-    /// Policy of the example agents (wander, seek, idle, circle).
-    #[arg(long, value_name = "NAME", default_value = "wander")]
+    /// Policy of the example agents: wander (walk, turn away after collisions), seek (find
+    /// the red object with the eyes and walk to it), idle, circle.
+    #[arg(long, value_name = "NAME", default_value = "wander",
+          value_parser = ["wander", "seek", "idle", "circle"])]
     pub policy: String,
     /// Threads shading image rows (1: the host thread only; 0: one per core).
     #[arg(long, value_name = "N", default_value_t = 0)]

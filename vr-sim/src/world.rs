@@ -297,12 +297,9 @@ impl World {
         })
     }
 
-    /// Builds a world from a validated config; errors are `(key, reason)`.
-    pub fn new(
-        cfg: WorldConfig,
-        agents: &[AgentConfig],
-        dt_s: f32,
-    ) -> Result<Self, (String, String)> {
+    /// Builds a world from a validated config; errors are `(key, reason)`, turned into a
+    /// [`WorldConfigError`] by [`World::from_config`].
+    fn new(cfg: WorldConfig, agents: &[AgentConfig], dt_s: f32) -> Result<Self, (String, String)> {
         let objects = cfg
             .objects
             .iter()
