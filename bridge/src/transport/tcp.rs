@@ -14,6 +14,28 @@
 //! use `TCP_NODELAY`. Reads are bounded: a length beyond the peer's maximum is an error,
 //! never an allocation. The host never blocks on reading: it waits for readiness with
 //! `poll(2)` on all agent sockets at once.
+//!
+//! # What a hostile or broken peer costs the host
+//! Every record is read by a [`RecordReader`]: one buffer of the largest acceptable record,
+//! allocated when the connection is accepted, never grown. Each misbehaviour drops that one
+//! connection with a logged reason (`TCP peer dropped: …` before the hello, `TCP agent
+//! dropped: …` after it); the host and the other agents go on.
+//! - garbage, a wrong record kind, a length beyond the maximum ([`MAX_HELLO`] before the
+//!   hello, the largest motor batch after it), a malformed hello or batch: dropped at once;
+//! - a truncated record and a close: dropped when the close is read;
+//! - wrong protocol version or layout, an agent id not in the session, an id already
+//!   connected, a wrong or missing `tcp_token`: a [`kind::REJECT`] saying why (a version
+//!   reject names both versions), then closed;
+//! - a peer that connects and says nothing, or stalls in the middle of its hello: dropped
+//!   [`HELLO_TIMEOUT`] after it connected; at most [`MAX_PENDING`] connections wait for
+//!   their hello at once, more are closed at once;
+//! - an admitted agent that stalls in the middle of a record: dropped once the record is
+//!   not complete [`STALL_TIMEOUT`] (or the `stop_timeout`, if shorter) after its first
+//!   bytes were seen; it is then no longer connected, so the barrier stops waiting for it;
+//! - an agent that stops reading its frames: dropped when a frame cannot be written within
+//!   the `stop_timeout` (at least 1 s);
+//! - a flood of batches: each drain takes at most [`MAX_RECORDS_PER_DRAIN`] records per
+//!   agent, so one agent cannot hold the host inside a drain.
 
 use std::io::{self, ErrorKind, Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};
@@ -54,6 +76,15 @@ pub const MAX_TOKEN: usize = 256;
 pub const MAX_HELLO: usize = 4 + 4 + 8 + 4 + 4 + MAX_TOKEN;
 /// How long a new connection may take to say hello.
 pub const HELLO_TIMEOUT: Duration = Duration::from_secs(2);
+/// How long a record may stay incomplete once its first bytes arrived from an admitted
+/// agent (the host uses the `stop_timeout` instead when that is shorter). A working agent
+/// writes each record in one go, so the rest follows within a network round trip.
+pub const STALL_TIMEOUT: Duration = Duration::from_secs(2);
+/// Most connections that may wait for their hello at once; more are closed at once.
+pub const MAX_PENDING: usize = 64;
+/// Most records read from one agent in one [`HostTransport::drain`] call; the rest is read
+/// by the next call.
+pub const MAX_RECORDS_PER_DRAIN: usize = 256;
 
 /// A decoded hello.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -239,6 +270,147 @@ impl RecordBuf {
     }
 }
 
+/// What [`RecordReader::read_from`] got.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReadProgress {
+    /// A whole record of this kind is in; its body is [`RecordReader::body`] until the
+    /// next call.
+    Record(u32),
+    /// The source has nothing more for now; [`RecordReader::buffered`] bytes of an
+    /// incomplete record are kept for the next call.
+    Pending,
+    /// The source closed; [`RecordReader::buffered`] tells whether it was mid-record.
+    Closed,
+}
+
+/// Why [`RecordReader::read_from`] failed. The reader is then unusable: drop the
+/// connection.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RecordReadError {
+    /// The prefix announced a record longer than the maximum.
+    #[error(transparent)]
+    Decode(#[from] DecodeError),
+    /// Reading failed.
+    #[error("{0}")]
+    Io(#[from] io::Error),
+}
+
+/// Reads `[len][kind][body]` records from a byte source piece by piece, as the bytes
+/// arrive, without blocking (a `WouldBlock` from the source ends the call) and without
+/// allocating: its one buffer holds the largest acceptable record and is allocated in
+/// [`RecordReader::new`]. A prefix announcing more than the maximum is an error before a
+/// single body byte is read.
+///
+/// Bodies are 8-byte aligned, so [`decode_motor`] can view the commands in place.
+#[derive(Debug)]
+pub struct RecordReader {
+    buf: RecordBuf,
+    max_body: usize,
+    fill: usize,
+    /// `(body len, kind)` once the prefix of the current record is in.
+    head: Option<(usize, u32)>,
+    complete: bool,
+}
+
+impl RecordReader {
+    /// A reader accepting bodies of at most `max_body` bytes.
+    pub fn new(max_body: usize) -> Self {
+        let mut buf = RecordBuf::with_capacity(max_body);
+        buf.len = PREFIX;
+        Self {
+            buf,
+            max_body,
+            fill: 0,
+            head: None,
+            complete: false,
+        }
+    }
+
+    /// Reads from `src` until one record is complete, `src` would block, or it closed.
+    /// Reads never go past the end of the current record.
+    ///
+    /// # Errors
+    /// [`RecordReadError::Decode`] for a length beyond the maximum,
+    /// [`RecordReadError::Io`] for a read error other than `WouldBlock`/`Interrupted`.
+    pub fn read_from(&mut self, src: &mut impl Read) -> Result<ReadProgress, RecordReadError> {
+        if self.complete {
+            self.complete = false;
+            self.fill = 0;
+            self.head = None;
+        }
+        loop {
+            let need = match self.head {
+                Some((len, _)) => PREFIX + len,
+                None if self.fill < PREFIX => PREFIX,
+                None => {
+                    let b = self.buf.words.as_bytes();
+                    let prefix = [b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]];
+                    self.head = Some(decode_prefix(prefix, self.max_body)?);
+                    continue;
+                }
+            };
+            if let Some((len, kind)) = self.head
+                && self.fill == need
+            {
+                self.complete = true;
+                self.buf.len = PREFIX + len;
+                return Ok(ReadProgress::Record(kind));
+            }
+            // `need <= PREFIX + max_body`, which the buffer holds: no growth.
+            let Some(dst) = self.buf.words.as_mut_bytes().get_mut(self.fill..need) else {
+                return Err(DecodeError::TooLong {
+                    len: need - PREFIX,
+                    max: self.max_body,
+                }
+                .into());
+            };
+            match src.read(dst) {
+                Ok(0) => return Ok(ReadProgress::Closed),
+                Ok(n) => self.fill += n,
+                Err(e) if e.kind() == ErrorKind::WouldBlock => return Ok(ReadProgress::Pending),
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                Err(e) => return Err(e.into()),
+            }
+        }
+    }
+
+    /// The body of the record the last [`RecordReader::read_from`] completed (empty
+    /// otherwise).
+    pub fn body(&self) -> &[u8] {
+        if self.complete { self.buf.body() } else { &[] }
+    }
+
+    /// Bytes of an incomplete record read so far (0 between records).
+    pub fn buffered(&self) -> usize {
+        if self.complete { 0 } else { self.fill }
+    }
+
+    /// `(body len, kind)` of the incomplete record once its prefix is in.
+    pub fn head(&self) -> Option<(usize, u32)> {
+        if self.complete { None } else { self.head }
+    }
+
+    /// Largest accepted body, bytes.
+    pub fn max_body(&self) -> usize {
+        self.max_body
+    }
+
+    /// Bytes of the reader's buffer (constant: `PREFIX + max_body` rounded up to 8).
+    pub fn capacity(&self) -> usize {
+        self.buf.words.capacity() * 8
+    }
+
+    /// Describes the incomplete record for a log line: `"5 of 8+ bytes"` before the
+    /// prefix is in, `"20 of 32 bytes"` after.
+    fn progress(&self) -> String {
+        match self.head() {
+            Some((len, _)) => format!("{} of {} bytes", self.buffered(), PREFIX + len),
+            None => format!("{} of {PREFIX}+ bytes", self.buffered()),
+        }
+    }
+}
+
 fn set_nodelay(s: &TcpStream) -> io::Result<()> {
     s.set_nodelay(true)
 }
@@ -409,8 +581,9 @@ pub fn termination_requested() -> bool {
 struct Conn {
     stream: TcpStream,
     peer: SocketAddr,
-    rbuf: RecordBuf,
-    fill: usize,
+    reader: RecordReader,
+    /// When the host first saw the current record incomplete.
+    partial_since: Option<Instant>,
 }
 
 #[derive(Debug)]
@@ -418,7 +591,7 @@ struct Pending {
     stream: TcpStream,
     peer: SocketAddr,
     since: Instant,
-    buf: Vec<u8>,
+    reader: RecordReader,
 }
 
 #[derive(Debug)]
@@ -441,6 +614,7 @@ pub struct TcpHost {
     pending: Vec<Pending>,
     max_motor_body: usize,
     max_frame_body: usize,
+    stall_timeout: Duration,
     token: Option<Vec<u8>>,
     fds: Vec<i32>,
     pfds: Vec<libc::pollfd>,
@@ -505,6 +679,7 @@ impl TcpHost {
             pending: Vec::new(),
             max_motor_body,
             max_frame_body,
+            stall_timeout: config.sync.stop_timeout.min(STALL_TIMEOUT),
             token: config.transport.tcp_token.clone().map(String::into_bytes),
             fds: Vec::new(),
             pfds: Vec::new(),
@@ -524,9 +699,17 @@ impl TcpHost {
     }
 
     fn accept_new(&mut self) {
+        let mut turned_away = 0usize;
         loop {
             match self.listener.accept() {
                 Ok((stream, peer)) => {
+                    if self.pending.len() >= MAX_PENDING {
+                        // Closed at once: a flood of silent connections costs a bounded
+                        // number of descriptors and buffers.
+                        debug!(%peer, "TCP peer dropped: too many connections waiting for their hello");
+                        turned_away += 1;
+                        continue;
+                    }
                     if stream.set_nonblocking(true).is_err() || set_nodelay(&stream).is_err() {
                         continue;
                     }
@@ -535,16 +718,21 @@ impl TcpHost {
                         stream,
                         peer,
                         since: Instant::now(),
-                        buf: Vec::with_capacity(PREFIX + MAX_HELLO),
+                        reader: RecordReader::new(MAX_HELLO),
                     });
                 }
-                Err(e) if e.kind() == ErrorKind::WouldBlock => return,
+                Err(e) if e.kind() == ErrorKind::WouldBlock => break,
                 Err(e) if e.kind() == ErrorKind::Interrupted => {}
                 Err(e) => {
                     warn!("TCP accept failed: {e}");
-                    return;
+                    break;
                 }
             }
+        }
+        if turned_away > 0 {
+            warn!(
+                "TCP peer dropped: {turned_away} connection(s) closed at once, {MAX_PENDING} are already waiting for their hello"
+            );
         }
     }
 
@@ -554,9 +742,20 @@ impl TcpHost {
         while i < self.pending.len() {
             match self.progress_hello(i) {
                 Ok(None) => {
-                    if self.pending[i].since.elapsed() > HELLO_TIMEOUT {
+                    let p = &self.pending[i];
+                    if p.since.elapsed() >= HELLO_TIMEOUT {
+                        let why = if p.reader.buffered() == 0 {
+                            format!(
+                                "sent nothing within {HELLO_TIMEOUT:?} of connecting (no hello)"
+                            )
+                        } else {
+                            format!(
+                                "stalled mid-record: {} of its hello within {HELLO_TIMEOUT:?} of connecting",
+                                p.reader.progress()
+                            )
+                        };
                         let p = self.pending.swap_remove(i);
-                        warn!(peer = %p.peer, "TCP peer dropped: no hello within {HELLO_TIMEOUT:?}");
+                        warn!(peer = %p.peer, "TCP peer dropped: {why}");
                     } else {
                         i += 1;
                     }
@@ -565,48 +764,51 @@ impl TcpHost {
                     let p = self.pending.swap_remove(i);
                     self.admit(p, hello);
                 }
-                Err(why) => {
+                Err((why, closed)) => {
                     let mut p = self.pending.swap_remove(i);
                     warn!(peer = %p.peer, "TCP peer dropped: {why}");
-                    let _ = p.stream.set_nonblocking(false);
-                    let _ = p.stream.set_write_timeout(Some(Duration::from_millis(200)));
-                    let _ = write_record(
-                        &mut p.stream,
-                        kind::REJECT,
-                        &encode_reject(reject::MALFORMED, &why),
-                    );
+                    if !closed {
+                        let _ = p.stream.set_nonblocking(false);
+                        let _ = p.stream.set_write_timeout(Some(Duration::from_millis(200)));
+                        let _ = write_record(
+                            &mut p.stream,
+                            kind::REJECT,
+                            &encode_reject(reject::MALFORMED, &why),
+                        );
+                    }
                 }
             }
         }
     }
 
-    fn progress_hello(&mut self, i: usize) -> Result<Option<Hello>, String> {
+    /// Reads what has arrived of connection `i`'s hello. `Err((why, closed))` drops it.
+    fn progress_hello(&mut self, i: usize) -> Result<Option<Hello>, (String, bool)> {
         let p = &mut self.pending[i];
-        let mut chunk = [0u8; PREFIX + MAX_HELLO];
-        loop {
-            let want = if p.buf.len() < PREFIX {
-                PREFIX - p.buf.len()
-            } else {
-                let (len, kind) =
-                    decode_prefix(p.buf[..PREFIX].try_into().map_err(|_| "prefix")?, MAX_HELLO)
-                        .map_err(|e| e.to_string())?;
-                if kind != kind::HELLO {
-                    return Err(format!("expected a hello, got record kind {kind}"));
-                }
-                if p.buf.len() == PREFIX + len {
-                    return decode_hello(&p.buf[PREFIX..])
-                        .map(Some)
-                        .map_err(|e| e.to_string());
-                }
-                PREFIX + len - p.buf.len()
-            };
-            match p.stream.read(&mut chunk[..want]) {
-                Ok(0) => return Err("closed before its hello".into()),
-                Ok(n) => p.buf.extend_from_slice(&chunk[..n]),
-                Err(e) if e.kind() == ErrorKind::WouldBlock => return Ok(None),
-                Err(e) if e.kind() == ErrorKind::Interrupted => {}
-                Err(e) => return Err(e.to_string()),
+        match p.reader.read_from(&mut p.stream) {
+            Ok(ReadProgress::Record(kind::HELLO)) => decode_hello(p.reader.body())
+                .map(Some)
+                .map_err(|e| (e.to_string(), false)),
+            Ok(ReadProgress::Record(k)) => {
+                Err((format!("expected a hello, got record kind {k}"), false))
             }
+            Ok(ReadProgress::Pending) => match p.reader.head() {
+                // Refuse a wrong kind as soon as its prefix is in.
+                Some((_, k)) if k != kind::HELLO => {
+                    Err((format!("expected a hello, got record kind {k}"), false))
+                }
+                _ => Ok(None),
+            },
+            Ok(ReadProgress::Closed) if p.reader.buffered() == 0 => {
+                Err(("closed the connection without a hello".into(), true))
+            }
+            Ok(ReadProgress::Closed) => Err((
+                format!(
+                    "closed the connection mid-record after {} of its hello",
+                    p.reader.progress()
+                ),
+                true,
+            )),
+            Err(e) => Err((e.to_string(), false)),
         }
     }
 
@@ -640,6 +842,12 @@ impl TcpHost {
                 format!("agent {} is not part of this session", hello.agent_id),
             );
         };
+        if let Some(old) = &self.slots[slot].conn
+            && peer_closed(&old.stream)
+        {
+            // The agent died or reconnects; its old connection is gone already.
+            self.drop_conn(slot, "connection closed (a new connection takes its place)");
+        }
         if self.slots[slot].conn.is_some() {
             return refuse(
                 &mut stream,
@@ -664,8 +872,8 @@ impl TcpHost {
         self.slots[slot].conn = Some(Conn {
             stream,
             peer: p.peer,
-            rbuf: RecordBuf::with_capacity(self.max_motor_body),
-            fill: 0,
+            reader: RecordReader::new(self.max_motor_body),
+            partial_since: None,
         });
     }
 
@@ -697,6 +905,70 @@ impl TcpHost {
         Ok(())
     }
 
+    /// Reads what has arrived from `c`, handing complete motor batches to `sink`.
+    /// `Err(why)` drops the connection.
+    fn drain_conn(
+        c: &mut Conn,
+        slot: usize,
+        stall_timeout: Duration,
+        sink: &mut BatchSink<'_>,
+    ) -> Result<(), String> {
+        for _ in 0..MAX_RECORDS_PER_DRAIN {
+            match c.reader.read_from(&mut c.stream) {
+                Ok(ReadProgress::Record(kind::MOTOR)) => {
+                    c.partial_since = None;
+                    let (header, commands) =
+                        decode_motor(c.reader.body()).map_err(|e| e.to_string())?;
+                    sink(slot, &header, commands);
+                }
+                Ok(ReadProgress::Record(k)) => {
+                    return Err(format!("sent record kind {k}, expected motor batches"));
+                }
+                Ok(ReadProgress::Pending) => {
+                    if let Some((_, k)) = c.reader.head()
+                        && k != kind::MOTOR
+                    {
+                        return Err(format!("sent record kind {k}, expected motor batches"));
+                    }
+                    if c.reader.buffered() == 0 {
+                        c.partial_since = None;
+                        return Ok(());
+                    }
+                    // Everything that has arrived is read and the record is still not
+                    // complete: a working agent's rest follows within a round trip.
+                    let now = Instant::now();
+                    let since = *c.partial_since.get_or_insert(now);
+                    if now.duration_since(since) >= stall_timeout {
+                        return Err(stall_reason(&c.reader, stall_timeout));
+                    }
+                    return Ok(());
+                }
+                Ok(ReadProgress::Closed) if c.reader.buffered() == 0 => {
+                    return Err("connection closed".into());
+                }
+                Ok(ReadProgress::Closed) => {
+                    return Err(format!(
+                        "connection closed mid-record after {} of a motor batch",
+                        c.reader.progress()
+                    ));
+                }
+                Err(e) => return Err(e.to_string()),
+            }
+        }
+        Ok(())
+    }
+
+    /// The earliest moment a pending hello or an incomplete record runs out of time.
+    fn next_deadline(&self) -> Option<Instant> {
+        let hellos = self.pending.iter().map(|p| p.since + HELLO_TIMEOUT);
+        let stalls = self
+            .slots
+            .iter()
+            .filter_map(|s| s.conn.as_ref()?.partial_since)
+            .map(|t| t + self.stall_timeout);
+        hellos.chain(stalls).min()
+    }
+
     fn writable_now(stream: &TcpStream) -> bool {
         let mut pfd = libc::pollfd {
             fd: stream.as_raw_fd(),
@@ -716,6 +988,25 @@ impl TcpHost {
     pub fn max_frame_body(&self) -> usize {
         self.max_frame_body
     }
+}
+
+fn stall_reason(reader: &RecordReader, stall_timeout: Duration) -> String {
+    format!(
+        "stalled mid-record: {} of a motor batch, not complete within {stall_timeout:?}",
+        reader.progress()
+    )
+}
+
+/// Whether the peer closed or reset the connection (without reading anything).
+fn peer_closed(stream: &TcpStream) -> bool {
+    let mut pfd = libc::pollfd {
+        fd: stream.as_raw_fd(),
+        events: libc::POLLRDHUP,
+        revents: 0,
+    };
+    // SAFETY: one valid pollfd for the duration of the call.
+    let n = unsafe { libc::poll(&mut pfd, 1, 0) };
+    n == 1 && pfd.revents & (libc::POLLRDHUP | libc::POLLHUP | libc::POLLERR) != 0
 }
 
 /// Compares two byte strings in time independent of where they differ.
@@ -801,59 +1092,12 @@ impl HostTransport for TcpHost {
     }
 
     fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError> {
-        let max = self.max_motor_body;
+        let stall_timeout = self.stall_timeout;
         for slot in 0..self.slots.len() {
-            let mut failure = None;
-            if let Some(c) = &mut self.slots[slot].conn {
-                loop {
-                    // Fill the prefix, then the body, without blocking.
-                    let need = if c.fill < PREFIX {
-                        PREFIX
-                    } else {
-                        let b = c.rbuf.words.as_bytes();
-                        let prefix = [b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]];
-                        match decode_prefix(prefix, max) {
-                            Ok((len, kind::MOTOR)) => PREFIX + len,
-                            Ok((_, k)) => {
-                                failure =
-                                    Some(format!("sent record kind {k}, expected motor batches"));
-                                break;
-                            }
-                            Err(e) => {
-                                failure = Some(e.to_string());
-                                break;
-                            }
-                        }
-                    };
-                    if c.fill >= PREFIX && c.fill == need {
-                        c.rbuf.len = need;
-                        match decode_motor(c.rbuf.body()) {
-                            Ok((header, commands)) => sink(slot, &header, commands),
-                            Err(e) => {
-                                failure = Some(e.to_string());
-                                break;
-                            }
-                        }
-                        c.fill = 0;
-                        continue;
-                    }
-                    c.rbuf.reserve_body(need - PREFIX);
-                    let dst = &mut c.rbuf.words.as_mut_bytes()[c.fill..need];
-                    match c.stream.read(dst) {
-                        Ok(0) => {
-                            failure = Some("connection closed".into());
-                            break;
-                        }
-                        Ok(n) => c.fill += n,
-                        Err(e) if e.kind() == ErrorKind::WouldBlock => break,
-                        Err(e) if e.kind() == ErrorKind::Interrupted => {}
-                        Err(e) => {
-                            failure = Some(e.to_string());
-                            break;
-                        }
-                    }
-                }
-            }
+            let failure = match &mut self.slots[slot].conn {
+                Some(c) => Self::drain_conn(c, slot, stall_timeout, sink).err(),
+                None => None,
+            };
             if let Some(why) = failure {
                 self.drop_conn(slot, &why);
             }
@@ -871,11 +1115,11 @@ impl HostTransport for TcpHost {
                 .iter()
                 .filter_map(|s| s.conn.as_ref().map(|c| c.stream.as_raw_fd())),
         );
-        // Pending hellos have their own deadline.
-        let timeout = if self.pending.is_empty() {
-            timeout
-        } else {
-            timeout.min(HELLO_TIMEOUT)
+        // Pending hellos and incomplete records have their own deadlines: wake for them
+        // (the host's next drain drops a stalled agent).
+        let timeout = match self.next_deadline() {
+            Some(d) => timeout.min(d.saturating_duration_since(Instant::now())),
+            None => timeout,
         };
         let mut ready = std::mem::take(&mut self.ready);
         let mut pfds = std::mem::take(&mut self.pfds);
@@ -886,6 +1130,24 @@ impl HostTransport for TcpHost {
             agent: u32::MAX,
             reason: format!("poll: {e}"),
         })?;
+        // An incomplete record past its deadline on a socket with nothing more to read is
+        // a stall: drop it here too, so a caller that only waits makes progress as well.
+        let now = Instant::now();
+        let mut fd_index = 1 + self.pending.len();
+        for slot in 0..self.slots.len() {
+            let Some(c) = &self.slots[slot].conn else {
+                continue;
+            };
+            let readable = self.ready.get(fd_index).copied().unwrap_or(true);
+            fd_index += 1;
+            if let Some(since) = c.partial_since
+                && !readable
+                && now.duration_since(since) >= self.stall_timeout
+            {
+                let why = stall_reason(&c.reader, self.stall_timeout);
+                self.drop_conn(slot, &why);
+            }
+        }
         if self.ready.first().copied().unwrap_or(false) {
             self.accept_new();
         }
@@ -1392,5 +1654,307 @@ mod tests {
         fn reject_decoder_never_panics(body in proptest::collection::vec(any::<u8>(), 0..64)) {
             let _ = decode_reject(&body);
         }
+
+        #[test]
+        fn hellos_round_trip(
+            protocol_version in any::<u32>(),
+            layout_hash in any::<u64>(),
+            agent_id in any::<u32>(),
+            token in proptest::collection::vec(any::<u8>(), 0..=MAX_TOKEN),
+        ) {
+            let h = Hello { protocol_version, layout_hash, agent_id, token };
+            let body = encode_hello(&h);
+            prop_assert!(body.len() <= MAX_HELLO);
+            prop_assert_eq!(decode_hello(&body), Ok(h));
+        }
+
+        /// Whatever the bytes and however they are split, the reader never panics, never
+        /// hands out a body beyond its maximum, never grows its buffer, and reads no body
+        /// byte of a record whose prefix is too long.
+        #[test]
+        fn record_reader_is_bounded_on_any_bytes(
+            data in proptest::collection::vec(any::<u8>(), 0..700),
+            chunks in proptest::collection::vec(1usize..40, 0..50),
+            max in 0usize..300,
+        ) {
+            let mut reader = RecordReader::new(max);
+            let capacity = reader.capacity();
+            prop_assert!(capacity >= PREFIX + max && capacity < PREFIX + max + 8);
+            let mut src = Chunked::new(&data, &chunks);
+            let (records, end) = read_all(&mut reader, &mut src);
+            let mut consumed = 0;
+            for (_, body) in &records {
+                prop_assert!(body.len() <= max);
+                consumed += PREFIX + body.len();
+            }
+            match end {
+                End::Closed { buffered } => prop_assert_eq!(consumed + buffered, data.len()),
+                End::Failed(RecordReadError::Decode(DecodeError::TooLong { len, max: m })) => {
+                    prop_assert!(len > max);
+                    prop_assert_eq!(m, max);
+                    // The prefix, and not a byte of the body.
+                    prop_assert_eq!(src.pos, consumed + PREFIX);
+                }
+                End::Failed(other) => prop_assert!(false, "unexpected {other}"),
+            }
+            prop_assert_eq!(reader.capacity(), capacity);
+        }
+
+        /// Well-formed records come out exactly as they went in, however the stream is split.
+        #[test]
+        fn record_reader_round_trips_any_split(
+            records in proptest::collection::vec(
+                (any::<u32>(), proptest::collection::vec(any::<u8>(), 0..=64)), 0..8),
+            chunks in proptest::collection::vec(1usize..30, 0..60),
+        ) {
+            let mut data = Vec::new();
+            for (k, body) in &records {
+                data.extend_from_slice(&(body.len() as u32).to_le_bytes());
+                data.extend_from_slice(&k.to_le_bytes());
+                data.extend_from_slice(body);
+            }
+            let mut reader = RecordReader::new(64);
+            let mut src = Chunked::new(&data, &chunks);
+            let (got, end) = read_all(&mut reader, &mut src);
+            prop_assert_eq!(got, records);
+            let clean = matches!(end, End::Closed { buffered: 0 });
+            prop_assert!(clean, "stream did not end cleanly between records");
+        }
+    }
+
+    /// Hands out `data` in chunks of the given sizes with a `WouldBlock` before each chunk
+    /// (as a non-blocking socket does), then end of stream.
+    struct Chunked<'a> {
+        data: &'a [u8],
+        pos: usize,
+        chunks: &'a [usize],
+        next_chunk: usize,
+        left_in_chunk: usize,
+    }
+
+    impl<'a> Chunked<'a> {
+        fn new(data: &'a [u8], chunks: &'a [usize]) -> Self {
+            Self {
+                data,
+                pos: 0,
+                chunks,
+                next_chunk: 0,
+                left_in_chunk: 0,
+            }
+        }
+    }
+
+    impl Read for Chunked<'_> {
+        fn read(&mut self, out: &mut [u8]) -> io::Result<usize> {
+            if self.pos == self.data.len() {
+                return Ok(0);
+            }
+            if self.left_in_chunk == 0 {
+                self.left_in_chunk = self
+                    .chunks
+                    .get(self.next_chunk)
+                    .copied()
+                    .unwrap_or(usize::MAX);
+                self.next_chunk += 1;
+                return Err(ErrorKind::WouldBlock.into());
+            }
+            let n = out
+                .len()
+                .min(self.left_in_chunk)
+                .min(self.data.len() - self.pos);
+            out[..n].copy_from_slice(&self.data[self.pos..self.pos + n]);
+            self.pos += n;
+            self.left_in_chunk -= n;
+            Ok(n)
+        }
+    }
+
+    enum End {
+        Closed { buffered: usize },
+        Failed(RecordReadError),
+    }
+
+    fn read_all(reader: &mut RecordReader, src: &mut Chunked<'_>) -> (Vec<(u32, Vec<u8>)>, End) {
+        let mut records = Vec::new();
+        loop {
+            match reader.read_from(src) {
+                Ok(ReadProgress::Record(k)) => records.push((k, reader.body().to_vec())),
+                Ok(ReadProgress::Pending) => {}
+                Ok(ReadProgress::Closed) => {
+                    let buffered = reader.buffered();
+                    return (records, End::Closed { buffered });
+                }
+                Err(e) => return (records, End::Failed(e)),
+            }
+        }
+    }
+
+    // --- TcpHost against raw sockets (no simulator) ------------------------------------
+
+    fn tcp_host(stop_timeout: f64) -> TcpHost {
+        let text = format!(
+            "[sync]\nstop_timeout = {stop_timeout}\n[transport]\nkind = \"tcp\"\n\
+             tcp_listen = \"127.0.0.1:0\"\n\
+             [[agent]]\nid = 0\n[[agent.camera]]\nname = \"c\"\nwidth = 8\n\
+             [[agent]]\nid = 1\n[[agent.camera]]\nname = \"c\"\nwidth = 8\n"
+        );
+        let config = Config::from_toml_str(&text, std::path::Path::new("t.toml")).unwrap();
+        TcpHost::create(&config).unwrap()
+    }
+
+    fn say_hello(host: &TcpHost, id: u32) -> TcpStream {
+        let mut s = TcpStream::connect(host.local_addr()).unwrap();
+        s.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+        let hello = Hello {
+            protocol_version: PROTOCOL_VERSION,
+            layout_hash: LAYOUT_HASH,
+            agent_id: id,
+            token: Vec::new(),
+        };
+        write_record(&mut s, kind::HELLO, &encode_hello(&hello)).unwrap();
+        s
+    }
+
+    fn read_reply(s: &mut TcpStream) -> (u32, Vec<u8>) {
+        let mut prefix = [0u8; PREFIX];
+        s.read_exact(&mut prefix).unwrap();
+        let (len, k) = decode_prefix(prefix, 4096).unwrap();
+        let mut body = vec![0u8; len];
+        s.read_exact(&mut body).unwrap();
+        (k, body)
+    }
+
+    /// Runs the host's wait/drain loop until `done` holds; panics after 20 s.
+    fn pump(host: &mut TcpHost, drain: bool, what: &str, done: impl Fn(&TcpHost) -> bool) {
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while !done(host) {
+            assert!(Instant::now() < deadline, "timed out waiting for {what}");
+            host.wait_activity(Duration::from_millis(50)).unwrap();
+            if drain {
+                host.drain(&mut |_, _, _| {}).unwrap();
+            }
+        }
+    }
+
+    fn motor_record(cycle: u64) -> Vec<u8> {
+        let header = MotorHeader {
+            protocol_version: PROTOCOL_VERSION,
+            agent_id: 0,
+            cycle,
+            flags: crate::wire::MOTOR_FLAG_STOP,
+            command_count: 0,
+        };
+        let mut r = Vec::new();
+        r.extend_from_slice(&(header.as_bytes().len() as u32).to_le_bytes());
+        r.extend_from_slice(&kind::MOTOR.to_le_bytes());
+        r.extend_from_slice(header.as_bytes());
+        r
+    }
+
+    #[test]
+    fn an_agent_stalling_mid_record_is_dropped_and_the_other_goes_on() {
+        let mut host = tcp_host(0.2);
+        let mut a0 = say_hello(&host, 0);
+        let mut a1 = say_hello(&host, 1);
+        pump(&mut host, false, "both agents", |h| {
+            h.is_connected(0) && h.is_connected(1)
+        });
+        assert_eq!(read_reply(&mut a0).0, kind::WELCOME);
+        assert_eq!(read_reply(&mut a1).0, kind::WELCOME);
+        // Agent 0: a prefix and half a batch, then silence with the socket open.
+        let rec = motor_record(0);
+        a0.write_all(&rec[..PREFIX + 10]).unwrap();
+        // Agent 1: a whole batch.
+        a1.write_all(&motor_record(0)).unwrap();
+        let got = std::cell::Cell::new(0);
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while host.is_connected(0) {
+            assert!(Instant::now() < deadline, "stalled agent never dropped");
+            host.wait_activity(Duration::from_millis(500)).unwrap();
+            host.drain(&mut |slot, h, _| {
+                assert_eq!((slot, h.cycle), (1, 0));
+                got.set(got.get() + 1);
+            })
+            .unwrap();
+        }
+        assert_eq!(got.get(), 1, "agent 1's batch arrives");
+        assert!(host.is_connected(1));
+        // The stalled agent's socket is closed by the host.
+        let mut b = [0u8; 1];
+        assert_eq!(a0.read(&mut b).unwrap_or(0), 0);
+    }
+
+    #[test]
+    fn an_oversized_motor_prefix_drops_the_agent_without_reading_the_body() {
+        let mut host = tcp_host(5.0);
+        let mut a0 = say_hello(&host, 0);
+        pump(&mut host, false, "agent 0", |h| h.is_connected(0));
+        assert_eq!(read_reply(&mut a0).0, kind::WELCOME);
+        let mut prefix = [0u8; PREFIX];
+        prefix[..4].copy_from_slice(&u32::MAX.to_le_bytes());
+        prefix[4..].copy_from_slice(&kind::MOTOR.to_le_bytes());
+        a0.write_all(&prefix).unwrap();
+        pump(&mut host, true, "agent 0 dropped", |h| !h.is_connected(0));
+    }
+
+    #[test]
+    fn silent_connections_are_bounded_and_time_out() {
+        let mut host = tcp_host(5.0);
+        let extra = 5;
+        let mut silent: Vec<TcpStream> = (0..MAX_PENDING + extra)
+            .map(|_| TcpStream::connect(host.local_addr()).unwrap())
+            .collect();
+        pump(&mut host, false, "the listen queue to empty", |h| {
+            h.pending.len() == MAX_PENDING
+        });
+        // Exactly `extra` of them were closed at once; the rest wait for their hello.
+        let closed = silent
+            .iter_mut()
+            .filter_map(|s| {
+                s.set_nonblocking(true).unwrap();
+                matches!(s.read(&mut [0u8; 1]), Ok(0)).then_some(())
+            })
+            .count();
+        assert_eq!(closed, extra);
+        pump(&mut host, false, "the hello timeout", |h| {
+            h.pending.is_empty()
+        });
+        // A real agent still gets in.
+        let mut a0 = say_hello(&host, 0);
+        pump(&mut host, false, "agent 0", |h| h.is_connected(0));
+        assert_eq!(read_reply(&mut a0).0, kind::WELCOME);
+    }
+
+    #[test]
+    fn an_agent_reconnecting_after_a_close_replaces_its_old_connection() {
+        let mut host = tcp_host(5.0);
+        let mut a0 = say_hello(&host, 0);
+        pump(&mut host, false, "agent 0", |h| h.is_connected(0));
+        assert_eq!(read_reply(&mut a0).0, kind::WELCOME);
+        // A second connection while the first is alive is refused.
+        let mut twin = say_hello(&host, 0);
+        let (k, body) = read_reply_pumping(&mut host, &mut twin);
+        assert_eq!(k, kind::REJECT);
+        assert_eq!(decode_reject(&body).unwrap().0, reject::ID_IN_USE);
+        // Once it closed (no drain has seen that yet), a new one takes its place.
+        drop(a0);
+        let mut again = say_hello(&host, 0);
+        let (k, _) = read_reply_pumping(&mut host, &mut again);
+        assert_eq!(k, kind::WELCOME);
+        assert!(host.is_connected(0));
+    }
+
+    fn read_reply_pumping(host: &mut TcpHost, s: &mut TcpStream) -> (u32, Vec<u8>) {
+        s.set_nonblocking(true).unwrap();
+        let deadline = Instant::now() + Duration::from_secs(20);
+        loop {
+            assert!(Instant::now() < deadline, "no reply");
+            host.wait_activity(Duration::from_millis(20)).unwrap();
+            if matches!(s.peek(&mut [0u8; 1]), Ok(1)) {
+                break;
+            }
+        }
+        s.set_nonblocking(false).unwrap();
+        read_reply(s)
     }
 }
