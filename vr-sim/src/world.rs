@@ -13,6 +13,11 @@
 //! Grasp, point, interact, release and the resets take effect at once and report only
 //! their final status (Finished, or Aborted when the world does not allow them: too far,
 //! not graspable, hands full, nothing seen at that pixel).
+//!
+//! Bodies are upright cylinders. A move stops at the first wall, object (where it reaches
+//! into the body's height band) or other body, reporting a collision `(action id,
+//! collider id)` and Finished, as the original did. A grasped object is carried in front
+//! of the body and is no obstacle until it is released (put down on the floor there).
 
 use glam::{Quat, Vec2, Vec3};
 use vrsync_bridge::config::AgentConfig;
@@ -1099,10 +1104,8 @@ impl World {
     /// reachable position and the obstacle's id. A body that already overlaps something
     /// (an object put down against it) walks freely until it is clear.
     fn walk(&self, bi: usize, from: Vec3, delta: Vec3) -> (Vec3, Option<u32>) {
-        let blocked = |p: Vec3| {
-            self.collider_at(Some(bi), p)
-                .filter(|_| self.collider_at(Some(bi), from).is_none())
-        };
+        let free_at_start = self.collider_at(Some(bi), from).is_none();
+        let blocked = |p: Vec3| self.collider_at(Some(bi), p).filter(|_| free_at_start);
         let Some(collider) = blocked(from + delta) else {
             return (from + delta, None);
         };
