@@ -279,3 +279,47 @@ fn a_bad_world_section_is_a_config_error_naming_the_key() {
         out.stderr
     );
 }
+
+#[test]
+fn the_same_world_over_tcp_gives_the_same_trajectory() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |kind: &str| {
+        let session = util::session(&format!("world-{kind}"));
+        let text = std::fs::read_to_string(default_config())
+            .unwrap()
+            .replace("session = \"default\"", &format!("session = {session:?}"))
+            .replace("kind = \"shm\"", &format!("kind = {kind:?}"))
+            .replace(
+                "tcp_listen = \"127.0.0.1:7400\"",
+                &format!("tcp_listen = \"127.0.0.1:{}\"", util::free_tcp_port()),
+            );
+        let config = dir.path().join(format!("{kind}.toml"));
+        std::fs::write(&config, text).unwrap();
+        let s = dir.path().join(format!("{kind}.json"));
+        let out = util::run(
+            "vr-sim",
+            &[
+                "run",
+                "--config",
+                config.to_str().unwrap(),
+                "--frames",
+                "150",
+                "--spawn-agents",
+                "2",
+                "--agent-arg=--policy",
+                "--agent-arg=seek",
+                "--summary-json",
+                s.to_str().unwrap(),
+                "--quiet",
+            ],
+            RUN_DEADLINE,
+        );
+        assert_eq!(out.code(), Some(0), "{kind}: stderr:\n{}", out.stderr);
+        summary(&s)
+    };
+    let shm = run("shm");
+    let tcp = run("tcp");
+    assert_eq!(tcp["transport"], "tcp");
+    // seek decides from the images: equal trajectories mean equal pixels arrived.
+    assert_eq!(shm["trajectory_hash"], tcp["trajectory_hash"]);
+}
