@@ -8,5 +8,6 @@ mod util;
 
 mod config;
 mod cpp;
+mod faults;
 mod sync;
 mod world;

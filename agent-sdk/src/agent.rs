@@ -450,6 +450,21 @@ impl Agent {
         Ok(())
     }
 
+    /// Queues a command in wire form as is, without any check: for tools and tests that
+    /// must send what the typed API cannot express (the host validates everything).
+    ///
+    /// # Errors
+    /// [`SendError::QueueFull`] beyond `max_commands_per_cycle`.
+    pub fn send_wire(&mut self, command: MotorCommand) -> Result<(), SendError> {
+        if self.queue.len() >= self.max_commands {
+            return Err(SendError::QueueFull {
+                max: self.max_commands,
+            });
+        }
+        self.queue.push(command);
+        Ok(())
+    }
+
     /// Sends the queued commands with the *stop* flag for the cycle of the newest frame,
     /// and signals *stop*: this agent is done with the cycle.
     ///

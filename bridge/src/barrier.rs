@@ -19,6 +19,8 @@ pub enum AgentOutcome {
     NotAwaited,
     /// Async mode: commands were taken as they arrived; stops are ignored.
     Async,
+    /// The agent was lost during the cycle (process died or disconnected) and evicted.
+    Evicted,
 }
 
 impl AgentOutcome {
@@ -29,6 +31,7 @@ impl AgentOutcome {
             Self::TimedOut => "timed_out",
             Self::NotAwaited => "not_awaited",
             Self::Async => "async",
+            Self::Evicted => "evicted",
         }
     }
 }
@@ -55,6 +58,7 @@ pub struct CycleBarrier {
     cycle: u64,
     awaited: Vec<bool>,
     stopped: Vec<bool>,
+    evicted: Vec<bool>,
     pending: usize,
 }
 
@@ -65,6 +69,7 @@ impl CycleBarrier {
             cycle: 0,
             awaited: vec![false; slots],
             stopped: vec![false; slots],
+            evicted: vec![false; slots],
             pending: 0,
         }
     }
@@ -74,6 +79,7 @@ impl CycleBarrier {
         self.cycle = cycle;
         self.awaited.fill(false);
         self.stopped.fill(false);
+        self.evicted.fill(false);
         self.pending = 0;
     }
 
@@ -113,6 +119,21 @@ impl CycleBarrier {
         }
     }
 
+    /// Stops waiting for `slot` this cycle (its process died or disconnected). Returns
+    /// whether it was pending.
+    pub fn evict(&mut self, slot: usize) -> bool {
+        let pending =
+            self.awaited.get(slot) == Some(&true) && self.stopped.get(slot) == Some(&false);
+        if let Some(e) = self.evicted.get_mut(slot) {
+            *e = true;
+        }
+        if pending {
+            self.awaited[slot] = false;
+            self.pending -= 1;
+        }
+        pending
+    }
+
     /// Whether every awaited agent stopped.
     pub fn is_complete(&self) -> bool {
         self.pending == 0
@@ -130,6 +151,9 @@ impl CycleBarrier {
 
     /// Outcome of `slot` if the cycle ended now.
     pub fn outcome(&self, slot: usize) -> AgentOutcome {
+        if self.evicted.get(slot) == Some(&true) {
+            return AgentOutcome::Evicted;
+        }
         match (self.awaited.get(slot), self.stopped.get(slot)) {
             (Some(true), Some(true)) => AgentOutcome::Stopped,
             (Some(true), _) => AgentOutcome::TimedOut,
@@ -187,6 +211,20 @@ mod tests {
             "after its stop"
         );
         assert_eq!(b.pending(), 1);
+    }
+
+    #[test]
+    fn an_evicted_agent_no_longer_holds_the_cycle() {
+        let mut b = CycleBarrier::new(2);
+        b.begin(3);
+        b.await_slot(0);
+        b.await_slot(1);
+        assert_eq!(b.on_batch(0, 3, true), BatchVerdict::Accept { stop: true });
+        assert!(b.evict(1));
+        assert!(b.is_complete());
+        assert_eq!(b.outcome(1), AgentOutcome::Evicted);
+        assert!(!b.evict(1), "evicting twice is harmless");
+        assert_eq!(b.on_batch(1, 3, true), BatchVerdict::NotAwaited);
     }
 
     #[test]

@@ -54,6 +54,19 @@ pub enum WaitMode {
     Spin,
 }
 
+/// What the host does when an agent's process dies or disconnects (`[sync] on_agent_lost`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum AgentLostPolicy {
+    /// Stop waiting for it at once and go on with the others; it may rejoin (default).
+    #[default]
+    Evict,
+    /// Pause the simulation until it reconnects (up to `connect_timeout`).
+    Wait,
+    /// End the run with an error naming the agent.
+    Abort,
+}
+
 /// One camera of an agent.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CameraConfig {
@@ -112,6 +125,8 @@ pub struct SyncConfig {
     pub connect_timeout: Duration,
     /// Block on events or busy-poll (`wait`).
     pub wait: WaitMode,
+    /// What to do when an agent is lost (`on_agent_lost`).
+    pub on_agent_lost: AgentLostPolicy,
 }
 
 /// `[transport]` section.
@@ -213,6 +228,7 @@ struct RawSync {
     stop_timeout: Option<Spanned<f64>>,
     connect_timeout: Option<Spanned<f64>>,
     wait: Option<WaitMode>,
+    on_agent_lost: Option<AgentLostPolicy>,
 }
 
 #[derive(Deserialize)]
@@ -374,6 +390,7 @@ impl Config {
             stop_timeout: None,
             connect_timeout: None,
             wait: None,
+            on_agent_lost: None,
         });
         let sync = SyncConfig {
             sync_mode: rs.sync_mode.unwrap_or(true),
@@ -385,6 +402,7 @@ impl Config {
             stop_timeout: ctx.seconds(rs.stop_timeout, "sync.stop_timeout", 5.0)?,
             connect_timeout: ctx.seconds(rs.connect_timeout, "sync.connect_timeout", 30.0)?,
             wait: rs.wait.unwrap_or_default(),
+            on_agent_lost: rs.on_agent_lost.unwrap_or_default(),
         };
 
         let rt = raw.transport.unwrap_or(RawTransport {
@@ -454,6 +472,8 @@ impl Config {
         }
         let mut seen = BTreeSet::new();
         let mut agents = Vec::with_capacity(raw.agent.len());
+        // The largest camera, to point at when the session does not fit /dev/shm.
+        let mut largest: Option<(usize, Range<usize>)> = None;
         for a in raw.agent {
             let agent_span = a.span();
             let a = a.into_inner();
@@ -486,14 +506,18 @@ impl Config {
             let mut names = BTreeSet::new();
             let mut cameras = Vec::with_capacity(a.camera.len());
             for c in a.camera {
-                let c = c.into_inner();
-                cameras.push(ctx.camera(c, id, &mut names)?);
+                let span = c.span();
+                let cam = ctx.camera(c.into_inner(), id, &mut names)?;
+                if largest.as_ref().is_none_or(|(b, _)| cam.image_bytes() > *b) {
+                    largest = Some((cam.image_bytes(), span));
+                }
+                cameras.push(cam);
             }
             agents.push(AgentConfig { id, cameras });
         }
         agents.sort_by_key(|a| a.id);
 
-        Ok(Self {
+        let config = Self {
             source: path.to_path_buf(),
             session,
             seed: raw.seed,
@@ -501,7 +525,22 @@ impl Config {
             transport,
             agents,
             world: raw.world,
-        })
+        };
+        if config.transport.kind == TransportKind::Shm
+            && let Err((needed, available)) = crate::transport::shm::check_shm_budget(&config)
+        {
+            return Err(ctx.invalid(
+                largest.map_or(0..0, |(_, span)| span),
+                "agent.camera",
+                format!(
+                    "the cameras of all agents need {} MB of shared memory but /dev/shm has {} MB free: {}",
+                    needed / 1_000_000,
+                    available / 1_000_000,
+                    crate::transport::shm::SHM_BUDGET_FIX
+                ),
+            ));
+        }
+        Ok(config)
     }
 
     /// The agent with this id.
@@ -573,7 +612,7 @@ impl Config {
         let _ = writeln!(s, "session = {:?}\nseed = {}", self.session, self.seed);
         let _ = writeln!(
             s,
-            "\n[sync]\nsync_mode = {}\nsimulation_time_per_frame = {:?}\nstop_timeout = {:?}\nconnect_timeout = {:?}\nwait = {:?}",
+            "\n[sync]\nsync_mode = {}\nsimulation_time_per_frame = {:?}\nstop_timeout = {:?}\nconnect_timeout = {:?}\nwait = {:?}\non_agent_lost = {:?}",
             self.sync.sync_mode,
             self.sync.simulation_time_per_frame.as_secs_f64(),
             self.sync.stop_timeout.as_secs_f64(),
@@ -581,6 +620,11 @@ impl Config {
             match self.sync.wait {
                 WaitMode::Block => "block",
                 WaitMode::Spin => "spin",
+            },
+            match self.sync.on_agent_lost {
+                AgentLostPolicy::Evict => "evict",
+                AgentLostPolicy::Wait => "wait",
+                AgentLostPolicy::Abort => "abort",
             }
         );
         let _ = writeln!(

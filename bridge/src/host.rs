@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 use tracing::{debug, info, warn};
 
 use crate::barrier::{AgentOutcome, BatchVerdict, CycleBarrier};
-use crate::config::{CameraConfig, Config, TransportKind};
+use crate::config::{AgentLostPolicy, CameraConfig, Config, TransportKind};
 use crate::transport::shm::{ShmHost, ShmHostCreateError};
 use crate::transport::tcp::{TcpHost, TcpHostCreateError};
 use crate::transport::{FrameLoan, HostTransport, HostTransportError};
@@ -207,6 +207,10 @@ pub struct HostStats {
     pub commands_overflowed: u64,
     /// Frames that reached no agent (not connected, or async TCP with a full socket).
     pub frames_undelivered: u64,
+    /// Agents evicted at least once (process died or disconnected), ascending.
+    pub evicted_agents: Vec<u32>,
+    /// Times an evicted agent came back.
+    pub rejoins: u64,
 }
 
 /// Why the host could not be created.
@@ -265,6 +269,26 @@ pub enum HostCycleError {
     /// SIGINT/SIGTERM.
     #[error("termination requested")]
     Terminated,
+    /// An agent was lost and `on_agent_lost = "abort"`.
+    #[error(
+        "agent {agent} was lost in cycle {cycle} (its process died or disconnected); on_agent_lost = \"abort\""
+    )]
+    AgentLost {
+        /// Agent id.
+        agent: u32,
+        /// Cycle.
+        cycle: u64,
+    },
+    /// An agent was lost, `on_agent_lost = "wait"`, and it did not come back.
+    #[error(
+        "agent {agent} was lost and did not reconnect within {waited:?} (on_agent_lost = \"wait\")"
+    )]
+    AgentNotBack {
+        /// Agent id.
+        agent: u32,
+        /// How long we waited.
+        waited: Duration,
+    },
     /// Transport failure.
     #[error(transparent)]
     Transport(HostTransportError),
@@ -314,6 +338,7 @@ impl<'c> HostBuilder<'c> {
                     image_count: a.cameras.len().min(MAX_CAMERAS),
                     last_outcome: WireOutcome::None,
                     last_rejected: 0,
+                    evicted: false,
                 }
             })
             .collect();
@@ -349,6 +374,8 @@ impl<'c> HostBuilder<'c> {
             },
             stats: HostStats::default(),
             next_tick: None,
+            dead: Vec::with_capacity(n),
+            lost_this_cycle: Vec::with_capacity(n),
             config,
         })
     }
@@ -361,7 +388,12 @@ struct SlotState {
     image_count: usize,
     last_outcome: WireOutcome,
     last_rejected: u32,
+    /// Evicted and not yet back.
+    evicted: bool,
 }
+
+/// How often the host looks for dead agent processes while it waits.
+pub const REAP_PERIOD: Duration = Duration::from_millis(100);
 
 /// The host side of a vrsync session.
 pub struct Host {
@@ -374,6 +406,8 @@ pub struct Host {
     report: CycleReport,
     stats: HostStats,
     next_tick: Option<Instant>,
+    dead: Vec<usize>,
+    lost_this_cycle: Vec<usize>,
 }
 
 impl core::fmt::Debug for Host {
@@ -545,6 +579,11 @@ impl Host {
         let slot = frame.slot;
         if self.backend.publish(slot, frame.loan)? {
             self.barrier.await_slot(slot);
+            if self.slots[slot].evicted {
+                self.slots[slot].evicted = false;
+                self.stats.rejoins += 1;
+                info!(agent = frame.agent_id, cycle = self.cycle, "agent rejoined");
+            }
         } else {
             self.stats.frames_undelivered += 1;
             debug!(
@@ -640,19 +679,58 @@ impl Host {
         Ok(())
     }
 
+    /// Evicts awaited agents that disconnected or whose process died.
+    fn check_lost(&mut self, reap: bool) {
+        self.dead.clear();
+        if reap {
+            self.backend.reap_dead_agents(&mut self.dead);
+        }
+        for slot in self.barrier.pending_slots() {
+            if !self.backend.is_connected(slot) && !self.dead.contains(&slot) {
+                self.dead.push(slot);
+            }
+        }
+        for i in 0..self.dead.len() {
+            let slot = self.dead[i];
+            if self.barrier.evict(slot) {
+                let id = self.slots[slot].id;
+                warn!(
+                    agent = id,
+                    cycle = self.cycle,
+                    "agent lost (process died or disconnected): evicted"
+                );
+                self.slots[slot].evicted = true;
+                self.lost_this_cycle.push(slot);
+                if let Err(pos) = self.stats.evicted_agents.binary_search(&id) {
+                    self.stats.evicted_agents.insert(pos, id);
+                }
+            }
+        }
+    }
+
     fn collect_sync(&mut self) -> Result<(), HostCycleError> {
-        let deadline = Instant::now() + self.config.sync.stop_timeout;
+        let started = Instant::now();
+        let deadline = started + self.config.sync.stop_timeout;
+        let mut next_reap = started + REAP_PERIOD;
+        self.lost_this_cycle.clear();
         loop {
             self.drain(true)?;
+            let now = Instant::now();
+            let reap = now >= next_reap;
+            if reap {
+                next_reap = now + REAP_PERIOD;
+            }
+            self.check_lost(reap);
             if self.barrier.is_complete() {
                 break;
             }
-            let now = Instant::now();
             if now >= deadline {
                 break;
             }
-            self.backend.wait_activity(deadline - now)?;
+            self.backend
+                .wait_activity(deadline.min(next_reap).saturating_duration_since(now))?;
         }
+        self.handle_lost()?;
         let mut timed_out = 0u64;
         for (slot, a) in self.report.agents.iter_mut().enumerate() {
             a.outcome = self.barrier.outcome(slot);
@@ -678,6 +756,46 @@ impl Host {
             );
         }
         Ok(())
+    }
+
+    /// Applies `on_agent_lost` to the agents lost this cycle.
+    fn handle_lost(&mut self) -> Result<(), HostCycleError> {
+        let Some(&slot) = self.lost_this_cycle.first() else {
+            return Ok(());
+        };
+        let agent = self.slots[slot].id;
+        match self.config.sync.on_agent_lost {
+            AgentLostPolicy::Evict => Ok(()),
+            AgentLostPolicy::Abort => Err(HostCycleError::AgentLost {
+                agent,
+                cycle: self.cycle,
+            }),
+            AgentLostPolicy::Wait => {
+                let timeout = self.config.sync.connect_timeout;
+                let started = Instant::now();
+                for i in 0..self.lost_this_cycle.len() {
+                    let slot = self.lost_this_cycle[i];
+                    let agent = self.slots[slot].id;
+                    warn!(
+                        agent,
+                        "pausing until the agent reconnects (on_agent_lost = \"wait\")"
+                    );
+                    while !self.backend.is_connected(slot) {
+                        let left = timeout.saturating_sub(started.elapsed());
+                        if left.is_zero() {
+                            return Err(HostCycleError::AgentNotBack {
+                                agent,
+                                waited: started.elapsed(),
+                            });
+                        }
+                        self.backend
+                            .wait_activity(left.min(Duration::from_secs(1)))?;
+                    }
+                }
+                self.backend.update_connections();
+                Ok(())
+            }
+        }
     }
 
     fn collect_async(&mut self) -> Result<(), HostCycleError> {

@@ -300,7 +300,10 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
         if let Some(bar) = &bar {
             bar.inc(1);
         }
-        if let Some((id, status)) = agents.failed() {
+        if let Some((id, status)) = agents.failed()
+            && !host.stats().evicted_agents.contains(&id)
+            && config.sync.on_agent_lost != vrsync_bridge::config::AgentLostPolicy::Evict
+        {
             bail!("agent {id} exited during cycle {cycle} ({status})");
         }
         if host.termination_requested() {
@@ -325,8 +328,14 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
     for (id, why) in &failures {
         warn!(agent = id, "agent did not end cleanly: {why}");
     }
-    if !interrupted && !failures.is_empty() {
-        bail!("spawned agents failed: {failures:?}");
+    // An evicted agent's failure was handled by on_agent_lost = "evict"; any other failure
+    // of a spawned agent fails the run.
+    let unhandled: Vec<_> = failures
+        .iter()
+        .filter(|(id, _)| !stats.evicted_agents.contains(id))
+        .collect();
+    if !interrupted && !unhandled.is_empty() {
+        bail!("spawned agents failed: {unhandled:?}");
     }
     let wall_s = wall.as_secs_f64();
     let summary = Summary {
@@ -344,7 +353,7 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
         stop_timeouts: stats.stop_timeouts,
         agent_timeouts: stats.agent_timeouts,
         late_stops: stats.late_batches,
-        evicted_agents: Vec::new(),
+        evicted_agents: stats.evicted_agents.clone(),
         commands_applied: applied,
         commands_rejected: rejected_total,
         trajectory_hash: hasher.finalize().to_hex().to_string(),

@@ -50,6 +50,11 @@ struct Args {
     /// the agent id, so spawned agents can share one --agent-arg.
     #[arg(long, value_name = "FILE")]
     log_cycles: Option<PathBuf>,
+    /// Testing aid: before the policy's commands, send four invalid ones every cycle (NaN
+    /// distance, distance out of range, unknown object id, unknown command kind), all with
+    /// action id 4294967295; the host must reject them and leave the world untouched.
+    #[arg(long, hide = true)]
+    bad_commands: bool,
     /// Testing aid: in this cycle, compute for twice the config's stop_timeout before
     /// stopping, so the host times out and the stop arrives late.
     #[arg(long, value_name = "CYCLE", hide = true)]
@@ -147,6 +152,30 @@ fn run(args: &Args) -> anyhow::Result<ExitCode> {
         let decision = policy.decide(&frame);
         drop(frame);
         sent.clear();
+        if args.bad_commands {
+            use vrsync_bridge::wire::{Command, MotorCommand};
+            let bad_id = u32::MAX;
+            let mut nan = Command::Move {
+                heading_deg: 0.0,
+                distance: 1.0,
+            }
+            .encode(bad_id);
+            nan.args[1] = f32::NAN;
+            let far = Command::Move {
+                heading_deg: 0.0,
+                distance: 1.0e9,
+            }
+            .encode(bad_id);
+            let ghost = Command::GraspId { object_id: 999_999 }.encode(bad_id);
+            let unknown = MotorCommand {
+                kind: 99,
+                action_id: bad_id,
+                ..MotorCommand::default()
+            };
+            for c in [nan, far, ghost, unknown] {
+                agent.send_wire(c).context("queue command")?;
+            }
+        }
         for command in decision.iter() {
             let action = agent.send(command).context("queue command")?;
             policy.started(action);

@@ -134,6 +134,13 @@ pub trait HostTransport {
     fn update_connections(&mut self);
     /// Whether SIGINT/SIGTERM was received.
     fn termination_requested(&self) -> bool;
+    /// Finds agents whose process died (iceoryx2 reports their node dead), removes their
+    /// stale resources, and appends their slots to `dead`. Called a few times per second
+    /// while the host waits; transports that see disconnects directly (TCP) need nothing.
+    fn reap_dead_agents(&mut self, dead: &mut Vec<usize>) {
+        let _ = dead;
+    }
+
     /// The network address agents connect to, for network transports.
     fn local_addr(&self) -> Option<std::net::SocketAddr> {
         None

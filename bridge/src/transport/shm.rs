@@ -17,6 +17,8 @@
 use std::mem::MaybeUninit;
 use std::time::{Duration, Instant};
 
+use tracing::debug;
+
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
@@ -83,6 +85,38 @@ pub fn reserved_bytes(config: &Config) -> u64 {
         })
         .sum()
 }
+
+/// Free bytes of the tmpfs behind `/dev/shm` (where iceoryx2 keeps its segments), if known.
+pub fn shm_free_bytes() -> Option<u64> {
+    let path = c"/dev/shm";
+    let mut st = core::mem::MaybeUninit::<libc::statvfs>::uninit();
+    // SAFETY: `path` is NUL-terminated and `st` is valid for writes of one statvfs.
+    let rc = unsafe { libc::statvfs(path.as_ptr(), st.as_mut_ptr()) };
+    if rc != 0 {
+        return None;
+    }
+    // SAFETY: statvfs returned 0, so it initialised `st`.
+    let st = unsafe { st.assume_init() };
+    // The field types differ between platforms (u32 on some); the casts are for those.
+    #[allow(clippy::unnecessary_cast)]
+    Some(st.f_bavail as u64 * st.f_frsize as u64)
+}
+
+/// Checks that the services of `config` fit into `/dev/shm`. tmpfs is filled lazily: an
+/// undersized one gives SIGBUS at write time, long after start, so we refuse up front.
+///
+/// # Errors
+/// `(needed, available)` in bytes when they do not fit.
+pub fn check_shm_budget(config: &Config) -> Result<(), (u64, u64)> {
+    let needed = reserved_bytes(config);
+    match shm_free_bytes() {
+        Some(available) if needed > available => Err((needed, available)),
+        _ => Ok(()),
+    }
+}
+
+/// The advice printed with a budget error.
+pub const SHM_BUDGET_FIX: &str = "use fewer or smaller cameras or fewer agents, or give /dev/shm more room      (`mount -o remount,size=16G /dev/shm`; in Docker `--shm-size=16g` or `--ipc=host`)";
 
 fn svc_name(session: &str, suffix: &str) -> Result<ServiceName, String> {
     let name = service_name(session, suffix);
@@ -224,6 +258,7 @@ struct HostAgentPorts {
 /// The host side of the shared-memory transport.
 pub struct ShmHost {
     node: Node<Svc>,
+    agent_node_names: Vec<String>,
     spin: bool,
     spins: u32,
     _start_service: event_factory::PortFactory<Svc>,
@@ -259,6 +294,19 @@ pub enum ShmHostCreateError {
         /// The service that exists.
         service: String,
     },
+    /// The services would not fit into `/dev/shm`.
+    #[error(
+        "the shared memory of this session needs {needed_mb} MB but /dev/shm has only {available_mb} MB free: {fix}",
+        needed_mb = needed / 1_000_000,
+        available_mb = available / 1_000_000,
+        fix = SHM_BUDGET_FIX
+    )]
+    ShmBudget {
+        /// Bytes the services reserve.
+        needed: u64,
+        /// Bytes free in /dev/shm.
+        available: u64,
+    },
     /// iceoryx2 refused to create a node, service or port.
     #[error("iceoryx2: {0}")]
     Iceoryx(String),
@@ -273,6 +321,9 @@ impl ShmHost {
         init_iceoryx2_logging();
         let ice = ShmHostCreateError::Iceoryx;
         let session = &config.session;
+        if let Err((needed, available)) = check_shm_budget(config) {
+            return Err(ShmHostCreateError::ShmBudget { needed, available });
+        }
         cleanup_dead_nodes();
         if host_alive(session) {
             return Err(ShmHostCreateError::SessionInUse {
@@ -398,6 +449,11 @@ impl ShmHost {
             .map_err(|e| ice(format!("cannot create the start notifier: {e:?}")))?;
         Ok(Self {
             node,
+            agent_node_names: config
+                .agents
+                .iter()
+                .map(|a| agent_node_name(session, a.id))
+                .collect(),
             spin: config.sync.wait == crate::config::WaitMode::Spin,
             spins: 0,
             _start_service: start_service,
@@ -545,6 +601,27 @@ impl HostTransport for ShmHost {
             return Err(HostTransportError::Terminated);
         }
         Ok(())
+    }
+
+    fn reap_dead_agents(&mut self, dead: &mut Vec<usize>) {
+        use iceoryx2::node::NodeView;
+        let names = &self.agent_node_names;
+        let _ = Node::<Svc>::list(Config2::global_config(), |state| {
+            if let NodeState::Dead(view) = state {
+                let slot = view
+                    .details()
+                    .as_ref()
+                    .and_then(|d| names.iter().position(|n| n == d.name().as_str()));
+                if let Some(slot) = slot {
+                    // Removes its ports from our services: its sample loans come back and
+                    // a restarted agent with the same id can attach.
+                    let cleaned = view.try_remove_stale_resources().is_ok();
+                    debug!(slot, cleaned, "dead agent node found");
+                    dead.push(slot);
+                }
+            }
+            CallbackProgression::Continue
+        });
     }
 
     fn update_connections(&mut self) {

@@ -1,0 +1,304 @@
+//! Faults with real processes: agents and hosts killed with SIGKILL, two hosts for one
+//! session, stale shared memory, an oversized config, bad commands, SIGINT/SIGTERM.
+
+use std::time::Duration;
+
+use crate::util::{self, Proc, RUN_DEADLINE, TestConfig, Transport, bin, cycle_log, summary};
+
+/// Names of iceoryx2 services of `session` that still exist.
+fn services_of(session: &str) -> Vec<String> {
+    use iceoryx2::prelude::*;
+    let prefix = format!("vrsync/{session}/");
+    let mut found = Vec::new();
+    ipc::Service::list(Config::global_config(), |s| {
+        let name = s.static_details.name().to_string();
+        if name.starts_with(&prefix) {
+            found.push(name);
+        }
+        CallbackProgression::Continue
+    })
+    .expect("list services");
+    found
+}
+
+/// An agent is SIGKILLed mid-run: the host evicts it (long before the stop timeout), the
+/// other agent goes on without a gap, and a restarted agent with the same id rejoins.
+fn a_killed_agent_is_evicted_and_can_rejoin(t: Transport) {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = TestConfig::with_transport("evict", 2, t);
+    cfg.stop_timeout_s = 30.0; // eviction must not wait for it
+    let config = cfg.write(dir.path());
+    let config = config.to_str().unwrap();
+    let s = dir.path().join("summary.json");
+    let mut host = Proc::spawn(
+        &bin("vr-sim"),
+        &[
+            "run",
+            "--config",
+            config,
+            "--frames",
+            "60",
+            "--summary-json",
+            s.to_str().unwrap(),
+            "--quiet",
+        ],
+    );
+    host.wait_for_stderr("waiting for agents", Duration::from_secs(30));
+    let log0 = dir.path().join("a0.log");
+    let log1 = dir.path().join("a1.log");
+    let a0 = Proc::spawn(
+        &bin("vr-agent"),
+        &[
+            "--config",
+            config,
+            "--id",
+            "0",
+            "--policy",
+            "circle",
+            "--log-cycles",
+            log0.to_str().unwrap(),
+        ],
+    );
+    // Agent 1 leaves after 10 cycles by being killed: it stops answering in cycle 10.
+    let mut victim = Proc::spawn(
+        &bin("vr-agent"),
+        &[
+            "--config",
+            config,
+            "--id",
+            "1",
+            "--policy",
+            "circle",
+            "--frames",
+            "10",
+            "--log-cycles",
+            log1.to_str().unwrap(),
+            "--late-stop-at",
+            "9",
+        ],
+    );
+    // --late-stop-at 9 makes it sleep 2 × stop_timeout before its 10th stop: kill it then.
+    victim.wait_for_stderr("stopping late on purpose", Duration::from_secs(60));
+    victim.signal(libc::SIGKILL);
+    let _ = victim.wait(Duration::from_secs(10));
+    host.wait_for_stderr("evicted", Duration::from_secs(20));
+    // Restart agent 1: it rejoins at the next cycle.
+    let back = Proc::spawn(
+        &bin("vr-agent"),
+        &["--config", config, "--id", "1", "--policy", "circle"],
+    );
+    host.wait_for_stderr("agent rejoined", Duration::from_secs(20));
+    let out = host.wait(RUN_DEADLINE);
+    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    assert_eq!(a0.wait(Duration::from_secs(10)).code(), Some(0));
+    assert_eq!(back.wait(Duration::from_secs(10)).code(), Some(0));
+    let sum = summary(&s);
+    assert_eq!(sum["frames"], 60);
+    assert_eq!(sum["evicted_agents"], serde_json::json!([1]));
+    assert_eq!(
+        sum["stop_timeouts"], 0,
+        "a dead agent is evicted, not waited for"
+    );
+    // The survivor saw every cycle, without a gap.
+    let cycles: Vec<u64> = cycle_log(&log0).iter().map(|l| l.cycle).collect();
+    assert_eq!(cycles, (0..60).collect::<Vec<_>>());
+}
+
+/// The host is SIGKILLed: a waiting agent's wait_start reports "host gone" (vr-agent exits
+/// 1 with a clear message); a new host for the same session starts cleanly afterwards.
+fn a_killed_host_is_noticed_and_a_new_host_starts(t: Transport) {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = TestConfig::with_transport("deadhost", 1, t);
+    let config = cfg.write(dir.path());
+    let config = config.to_str().unwrap();
+    let mut host = Proc::spawn(&bin("vr-sim"), &["run", "--config", config, "--quiet"]);
+    host.wait_for_stderr("waiting for agents", Duration::from_secs(30));
+    let mut agent = Proc::spawn(
+        &bin("vr-agent"),
+        &["--config", config, "--id", "0", "--policy", "idle"],
+    );
+    host.wait_for_stderr("all agents connected", Duration::from_secs(30));
+    agent.wait_for_stderr("connected", Duration::from_secs(30));
+    host.signal(libc::SIGKILL);
+    let _ = host.wait(Duration::from_secs(10));
+    let out = agent.wait(Duration::from_secs(10));
+    assert_eq!(out.code(), Some(1), "stderr:\n{}", out.stderr);
+    assert!(out.stderr.contains("host is gone"), "{}", out.stderr);
+
+    // A new host with the same session cleans what the dead one left and runs.
+    let s = dir.path().join("summary.json");
+    let out = util::run(
+        "vr-sim",
+        &[
+            "run",
+            "--config",
+            config,
+            "--frames",
+            "5",
+            "--spawn-agents",
+            "1",
+            "--summary-json",
+            s.to_str().unwrap(),
+            "--quiet",
+        ],
+        RUN_DEADLINE,
+    );
+    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    assert_eq!(summary(&s)["frames"], 5);
+}
+
+#[test]
+fn two_live_hosts_for_one_session_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = TestConfig::new("twohosts", 1);
+    let config = cfg.write(dir.path());
+    let config = config.to_str().unwrap();
+    let mut first = Proc::spawn(&bin("vr-sim"), &["run", "--config", config, "--quiet"]);
+    first.wait_for_stderr("waiting for agents", Duration::from_secs(30));
+    let out = util::run(
+        "vr-sim",
+        &["run", "--config", config, "--quiet"],
+        Duration::from_secs(30),
+    );
+    assert_eq!(out.code(), Some(1), "stderr:\n{}", out.stderr);
+    assert!(out.stderr.contains("already hosted"), "{}", out.stderr);
+    assert!(out.stderr.contains(&cfg.session), "{}", out.stderr);
+    first.signal(libc::SIGTERM);
+    let _ = first.wait(Duration::from_secs(30));
+}
+
+#[test]
+fn a_config_that_does_not_fit_dev_shm_is_refused_with_the_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = String::from("session = \"budget\"\n");
+    for id in 0..250 {
+        text += &format!("[[agent]]\nid = {id}\n");
+        for c in 0..4 {
+            text += &format!(
+                "[[agent.camera]]\nname = \"c{c}\"\nwidth = 8192\nheight = 8192\nformat = \"rgba8\"\n"
+            );
+        }
+    }
+    let path = dir.path().join("huge.toml");
+    std::fs::write(&path, &text).unwrap();
+    let out = util::run(
+        "vr-sim",
+        &["run", "--config", path.to_str().unwrap(), "--quiet"],
+        Duration::from_secs(60),
+    );
+    assert_eq!(out.code(), Some(2), "stderr:\n{}", out.stderr);
+    assert!(out.stderr.contains("huge.toml:"), "{}", out.stderr);
+    assert!(out.stderr.contains("agent.camera"), "{}", out.stderr);
+    assert!(out.stderr.contains("MB of shared memory"), "{}", out.stderr);
+    assert!(out.stderr.contains("/dev/shm"), "{}", out.stderr);
+}
+
+/// Invalid commands are rejected and counted, and the world is untouched: the trajectory
+/// equals that of the same run without them.
+fn bad_commands_are_rejected_and_leave_the_world_untouched(t: Transport) {
+    let dir = tempfile::tempdir().unwrap();
+    let mut hashes = Vec::new();
+    for bad in [false, true] {
+        let cfg = TestConfig::with_transport("badcmd", 1, t);
+        let config = cfg.write(dir.path());
+        let s = dir.path().join(format!("s{bad}.json"));
+        let mut args = vec![
+            "run".to_string(),
+            "--config".into(),
+            config.display().to_string(),
+            "--frames".into(),
+            "40".into(),
+            "--spawn-agents".into(),
+            "1".into(),
+            "--agent-arg=--policy".into(),
+            "--agent-arg=circle".into(),
+            "--summary-json".into(),
+            s.display().to_string(),
+            "--quiet".into(),
+        ];
+        if bad {
+            args.push("--agent-arg=--bad-commands".into());
+        }
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let out = util::run("vr-sim", &args, RUN_DEADLINE);
+        assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+        let sum = summary(&s);
+        assert_eq!(sum["commands_applied"], 40);
+        assert_eq!(sum["commands_rejected"], if bad { 160 } else { 0 });
+        if bad {
+            // Logged once per agent and kind, not once per command.
+            let logged = out
+                .stderr
+                .lines()
+                .filter(|l| l.contains("command rejected"))
+                .count();
+            assert_eq!(
+                logged, 3,
+                "move (twice: NaN and range), grasp_id, unknown:\n{}",
+                out.stderr
+            );
+        }
+        hashes.push(sum["trajectory_hash"].as_str().unwrap().to_string());
+    }
+    assert_eq!(hashes[0], hashes[1]);
+}
+
+/// SIGINT and SIGTERM end the host's loop after the current cycle: the summary is still
+/// printed and written, the agent leaves cleanly, and no service of the session remains.
+fn a_signal_ends_the_run_cleanly(t: Transport, sig: i32) {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = TestConfig::with_transport("signal", 1, t);
+    let config = cfg.write(dir.path());
+    let config = config.to_str().unwrap();
+    let s = dir.path().join("summary.json");
+    let mut host = Proc::spawn(
+        &bin("vr-sim"),
+        &[
+            "run",
+            "--config",
+            config,
+            "--summary-json",
+            s.to_str().unwrap(),
+            "--quiet",
+        ],
+    );
+    host.wait_for_stderr("waiting for agents", Duration::from_secs(30));
+    let agent = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "0"]);
+    host.wait_for_stderr("all agents connected", Duration::from_secs(30));
+    host.signal(sig);
+    let out = host.wait(Duration::from_secs(30));
+    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    assert!(out.stdout.contains("(interrupted)"), "{}", out.stdout);
+    assert_eq!(summary(&s)["interrupted"], true);
+    assert_eq!(agent.wait(Duration::from_secs(10)).code(), Some(0));
+    if t == Transport::Shm {
+        assert_eq!(services_of(&cfg.session), Vec::<String>::new());
+    }
+}
+
+fn sigint(t: Transport) {
+    a_signal_ends_the_run_cleanly(t, libc::SIGINT);
+}
+
+fn sigterm(t: Transport) {
+    a_signal_ends_the_run_cleanly(t, libc::SIGTERM);
+}
+
+macro_rules! for_both_transports {
+    ($($name:ident),* $(,)?) => {
+        mod shm {
+            $( #[test] fn $name() { super::$name(crate::util::Transport::Shm) } )*
+        }
+        mod tcp {
+            $( #[test] fn $name() { super::$name(crate::util::Transport::Tcp) } )*
+        }
+    };
+}
+
+for_both_transports!(
+    a_killed_agent_is_evicted_and_can_rejoin,
+    a_killed_host_is_noticed_and_a_new_host_starts,
+    bad_commands_are_rejected_and_leave_the_world_untouched,
+    sigint,
+    sigterm,
+);
