@@ -8,6 +8,7 @@ mod util;
 
 mod config;
 mod cpp;
+mod hostile;
 mod faults;
 mod sync;
 mod world;
