@@ -8,7 +8,7 @@ mod util;
 
 mod config;
 mod cpp;
-mod hostile;
 mod faults;
+mod hostile;
 mod sync;
 mod world;
