@@ -1,0 +1,1081 @@
+//! The exported `vrs_host_*` functions. Each is a thin wrapper over an `*_impl` function
+//! returning a `Result`; [`boundary`] catches panics and records the message.
+
+use std::ffi::{CStr, c_char};
+use std::time::Duration;
+
+use vrsync_bridge::config::{Config, TransportKind};
+use vrsync_bridge::wire::{
+    self, ActionState, ActionStatus, Collision, EyePosition, GridPosition, HeadMotion, Pose,
+};
+use vrsync_bridge::{Host, HostWaitError};
+
+use crate::state::{
+    FfiError, ImageView, Phase, boundary, boundary_status, c_name, copy_report, destroy,
+    last_error_ptr, register, with_host,
+};
+use crate::types::*;
+
+// ---------------------------------------------------------------------------------------
+// Helpers
+// ---------------------------------------------------------------------------------------
+
+/// Writes `value` through `out` when `out` is not null.
+///
+/// # Safety
+/// `out` is null or valid for writing a `T`.
+unsafe fn write_opt<T>(out: *mut T, value: T) {
+    if !out.is_null() {
+        // SAFETY: non-null and, by the caller's contract, valid for writes.
+        unsafe { out.write(value) }
+    }
+}
+
+/// Writes `value` through `out`, which must not be null.
+///
+/// # Safety
+/// `out` is null or valid for writing a `T`.
+unsafe fn write_required<T>(out: *mut T, what: &'static str, value: T) -> Result<(), FfiError> {
+    if out.is_null() {
+        return Err(FfiError::Null(what));
+    }
+    // SAFETY: non-null and, by the caller's contract, valid for writes.
+    unsafe { out.write(value) };
+    Ok(())
+}
+
+/// Reads a C string argument as UTF-8.
+///
+/// # Safety
+/// `s` is null or a valid NUL-terminated string.
+unsafe fn str_arg<'a>(s: *const c_char, what: &'static str) -> Result<&'a str, FfiError> {
+    if s.is_null() {
+        return Err(FfiError::Null(what));
+    }
+    // SAFETY: non-null and NUL-terminated by the caller's contract.
+    let c = unsafe { CStr::from_ptr(s) };
+    c.to_str()
+        .map_err(|e| FfiError::InvalidArgument(format!("{what} is not UTF-8: {e}")))
+}
+
+fn image_info(view: &ImageView) -> vrs_host_image_t {
+    let d = &view.desc;
+    vrs_host_image_t {
+        data: view.data,
+        len: d.len,
+        stride: u64::from(d.stride_bytes),
+        width: d.width_px,
+        height: d.height_px,
+        format: d.pixel_format().map_or(
+            vrs_host_pixel_format_t::VRS_HOST_PIXEL_FORMAT_RGB8,
+            Into::into,
+        ),
+        camera: d.camera,
+        name: c_name(d.name()),
+    }
+}
+
+/// Checks the sensor struct before anything is written (a wrong count is the typical
+/// sign of a binding whose struct layout does not match the header).
+fn check_sensors(s: &vrs_host_sensors_t) -> Result<(), FfiError> {
+    if s.status_count > VRS_HOST_MAX_STATUSES {
+        return Err(FfiError::InvalidArgument(format!(
+            "sensors.status_count = {} exceeds VRS_HOST_MAX_STATUSES ({VRS_HOST_MAX_STATUSES})",
+            s.status_count
+        )));
+    }
+    if s.collision_count > VRS_HOST_MAX_COLLISIONS {
+        return Err(FfiError::InvalidArgument(format!(
+            "sensors.collision_count = {} exceeds VRS_HOST_MAX_COLLISIONS \
+             ({VRS_HOST_MAX_COLLISIONS})",
+            s.collision_count
+        )));
+    }
+    let statuses = &s.statuses[..s.status_count as usize];
+    if let Some((i, bad)) = statuses
+        .iter()
+        .enumerate()
+        .find(|(_, st)| ActionState::from_u32(st.state).is_none())
+    {
+        return Err(FfiError::InvalidArgument(format!(
+            "sensors.statuses[{i}].state = {} is not a vrs_host_action_state_t",
+            bad.state
+        )));
+    }
+    Ok(())
+}
+
+fn write_header(h: &mut wire::SensorHeader, s: &vrs_host_sensors_t) {
+    h.pose = Pose {
+        position: s.pose.position,
+        rotation: s.pose.rotation,
+    };
+    h.reward = s.reward;
+    h.grid = GridPosition {
+        position: s.grid.position,
+        rotation_deg: s.grid.rotation_deg,
+    };
+    h.head_motion = HeadMotion {
+        velocity: s.head_motion.velocity,
+        acceleration: s.head_motion.acceleration,
+        angular_velocity_deg: s.head_motion.angular_velocity_deg,
+        angular_acceleration_deg: s.head_motion.angular_acceleration_deg,
+    };
+    h.eye = EyePosition {
+        rotation_deg: s.eye.rotation_deg,
+        rotation_velocity_deg: s.eye.rotation_velocity_deg,
+    };
+    // Every entry is written, the unused ones zeroed: the sample may hold an older frame.
+    h.status_count = s.status_count;
+    for (i, dst) in h.statuses.iter_mut().enumerate() {
+        *dst = match s.statuses.get(i) {
+            Some(src) if i < s.status_count as usize => ActionStatus {
+                action_id: src.action_id,
+                state: src.state,
+            },
+            _ => ActionStatus::default(),
+        };
+    }
+    h.collision_count = s.collision_count;
+    for (i, dst) in h.collisions.iter_mut().enumerate() {
+        *dst = match s.collisions.get(i) {
+            Some(src) if i < s.collision_count as usize => Collision {
+                action_id: src.action_id,
+                collider_id: src.collider_id,
+            },
+            _ => Collision::default(),
+        };
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Implementations
+// ---------------------------------------------------------------------------------------
+
+fn create_impl(config_path: *const c_char, out_host: *mut *mut vrs_host_t) -> Result<(), FfiError> {
+    if out_host.is_null() {
+        return Err(FfiError::Null("out_host"));
+    }
+    // SAFETY: checked non-null; valid for writes by the caller's contract. Cleared first
+    // so that a failed create leaves NULL behind.
+    unsafe { out_host.write(std::ptr::null_mut()) };
+    // SAFETY: a C string by the caller's contract.
+    let path = unsafe { str_arg(config_path, "config_path") }?;
+    let config = Config::load(path)?;
+    let host = Host::builder(&config).create()?;
+    let key = register(host)?;
+    // SAFETY: as above. The handle is a registry key, never dereferenced.
+    unsafe { out_host.write(std::ptr::without_provenance_mut(key)) };
+    Ok(())
+}
+
+fn info_impl(host: *mut vrs_host_t, out_info: *mut vrs_host_info_t) -> Result<(), FfiError> {
+    with_host(host, |st| {
+        let h = &st.host;
+        let c = h.config();
+        let info = vrs_host_info_t {
+            cycle: h.cycle(),
+            sim_time_ns: h.sim_time_ns(),
+            simulation_time_per_frame_ns: c.sync.simulation_time_per_frame.as_nanos() as u64,
+            stop_timeout_ns: c.sync.stop_timeout.as_nanos() as u64,
+            connect_timeout_ns: c.sync.connect_timeout.as_nanos() as u64,
+            agent_count: st.ids.len() as u32,
+            sync_mode: u32::from(c.sync.sync_mode),
+            transport: match c.transport.kind {
+                TransportKind::Shm => vrs_host_transport_t::VRS_HOST_TRANSPORT_SHM,
+                TransportKind::Tcp => vrs_host_transport_t::VRS_HOST_TRANSPORT_TCP,
+            },
+            tcp_port: h.tcp_local_addr().map_or(0, |a| u32::from(a.port())),
+            max_commands_per_cycle: c.transport.max_commands_per_cycle,
+            protocol_version: wire::PROTOCOL_VERSION,
+        };
+        // SAFETY: null or writable by the caller's contract.
+        unsafe { write_required(out_info, "out_info", info) }
+    })
+}
+
+fn agent_info_impl(
+    host: *mut vrs_host_t,
+    index: u32,
+    out_agent: *mut vrs_host_agent_info_t,
+) -> Result<(), FfiError> {
+    with_host(host, |st| {
+        let i = index as usize;
+        let agent = st.host.config().agents.get(i).ok_or(FfiError::OutOfRange {
+            what: "agent",
+            index: i,
+            count: st.ids.len(),
+        })?;
+        let info = vrs_host_agent_info_t {
+            agent_id: agent.id,
+            camera_count: agent.cameras.len() as u32,
+            connected: u32::from(st.host.is_connected(agent.id)),
+            reserved: 0,
+        };
+        // SAFETY: null or writable by the caller's contract.
+        unsafe { write_required(out_agent, "out_agent", info) }
+    })
+}
+
+fn camera_impl(
+    host: *mut vrs_host_t,
+    agent_id: u32,
+    index: u32,
+    out_camera: *mut vrs_host_camera_t,
+) -> Result<(), FfiError> {
+    with_host(host, |st| {
+        let slot = st.slot_of(agent_id)?;
+        let cameras = &st.host.config().agents[slot].cameras;
+        let i = index as usize;
+        let c = cameras.get(i).ok_or(FfiError::OutOfRange {
+            what: "camera",
+            index: i,
+            count: cameras.len(),
+        })?;
+        let info = vrs_host_camera_t {
+            len: c.image_bytes() as u64,
+            stride: c.stride_bytes() as u64,
+            width: c.width_px,
+            height: c.height_px,
+            format: c.format.into(),
+            fov_horizontal_deg: c.fov_horizontal_deg,
+            fov_vertical_deg: c.fov_vertical_deg,
+            name: c_name(&c.name),
+        };
+        // SAFETY: null or writable by the caller's contract.
+        unsafe { write_required(out_camera, "out_camera", info) }
+    })
+}
+
+fn wait_for_agents_impl(
+    host: *mut vrs_host_t,
+    timeout_ms: i64,
+    out_missing: *mut u32,
+    missing_capacity: u32,
+    out_missing_count: *mut u32,
+) -> Result<(vrs_host_status_t, String), FfiError> {
+    if out_missing.is_null() && missing_capacity > 0 {
+        return Err(FfiError::Null("out_missing (with missing_capacity > 0)"));
+    }
+    with_host(host, |st| {
+        st.expect_phase("vrs_host_wait_for_agents", Phase::Frames)?;
+        let timeout = u64::try_from(timeout_ms)
+            .map(Duration::from_millis)
+            .unwrap_or(st.host.config().sync.connect_timeout);
+        match st.host.wait_for_agents(timeout) {
+            Ok(()) => {
+                // SAFETY: null or writable by the caller's contract.
+                unsafe { write_opt(out_missing_count, 0) };
+                Ok((vrs_host_status_t::VRS_HOST_OK, String::new()))
+            }
+            Err(e @ HostWaitError::AgentsMissing { .. }) => {
+                let message = e.to_string();
+                if let HostWaitError::AgentsMissing { missing, .. } = e {
+                    for (i, &id) in missing.iter().take(missing_capacity as usize).enumerate() {
+                        // SAFETY: non-null (checked above when capacity > 0) and valid
+                        // for `missing_capacity` writes by the caller's contract.
+                        unsafe { out_missing.add(i).write(id) };
+                    }
+                    // SAFETY: null or writable by the caller's contract.
+                    unsafe { write_opt(out_missing_count, missing.len() as u32) };
+                }
+                Ok((vrs_host_status_t::VRS_HOST_TIMEOUT, message))
+            }
+            Err(e) => Err(e.into()),
+        }
+    })
+}
+
+fn loan_frame_impl(
+    host: *mut vrs_host_t,
+    agent_id: u32,
+    out_frame: *mut vrs_host_frame_t,
+) -> Result<(), FfiError> {
+    const CALL: &str = "vrs_host_loan_frame";
+    with_host(host, |st| {
+        st.expect_phase(CALL, Phase::Frames)?;
+        let slot = st.slot_of(agent_id)?;
+        let s = &st.slots[slot];
+        if s.frame.is_some() {
+            return Err(FfiError::WrongState {
+                call: CALL,
+                why: format!("agent {agent_id}'s frame is already loaned (publish or discard it)"),
+            });
+        }
+        if s.published {
+            return Err(FfiError::WrongState {
+                call: CALL,
+                why: format!(
+                    "agent {agent_id}'s frame was already published this cycle (one frame per \
+                     agent and cycle)"
+                ),
+            });
+        }
+        let mut frame = st.host.loan_frame(agent_id)?;
+        let mut images = [None; wire::MAX_CAMERAS];
+        for (dst, image) in images.iter_mut().zip(frame.images_mut()) {
+            // The pointer stays valid while the loan lives in the slot: shared memory (or
+            // the TCP record buffer) does not move with the `SensorFrameMut`.
+            *dst = Some(ImageView {
+                data: image.data.as_mut_ptr(),
+                desc: image.desc,
+            });
+        }
+        let h = frame.header();
+        let info = vrs_host_frame_t {
+            cycle: h.cycle,
+            sim_time_ns: h.sim_time_ns,
+            agent_id,
+            image_count: images.iter().flatten().count() as u32,
+        };
+        let s = &mut st.slots[slot];
+        s.frame = Some(frame);
+        s.images = images;
+        // SAFETY: null or writable by the caller's contract.
+        unsafe { write_opt(out_frame, info) };
+        Ok(())
+    })
+}
+
+fn frame_image_impl(
+    host: *mut vrs_host_t,
+    agent_id: u32,
+    index: u32,
+    out_image: *mut vrs_host_image_t,
+) -> Result<(), FfiError> {
+    with_host(host, |st| {
+        let slot = st.slot_of(agent_id)?;
+        let s = &st.slots[slot];
+        if s.frame.is_none() {
+            return Err(FfiError::NoFrame {
+                call: "vrs_host_frame_image",
+                agent: agent_id,
+            });
+        }
+        let count = s.images.iter().flatten().count();
+        let view = s
+            .images
+            .get(index as usize)
+            .and_then(Option::as_ref)
+            .ok_or(FfiError::OutOfRange {
+                what: "image",
+                index: index as usize,
+                count,
+            })?;
+        // SAFETY: null or writable by the caller's contract.
+        unsafe { write_required(out_image, "out_image", image_info(view)) }
+    })
+}
+
+fn frame_image_by_name_impl(
+    host: *mut vrs_host_t,
+    agent_id: u32,
+    name: *const c_char,
+    out_image: *mut vrs_host_image_t,
+) -> Result<(), FfiError> {
+    // SAFETY: a C string by the caller's contract.
+    let name = unsafe { str_arg(name, "name") }?;
+    with_host(host, |st| {
+        let slot = st.slot_of(agent_id)?;
+        let s = &st.slots[slot];
+        if s.frame.is_none() {
+            return Err(FfiError::NoFrame {
+                call: "vrs_host_frame_image_by_name",
+                agent: agent_id,
+            });
+        }
+        let view = s
+            .images
+            .iter()
+            .flatten()
+            .find(|v| v.desc.name() == name)
+            .ok_or_else(|| FfiError::NoSuchCamera {
+                agent: agent_id,
+                name: name.to_owned(),
+            })?;
+        // SAFETY: null or writable by the caller's contract.
+        unsafe { write_required(out_image, "out_image", image_info(view)) }
+    })
+}
+
+fn publish_impl(
+    host: *mut vrs_host_t,
+    agent_id: u32,
+    sensors: *const vrs_host_sensors_t,
+) -> Result<(), FfiError> {
+    const CALL: &str = "vrs_host_publish";
+    let sensors = if sensors.is_null() {
+        vrs_host_sensors_t::default()
+    } else {
+        // SAFETY: non-null and valid for reads by the caller's contract. Read unaligned:
+        // a binding may hand over a packed copy.
+        unsafe { sensors.read_unaligned() }
+    };
+    check_sensors(&sensors)?;
+    with_host(host, |st| {
+        st.expect_phase(CALL, Phase::Frames)?;
+        let slot = st.slot_of(agent_id)?;
+        let s = &mut st.slots[slot];
+        let mut frame = s.frame.take().ok_or(FfiError::NoFrame {
+            call: CALL,
+            agent: agent_id,
+        })?;
+        s.images = [None; wire::MAX_CAMERAS];
+        write_header(frame.header_mut(), &sensors);
+        st.host.publish(frame)?;
+        st.slots[slot].published = true;
+        Ok(())
+    })
+}
+
+fn discard_frame_impl(host: *mut vrs_host_t, agent_id: u32) -> Result<(), FfiError> {
+    with_host(host, |st| {
+        let slot = st.slot_of(agent_id)?;
+        let s = &mut st.slots[slot];
+        s.images = [None; wire::MAX_CAMERAS];
+        // Dropping the loan returns the memory unpublished.
+        s.frame.take().map(drop).ok_or(FfiError::NoFrame {
+            call: "vrs_host_discard_frame",
+            agent: agent_id,
+        })
+    })
+}
+
+fn start_impl(host: *mut vrs_host_t) -> Result<(), FfiError> {
+    const CALL: &str = "vrs_host_start";
+    with_host(host, |st| {
+        st.expect_phase(CALL, Phase::Frames)?;
+        let loaned: Vec<u32> = st
+            .ids
+            .iter()
+            .zip(&st.slots)
+            .filter(|(_, s)| s.frame.is_some())
+            .map(|(&id, _)| id)
+            .collect();
+        if !loaned.is_empty() {
+            return Err(FfiError::WrongState {
+                call: CALL,
+                why: format!(
+                    "the frames of agents {loaned:?} are loaned but not published (publish or \
+                     discard them first)"
+                ),
+            });
+        }
+        st.host.start()?;
+        st.phase = Phase::Started;
+        Ok(())
+    })
+}
+
+fn collect_impl(host: *mut vrs_host_t, out_cycle: *mut vrs_host_cycle_t) -> Result<(), FfiError> {
+    with_host(host, |st| {
+        st.expect_phase("vrs_host_collect", Phase::Started)?;
+        let report = st.host.collect()?;
+        st.cycle = copy_report(&mut st.reports, report);
+        st.phase = Phase::Collected;
+        // SAFETY: null or writable by the caller's contract.
+        unsafe { write_opt(out_cycle, st.cycle) };
+        Ok(())
+    })
+}
+
+fn agent_report_impl(
+    host: *mut vrs_host_t,
+    index: u32,
+    out_report: *mut vrs_host_agent_report_t,
+) -> Result<(), FfiError> {
+    with_host(host, |st| {
+        st.expect_phase("vrs_host_agent_report", Phase::Collected)?;
+        let count = st.reports.len();
+        let r = st.reports.get(index as usize).ok_or(FfiError::OutOfRange {
+            what: "agent report",
+            index: index as usize,
+            count,
+        })?;
+        let report = vrs_host_agent_report_t {
+            agent_id: r.agent_id,
+            outcome: r.outcome,
+            command_count: r.commands.len() as u32,
+            reserved: 0,
+            commands: if r.commands.is_empty() {
+                std::ptr::null()
+            } else {
+                // Same layout (asserted in types.rs); the buffer is not touched until
+                // vrs_host_end_cycle.
+                r.commands.as_ptr().cast::<vrs_host_command_t>()
+            },
+        };
+        // SAFETY: null or writable by the caller's contract.
+        unsafe { write_required(out_report, "out_report", report) }
+    })
+}
+
+fn command_impl(
+    host: *mut vrs_host_t,
+    agent_index: u32,
+    command_index: u32,
+    out_command: *mut vrs_host_command_t,
+) -> Result<(), FfiError> {
+    with_host(host, |st| {
+        st.expect_phase("vrs_host_command", Phase::Collected)?;
+        let count = st.reports.len();
+        let r = st
+            .reports
+            .get(agent_index as usize)
+            .ok_or(FfiError::OutOfRange {
+                what: "agent report",
+                index: agent_index as usize,
+                count,
+            })?;
+        let c = r
+            .commands
+            .get(command_index as usize)
+            .ok_or(FfiError::OutOfRange {
+                what: "command",
+                index: command_index as usize,
+                count: r.commands.len(),
+            })?;
+        let command = vrs_host_command_t {
+            kind: c.kind,
+            action_id: c.action_id,
+            object_id: c.object_id,
+            reserved: c.reserved,
+            args: c.args,
+        };
+        // SAFETY: null or writable by the caller's contract.
+        unsafe { write_required(out_command, "out_command", command) }
+    })
+}
+
+fn set_rejected_impl(host: *mut vrs_host_t, agent_id: u32, rejected: u32) -> Result<(), FfiError> {
+    with_host(host, |st| {
+        st.slot_of(agent_id)?;
+        st.host.set_rejected(agent_id, rejected);
+        Ok(())
+    })
+}
+
+fn end_cycle_impl(host: *mut vrs_host_t) -> Result<(), FfiError> {
+    with_host(host, |st| {
+        st.expect_phase("vrs_host_end_cycle", Phase::Collected)?;
+        for s in &mut st.slots {
+            s.published = false;
+        }
+        for r in &mut st.reports {
+            r.commands.clear();
+        }
+        st.phase = Phase::Frames;
+        Ok(())
+    })
+}
+
+fn stats_impl(host: *mut vrs_host_t, out_stats: *mut vrs_host_stats_t) -> Result<(), FfiError> {
+    with_host(host, |st| {
+        let s = st.host.stats();
+        let stats = vrs_host_stats_t {
+            cycles: s.cycles,
+            stop_timeouts: s.stop_timeouts,
+            agent_timeouts: s.agent_timeouts,
+            late_batches: s.late_batches,
+            future_batches: s.future_batches,
+            commands_received: s.commands_received,
+            commands_overflowed: s.commands_overflowed,
+            frames_undelivered: s.frames_undelivered,
+        };
+        // SAFETY: null or writable by the caller's contract.
+        unsafe { write_required(out_stats, "out_stats", stats) }
+    })
+}
+
+fn init_logging_impl(filter: *const c_char) -> Result<(), FfiError> {
+    use tracing_subscriber::EnvFilter;
+    let filter = if filter.is_null() {
+        EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("warn"))
+    } else {
+        // SAFETY: a C string by the caller's contract.
+        let text = unsafe { str_arg(filter, "filter") }?;
+        EnvFilter::try_new(text)
+            .map_err(|e| FfiError::InvalidArgument(format!("bad log filter {text:?}: {e}")))?
+    };
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init()
+        .map_err(|_| FfiError::LoggingAlreadySet)
+}
+
+// ---------------------------------------------------------------------------------------
+// The exported functions: library
+// ---------------------------------------------------------------------------------------
+
+/// The version of this library (`"MAJOR.MINOR.PATCH"`), a static string.
+///
+/// # Safety
+/// Always safe to call; do not free the result.
+#[unsafe(no_mangle)]
+pub extern "C" fn vrs_host_version() -> *const c_char {
+    static VERSION: &CStr =
+        match CStr::from_bytes_with_nul(concat!(env!("CARGO_PKG_VERSION"), "\0").as_bytes()) {
+            Ok(v) => v,
+            Err(_) => c"unknown",
+        };
+    VERSION.as_ptr()
+}
+
+/// The vrsync wire protocol version this library speaks (agents must speak the same).
+///
+/// # Safety
+/// Always safe to call.
+#[unsafe(no_mangle)]
+pub extern "C" fn vrs_host_protocol_version() -> u32 {
+    wire::PROTOCOL_VERSION
+}
+
+/// The message of the last `vrs_host_` call made on this thread: why it failed or timed
+/// out, or an empty string after a success. Never NULL.
+///
+/// # Safety
+/// Always safe to call. The string belongs to the library and stays valid until the next
+/// `vrs_host_` call on this thread; copy it to keep it. Do not free it.
+#[unsafe(no_mangle)]
+pub extern "C" fn vrs_host_last_error_message() -> *const c_char {
+    last_error_ptr()
+}
+
+/// The name of a status code (`"VRS_HOST_TIMEOUT"`, …), or `"VRS_HOST_UNKNOWN_STATUS"`.
+/// A static string.
+///
+/// # Safety
+/// Always safe to call; do not free the result.
+#[unsafe(no_mangle)]
+pub extern "C" fn vrs_host_status_name(status: i32) -> *const c_char {
+    use vrs_host_status_t::*;
+    let all = [
+        (VRS_HOST_OK, c"VRS_HOST_OK"),
+        (VRS_HOST_TIMEOUT, c"VRS_HOST_TIMEOUT"),
+        (VRS_HOST_DEFERRED, c"VRS_HOST_DEFERRED"),
+        (
+            VRS_HOST_ERROR_INVALID_ARGUMENT,
+            c"VRS_HOST_ERROR_INVALID_ARGUMENT",
+        ),
+        (
+            VRS_HOST_ERROR_INVALID_HANDLE,
+            c"VRS_HOST_ERROR_INVALID_HANDLE",
+        ),
+        (VRS_HOST_ERROR_WRONG_THREAD, c"VRS_HOST_ERROR_WRONG_THREAD"),
+        (VRS_HOST_ERROR_CONFIG, c"VRS_HOST_ERROR_CONFIG"),
+        (VRS_HOST_ERROR_CREATE, c"VRS_HOST_ERROR_CREATE"),
+        (
+            VRS_HOST_ERROR_UNKNOWN_AGENT,
+            c"VRS_HOST_ERROR_UNKNOWN_AGENT",
+        ),
+        (VRS_HOST_ERROR_WRONG_STATE, c"VRS_HOST_ERROR_WRONG_STATE"),
+        (VRS_HOST_ERROR_NO_FRAME, c"VRS_HOST_ERROR_NO_FRAME"),
+        (VRS_HOST_ERROR_OUT_OF_RANGE, c"VRS_HOST_ERROR_OUT_OF_RANGE"),
+        (VRS_HOST_ERROR_TRANSPORT, c"VRS_HOST_ERROR_TRANSPORT"),
+        (VRS_HOST_ERROR_TERMINATED, c"VRS_HOST_ERROR_TERMINATED"),
+        (VRS_HOST_ERROR_OTHER, c"VRS_HOST_ERROR_OTHER"),
+        (VRS_HOST_ERROR_PANIC, c"VRS_HOST_ERROR_PANIC"),
+    ];
+    all.iter()
+        .find(|(s, _)| *s as i32 == status)
+        .map_or(c"VRS_HOST_UNKNOWN_STATUS", |(_, name)| name)
+        .as_ptr()
+}
+
+/// Sends the library's log (and iceoryx2's) to stderr. `filter` is a `RUST_LOG`-style
+/// filter such as `"info"` or `"vrsync_bridge=debug"`; NULL uses the `RUST_LOG`
+/// environment variable, or `"warn"`. Without this call the library logs nothing (Unity:
+/// stderr ends up in the player log / `Editor.log`).
+///
+/// # Errors
+/// `VRS_HOST_ERROR_INVALID_ARGUMENT` for a bad filter or when logging was already set up
+/// in this process.
+///
+/// # Safety
+/// `filter` is NULL or a valid NUL-terminated string.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_init_logging(filter: *const c_char) -> vrs_host_status_t {
+    boundary(|| init_logging_impl(filter))
+}
+
+macro_rules! sizeof_fns {
+    ($($fn_name:ident => $ty:ty),* $(,)?) => {$(
+        #[doc = concat!("`sizeof(", stringify!($ty), ")` as this library was built: a binding")]
+        /// compares it with its own struct size before the first call that passes one.
+        ///
+        /// # Safety
+        /// Always safe to call.
+        #[unsafe(no_mangle)]
+        pub extern "C" fn $fn_name() -> usize {
+            core::mem::size_of::<$ty>()
+        }
+    )*};
+}
+
+sizeof_fns! {
+    vrs_host_sizeof_sensors => vrs_host_sensors_t,
+    vrs_host_sizeof_frame => vrs_host_frame_t,
+    vrs_host_sizeof_image => vrs_host_image_t,
+    vrs_host_sizeof_camera => vrs_host_camera_t,
+    vrs_host_sizeof_agent_info => vrs_host_agent_info_t,
+    vrs_host_sizeof_info => vrs_host_info_t,
+    vrs_host_sizeof_cycle => vrs_host_cycle_t,
+    vrs_host_sizeof_command => vrs_host_command_t,
+    vrs_host_sizeof_agent_report => vrs_host_agent_report_t,
+    vrs_host_sizeof_stats => vrs_host_stats_t,
+}
+
+// ---------------------------------------------------------------------------------------
+// The exported functions: the host
+// ---------------------------------------------------------------------------------------
+
+/// Creates the host of the session described by the config file at `config_path` (the
+/// file the agents use too: session name, transport, agents and their cameras). On
+/// success `*out_host` is the new handle; on failure it is NULL. Destroy it with
+/// [`vrs_host_destroy`]. Stale shared memory of a crashed earlier run is cleaned up.
+///
+/// # Errors
+/// `VRS_HOST_ERROR_CONFIG` (unreadable or invalid config), `VRS_HOST_ERROR_CREATE`
+/// (shared memory, the session is in use by a live host, TCP port taken, …),
+/// `VRS_HOST_ERROR_INVALID_ARGUMENT`.
+///
+/// # Safety
+/// `config_path` is NULL or a valid NUL-terminated UTF-8 string; `out_host` is NULL or
+/// valid for writing a pointer.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_create(
+    config_path: *const c_char,
+    out_host: *mut *mut vrs_host_t,
+) -> vrs_host_status_t {
+    boundary(|| create_impl(config_path, out_host))
+}
+
+/// Destroys the host: releases loaned frames and closes the session (agents see it
+/// closed and end cleanly). The handle is invalid afterwards: using it again, including a
+/// second destroy, returns `VRS_HOST_ERROR_INVALID_HANDLE`. Called from a thread that does
+/// not own the host (a .NET finalizer), it returns `VRS_HOST_DEFERRED` and the host is
+/// destroyed at the owning thread's next `vrs_host_` call.
+///
+/// # Safety
+/// Any value may be passed: the handle is looked up, never dereferenced.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_destroy(host: *mut vrs_host_t) -> vrs_host_status_t {
+    boundary_status(|| destroy(host))
+}
+
+/// The session's settings and the current cycle.
+///
+/// # Errors
+/// `VRS_HOST_ERROR_INVALID_ARGUMENT` (NULL `out_info`), handle errors.
+///
+/// # Safety
+/// Any handle value may be passed; `out_info` is NULL or valid for writing a
+/// [`vrs_host_info_t`].
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_info(
+    host: *mut vrs_host_t,
+    out_info: *mut vrs_host_info_t,
+) -> vrs_host_status_t {
+    boundary(|| info_impl(host, out_info))
+}
+
+/// Agent number `index` (`0..agent_count`, ascending ids) of the config: its id, camera
+/// count and whether it is connected now.
+///
+/// # Errors
+/// `VRS_HOST_ERROR_OUT_OF_RANGE`, `VRS_HOST_ERROR_INVALID_ARGUMENT`, handle errors.
+///
+/// # Safety
+/// Any handle value may be passed; `out_agent` is NULL or valid for writing a
+/// [`vrs_host_agent_info_t`].
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_agent_info(
+    host: *mut vrs_host_t,
+    index: u32,
+    out_agent: *mut vrs_host_agent_info_t,
+) -> vrs_host_status_t {
+    boundary(|| agent_info_impl(host, index, out_agent))
+}
+
+/// Camera `index` of agent `agent_id` as configured (size, format, fields of view): to
+/// create render targets before the first cycle.
+///
+/// # Errors
+/// `VRS_HOST_ERROR_UNKNOWN_AGENT`, `VRS_HOST_ERROR_OUT_OF_RANGE`,
+/// `VRS_HOST_ERROR_INVALID_ARGUMENT`, handle errors.
+///
+/// # Safety
+/// Any handle value may be passed; `out_camera` is NULL or valid for writing a
+/// [`vrs_host_camera_t`].
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_camera(
+    host: *mut vrs_host_t,
+    agent_id: u32,
+    index: u32,
+    out_camera: *mut vrs_host_camera_t,
+) -> vrs_host_status_t {
+    boundary(|| camera_impl(host, agent_id, index, out_camera))
+}
+
+/// Blocks until every agent of the config is connected, or `timeout_ms` passed (negative:
+/// the config's `connect_timeout`). Call it before the first cycle: a *start* sent before
+/// an agent listens is lost. Returns `VRS_HOST_TIMEOUT` when some agents are missing:
+/// their ids are written to `out_missing` (up to `missing_capacity` of them),
+/// `*out_missing_count` is how many are missing (0 on success), and the message names
+/// them. Wait again, or run without them (they are not waited for until they connect).
+///
+/// # Errors
+/// `VRS_HOST_ERROR_WRONG_STATE` (in the middle of a cycle), `VRS_HOST_ERROR_TERMINATED`,
+/// `VRS_HOST_ERROR_TRANSPORT`, handle errors.
+///
+/// # Safety
+/// Any handle value may be passed; `out_missing` is NULL (then `missing_capacity` must be
+/// 0) or valid for writing `missing_capacity` `uint32_t`; `out_missing_count` is NULL or
+/// valid for writing one.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_wait_for_agents(
+    host: *mut vrs_host_t,
+    timeout_ms: i64,
+    out_missing: *mut u32,
+    missing_capacity: u32,
+    out_missing_count: *mut u32,
+) -> vrs_host_status_t {
+    boundary_status(|| {
+        wait_for_agents_impl(
+            host,
+            timeout_ms,
+            out_missing,
+            missing_capacity,
+            out_missing_count,
+        )
+    })
+}
+
+/// Frame 1, step 1: loans agent `agent_id`'s sensor frame of the current cycle. Its
+/// header is pre-filled (cycle, simulated time, image table); get each image's writable
+/// memory with [`vrs_host_frame_image`], render or copy into it, then
+/// [`vrs_host_publish`] it with the sensor data (or [`vrs_host_discard_frame`] it). One
+/// frame per agent and cycle.
+///
+/// # Errors
+/// `VRS_HOST_ERROR_WRONG_STATE` (after start, or already loaned/published this cycle),
+/// `VRS_HOST_ERROR_UNKNOWN_AGENT`, `VRS_HOST_ERROR_TRANSPORT` (no memory to loan), handle
+/// errors.
+///
+/// # Safety
+/// Any handle value may be passed; `out_frame` is NULL or valid for writing a
+/// [`vrs_host_frame_t`].
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_loan_frame(
+    host: *mut vrs_host_t,
+    agent_id: u32,
+    out_frame: *mut vrs_host_frame_t,
+) -> vrs_host_status_t {
+    boundary(|| loan_frame_impl(host, agent_id, out_frame))
+}
+
+/// Image `index` (camera order) of agent `agent_id`'s loaned frame: where to write its
+/// pixels. `data` stays valid until the frame is published or discarded, or the host
+/// destroyed.
+///
+/// # Errors
+/// `VRS_HOST_ERROR_NO_FRAME`, `VRS_HOST_ERROR_OUT_OF_RANGE`,
+/// `VRS_HOST_ERROR_UNKNOWN_AGENT`, `VRS_HOST_ERROR_INVALID_ARGUMENT`, handle errors.
+///
+/// # Safety
+/// Any handle value may be passed; `out_image` is NULL or valid for writing a
+/// [`vrs_host_image_t`]. Writes through `data` must stay within `len` bytes.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_frame_image(
+    host: *mut vrs_host_t,
+    agent_id: u32,
+    index: u32,
+    out_image: *mut vrs_host_image_t,
+) -> vrs_host_status_t {
+    boundary(|| frame_image_impl(host, agent_id, index, out_image))
+}
+
+/// Like [`vrs_host_frame_image`], by camera name (`"left"`, `"right"`, …).
+///
+/// # Errors
+/// `VRS_HOST_ERROR_INVALID_ARGUMENT` (no such camera, NULL), `VRS_HOST_ERROR_NO_FRAME`,
+/// `VRS_HOST_ERROR_UNKNOWN_AGENT`, handle errors.
+///
+/// # Safety
+/// Any handle value may be passed; `name` is NULL or a valid NUL-terminated string;
+/// `out_image` is NULL or valid for writing a [`vrs_host_image_t`].
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_frame_image_by_name(
+    host: *mut vrs_host_t,
+    agent_id: u32,
+    name: *const c_char,
+    out_image: *mut vrs_host_image_t,
+) -> vrs_host_status_t {
+    boundary(|| frame_image_by_name_impl(host, agent_id, name, out_image))
+}
+
+/// Frame 1, step 2: copies `sensors` into the loaned frame's header and publishes the
+/// frame to its agent (NULL `sensors`: identity pose, zeros, no statuses). The image
+/// pointers of the frame are invalid afterwards. A frame for an agent that is not
+/// connected is dropped and counted (`frames_undelivered`); that agent is not waited for
+/// this cycle.
+///
+/// # Errors
+/// `VRS_HOST_ERROR_INVALID_ARGUMENT` (more statuses or collisions than fit, an unknown
+/// action state: the frame stays loaned), `VRS_HOST_ERROR_NO_FRAME`,
+/// `VRS_HOST_ERROR_WRONG_STATE`, `VRS_HOST_ERROR_TRANSPORT`, handle errors.
+///
+/// # Safety
+/// Any handle value may be passed; `sensors` is NULL or valid for reading a
+/// [`vrs_host_sensors_t`].
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_publish(
+    host: *mut vrs_host_t,
+    agent_id: u32,
+    sensors: *const vrs_host_sensors_t,
+) -> vrs_host_status_t {
+    boundary(|| publish_impl(host, agent_id, sensors))
+}
+
+/// Returns agent `agent_id`'s loaned frame unpublished (the agent gets no frame this
+/// cycle and is not waited for). Its image pointers are invalid afterwards.
+///
+/// # Errors
+/// `VRS_HOST_ERROR_NO_FRAME`, `VRS_HOST_ERROR_UNKNOWN_AGENT`, handle errors.
+///
+/// # Safety
+/// Any handle value may be passed.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_discard_frame(
+    host: *mut vrs_host_t,
+    agent_id: u32,
+) -> vrs_host_status_t {
+    boundary(|| discard_frame_impl(host, agent_id))
+}
+
+/// Frame 1, step 3: signals *start* to every agent at once (the original's
+/// `MsgStartSync`, one broadcast instead of one message per agent). Every loaned frame
+/// must be published or discarded first.
+///
+/// # Errors
+/// `VRS_HOST_ERROR_WRONG_STATE` (frames still loaned, start already sent),
+/// `VRS_HOST_ERROR_TRANSPORT`, handle errors.
+///
+/// # Safety
+/// Any handle value may be passed.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_start(host: *mut vrs_host_t) -> vrs_host_status_t {
+    boundary(|| start_impl(host))
+}
+
+/// Frame 2: waits for the stops. Sync mode: blocks until every agent whose frame was
+/// published this cycle sent its stop, or the config's `stop_timeout` passed (one deadline
+/// for all agents); an agent whose stop is missing gets `VRS_HOST_OUTCOME_TIMED_OUT` in its
+/// report — not an error. Async mode: waits until the next tick of
+/// `simulation_time_per_frame` real time, taking commands as they arrive. Then the cycle
+/// number advances; read each agent's commands with [`vrs_host_agent_report`] and finish
+/// with [`vrs_host_end_cycle`].
+///
+/// # Errors
+/// `VRS_HOST_ERROR_WRONG_STATE` (no start), `VRS_HOST_ERROR_TERMINATED` (SIGINT/SIGTERM),
+/// `VRS_HOST_ERROR_TRANSPORT`, `VRS_HOST_ERROR_OTHER` (e.g. an agent lost with
+/// `on_agent_lost = "abort"`), handle errors.
+///
+/// # Safety
+/// Any handle value may be passed; `out_cycle` is NULL or valid for writing a
+/// [`vrs_host_cycle_t`].
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_collect(
+    host: *mut vrs_host_t,
+    out_cycle: *mut vrs_host_cycle_t,
+) -> vrs_host_status_t {
+    boundary(|| collect_impl(host, out_cycle))
+}
+
+/// Agent report `index` (`0..agent_count` of the cycle, in agent id order) of the cycle
+/// just collected: its outcome and its commands (`commands[0..command_count]`, valid until
+/// [`vrs_host_end_cycle`]).
+///
+/// # Errors
+/// `VRS_HOST_ERROR_WRONG_STATE` (not collected), `VRS_HOST_ERROR_OUT_OF_RANGE`,
+/// `VRS_HOST_ERROR_INVALID_ARGUMENT`, handle errors.
+///
+/// # Safety
+/// Any handle value may be passed; `out_report` is NULL or valid for writing a
+/// [`vrs_host_agent_report_t`].
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_agent_report(
+    host: *mut vrs_host_t,
+    index: u32,
+    out_report: *mut vrs_host_agent_report_t,
+) -> vrs_host_status_t {
+    boundary(|| agent_report_impl(host, index, out_report))
+}
+
+/// Copies command `command_index` of agent report `agent_index` (for callers that prefer
+/// copies to the report's pointer).
+///
+/// # Errors
+/// `VRS_HOST_ERROR_WRONG_STATE` (not collected), `VRS_HOST_ERROR_OUT_OF_RANGE`,
+/// `VRS_HOST_ERROR_INVALID_ARGUMENT`, handle errors.
+///
+/// # Safety
+/// Any handle value may be passed; `out_command` is NULL or valid for writing a
+/// [`vrs_host_command_t`].
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_command(
+    host: *mut vrs_host_t,
+    agent_index: u32,
+    command_index: u32,
+    out_command: *mut vrs_host_command_t,
+) -> vrs_host_status_t {
+    boundary(|| command_impl(host, agent_index, command_index, out_command))
+}
+
+/// Records how many of agent `agent_id`'s commands of the cycle just collected the
+/// simulator rejected (NaN, out of range, unknown object); the agent sees the number in
+/// its next frame.
+///
+/// # Errors
+/// `VRS_HOST_ERROR_UNKNOWN_AGENT`, handle errors.
+///
+/// # Safety
+/// Any handle value may be passed.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_set_rejected(
+    host: *mut vrs_host_t,
+    agent_id: u32,
+    rejected: u32,
+) -> vrs_host_status_t {
+    boundary(|| set_rejected_impl(host, agent_id, rejected))
+}
+
+/// Ends the collected cycle: the report's command pointers become invalid and the next
+/// cycle's frames may be loaned.
+///
+/// # Errors
+/// `VRS_HOST_ERROR_WRONG_STATE` (not collected), handle errors.
+///
+/// # Safety
+/// Any handle value may be passed.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_end_cycle(host: *mut vrs_host_t) -> vrs_host_status_t {
+    boundary(|| end_cycle_impl(host))
+}
+
+/// Counters since the host was created.
+///
+/// # Errors
+/// `VRS_HOST_ERROR_INVALID_ARGUMENT` (NULL `out_stats`), handle errors.
+///
+/// # Safety
+/// Any handle value may be passed; `out_stats` is NULL or valid for writing a
+/// [`vrs_host_stats_t`].
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_stats(
+    host: *mut vrs_host_t,
+    out_stats: *mut vrs_host_stats_t,
+) -> vrs_host_status_t {
+    boundary(|| stats_impl(host, out_stats))
+}

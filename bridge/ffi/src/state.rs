@@ -1,0 +1,534 @@
+//! What lives behind a `vrs_host_t`: the registry of hosts, each host's cycle state, the
+//! error type of the boundary and the thread-local last-error message.
+
+use std::cell::RefCell;
+use std::collections::{BTreeMap, HashMap};
+use std::ffi::{CString, c_char};
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::thread::ThreadId;
+
+use vrsync_bridge::config::ConfigLoadError;
+use vrsync_bridge::wire::{self, ImageDesc, MAX_CAMERAS, MotorCommand};
+use vrsync_bridge::{
+    AgentOutcome, Host, HostCreateError, HostCycleError, HostWaitError, SensorFrameMut,
+};
+
+use crate::types::{
+    VRS_HOST_CAMERA_NAME_SIZE, vrs_host_cycle_t, vrs_host_outcome_t, vrs_host_status_t, vrs_host_t,
+};
+
+// ---------------------------------------------------------------------------------------
+// Errors and the boundary
+// ---------------------------------------------------------------------------------------
+
+/// Everything a host C ABI call can fail with; each maps to one [`vrs_host_status_t`].
+#[derive(Debug, thiserror::Error)]
+pub(crate) enum FfiError {
+    #[error("{0} must not be null")]
+    Null(&'static str),
+    #[error("invalid argument: {0}")]
+    InvalidArgument(String),
+    #[error("invalid host handle: null")]
+    NullHandle,
+    #[error("invalid host handle {0:#x}: not a host, or already destroyed (double free?)")]
+    UnknownHandle(usize),
+    #[error(
+        "host handle {0:#x} belongs to another thread: use a host only on the thread that \
+         created it (Unity: the main thread)"
+    )]
+    WrongThread(usize),
+    #[error("the calling thread is exiting; its hosts are already destroyed")]
+    ThreadExiting,
+    #[error(transparent)]
+    Config(#[from] ConfigLoadError),
+    #[error("cannot create the host: {0}")]
+    Create(#[from] HostCreateError),
+    #[error("agents {missing:?} did not connect within {waited_ms} ms")]
+    AgentsMissing { missing: Vec<u32>, waited_ms: u64 },
+    #[error(transparent)]
+    Wait(HostWaitError),
+    #[error(transparent)]
+    Cycle(#[from] HostCycleError),
+    #[error("agent {0} is not part of this session")]
+    UnknownAgent(u32),
+    #[error("{call}: {why}")]
+    WrongState { call: &'static str, why: String },
+    #[error(
+        "{call}: no frame is loaned for agent {agent} (call vrs_host_loan_frame first; a \
+         frame ends when it is published or discarded)"
+    )]
+    NoFrame { call: &'static str, agent: u32 },
+    #[error("{what} index {index} is out of range (there are {count})")]
+    OutOfRange {
+        what: &'static str,
+        index: usize,
+        count: usize,
+    },
+    #[error("agent {agent}'s frame has no camera named {name:?}")]
+    NoSuchCamera { agent: u32, name: String },
+    #[error("logging is already initialised in this process")]
+    LoggingAlreadySet,
+    #[error("panic in the vrsync host library: {0}")]
+    Panic(String),
+}
+
+impl FfiError {
+    // The wildcard arms keep new variants of the bridge's (non-exhaustive) error enums
+    // from breaking the build; they map to VRS_HOST_ERROR_OTHER with their message.
+    fn status(&self) -> vrs_host_status_t {
+        use vrs_host_status_t::*;
+        match self {
+            Self::Null(_)
+            | Self::InvalidArgument(_)
+            | Self::NoSuchCamera { .. }
+            | Self::LoggingAlreadySet => VRS_HOST_ERROR_INVALID_ARGUMENT,
+            Self::NullHandle | Self::UnknownHandle(_) | Self::ThreadExiting => {
+                VRS_HOST_ERROR_INVALID_HANDLE
+            }
+            Self::WrongThread(_) => VRS_HOST_ERROR_WRONG_THREAD,
+            Self::Config(_) => VRS_HOST_ERROR_CONFIG,
+            Self::Create(_) => VRS_HOST_ERROR_CREATE,
+            Self::AgentsMissing { .. } => VRS_HOST_TIMEOUT,
+            Self::Wait(e) => match e {
+                HostWaitError::Terminated => VRS_HOST_ERROR_TERMINATED,
+                HostWaitError::Transport(_) => VRS_HOST_ERROR_TRANSPORT,
+                _ => VRS_HOST_ERROR_OTHER,
+            },
+            Self::Cycle(e) => match e {
+                HostCycleError::UnknownAgent(_) => VRS_HOST_ERROR_UNKNOWN_AGENT,
+                HostCycleError::StaleFrame { .. } => VRS_HOST_ERROR_WRONG_STATE,
+                HostCycleError::Terminated => VRS_HOST_ERROR_TERMINATED,
+                HostCycleError::Transport(_) => VRS_HOST_ERROR_TRANSPORT,
+                _ => VRS_HOST_ERROR_OTHER,
+            },
+            Self::UnknownAgent(_) => VRS_HOST_ERROR_UNKNOWN_AGENT,
+            Self::WrongState { .. } => VRS_HOST_ERROR_WRONG_STATE,
+            Self::NoFrame { .. } => VRS_HOST_ERROR_NO_FRAME,
+            Self::OutOfRange { .. } => VRS_HOST_ERROR_OUT_OF_RANGE,
+            Self::Panic(_) => VRS_HOST_ERROR_PANIC,
+        }
+    }
+}
+
+impl From<HostWaitError> for FfiError {
+    fn from(e: HostWaitError) -> Self {
+        match e {
+            HostWaitError::AgentsMissing { missing, waited } => Self::AgentsMissing {
+                missing,
+                waited_ms: waited.as_millis() as u64,
+            },
+            other => Self::Wait(other),
+        }
+    }
+}
+
+/// The error and its sources, `: `-separated (what `{:#}` prints with anyhow).
+fn chain(e: &dyn std::error::Error) -> String {
+    let mut s = e.to_string();
+    let mut source = e.source();
+    while let Some(inner) = source {
+        let text = inner.to_string();
+        // `#[error(transparent)]` repeats the source's text; say it once.
+        if !s.ends_with(&text) {
+            s.push_str(": ");
+            s.push_str(&text);
+        }
+        source = inner.source();
+    }
+    s
+}
+
+thread_local! {
+    static LAST_ERROR: RefCell<CString> = RefCell::new(CString::default());
+}
+
+fn set_last_error(message: &str) {
+    // A message cannot hold NUL bytes in C; cut at the first one.
+    let message = message.split('\0').next().unwrap_or_default();
+    let c = CString::new(message).unwrap_or_default();
+    let _ = LAST_ERROR.try_with(|cell| {
+        if let Ok(mut slot) = cell.try_borrow_mut() {
+            *slot = c;
+        }
+    });
+}
+
+/// The last message of this thread as a C string (empty after a success).
+pub(crate) fn last_error_ptr() -> *const c_char {
+    LAST_ERROR
+        .try_with(|cell| match cell.try_borrow() {
+            // The CString's buffer stays where it is until the next call replaces it.
+            Ok(s) => s.as_ptr(),
+            Err(_) => c"".as_ptr(),
+        })
+        .unwrap_or(c"".as_ptr())
+}
+
+fn panic_message(payload: Box<dyn std::any::Any + Send>) -> String {
+    if let Some(s) = payload.downcast_ref::<&str>() {
+        (*s).to_owned()
+    } else if let Some(s) = payload.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "unknown panic payload".to_owned()
+    }
+}
+
+/// The boundary: destroys hosts whose destruction other threads deferred to this one,
+/// runs `f`, catches panics, records the message, returns the status. `f` may return a
+/// positive status with a message (`VRS_HOST_TIMEOUT`, `VRS_HOST_DEFERRED`).
+pub(crate) fn boundary(f: impl FnOnce() -> Result<(), FfiError>) -> vrs_host_status_t {
+    let result = catch_unwind(AssertUnwindSafe(|| {
+        destroy_deferred();
+        f()
+    }))
+    .unwrap_or_else(|payload| Err(FfiError::Panic(panic_message(payload))));
+    match result {
+        Ok(()) => {
+            set_last_error("");
+            vrs_host_status_t::VRS_HOST_OK
+        }
+        Err(e) => {
+            set_last_error(&chain(&e));
+            e.status()
+        }
+    }
+}
+
+/// Like [`boundary`] for calls whose success is itself a positive status.
+pub(crate) fn boundary_status(
+    f: impl FnOnce() -> Result<(vrs_host_status_t, String), FfiError>,
+) -> vrs_host_status_t {
+    let mut outcome = (vrs_host_status_t::VRS_HOST_OK, String::new());
+    let status = boundary(|| {
+        outcome = f()?;
+        Ok(())
+    });
+    if status == vrs_host_status_t::VRS_HOST_OK && outcome.0 != vrs_host_status_t::VRS_HOST_OK {
+        set_last_error(&outcome.1);
+        return outcome.0;
+    }
+    status
+}
+
+// ---------------------------------------------------------------------------------------
+// One host and its cycle
+// ---------------------------------------------------------------------------------------
+
+/// Where the host is in its cycle. The calls of one cycle must come in this order:
+/// `Frames` (loan, write, publish or discard each agent's frame) → `start` → `Started` →
+/// `collect` → `Collected` (read the reports) → `end_cycle` → `Frames`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Phase {
+    Frames,
+    Started,
+    Collected,
+}
+
+impl Phase {
+    pub(crate) fn describe(self) -> &'static str {
+        match self {
+            Self::Frames => "the cycle is before vrs_host_start",
+            Self::Started => "vrs_host_start was called and vrs_host_collect not yet",
+            Self::Collected => {
+                "the cycle was collected and not yet ended (call vrs_host_end_cycle)"
+            }
+        }
+    }
+}
+
+/// One image of a loaned frame, located once at loan time.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct ImageView {
+    pub(crate) data: *mut u8,
+    pub(crate) desc: ImageDesc,
+}
+
+/// One agent's frame slot in the current cycle.
+#[derive(Debug, Default)]
+pub(crate) struct FrameSlot {
+    /// The loaned frame, until published or discarded.
+    pub(crate) frame: Option<SensorFrameMut>,
+    pub(crate) images: [Option<ImageView>; MAX_CAMERAS],
+    /// Published this cycle (a second loan is refused).
+    pub(crate) published: bool,
+}
+
+/// One agent's part of the last collected cycle, copied out of the host's report.
+#[derive(Debug)]
+pub(crate) struct ReportCopy {
+    pub(crate) agent_id: u32,
+    pub(crate) outcome: vrs_host_outcome_t,
+    pub(crate) commands: Vec<MotorCommand>,
+}
+
+/// Everything behind one handle.
+pub(crate) struct HostState {
+    handle: usize,
+    // Declared before `host`: loaned samples are released before the ports.
+    pub(crate) slots: Vec<FrameSlot>,
+    pub(crate) host: Host,
+    pub(crate) ids: Vec<u32>,
+    pub(crate) phase: Phase,
+    pub(crate) cycle: vrs_host_cycle_t,
+    pub(crate) reports: Vec<ReportCopy>,
+}
+
+impl HostState {
+    pub(crate) fn new(handle: usize, host: Host) -> Self {
+        let ids: Vec<u32> = host.agent_ids().collect();
+        // Room for what the host hands over in one cycle, so that copying the report
+        // does not allocate in steady state.
+        let cap = host.config().transport.max_commands_per_cycle as usize * 2;
+        let reports = ids
+            .iter()
+            .map(|&agent_id| ReportCopy {
+                agent_id,
+                outcome: vrs_host_outcome_t::VRS_HOST_OUTCOME_NOT_AWAITED,
+                commands: Vec::with_capacity(cap),
+            })
+            .collect();
+        Self {
+            handle,
+            slots: ids.iter().map(|_| FrameSlot::default()).collect(),
+            host,
+            ids,
+            phase: Phase::Frames,
+            cycle: vrs_host_cycle_t::default(),
+            reports,
+        }
+    }
+
+    /// The slot index of agent `id`.
+    pub(crate) fn slot_of(&self, id: u32) -> Result<usize, FfiError> {
+        self.ids
+            .iter()
+            .position(|&i| i == id)
+            .ok_or(FfiError::UnknownAgent(id))
+    }
+
+    /// Fails unless the cycle is in `phase`.
+    pub(crate) fn expect_phase(&self, call: &'static str, phase: Phase) -> Result<(), FfiError> {
+        if self.phase == phase {
+            return Ok(());
+        }
+        let hint = match phase {
+            Phase::Frames => "it belongs before vrs_host_start",
+            Phase::Started => "it belongs after vrs_host_start",
+            Phase::Collected => "it belongs after vrs_host_collect",
+        };
+        Err(FfiError::WrongState {
+            call,
+            why: format!("{}; {hint}", self.phase.describe()),
+        })
+    }
+}
+
+/// Copies the host's report of the cycle that just ended into `reports` (whose command
+/// buffers are reused) and returns the cycle's summary.
+pub(crate) fn copy_report(
+    reports: &mut [ReportCopy],
+    report: &vrsync_bridge::CycleReport,
+) -> vrs_host_cycle_t {
+    let mut timed_out = 0u32;
+    let mut commands = 0u32;
+    for (copy, agent) in reports.iter_mut().zip(report.agents()) {
+        copy.agent_id = agent.agent_id;
+        copy.outcome = outcome(agent.outcome);
+        copy.commands.clear();
+        copy.commands.extend_from_slice(agent.commands());
+        commands = commands.saturating_add(copy.commands.len() as u32);
+        if copy.outcome == vrs_host_outcome_t::VRS_HOST_OUTCOME_TIMED_OUT {
+            timed_out += 1;
+        }
+    }
+    vrs_host_cycle_t {
+        cycle: report.cycle,
+        sim_time_ns: report.sim_time_ns,
+        agent_count: reports.len() as u32,
+        timed_out_agents: timed_out,
+        late_batches: report.late_batches,
+        command_count: commands,
+    }
+}
+
+fn outcome(o: AgentOutcome) -> vrs_host_outcome_t {
+    use vrs_host_outcome_t::*;
+    // Outcomes added to the bridge later are matched by name, so that this crate builds
+    // against both the older and the newer set.
+    #[allow(unreachable_patterns)]
+    match o {
+        AgentOutcome::Stopped => VRS_HOST_OUTCOME_STOPPED,
+        AgentOutcome::TimedOut => VRS_HOST_OUTCOME_TIMED_OUT,
+        AgentOutcome::NotAwaited => VRS_HOST_OUTCOME_NOT_AWAITED,
+        AgentOutcome::Async => VRS_HOST_OUTCOME_ASYNC,
+        other => match other.as_str() {
+            "evicted" => VRS_HOST_OUTCOME_EVICTED,
+            _ => VRS_HOST_OUTCOME_OTHER,
+        },
+    }
+}
+
+/// A camera name as a NUL-terminated C array.
+pub(crate) fn c_name(name: &str) -> [c_char; VRS_HOST_CAMERA_NAME_SIZE] {
+    let mut out = [0 as c_char; VRS_HOST_CAMERA_NAME_SIZE];
+    for (dst, &src) in out
+        .iter_mut()
+        .zip(name.as_bytes().iter().take(wire::CAMERA_NAME_LEN))
+    {
+        *dst = src as c_char;
+    }
+    out
+}
+
+impl Drop for HostState {
+    fn drop(&mut self) {
+        if owners()
+            .remove(&self.handle)
+            .is_some_and(|o| o.destroy_requested)
+        {
+            PENDING_DESTROYS.fetch_sub(1, Ordering::Relaxed);
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// The handle registry
+// ---------------------------------------------------------------------------------------
+//
+// A `vrs_host_t*` carries a number from a counter that is never reused; the hosts live in
+// a per-thread map keyed by that number (iceoryx2 `ipc` ports are neither `Send` nor
+// `Sync`, so a host belongs to the thread that created it). A global map remembers which
+// thread owns each live handle, to tell "wrong thread" from "unknown handle", and holds
+// the destructions other threads asked for.
+
+/// The next handle value; never reused, never 0.
+static NEXT_HANDLE: AtomicUsize = AtomicUsize::new(1);
+
+/// Owner of each live handle, and whether another thread asked to destroy it.
+#[derive(Debug)]
+struct Owner {
+    thread: ThreadId,
+    destroy_requested: bool,
+}
+
+static OWNERS: Mutex<BTreeMap<usize, Owner>> = Mutex::new(BTreeMap::new());
+
+/// How many handles have a destruction requested (lets every call skip the lock).
+static PENDING_DESTROYS: AtomicUsize = AtomicUsize::new(0);
+
+fn owners() -> std::sync::MutexGuard<'static, BTreeMap<usize, Owner>> {
+    // The map stays consistent even if a holder panicked: every operation is one call.
+    OWNERS
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+thread_local! {
+    static HOSTS: RefCell<HashMap<usize, HostState>> = RefCell::new(HashMap::new());
+}
+
+fn handle_key(handle: *const vrs_host_t) -> usize {
+    handle.addr()
+}
+
+fn unknown_handle(key: usize) -> FfiError {
+    match owners().get(&key) {
+        Some(owner) if owner.thread != std::thread::current().id() => FfiError::WrongThread(key),
+        _ => FfiError::UnknownHandle(key),
+    }
+}
+
+/// Runs `f` on the host behind `handle`.
+pub(crate) fn with_host<R>(
+    handle: *const vrs_host_t,
+    f: impl FnOnce(&mut HostState) -> Result<R, FfiError>,
+) -> Result<R, FfiError> {
+    let key = handle_key(handle);
+    if key == 0 {
+        return Err(FfiError::NullHandle);
+    }
+    HOSTS
+        .try_with(|hosts| {
+            let mut hosts = hosts.borrow_mut();
+            match hosts.get_mut(&key) {
+                Some(state) => f(state),
+                None => Err(unknown_handle(key)),
+            }
+        })
+        .unwrap_or(Err(FfiError::ThreadExiting))
+}
+
+/// Registers a new host on this thread and returns its handle value.
+pub(crate) fn register(host: Host) -> Result<usize, FfiError> {
+    let key = NEXT_HANDLE.fetch_add(1, Ordering::Relaxed);
+    let state = HostState::new(key, host);
+    owners().insert(
+        key,
+        Owner {
+            thread: std::thread::current().id(),
+            destroy_requested: false,
+        },
+    );
+    HOSTS
+        .try_with(|hosts| {
+            hosts.borrow_mut().insert(key, state);
+        })
+        .map_err(|_| FfiError::ThreadExiting)?;
+    Ok(key)
+}
+
+/// Destroys the host behind `handle`: at once on its own thread, deferred to the owner's
+/// next call from any other thread (a .NET finalizer runs on its own thread).
+pub(crate) fn destroy(handle: *mut vrs_host_t) -> Result<(vrs_host_status_t, String), FfiError> {
+    let key = handle_key(handle);
+    if key == 0 {
+        return Err(FfiError::NullHandle);
+    }
+    let state = HOSTS
+        .try_with(|hosts| hosts.borrow_mut().remove(&key))
+        .map_err(|_| FfiError::ThreadExiting)?;
+    if let Some(state) = state {
+        // Dropped outside the registry borrow.
+        drop(state);
+        return Ok((vrs_host_status_t::VRS_HOST_OK, String::new()));
+    }
+    let mut owners = owners();
+    match owners.get_mut(&key) {
+        Some(owner) if !owner.destroy_requested => {
+            owner.destroy_requested = true;
+            PENDING_DESTROYS.fetch_add(1, Ordering::Relaxed);
+            Ok((
+                vrs_host_status_t::VRS_HOST_DEFERRED,
+                format!(
+                    "host handle {key:#x} belongs to another thread: it is destroyed at that \
+                     thread's next vrs_host_ call"
+                ),
+            ))
+        }
+        Some(_) => Err(FfiError::UnknownHandle(key)),
+        None => Err(FfiError::UnknownHandle(key)),
+    }
+}
+
+/// Drops the hosts of this thread that other threads asked to destroy.
+fn destroy_deferred() {
+    if PENDING_DESTROYS.load(Ordering::Relaxed) == 0 {
+        return;
+    }
+    let me = std::thread::current().id();
+    let doomed: Vec<usize> = {
+        owners()
+            .iter()
+            .filter(|(_, o)| o.destroy_requested && o.thread == me)
+            .map(|(&k, _)| k)
+            .collect()
+    };
+    for key in doomed {
+        if let Ok(Some(state)) = HOSTS.try_with(|hosts| hosts.borrow_mut().remove(&key)) {
+            drop(state);
+        }
+    }
+}

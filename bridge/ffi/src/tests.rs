@@ -1,0 +1,704 @@
+use std::ffi::{CStr, CString};
+use std::mem::MaybeUninit;
+use std::path::{Path, PathBuf};
+use std::ptr;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::Duration;
+
+use vrsync_agent::{Agent, Command};
+use vrsync_bridge::Config;
+
+use crate::types::vrs_host_status_t::*;
+use crate::*;
+
+fn last_error() -> String {
+    // SAFETY: the library returns a valid C string, never NULL.
+    unsafe { CStr::from_ptr(vrs_host_last_error_message()) }
+        .to_string_lossy()
+        .into_owned()
+}
+
+fn session(tag: &str) -> String {
+    static N: AtomicU32 = AtomicU32::new(0);
+    format!(
+        "hffi{}-{}-{tag}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::Relaxed)
+    )
+}
+
+/// A config with agents `0..agents` (two 8×4 cameras each) in `dir`.
+fn write_config(dir: &Path, tag: &str, agents: u32, stop_timeout_s: f64) -> PathBuf {
+    let mut toml = format!(
+        "session = {:?}\n[sync]\nstop_timeout = {stop_timeout_s}\nconnect_timeout = 5.0\n\
+         [transport]\nmax_commands_per_cycle = 4\n",
+        session(tag)
+    );
+    for id in 0..agents {
+        toml.push_str(&format!(
+            "[[agent]]\nid = {id}\n\
+             [[agent.camera]]\nname = \"left\"\nwidth = 8\nheight = 4\n\
+             [[agent.camera]]\nname = \"right\"\nwidth = 8\nheight = 4\nformat = \"gray8\"\n"
+        ));
+    }
+    let path = dir.join(format!("{tag}.toml"));
+    std::fs::write(&path, toml).unwrap();
+    path
+}
+
+fn c_path(path: &Path) -> CString {
+    CString::new(path.to_str().unwrap()).unwrap()
+}
+
+fn create(path: &Path) -> *mut vrs_host_t {
+    let mut host = ptr::null_mut();
+    // SAFETY: valid C string and out pointer.
+    let st = unsafe { vrs_host_create(c_path(path).as_ptr(), &mut host) };
+    assert_eq!(st, VRS_HOST_OK, "{}", last_error());
+    assert!(!host.is_null());
+    host
+}
+
+fn connect_agent(path: &Path, id: u32) -> Agent {
+    let config = Config::load(path).unwrap();
+    Agent::connect(&config, id).unwrap()
+}
+
+#[test]
+fn header_is_up_to_date() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let config = cbindgen::Config::from_file(dir.join("cbindgen.toml")).unwrap();
+    let mut generated = Vec::new();
+    cbindgen::Builder::new()
+        .with_config(config)
+        .with_src(dir.join("src/types.rs"))
+        .with_src(dir.join("src/ffi.rs"))
+        .generate()
+        .expect("cbindgen")
+        .write(&mut generated);
+    let path = dir.join("include/vrsync_host.h");
+    if std::env::var_os("VRSYNC_UPDATE_HEADER").is_some() {
+        std::fs::write(&path, &generated).unwrap();
+        return;
+    }
+    let committed = std::fs::read(&path).unwrap_or_default();
+    assert!(
+        committed == generated,
+        "{} is out of date with src/types.rs and src/ffi.rs; regenerate it with \
+         `VRSYNC_UPDATE_HEADER=1 cargo test -p vrsync-host-ffi header` and commit it",
+        path.display()
+    );
+}
+
+#[test]
+fn version_status_names_and_sizes() {
+    // SAFETY: static strings.
+    let v = unsafe { CStr::from_ptr(vrs_host_version()) }
+        .to_str()
+        .unwrap();
+    assert_eq!(v, env!("CARGO_PKG_VERSION"));
+    assert_eq!(
+        vrs_host_protocol_version(),
+        vrsync_bridge::wire::PROTOCOL_VERSION
+    );
+    // SAFETY: static strings.
+    let name = |s: i32| {
+        unsafe { CStr::from_ptr(vrs_host_status_name(s)) }
+            .to_str()
+            .unwrap()
+    };
+    assert_eq!(name(0), "VRS_HOST_OK");
+    assert_eq!(name(VRS_HOST_TIMEOUT as i32), "VRS_HOST_TIMEOUT");
+    assert_eq!(
+        name(VRS_HOST_ERROR_WRONG_STATE as i32),
+        "VRS_HOST_ERROR_WRONG_STATE"
+    );
+    assert_eq!(name(12345), "VRS_HOST_UNKNOWN_STATUS");
+    assert_eq!(vrs_host_sizeof_sensors(), 328);
+    assert_eq!(vrs_host_sizeof_command(), 32);
+    assert_eq!(
+        vrs_host_sizeof_image(),
+        std::mem::size_of::<vrs_host_image_t>()
+    );
+}
+
+#[test]
+fn null_and_made_up_handles_are_errors_with_messages() {
+    let null = ptr::null_mut();
+    let bogus: *mut vrs_host_t = ptr::without_provenance_mut(0xdead_beef);
+    for h in [null, bogus] {
+        let mut info = MaybeUninit::<vrs_host_info_t>::uninit();
+        let mut frame = MaybeUninit::<vrs_host_frame_t>::uninit();
+        let mut cycle = MaybeUninit::<vrs_host_cycle_t>::uninit();
+        // SAFETY: every out pointer is valid; the handle is never dereferenced.
+        unsafe {
+            assert_eq!(
+                vrs_host_info(h, info.as_mut_ptr()),
+                VRS_HOST_ERROR_INVALID_HANDLE
+            );
+            assert!(
+                last_error().starts_with("invalid host handle"),
+                "{}",
+                last_error()
+            );
+            assert_eq!(
+                vrs_host_loan_frame(h, 0, frame.as_mut_ptr()),
+                VRS_HOST_ERROR_INVALID_HANDLE
+            );
+            assert_eq!(
+                vrs_host_publish(h, 0, ptr::null()),
+                VRS_HOST_ERROR_INVALID_HANDLE
+            );
+            assert_eq!(vrs_host_start(h), VRS_HOST_ERROR_INVALID_HANDLE);
+            assert_eq!(
+                vrs_host_collect(h, cycle.as_mut_ptr()),
+                VRS_HOST_ERROR_INVALID_HANDLE
+            );
+            assert_eq!(vrs_host_end_cycle(h), VRS_HOST_ERROR_INVALID_HANDLE);
+            assert_eq!(
+                vrs_host_wait_for_agents(h, 0, ptr::null_mut(), 0, ptr::null_mut()),
+                VRS_HOST_ERROR_INVALID_HANDLE
+            );
+            assert_eq!(vrs_host_destroy(h), VRS_HOST_ERROR_INVALID_HANDLE);
+        }
+    }
+    // SAFETY: the handle is never dereferenced.
+    unsafe { vrs_host_start(bogus) };
+    assert!(last_error().contains("0xdeadbeef"), "{}", last_error());
+}
+
+#[test]
+fn create_reports_bad_arguments_and_config_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut host: *mut vrs_host_t = ptr::without_provenance_mut(1);
+    // SAFETY: valid (or null, on purpose) pointers.
+    unsafe {
+        assert_eq!(
+            vrs_host_create(ptr::null(), &mut host),
+            VRS_HOST_ERROR_INVALID_ARGUMENT
+        );
+        assert!(host.is_null(), "a failed create leaves NULL behind");
+        assert_eq!(last_error(), "config_path must not be null");
+        let path = c_path(&dir.path().join("missing.toml"));
+        assert_eq!(
+            vrs_host_create(path.as_ptr(), ptr::null_mut()),
+            VRS_HOST_ERROR_INVALID_ARGUMENT
+        );
+        assert_eq!(
+            vrs_host_create(path.as_ptr(), &mut host),
+            VRS_HOST_ERROR_CONFIG
+        );
+        assert!(last_error().contains("missing.toml"), "{}", last_error());
+        let bad = dir.path().join("bad.toml");
+        std::fs::write(&bad, "session = \"x\"\nbogus_key = 1\n").unwrap();
+        assert_eq!(
+            vrs_host_create(c_path(&bad).as_ptr(), &mut host),
+            VRS_HOST_ERROR_CONFIG
+        );
+        assert!(last_error().contains("bogus_key"), "{}", last_error());
+        assert!(host.is_null());
+        let bad_filter = CString::new("[[[").unwrap();
+        assert_eq!(
+            vrs_host_init_logging(bad_filter.as_ptr()),
+            VRS_HOST_ERROR_INVALID_ARGUMENT
+        );
+    }
+}
+
+/// What the agent thread saw in one cycle.
+#[derive(Debug, Clone, PartialEq)]
+struct Seen {
+    cycle: u64,
+    position: [f32; 3],
+    reward: f32,
+    statuses: Vec<(u32, u32)>,
+    collisions: Vec<(u32, u32)>,
+    left_first: u8,
+    right_last: u8,
+    previous_rejected: u32,
+}
+
+#[test]
+fn cycles_through_the_c_abi_with_a_real_agent() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_config(dir.path(), "cycle", 1, 5.0);
+    let host = create(&path);
+    let agent_path = path.clone();
+    let agent = std::thread::spawn(move || {
+        let mut agent = connect_agent(&agent_path, 0);
+        let mut seen = Vec::new();
+        for _ in 0..3 {
+            let frame = agent.wait_start(Some(Duration::from_secs(5))).unwrap();
+            let h = frame.header();
+            seen.push(Seen {
+                cycle: frame.cycle(),
+                position: h.pose.position,
+                reward: h.reward,
+                statuses: h
+                    .statuses()
+                    .iter()
+                    .map(|s| (s.action_id, s.state))
+                    .collect(),
+                collisions: h
+                    .collisions()
+                    .iter()
+                    .map(|c| (c.action_id, c.collider_id))
+                    .collect(),
+                left_first: frame.image_by_name("left").unwrap().data()[0],
+                right_last: *frame.image_by_name("right").unwrap().data().last().unwrap(),
+                previous_rejected: h.previous_rejected,
+            });
+            drop(frame);
+            agent
+                .send_with_id(
+                    100,
+                    Command::Move {
+                        heading_deg: 90.0,
+                        distance: 1.5,
+                    },
+                )
+                .unwrap();
+            agent.send(Command::Turn { angle_deg: -30.0 }).unwrap();
+            agent.stop().unwrap();
+        }
+        seen
+    });
+
+    let mut missing = [u32::MAX; 4];
+    let mut missing_count = 99u32;
+    let mut info = MaybeUninit::<vrs_host_info_t>::uninit();
+    let mut agent_info = MaybeUninit::<vrs_host_agent_info_t>::uninit();
+    let mut camera = MaybeUninit::<vrs_host_camera_t>::uninit();
+    let mut frame = MaybeUninit::<vrs_host_frame_t>::uninit();
+    let mut image = MaybeUninit::<vrs_host_image_t>::uninit();
+    let mut cycle = MaybeUninit::<vrs_host_cycle_t>::uninit();
+    let mut report = MaybeUninit::<vrs_host_agent_report_t>::uninit();
+    let mut command = MaybeUninit::<vrs_host_command_t>::uninit();
+    // SAFETY: every pointer below is valid for its use; image writes stay within `len`.
+    unsafe {
+        assert_eq!(
+            vrs_host_wait_for_agents(
+                host,
+                5000,
+                missing.as_mut_ptr(),
+                missing.len() as u32,
+                &mut missing_count
+            ),
+            VRS_HOST_OK,
+            "{}",
+            last_error()
+        );
+        assert_eq!(missing_count, 0);
+        assert_eq!(vrs_host_info(host, info.as_mut_ptr()), VRS_HOST_OK);
+        let i = info.assume_init();
+        assert_eq!((i.agent_count, i.sync_mode, i.cycle), (1, 1, 0));
+        assert_eq!(i.simulation_time_per_frame_ns, 100_000_000);
+        assert_eq!(i.stop_timeout_ns, 5_000_000_000);
+        assert_eq!(i.transport, vrs_host_transport_t::VRS_HOST_TRANSPORT_SHM);
+        assert_eq!(
+            vrs_host_agent_info(host, 0, agent_info.as_mut_ptr()),
+            VRS_HOST_OK
+        );
+        let a = agent_info.assume_init();
+        assert_eq!((a.agent_id, a.camera_count, a.connected), (0, 2, 1));
+        assert_eq!(
+            vrs_host_agent_info(host, 1, agent_info.as_mut_ptr()),
+            VRS_HOST_ERROR_OUT_OF_RANGE
+        );
+        assert_eq!(
+            vrs_host_camera(host, 0, 1, camera.as_mut_ptr()),
+            VRS_HOST_OK
+        );
+        let c = camera.assume_init();
+        assert_eq!((c.width, c.height, c.stride, c.len), (8, 4, 8, 32));
+        assert_eq!(
+            c.format,
+            vrs_host_pixel_format_t::VRS_HOST_PIXEL_FORMAT_GRAY8
+        );
+        assert_eq!(CStr::from_ptr(c.name.as_ptr()).to_str().unwrap(), "right");
+        assert_eq!(
+            vrs_host_camera(host, 7, 0, camera.as_mut_ptr()),
+            VRS_HOST_ERROR_UNKNOWN_AGENT
+        );
+
+        // Out of order: nothing loaned, nothing started.
+        assert_eq!(
+            vrs_host_publish(host, 0, ptr::null()),
+            VRS_HOST_ERROR_NO_FRAME
+        );
+        assert_eq!(
+            vrs_host_collect(host, cycle.as_mut_ptr()),
+            VRS_HOST_ERROR_WRONG_STATE
+        );
+        assert!(
+            last_error().contains("belongs after vrs_host_start"),
+            "{}",
+            last_error()
+        );
+        assert_eq!(vrs_host_end_cycle(host), VRS_HOST_ERROR_WRONG_STATE);
+        assert_eq!(
+            vrs_host_loan_frame(host, 3, frame.as_mut_ptr()),
+            VRS_HOST_ERROR_UNKNOWN_AGENT
+        );
+
+        for n in 0..3u32 {
+            assert_eq!(
+                vrs_host_loan_frame(host, 0, frame.as_mut_ptr()),
+                VRS_HOST_OK,
+                "{}",
+                last_error()
+            );
+            let f = frame.assume_init();
+            assert_eq!((f.cycle, f.agent_id, f.image_count), (u64::from(n), 0, 2));
+            assert_eq!(f.sim_time_ns, u64::from(n) * 100_000_000);
+            assert_eq!(
+                vrs_host_loan_frame(host, 0, frame.as_mut_ptr()),
+                VRS_HOST_ERROR_WRONG_STATE,
+                "a second loan is refused"
+            );
+            assert_eq!(
+                vrs_host_frame_image(host, 0, 0, image.as_mut_ptr()),
+                VRS_HOST_OK
+            );
+            let left = image.assume_init();
+            assert_eq!(
+                (left.width, left.height, left.stride, left.len),
+                (8, 4, 24, 96)
+            );
+            assert_eq!(
+                left.format,
+                vrs_host_pixel_format_t::VRS_HOST_PIXEL_FORMAT_RGB8
+            );
+            std::slice::from_raw_parts_mut(left.data, left.len as usize).fill(10 + n as u8);
+            let name = CString::new("right").unwrap();
+            assert_eq!(
+                vrs_host_frame_image_by_name(host, 0, name.as_ptr(), image.as_mut_ptr()),
+                VRS_HOST_OK
+            );
+            let right = image.assume_init();
+            assert_eq!(right.camera, 1);
+            std::slice::from_raw_parts_mut(right.data, right.len as usize).fill(200 + n as u8);
+            assert_eq!(
+                vrs_host_frame_image(host, 0, 2, image.as_mut_ptr()),
+                VRS_HOST_ERROR_OUT_OF_RANGE
+            );
+            let nope = CString::new("main").unwrap();
+            assert_eq!(
+                vrs_host_frame_image_by_name(host, 0, nope.as_ptr(), image.as_mut_ptr()),
+                VRS_HOST_ERROR_INVALID_ARGUMENT
+            );
+
+            let mut sensors = vrs_host_sensors_t::default();
+            sensors.pose.position = [n as f32, 0.0, 2.0];
+            sensors.reward = 0.25 * n as f32;
+            sensors.status_count = 1;
+            sensors.statuses[0] = vrs_host_action_status_t {
+                action_id: 100,
+                state: vrs_host_action_state_t::VRS_HOST_ACTION_WALKING as u32,
+            };
+            if n == 1 {
+                sensors.collision_count = 1;
+                sensors.collisions[0] = vrs_host_collision_t {
+                    action_id: 100,
+                    collider_id: 77,
+                };
+            }
+            // Invalid sensors are refused and the frame stays loaned.
+            let mut bad = sensors;
+            bad.status_count = 17;
+            assert_eq!(
+                vrs_host_publish(host, 0, &bad),
+                VRS_HOST_ERROR_INVALID_ARGUMENT
+            );
+            assert!(
+                last_error().contains("status_count = 17"),
+                "{}",
+                last_error()
+            );
+            bad.status_count = 1;
+            bad.statuses[0].state = 9;
+            assert_eq!(
+                vrs_host_publish(host, 0, &bad),
+                VRS_HOST_ERROR_INVALID_ARGUMENT
+            );
+            assert_eq!(
+                vrs_host_start(host),
+                VRS_HOST_ERROR_WRONG_STATE,
+                "start with a loaned frame"
+            );
+            assert!(last_error().contains("[0]"), "{}", last_error());
+            assert_eq!(
+                vrs_host_publish(host, 0, &sensors),
+                VRS_HOST_OK,
+                "{}",
+                last_error()
+            );
+            assert_eq!(
+                vrs_host_frame_image(host, 0, 0, image.as_mut_ptr()),
+                VRS_HOST_ERROR_NO_FRAME
+            );
+            assert_eq!(
+                vrs_host_loan_frame(host, 0, frame.as_mut_ptr()),
+                VRS_HOST_ERROR_WRONG_STATE,
+                "one frame per agent and cycle"
+            );
+            assert_eq!(vrs_host_start(host), VRS_HOST_OK);
+            assert_eq!(vrs_host_start(host), VRS_HOST_ERROR_WRONG_STATE);
+            assert_eq!(
+                vrs_host_agent_report(host, 0, report.as_mut_ptr()),
+                VRS_HOST_ERROR_WRONG_STATE
+            );
+
+            assert_eq!(
+                vrs_host_collect(host, cycle.as_mut_ptr()),
+                VRS_HOST_OK,
+                "{}",
+                last_error()
+            );
+            let c = cycle.assume_init();
+            assert_eq!(c.cycle, u64::from(n));
+            assert_eq!(
+                (c.agent_count, c.timed_out_agents, c.command_count),
+                (1, 0, 2)
+            );
+            assert_eq!(
+                vrs_host_agent_report(host, 0, report.as_mut_ptr()),
+                VRS_HOST_OK
+            );
+            let r = report.assume_init();
+            assert_eq!(r.agent_id, 0);
+            assert_eq!(r.outcome, vrs_host_outcome_t::VRS_HOST_OUTCOME_STOPPED);
+            assert_eq!(r.command_count, 2);
+            let commands = std::slice::from_raw_parts(r.commands, r.command_count as usize);
+            assert_eq!(
+                commands[0].kind,
+                vrs_host_command_kind_t::VRS_HOST_COMMAND_MOVE as u32
+            );
+            assert_eq!(commands[0].action_id, 100);
+            assert_eq!(commands[0].args[..2], [90.0, 1.5]);
+            assert_eq!(
+                commands[1].kind,
+                vrs_host_command_kind_t::VRS_HOST_COMMAND_TURN as u32
+            );
+            assert_eq!(commands[1].args[0], -30.0);
+            assert_eq!(
+                vrs_host_command(host, 0, 1, command.as_mut_ptr()),
+                VRS_HOST_OK
+            );
+            assert_eq!(command.assume_init(), commands[1]);
+            assert_eq!(
+                vrs_host_command(host, 0, 2, command.as_mut_ptr()),
+                VRS_HOST_ERROR_OUT_OF_RANGE
+            );
+            assert_eq!(
+                vrs_host_agent_report(host, 1, report.as_mut_ptr()),
+                VRS_HOST_ERROR_OUT_OF_RANGE
+            );
+            assert_eq!(
+                vrs_host_loan_frame(host, 0, frame.as_mut_ptr()),
+                VRS_HOST_ERROR_WRONG_STATE,
+                "no loan before end_cycle"
+            );
+            assert!(
+                last_error().contains("vrs_host_end_cycle"),
+                "{}",
+                last_error()
+            );
+            assert_eq!(vrs_host_set_rejected(host, 0, n), VRS_HOST_OK);
+            assert_eq!(vrs_host_end_cycle(host), VRS_HOST_OK);
+            assert_eq!(vrs_host_end_cycle(host), VRS_HOST_ERROR_WRONG_STATE);
+        }
+        let mut stats = MaybeUninit::<vrs_host_stats_t>::uninit();
+        assert_eq!(vrs_host_stats(host, stats.as_mut_ptr()), VRS_HOST_OK);
+        let s = stats.assume_init();
+        assert_eq!((s.cycles, s.stop_timeouts, s.commands_received), (3, 0, 6));
+    }
+    let seen = agent.join().unwrap();
+    assert_eq!(seen.len(), 3);
+    for (n, s) in seen.iter().enumerate() {
+        assert_eq!(s.cycle, n as u64);
+        assert_eq!(s.position, [n as f32, 0.0, 2.0]);
+        assert_eq!(s.reward, 0.25 * n as f32);
+        assert_eq!(s.statuses, vec![(100, 3)]);
+        let collisions = if n == 1 { vec![(100, 77)] } else { vec![] };
+        assert_eq!(s.collisions, collisions);
+        assert_eq!((s.left_first, s.right_last), (10 + n as u8, 200 + n as u8));
+        assert_eq!(s.previous_rejected, n.saturating_sub(1) as u32);
+    }
+    // SAFETY: a handle from create; then a double free.
+    unsafe {
+        assert_eq!(vrs_host_destroy(host), VRS_HOST_OK);
+        assert_eq!(vrs_host_destroy(host), VRS_HOST_ERROR_INVALID_HANDLE);
+        assert!(
+            last_error().contains("already destroyed"),
+            "{}",
+            last_error()
+        );
+    }
+}
+
+#[test]
+fn missing_agents_and_stop_timeouts_are_outcomes_not_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_config(dir.path(), "timeout", 2, 0.2);
+    let host = create(&path);
+    // Agent 0 answers every cycle; agent 1 connects but never stops.
+    let agent_path = path.clone();
+    let responsive = std::thread::spawn(move || {
+        let mut agent = connect_agent(&agent_path, 0);
+        for _ in 0..2 {
+            drop(agent.wait_start(Some(Duration::from_secs(5))).unwrap());
+            agent.stop().unwrap();
+        }
+    });
+    let mut missing = [u32::MAX; 1];
+    let mut missing_count = 0u32;
+    let mut cycle = MaybeUninit::<vrs_host_cycle_t>::uninit();
+    let mut report = MaybeUninit::<vrs_host_agent_report_t>::uninit();
+    // SAFETY: every pointer below is valid for its use.
+    unsafe {
+        // Wait until agent 0 is in, then find agent 1 missing.
+        let mut waited = 0;
+        loop {
+            let st = vrs_host_wait_for_agents(
+                host,
+                100,
+                missing.as_mut_ptr(),
+                missing.len() as u32,
+                &mut missing_count,
+            );
+            assert_eq!(st, VRS_HOST_TIMEOUT);
+            assert!(last_error().contains("did not connect"), "{}", last_error());
+            if missing_count == 1 {
+                break;
+            }
+            waited += 1;
+            assert!(waited < 50, "agent 0 never connected");
+        }
+        assert_eq!(missing, [1]);
+        // Too small a buffer: the count says how many there are.
+        let mut agent_info = MaybeUninit::<vrs_host_agent_info_t>::uninit();
+        assert_eq!(
+            vrs_host_agent_info(host, 1, agent_info.as_mut_ptr()),
+            VRS_HOST_OK
+        );
+        assert_eq!(agent_info.assume_init().connected, 0);
+        assert_eq!(
+            vrs_host_wait_for_agents(host, 0, ptr::null_mut(), 1, ptr::null_mut()),
+            VRS_HOST_ERROR_INVALID_ARGUMENT
+        );
+
+        let _silent = connect_agent(&path, 1);
+        assert_eq!(
+            vrs_host_wait_for_agents(host, 5000, ptr::null_mut(), 0, &mut missing_count),
+            VRS_HOST_OK,
+            "{}",
+            last_error()
+        );
+        assert_eq!(missing_count, 0);
+        for n in 0..2u64 {
+            for id in 0..2 {
+                assert_eq!(vrs_host_loan_frame(host, id, ptr::null_mut()), VRS_HOST_OK);
+                assert_eq!(vrs_host_publish(host, id, ptr::null()), VRS_HOST_OK);
+            }
+            assert_eq!(vrs_host_start(host), VRS_HOST_OK);
+            assert_eq!(
+                vrs_host_collect(host, cycle.as_mut_ptr()),
+                VRS_HOST_OK,
+                "a stop timeout is not an error: {}",
+                last_error()
+            );
+            let c = cycle.assume_init();
+            assert_eq!((c.cycle, c.timed_out_agents), (n, 1));
+            assert_eq!(
+                vrs_host_agent_report(host, 0, report.as_mut_ptr()),
+                VRS_HOST_OK
+            );
+            let r0 = report.assume_init();
+            assert_eq!(r0.outcome, vrs_host_outcome_t::VRS_HOST_OUTCOME_STOPPED);
+            assert!(r0.commands.is_null());
+            assert_eq!(
+                vrs_host_agent_report(host, 1, report.as_mut_ptr()),
+                VRS_HOST_OK
+            );
+            let r1 = report.assume_init();
+            assert_eq!(r1.agent_id, 1);
+            assert_eq!(r1.outcome, vrs_host_outcome_t::VRS_HOST_OUTCOME_TIMED_OUT);
+            assert_eq!(vrs_host_end_cycle(host), VRS_HOST_OK);
+        }
+        // A discarded frame: the agent is not waited for.
+        assert_eq!(vrs_host_loan_frame(host, 1, ptr::null_mut()), VRS_HOST_OK);
+        assert_eq!(vrs_host_discard_frame(host, 1), VRS_HOST_OK);
+        assert_eq!(vrs_host_discard_frame(host, 1), VRS_HOST_ERROR_NO_FRAME);
+        assert_eq!(vrs_host_start(host), VRS_HOST_OK);
+        assert_eq!(vrs_host_collect(host, cycle.as_mut_ptr()), VRS_HOST_OK);
+        assert_eq!(cycle.assume_init().timed_out_agents, 0);
+        assert_eq!(
+            vrs_host_agent_report(host, 1, report.as_mut_ptr()),
+            VRS_HOST_OK
+        );
+        assert_eq!(
+            report.assume_init().outcome,
+            vrs_host_outcome_t::VRS_HOST_OUTCOME_NOT_AWAITED
+        );
+        let mut stats = MaybeUninit::<vrs_host_stats_t>::uninit();
+        assert_eq!(vrs_host_stats(host, stats.as_mut_ptr()), VRS_HOST_OK);
+        let s = stats.assume_init();
+        assert_eq!((s.cycles, s.stop_timeouts, s.agent_timeouts), (3, 2, 2));
+        assert_eq!(vrs_host_destroy(host), VRS_HOST_OK);
+    }
+    responsive.join().unwrap();
+}
+
+#[test]
+fn a_host_belongs_to_its_thread_and_finalizers_defer_destruction() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_config(dir.path(), "thread", 1, 1.0);
+    let first = create(&path);
+    let key = first.addr();
+    let from_other_thread = std::thread::spawn(move || {
+        let host: *mut vrs_host_t = ptr::without_provenance_mut(key);
+        // SAFETY: the handle is never dereferenced.
+        let start = unsafe { vrs_host_start(host) };
+        let message = last_error();
+        // SAFETY: as above.
+        let destroy = unsafe { vrs_host_destroy(host) };
+        let deferred_message = last_error();
+        // SAFETY: as above.
+        let again = unsafe { vrs_host_destroy(host) };
+        (start, message, destroy, deferred_message, again)
+    })
+    .join()
+    .unwrap();
+    assert_eq!(from_other_thread.0, VRS_HOST_ERROR_WRONG_THREAD);
+    assert!(
+        from_other_thread.1.contains("another thread"),
+        "{}",
+        from_other_thread.1
+    );
+    assert_eq!(from_other_thread.2, VRS_HOST_DEFERRED);
+    assert!(
+        from_other_thread.3.contains("next vrs_host_ call"),
+        "{}",
+        from_other_thread.3
+    );
+    assert_eq!(
+        from_other_thread.4, VRS_HOST_ERROR_INVALID_HANDLE,
+        "a second destroy is a double free"
+    );
+    // The owner's next call destroys it: the session is free again for a new host, as
+    // after a Unity domain reload whose finalizers released the old one.
+    let second = create(&path);
+    // SAFETY: the handles are never dereferenced.
+    unsafe {
+        assert_eq!(vrs_host_start(first), VRS_HOST_ERROR_INVALID_HANDLE);
+        assert_eq!(vrs_host_destroy(second), VRS_HOST_OK);
+    }
+}
+
+#[test]
+fn panics_become_a_status() {
+    let st = crate::state::boundary(|| panic!("boom"));
+    assert_eq!(st, VRS_HOST_ERROR_PANIC);
+    assert!(last_error().contains("boom"), "{}", last_error());
+}

@@ -1,0 +1,519 @@
+//! The types of the host C ABI: status codes, enums and the `#[repr(C)]` structs that
+//! cross the boundary (declared in `include/vrsync_host.h`).
+//!
+//! Every struct is plain data with fixed-size fields (`uint32_t`, `uint64_t`, `float`, one
+//! data pointer in [`vrs_host_image_t`] and [`vrs_host_agent_report_t`]): no `bool`, no
+//! `size_t`, so that the C# binding can mirror each one as a blittable
+//! `[StructLayout(LayoutKind.Sequential)]` struct. `vrs_host_sizeof_*` report the sizes
+//! for the binding to check against `Marshal.SizeOf`.
+
+#![allow(non_camel_case_types)]
+
+use core::mem::{align_of, offset_of, size_of};
+use std::ffi::c_char;
+
+use vrsync_bridge::wire::{self, MotorCommand, PixelFormat};
+
+/// Most images (cameras) per agent and frame.
+pub const VRS_HOST_MAX_IMAGES: u32 = 4;
+/// Most action statuses per sensor frame ([`vrs_host_sensors_t::statuses`]).
+pub const VRS_HOST_MAX_STATUSES: u32 = 16;
+/// Most collisions per sensor frame ([`vrs_host_sensors_t::collisions`]).
+pub const VRS_HOST_MAX_COLLISIONS: u32 = 8;
+/// Size of a camera name field: up to 16 bytes of UTF-8 and a terminating NUL.
+pub const VRS_HOST_CAMERA_NAME_SIZE: usize = 17;
+
+const _: () = {
+    assert!(VRS_HOST_MAX_IMAGES as usize == wire::MAX_CAMERAS);
+    assert!(VRS_HOST_MAX_STATUSES as usize == wire::MAX_STATUSES);
+    assert!(VRS_HOST_MAX_COLLISIONS as usize == wire::MAX_COLLISIONS);
+    assert!(VRS_HOST_CAMERA_NAME_SIZE == wire::CAMERA_NAME_LEN + 1);
+};
+
+/// Result of a call: 0 is success, positive values are outcomes that are not errors,
+/// negative values are errors (details in `vrs_host_last_error_message`). The numbers
+/// shared with the agent SDK's `vrs_status_t` mean the same.
+#[repr(i32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum vrs_host_status_t {
+    /// Success.
+    VRS_HOST_OK = 0,
+    /// `vrs_host_wait_for_agents`: some agents did not connect in time (their ids are
+    /// reported); wait again or go on without them.
+    VRS_HOST_TIMEOUT = 1,
+    /// `vrs_host_destroy` from a thread that does not own the host (a .NET finalizer):
+    /// the host is destroyed at the owning thread's next `vrs_host_` call.
+    VRS_HOST_DEFERRED = 2,
+    /// A pointer argument is null or an argument is out of its domain (too many statuses,
+    /// not UTF-8, …).
+    VRS_HOST_ERROR_INVALID_ARGUMENT = -1,
+    /// The host handle is null, unknown, or was already destroyed.
+    VRS_HOST_ERROR_INVALID_HANDLE = -2,
+    /// The host handle belongs to another thread.
+    VRS_HOST_ERROR_WRONG_THREAD = -3,
+    /// The config file could not be read or is invalid.
+    VRS_HOST_ERROR_CONFIG = -4,
+    /// The host could not be created (shared memory, session in use, TCP port taken, …).
+    VRS_HOST_ERROR_CREATE = -5,
+    /// The agent id is not in the config.
+    VRS_HOST_ERROR_UNKNOWN_AGENT = -6,
+    /// The call does not fit the cycle's phase (a loan after start, collect before start,
+    /// start with an unpublished frame, a second loan for one agent, …).
+    VRS_HOST_ERROR_WRONG_STATE = -7,
+    /// No frame is loaned for this agent (publish, image or discard without a loan).
+    VRS_HOST_ERROR_NO_FRAME = -8,
+    /// An index is past the end of its table (image, camera, agent, command).
+    VRS_HOST_ERROR_OUT_OF_RANGE = -9,
+    /// The transport failed.
+    VRS_HOST_ERROR_TRANSPORT = -12,
+    /// SIGINT or SIGTERM arrived: the program should end.
+    VRS_HOST_ERROR_TERMINATED = -13,
+    /// Something not covered above (see the message).
+    VRS_HOST_ERROR_OTHER = -98,
+    /// A bug: the library panicked (see the message).
+    VRS_HOST_ERROR_PANIC = -99,
+}
+
+/// Pixel format of an image (the values of the wire format).
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum vrs_host_pixel_format_t {
+    /// 8-bit red, green, blue: 3 bytes per pixel.
+    VRS_HOST_PIXEL_FORMAT_RGB8 = 0,
+    /// 8-bit red, green, blue, alpha: 4 bytes per pixel.
+    VRS_HOST_PIXEL_FORMAT_RGBA8 = 1,
+    /// 8-bit grey: 1 byte per pixel.
+    VRS_HOST_PIXEL_FORMAT_GRAY8 = 2,
+    /// 32-bit float depth in metres, native endian: 4 bytes per pixel.
+    VRS_HOST_PIXEL_FORMAT_DEPTH32F = 3,
+}
+
+impl From<PixelFormat> for vrs_host_pixel_format_t {
+    fn from(f: PixelFormat) -> Self {
+        match f {
+            PixelFormat::Rgb8 => Self::VRS_HOST_PIXEL_FORMAT_RGB8,
+            PixelFormat::Rgba8 => Self::VRS_HOST_PIXEL_FORMAT_RGBA8,
+            PixelFormat::Gray8 => Self::VRS_HOST_PIXEL_FORMAT_GRAY8,
+            PixelFormat::Depth32f => Self::VRS_HOST_PIXEL_FORMAT_DEPTH32F,
+        }
+    }
+}
+
+/// Execution state of an action, reported to the agent in
+/// [`vrs_host_sensors_t::statuses`] (the values of the original
+/// `MsgActionExecutationStatus`).
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum vrs_host_action_state_t {
+    /// Accepted, not finished yet.
+    VRS_HOST_ACTION_IN_EXECUTION = 0,
+    /// Completed.
+    VRS_HOST_ACTION_FINISHED = 1,
+    /// Cancelled, replaced by a newer action, or impossible.
+    VRS_HOST_ACTION_ABORTED = 2,
+    /// A movement is walking.
+    VRS_HOST_ACTION_WALKING = 3,
+    /// A movement is rotating.
+    VRS_HOST_ACTION_ROTATING = 4,
+    /// A movement is walking and rotating.
+    VRS_HOST_ACTION_WALKING_ROTATING = 5,
+}
+
+/// How one agent's part of a cycle ended ([`vrs_host_agent_report_t::outcome`]).
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum vrs_host_outcome_t {
+    /// No frame reached the agent this cycle (not connected), so it was not waited for.
+    VRS_HOST_OUTCOME_NOT_AWAITED = 0,
+    /// The agent's stop arrived in time.
+    VRS_HOST_OUTCOME_STOPPED = 1,
+    /// The stop timeout ended the cycle before the agent's stop arrived. Not an error:
+    /// the cycle goes on with what arrived, as the original did.
+    VRS_HOST_OUTCOME_TIMED_OUT = 2,
+    /// Async mode: commands were taken as they arrived.
+    VRS_HOST_OUTCOME_ASYNC = 3,
+    /// The agent was lost during the cycle (process died or disconnected).
+    VRS_HOST_OUTCOME_EVICTED = 4,
+    /// An outcome this version of the ABI does not know.
+    VRS_HOST_OUTCOME_OTHER = 255,
+}
+
+/// Motor command kinds ([`vrs_host_command_t::kind`]); the values of the wire format.
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum vrs_host_command_kind_t {
+    /// Walk `args[0]` degrees heading (world frame, 0 = +z, 90 = +x) for `args[1]` metres.
+    VRS_HOST_COMMAND_MOVE = 1,
+    /// Turn by `args[0]` degrees (clockwise seen from above, relative).
+    VRS_HOST_COMMAND_TURN = 2,
+    /// Walk straight to the world position `args[0..3]`.
+    VRS_HOST_COMMAND_MOVE_TO = 3,
+    /// Cancel the running movement.
+    VRS_HOST_COMMAND_CANCEL_MOVE = 4,
+    /// Eyes: pan left `args[0]`, pan right `args[1]`, tilt `args[2]` degrees.
+    VRS_HOST_COMMAND_EYE_MOVEMENT = 5,
+    /// Fixate both eyes on the world point `args[0..3]`.
+    VRS_HOST_COMMAND_EYE_FIXATION = 6,
+    /// Grasp the object `object_id`.
+    VRS_HOST_COMMAND_GRASP_ID = 7,
+    /// Grasp what is seen at left-eye pixel (`args[0]`, `args[1]`).
+    VRS_HOST_COMMAND_GRASP_POS = 8,
+    /// Point at the object `object_id`.
+    VRS_HOST_COMMAND_POINT_ID = 9,
+    /// Point at left-eye pixel (`args[0]`, `args[1]`).
+    VRS_HOST_COMMAND_POINT_POS = 10,
+    /// Interact with the object `object_id`.
+    VRS_HOST_COMMAND_INTERACT_ID = 11,
+    /// Interact with what is seen at left-eye pixel (`args[0]`, `args[1]`).
+    VRS_HOST_COMMAND_INTERACT_POS = 12,
+    /// Release the grasped object.
+    VRS_HOST_COMMAND_GRASP_RELEASE = 13,
+    /// Reset the environment (`object_id` = reset type).
+    VRS_HOST_COMMAND_ENVIRONMENT_RESET = 14,
+    /// Reset the trial (`object_id` = reset type).
+    VRS_HOST_COMMAND_TRIAL_RESET = 15,
+}
+
+/// The transport a host runs on ([`vrs_host_info_t::transport`]).
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum vrs_host_transport_t {
+    /// iceoryx2 shared memory (zero copy, same machine).
+    VRS_HOST_TRANSPORT_SHM = 0,
+    /// TCP.
+    VRS_HOST_TRANSPORT_TCP = 1,
+}
+
+const _: () = {
+    use vrs_host_command_kind_t::*;
+    assert!(VRS_HOST_COMMAND_MOVE as u32 == wire::kind::MOVE);
+    assert!(VRS_HOST_COMMAND_TURN as u32 == wire::kind::TURN);
+    assert!(VRS_HOST_COMMAND_EYE_FIXATION as u32 == wire::kind::EYE_FIXATION);
+    assert!(VRS_HOST_COMMAND_GRASP_RELEASE as u32 == wire::kind::GRASP_RELEASE);
+    assert!(VRS_HOST_COMMAND_TRIAL_RESET as u32 == wire::kind::TRIAL_RESET);
+    assert!(
+        vrs_host_pixel_format_t::VRS_HOST_PIXEL_FORMAT_DEPTH32F as u32
+            == PixelFormat::Depth32f as u32
+    );
+    assert!(
+        vrs_host_action_state_t::VRS_HOST_ACTION_WALKING_ROTATING as u32
+            == wire::ActionState::WalkingRotating as u32
+    );
+};
+
+/// Opaque host handle. It is a registry key, not a pointer to memory: the library never
+/// dereferences it, so a null, stale or made-up handle is an error, never a crash.
+pub struct vrs_host_t {
+    _private: [u8; 0],
+}
+
+/// Body pose: position in metres, orientation as a unit quaternion `[x, y, z, w]`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct vrs_host_pose_t {
+    /// Position `[x, y, z]` in metres (world frame: x right, y up, z forward).
+    pub position: [f32; 3],
+    /// Orientation quaternion `[x, y, z, w]` (Unity's `Quaternion` has the same order).
+    pub rotation: [f32; 4],
+}
+
+impl Default for vrs_host_pose_t {
+    fn default() -> Self {
+        Self {
+            position: [0.0; 3],
+            rotation: [0.0, 0.0, 0.0, 1.0],
+        }
+    }
+}
+
+/// Grid position sensor (the original `MsgGridPosition`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct vrs_host_grid_position_t {
+    /// Position in metres.
+    pub position: [f32; 3],
+    /// Euler rotation in degrees (x, y, z).
+    pub rotation_deg: [f32; 3],
+}
+
+/// Head motion sensor (the original `MsgHeadMotion`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct vrs_host_head_motion_t {
+    /// Velocity in metres per second.
+    pub velocity: [f32; 3],
+    /// Acceleration in metres per second squared.
+    pub acceleration: [f32; 3],
+    /// Angular velocity in degrees per second.
+    pub angular_velocity_deg: [f32; 3],
+    /// Angular acceleration in degrees per second squared.
+    pub angular_acceleration_deg: [f32; 3],
+}
+
+/// Eye position sensor (the original `MsgEyePosition`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct vrs_host_eye_position_t {
+    /// Eye rotation in degrees: pan left, pan right, tilt.
+    pub rotation_deg: [f32; 3],
+    /// Change of the eye rotation per cycle, degrees.
+    pub rotation_velocity_deg: [f32; 3],
+}
+
+/// One action status: the state of the agent's action `action_id`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct vrs_host_action_status_t {
+    /// The action id the agent sent with the command.
+    pub action_id: u32,
+    /// A `vrs_host_action_state_t` value.
+    pub state: u32,
+}
+
+/// One collision.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct vrs_host_collision_t {
+    /// The action that was running.
+    pub action_id: u32,
+    /// The object (or wall) that was hit.
+    pub collider_id: u32,
+}
+
+/// The sensor data of one agent's frame, everything but the images: passed to
+/// `vrs_host_publish`, which copies it into the frame's header in shared memory.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct vrs_host_sensors_t {
+    /// Body pose.
+    pub pose: vrs_host_pose_t,
+    /// Reward since the previous frame.
+    pub reward: f32,
+    /// Grid position sensor.
+    pub grid: vrs_host_grid_position_t,
+    /// Head motion sensor.
+    pub head_motion: vrs_host_head_motion_t,
+    /// Eye position sensor.
+    pub eye: vrs_host_eye_position_t,
+    /// Valid entries in `statuses` (at most `VRS_HOST_MAX_STATUSES`).
+    pub status_count: u32,
+    /// Valid entries in `collisions` (at most `VRS_HOST_MAX_COLLISIONS`).
+    pub collision_count: u32,
+    /// Action statuses that changed since the previous frame.
+    pub statuses: [vrs_host_action_status_t; VRS_HOST_MAX_STATUSES as usize],
+    /// Collisions since the previous frame.
+    pub collisions: [vrs_host_collision_t; VRS_HOST_MAX_COLLISIONS as usize],
+}
+
+impl Default for vrs_host_sensors_t {
+    fn default() -> Self {
+        Self {
+            pose: vrs_host_pose_t::default(),
+            reward: 0.0,
+            grid: vrs_host_grid_position_t::default(),
+            head_motion: vrs_host_head_motion_t::default(),
+            eye: vrs_host_eye_position_t::default(),
+            status_count: 0,
+            collision_count: 0,
+            statuses: [vrs_host_action_status_t::default(); VRS_HOST_MAX_STATUSES as usize],
+            collisions: [vrs_host_collision_t::default(); VRS_HOST_MAX_COLLISIONS as usize],
+        }
+    }
+}
+
+/// A loaned sensor frame ([`vrs_host_loan_frame`](crate::ffi::vrs_host_loan_frame)).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct vrs_host_frame_t {
+    /// Cycle number the frame belongs to.
+    pub cycle: u64,
+    /// Simulated time at the start of the cycle, nanoseconds.
+    pub sim_time_ns: u64,
+    /// The agent the frame is for.
+    pub agent_id: u32,
+    /// Number of images (`vrs_host_frame_image` indices `0..image_count`).
+    pub image_count: u32,
+}
+
+/// One writable image of a loaned frame: on shared memory, the memory the agent will
+/// read. Rows are `stride` bytes apart, origin top-left. The bytes hold an older frame
+/// until written: write all of them.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct vrs_host_image_t {
+    /// First byte of the first (top) row. Valid until the frame is published or
+    /// discarded.
+    pub data: *mut u8,
+    /// Number of bytes at `data` (`stride * height`).
+    pub len: u64,
+    /// Bytes per row (`width * bytes per pixel`, no padding).
+    pub stride: u64,
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Pixel format.
+    pub format: vrs_host_pixel_format_t,
+    /// Index of the camera in the agent's camera list.
+    pub camera: u32,
+    /// Camera name, NUL-terminated (`left`, `right`, …).
+    pub name: [c_char; VRS_HOST_CAMERA_NAME_SIZE],
+}
+
+/// One camera of an agent, from the config (to size render targets before the first
+/// cycle).
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct vrs_host_camera_t {
+    /// Bytes of one image (`stride * height`).
+    pub len: u64,
+    /// Bytes per row.
+    pub stride: u64,
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels (given, or derived from the fields of view).
+    pub height: u32,
+    /// Pixel format.
+    pub format: vrs_host_pixel_format_t,
+    /// Horizontal field of view, degrees.
+    pub fov_horizontal_deg: f32,
+    /// Vertical field of view, degrees (Unity's `Camera.fieldOfView`).
+    pub fov_vertical_deg: f32,
+    /// Camera name, NUL-terminated.
+    pub name: [c_char; VRS_HOST_CAMERA_NAME_SIZE],
+}
+
+/// One agent of the session, from the config.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct vrs_host_agent_info_t {
+    /// Agent id.
+    pub agent_id: u32,
+    /// Number of cameras (`vrs_host_camera` indices `0..camera_count`).
+    pub camera_count: u32,
+    /// 1 if the agent is connected now, else 0.
+    pub connected: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+}
+
+/// The session: what the config says and where the host is.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct vrs_host_info_t {
+    /// Current cycle number (the next frame's).
+    pub cycle: u64,
+    /// Simulated time at the start of the current cycle, nanoseconds.
+    pub sim_time_ns: u64,
+    /// Simulated time per cycle (`simulation_time_per_frame`), nanoseconds.
+    pub simulation_time_per_frame_ns: u64,
+    /// How long `vrs_host_collect` waits for stops (`stop_timeout`), nanoseconds.
+    pub stop_timeout_ns: u64,
+    /// The config's `connect_timeout`, nanoseconds.
+    pub connect_timeout_ns: u64,
+    /// Number of agents in the config (`vrs_host_agent_info` indices).
+    pub agent_count: u32,
+    /// 1 in sync (lock-step) mode, 0 in async mode.
+    pub sync_mode: u32,
+    /// The transport.
+    pub transport: vrs_host_transport_t,
+    /// The TCP port agents connect to (the bound one if the config said 0); 0 on shm.
+    pub tcp_port: u32,
+    /// Most commands one agent may send per cycle.
+    pub max_commands_per_cycle: u32,
+    /// The wire protocol version.
+    pub protocol_version: u32,
+}
+
+/// The end of one cycle ([`vrs_host_collect`](crate::ffi::vrs_host_collect)).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct vrs_host_cycle_t {
+    /// Cycle number that ended.
+    pub cycle: u64,
+    /// Simulated time at its start, nanoseconds. The world advances by
+    /// `simulation_time_per_frame` now.
+    pub sim_time_ns: u64,
+    /// Number of agent reports (`vrs_host_agent_report` indices), in agent id order.
+    pub agent_count: u32,
+    /// Agents whose stop did not arrive before the stop timeout (0 = all in time).
+    pub timed_out_agents: u32,
+    /// Batches for earlier cycles (or after a stop) dropped during this cycle.
+    pub late_batches: u32,
+    /// Commands received this cycle, all agents together.
+    pub command_count: u32,
+}
+
+/// A motor command as the agent sent it. `kind` is a `vrs_host_command_kind_t` value, or
+/// any other number if the agent sent garbage: check it, and the arguments (NaN, range),
+/// before applying. Same layout as the wire format, so command arrays are handed out
+/// without a copy.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct vrs_host_command_t {
+    /// A `vrs_host_command_kind_t` value (not checked).
+    pub kind: u32,
+    /// The action id the agent chose; report its state back in `statuses`.
+    pub action_id: u32,
+    /// Object id or reset type, for the kinds that take one.
+    pub object_id: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// Float arguments, meaning per kind.
+    pub args: [f32; 4],
+}
+
+/// One agent's part of the cycle that ended.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct vrs_host_agent_report_t {
+    /// Agent id.
+    pub agent_id: u32,
+    /// How its part of the cycle ended.
+    pub outcome: vrs_host_outcome_t,
+    /// Number of commands at `commands`.
+    pub command_count: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// The commands in the order the agent sent them; NULL when there are none. Valid
+    /// until `vrs_host_end_cycle`.
+    pub commands: *const vrs_host_command_t,
+}
+
+/// Counters since the host was created.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct vrs_host_stats_t {
+    /// Cycles completed.
+    pub cycles: u64,
+    /// Cycles that ended by the stop timeout.
+    pub stop_timeouts: u64,
+    /// Agent-cycles that timed out (one cycle with two missing agents counts 2).
+    pub agent_timeouts: u64,
+    /// Batches dropped because they named an earlier cycle or followed the stop.
+    pub late_batches: u64,
+    /// Batches dropped because they named a cycle that had not started.
+    pub future_batches: u64,
+    /// Commands received.
+    pub commands_received: u64,
+    /// Commands dropped because an agent exceeded `max_commands_per_cycle`.
+    pub commands_overflowed: u64,
+    /// Frames that reached no agent (not connected).
+    pub frames_undelivered: u64,
+}
+
+// The command array of a report is the host's `[MotorCommand]`, handed out as is.
+const _: () = {
+    assert!(size_of::<vrs_host_command_t>() == size_of::<MotorCommand>());
+    assert!(align_of::<vrs_host_command_t>() == align_of::<MotorCommand>());
+    assert!(offset_of!(vrs_host_command_t, kind) == offset_of!(MotorCommand, kind));
+    assert!(offset_of!(vrs_host_command_t, action_id) == offset_of!(MotorCommand, action_id));
+    assert!(offset_of!(vrs_host_command_t, object_id) == offset_of!(MotorCommand, object_id));
+    assert!(offset_of!(vrs_host_command_t, reserved) == offset_of!(MotorCommand, reserved));
+    assert!(offset_of!(vrs_host_command_t, args) == offset_of!(MotorCommand, args));
+    // Sizes the C# binding mirrors (64-bit targets; the pointer structs differ on 32-bit).
+    assert!(size_of::<vrs_host_sensors_t>() == 328);
+    assert!(size_of::<vrs_host_command_t>() == 32);
+    assert!(size_of::<vrs_host_cycle_t>() == 32);
+    assert!(size_of::<vrs_host_stats_t>() == 64);
+};
