@@ -607,7 +607,7 @@ impl Config {
         let _ = writeln!(
             s,
             "# effective vrsync config (generated from {})",
-            self.source.display()
+            self.source.display().to_string().escape_debug()
         );
         let _ = writeln!(s, "session = {:?}\nseed = {}", self.session, self.seed);
         let _ = writeln!(
@@ -635,15 +635,15 @@ impl Config {
             self.transport.max_commands_per_cycle
         );
         if let Some(token) = &self.transport.tcp_token {
-            let _ = writeln!(s, "tcp_token = {token:?}");
+            let _ = writeln!(s, "tcp_token = {}", toml_string(token));
         }
         for a in &self.agents {
             let _ = writeln!(s, "\n[[agent]]\nid = {}", a.id);
             for c in &a.cameras {
                 let _ = writeln!(
                     s,
-                    "[[agent.camera]]\nname = {:?}\nwidth = {}\nheight = {}\nformat = {:?}\nfov_horizontal_deg = {:?}\nfov_vertical_deg = {:?}",
-                    c.name,
+                    "[[agent.camera]]\nname = {}\nwidth = {}\nheight = {}\nformat = {:?}\nfov_horizontal_deg = {:?}\nfov_vertical_deg = {:?}",
+                    toml_string(&c.name),
                     c.width_px,
                     c.height_px,
                     c.format.as_str(),
@@ -742,6 +742,11 @@ impl Ctx<'_> {
             fov_vertical_deg: fov_v as f32,
         })
     }
+}
+
+/// `s` as a TOML string value. (Rust's `{:?}` is not TOML: it writes `\u{7f}`.)
+fn toml_string(s: &str) -> String {
+    toml::Value::String(s.to_string()).to_string()
 }
 
 fn valid_session(s: &str) -> bool {
