@@ -276,6 +276,45 @@ fn a_signal_ends_the_run_cleanly(t: Transport, sig: i32) {
     }
 }
 
+/// SIGTERM on an agent ends its loop: it exits 0, and the host goes on without it.
+fn sigterm_on_an_agent(t: Transport) {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = TestConfig::with_transport("agentsig", 2, t);
+    cfg.stop_timeout_s = 30.0;
+    let config = cfg.write(dir.path());
+    let config = config.to_str().unwrap();
+    let s = dir.path().join("summary.json");
+    let mut host = Proc::spawn(
+        &bin("vr-sim"),
+        &[
+            "run",
+            "--config",
+            config,
+            "--summary-json",
+            s.to_str().unwrap(),
+            "--quiet",
+        ],
+    );
+    host.wait_for_stderr("waiting for agents", Duration::from_secs(30));
+    let a0 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "0"]);
+    let mut a1 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "1"]);
+    host.wait_for_stderr("all agents connected", Duration::from_secs(30));
+    // Only an agent that took part is "lost" when it leaves.
+    a1.wait_for_stderr("first frame received", Duration::from_secs(30));
+    a1.signal(libc::SIGTERM);
+    let out = a1.wait(Duration::from_secs(10));
+    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    assert!(out.stderr.contains("agent finished"), "{}", out.stderr);
+    host.wait_for_stderr("evicted", Duration::from_secs(20));
+    host.signal(libc::SIGTERM);
+    let out = host.wait(Duration::from_secs(30));
+    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    assert_eq!(a0.wait(Duration::from_secs(10)).code(), Some(0));
+    let sum = summary(&s);
+    assert_eq!(sum["evicted_agents"], serde_json::json!([1]));
+    assert_eq!(sum["stop_timeouts"], 0);
+}
+
 fn sigint(t: Transport) {
     a_signal_ends_the_run_cleanly(t, libc::SIGINT);
 }
@@ -301,4 +340,5 @@ for_both_transports!(
     bad_commands_are_rejected_and_leave_the_world_untouched,
     sigint,
     sigterm,
+    sigterm_on_an_agent,
 );

@@ -514,6 +514,10 @@ fn wait_shm(
     // here is remembered by the transport even if a frame is returned first.
     shm.clear_start();
     loop {
+        // Checked before taking a frame too: in a fast run a frame is always waiting.
+        if shm.termination_requested() {
+            return Err(WaitStartError::Terminated);
+        }
         if let Some(frame) = shm.receive_newest().map_err(WaitStartError::Receive)? {
             let cycle = frame.header().cycle;
             if last_cycle.is_none_or(|last| cycle > last) {
@@ -524,9 +528,6 @@ fn wait_shm(
         if shm.shutdown_seen() {
             debug!("host closed the session (shutdown event)");
             return Err(WaitStartError::HostClosed);
-        }
-        if shm.termination_requested() {
-            return Err(WaitStartError::Terminated);
         }
         let now = Instant::now();
         if now >= *next_liveness {

@@ -339,6 +339,7 @@ impl<'c> HostBuilder<'c> {
                     last_outcome: WireOutcome::None,
                     last_rejected: 0,
                     evicted: false,
+                    seen: false,
                 }
             })
             .collect();
@@ -390,6 +391,8 @@ struct SlotState {
     last_rejected: u32,
     /// Evicted and not yet back.
     evicted: bool,
+    /// A frame reached it since it was last evicted (so losing it now is news).
+    seen: bool,
 }
 
 /// How often the host looks for dead agent processes while it waits.
@@ -579,6 +582,7 @@ impl Host {
         let slot = frame.slot;
         if self.backend.publish(slot, frame.loan)? {
             self.barrier.await_slot(slot);
+            self.slots[slot].seen = true;
             if self.slots[slot].evicted {
                 self.slots[slot].evicted = false;
                 self.stats.rejoins += 1;
@@ -685,14 +689,18 @@ impl Host {
         if reap {
             self.backend.reap_dead_agents(&mut self.dead);
         }
-        for slot in self.barrier.pending_slots() {
-            if !self.backend.is_connected(slot) && !self.dead.contains(&slot) {
+        // Awaited agents that disconnected, and agents that left between cycles.
+        for slot in 0..self.slots.len() {
+            let pending = self.barrier.outcome(slot) == AgentOutcome::TimedOut;
+            let known = pending || (self.slots[slot].seen && !self.slots[slot].evicted);
+            if known && !self.backend.is_connected(slot) && !self.dead.contains(&slot) {
                 self.dead.push(slot);
             }
         }
         for i in 0..self.dead.len() {
             let slot = self.dead[i];
-            if self.barrier.evict(slot) {
+            let pending = self.barrier.evict(slot);
+            if pending || !self.slots[slot].evicted {
                 let id = self.slots[slot].id;
                 warn!(
                     agent = id,
@@ -700,6 +708,7 @@ impl Host {
                     "agent lost (process died or disconnected): evicted"
                 );
                 self.slots[slot].evicted = true;
+                self.slots[slot].seen = false;
                 self.lost_this_cycle.push(slot);
                 if let Err(pos) = self.stats.evicted_agents.binary_search(&id) {
                     self.stats.evicted_agents.insert(pos, id);
@@ -807,14 +816,23 @@ impl Host {
             Some(t) if t + period > now => t,
             _ => now + period,
         };
+        self.lost_this_cycle.clear();
+        let mut next_reap = now + REAP_PERIOD;
         loop {
             self.drain(false)?;
             let now = Instant::now();
+            let reap = now >= next_reap;
+            if reap {
+                next_reap = now + REAP_PERIOD;
+            }
+            self.check_lost(reap);
             if now >= tick {
                 break;
             }
-            self.backend.wait_activity(tick - now)?;
+            self.backend
+                .wait_activity(tick.min(next_reap).saturating_duration_since(now))?;
         }
+        self.handle_lost()?;
         self.next_tick = Some(tick + period);
         for a in &mut self.report.agents {
             a.outcome = AgentOutcome::Async;

@@ -149,6 +149,9 @@ fn run(args: &Args) -> anyhow::Result<ExitCode> {
         };
         let cycle = frame.cycle();
         let sim_time_ns = frame.header().sim_time_ns;
+        if cycles == 0 {
+            info!(id = args.id, cycle, "first frame received");
+        }
         let decision = policy.decide(&frame);
         drop(frame);
         sent.clear();

@@ -142,6 +142,15 @@ pub fn init_iceoryx2_logging() {
     set_log_level_from_env_or(LogLevel::Error);
 }
 
+/// Whether SIGINT/SIGTERM arrived. iceoryx2 hands a signal out only once (and installs its
+/// handlers on the first query), so the answer is remembered in `flag`.
+fn sticky_termination(node: &Node<Svc>, flag: &core::cell::Cell<bool>) -> bool {
+    if !flag.get() && node.wait(Duration::ZERO).is_err() {
+        flag.set(true);
+    }
+    flag.get()
+}
+
 fn node(name: &str) -> Result<Node<Svc>, String> {
     let node_name =
         NodeName::new(name).map_err(|e| format!("invalid node name {name:?}: {e:?}"))?;
@@ -258,6 +267,7 @@ struct HostAgentPorts {
 /// The host side of the shared-memory transport.
 pub struct ShmHost {
     node: Node<Svc>,
+    terminated: core::cell::Cell<bool>,
     agent_node_names: Vec<String>,
     spin: bool,
     spins: u32,
@@ -447,8 +457,12 @@ impl ShmHost {
             .default_event_id(EventId::new(START_EVENT))
             .create()
             .map_err(|e| ice(format!("cannot create the start notifier: {e:?}")))?;
+        // Install iceoryx2's SIGINT/SIGTERM handlers now: from here on a signal only sets a
+        // flag that the cycle loop honours.
+        let terminated = core::cell::Cell::new(node.wait(Duration::ZERO).is_err());
         Ok(Self {
             node,
+            terminated,
             agent_node_names: config
                 .agents
                 .iter()
@@ -632,7 +646,7 @@ impl HostTransport for ShmHost {
     }
 
     fn termination_requested(&self) -> bool {
-        self.node.wait(Duration::ZERO).is_err()
+        sticky_termination(&self.node, &self.terminated)
     }
 }
 
@@ -726,6 +740,7 @@ pub struct ShmAgent {
     id: u32,
     session: String,
     node: Node<Svc>,
+    terminated: core::cell::Cell<bool>,
     _start_service: event_factory::PortFactory<Svc>,
     start: Listener<Svc>,
     _stop_service: event_factory::PortFactory<Svc>,
@@ -885,10 +900,13 @@ impl ShmAgent {
             .map_err(|e| in_use(&e))?;
         // Tell the host we are here (it waits on the stop event while agents join).
         let _ = stop.notify();
+        // Install iceoryx2's SIGINT/SIGTERM handlers now (see ShmHost::create).
+        let terminated = core::cell::Cell::new(node.wait(Duration::ZERO).is_err());
         Ok(Self {
             id,
             session: session.clone(),
             node,
+            terminated,
             _start_service: start_service,
             start,
             _stop_service: stop_service,
@@ -979,7 +997,7 @@ impl ShmAgent {
 
     /// Whether SIGINT/SIGTERM was received.
     pub fn termination_requested(&self) -> bool {
-        self.node.wait(Duration::ZERO).is_err()
+        sticky_termination(&self.node, &self.terminated)
     }
 
     /// Publishes a motor batch and, if it carries the stop flag, notifies *stop*.

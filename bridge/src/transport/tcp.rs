@@ -1412,6 +1412,9 @@ impl TcpAgent {
         if self.closed {
             return Err(TcpWaitError::HostClosed);
         }
+        if termination_requested() {
+            return Err(TcpWaitError::Terminated);
+        }
         let mut newest: Option<TcpFrame> = None;
         loop {
             let more = newest.is_none() || self.readable_now();
