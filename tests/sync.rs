@@ -467,3 +467,33 @@ for_both_transports!(
     without_spawn_the_host_says_which_agents_it_waits_for,
     an_agent_without_a_host_fails_with_a_clear_error,
 );
+
+#[test]
+fn tcp_port_0_with_spawned_agents_tells_them_the_bound_port() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = TestConfig::with_transport("port0", 2, Transport::Tcp);
+    cfg.tcp_port = 0;
+    let config = cfg.write(dir.path());
+    let s = dir.path().join("summary.json");
+    let out = util::run(
+        "vr-sim",
+        &[
+            "run",
+            "--config",
+            config.to_str().unwrap(),
+            "--frames",
+            "20",
+            "--spawn-agents",
+            "2",
+            "--summary-json",
+            s.to_str().unwrap(),
+            "--quiet",
+        ],
+        RUN_DEADLINE,
+    );
+    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    let sum = summary(&s);
+    assert_eq!(sum["frames"], 20);
+    assert_eq!(sum["transport"], "tcp");
+    assert_eq!(sum["stop_timeouts"], 0);
+}

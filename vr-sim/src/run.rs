@@ -115,8 +115,27 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
         .create()
         .context("cannot create the host")?;
     let ids: Vec<u32> = host.agent_ids().collect();
+    // `tcp_listen` with port 0 binds a free port: spawned agents must learn the real one.
+    let mut _bound_config = None;
+    let mut agent_config_path = opts.agent_config_path.clone();
+    if let Some(addr) = host.tcp_local_addr()
+        && addr != config.transport.tcp_listen
+        && opts.spawn
+    {
+        let mut bound = config.clone();
+        bound.transport.tcp_listen = addr;
+        let path = std::env::temp_dir().join(format!(
+            "vrsync-{}-{}-bound.toml",
+            config.session,
+            std::process::id()
+        ));
+        std::fs::write(&path, bound.to_toml_string())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        agent_config_path = path.clone();
+        _bound_config = Some(crate::spawn::RemoveOnDrop(path));
+    }
     let mut agents = if opts.spawn {
-        Agents::spawn(&opts.agent_config_path, &ids, &opts.agent_args)?
+        Agents::spawn(&agent_config_path, &ids, &opts.agent_args)?
     } else {
         Agents::default()
     };

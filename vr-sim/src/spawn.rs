@@ -100,3 +100,13 @@ impl Drop for Agents {
         }
     }
 }
+
+/// A file removed when this value is dropped.
+#[derive(Debug)]
+pub struct RemoveOnDrop(pub PathBuf);
+
+impl Drop for RemoveOnDrop {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
