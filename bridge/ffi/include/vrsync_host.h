@@ -72,6 +72,9 @@ enum vrs_host_status_t
   VRS_HOST_ERROR_NO_FRAME = -8,
   // An index is past the end of its table (image, camera, agent, command).
   VRS_HOST_ERROR_OUT_OF_RANGE = -9,
+  // An agent was lost (its process died or disconnected) and the config says
+  // `on_agent_lost = "abort"`, or `"wait"` and it did not come back in time.
+  VRS_HOST_ERROR_AGENT_LOST = -10,
   // The transport failed.
   VRS_HOST_ERROR_TRANSPORT = -12,
   // SIGINT or SIGTERM arrived: the program should end.
@@ -296,7 +299,7 @@ typedef struct vrs_host_camera_t {
   char name[VRS_HOST_CAMERA_NAME_SIZE];
 } vrs_host_camera_t;
 
-// A loaned sensor frame ([`vrs_host_loan_frame`](crate::ffi::vrs_host_loan_frame)).
+// A loaned sensor frame (`vrs_host_loan_frame`).
 typedef struct vrs_host_frame_t {
   // Cycle number the frame belongs to.
   uint64_t cycle;
@@ -336,6 +339,7 @@ typedef struct vrs_host_pose_t {
   // Position `[x, y, z]` in metres (world frame: x right, y up, z forward).
   float position[3];
   // Orientation quaternion `[x, y, z, w]` (Unity's `Quaternion` has the same order).
+  // All zeros (a zero-initialised struct) is sent as the identity.
   float rotation[4];
 } vrs_host_pose_t;
 
@@ -406,7 +410,7 @@ typedef struct vrs_host_sensors_t {
   struct vrs_host_collision_t collisions[VRS_HOST_MAX_COLLISIONS];
 } vrs_host_sensors_t;
 
-// The end of one cycle ([`vrs_host_collect`](crate::ffi::vrs_host_collect)).
+// The end of one cycle (`vrs_host_collect`).
 typedef struct vrs_host_cycle_t {
   // Cycle number that ended.
   uint64_t cycle;
@@ -701,8 +705,8 @@ vrs_host_status_t vrs_host_start(struct vrs_host_t *host);
 //
 // # Errors
 // `VRS_HOST_ERROR_WRONG_STATE` (no start), `VRS_HOST_ERROR_TERMINATED` (SIGINT/SIGTERM),
-// `VRS_HOST_ERROR_TRANSPORT`, `VRS_HOST_ERROR_OTHER` (e.g. an agent lost with
-// `on_agent_lost = "abort"`), handle errors.
+// `VRS_HOST_ERROR_TRANSPORT`, `VRS_HOST_ERROR_AGENT_LOST` (an agent lost with
+// `on_agent_lost = "abort"` or `"wait"`), handle errors.
 //
 // # Safety
 // Any handle value may be passed; `out_cycle` is NULL or valid for writing a

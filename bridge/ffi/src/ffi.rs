@@ -106,9 +106,16 @@ fn check_sensors(s: &vrs_host_sensors_t) -> Result<(), FfiError> {
 }
 
 fn write_header(h: &mut wire::SensorHeader, s: &vrs_host_sensors_t) {
+    // A zero-initialised struct (C `{0}`, C# `default`) has no valid rotation; the
+    // agents would compute NaN headings from it.
+    let rotation = if s.pose.rotation == [0.0; 4] {
+        [0.0, 0.0, 0.0, 1.0]
+    } else {
+        s.pose.rotation
+    };
     h.pose = Pose {
         position: s.pose.position,
-        rotation: s.pose.rotation,
+        rotation,
     };
     h.reward = s.reward;
     h.grid = GridPosition {
@@ -672,6 +679,7 @@ pub extern "C" fn vrs_host_status_name(status: i32) -> *const c_char {
         (VRS_HOST_ERROR_WRONG_STATE, c"VRS_HOST_ERROR_WRONG_STATE"),
         (VRS_HOST_ERROR_NO_FRAME, c"VRS_HOST_ERROR_NO_FRAME"),
         (VRS_HOST_ERROR_OUT_OF_RANGE, c"VRS_HOST_ERROR_OUT_OF_RANGE"),
+        (VRS_HOST_ERROR_AGENT_LOST, c"VRS_HOST_ERROR_AGENT_LOST"),
         (VRS_HOST_ERROR_TRANSPORT, c"VRS_HOST_ERROR_TRANSPORT"),
         (VRS_HOST_ERROR_TERMINATED, c"VRS_HOST_ERROR_TERMINATED"),
         (VRS_HOST_ERROR_OTHER, c"VRS_HOST_ERROR_OTHER"),
@@ -979,8 +987,8 @@ pub unsafe extern "C" fn vrs_host_start(host: *mut vrs_host_t) -> vrs_host_statu
 ///
 /// # Errors
 /// `VRS_HOST_ERROR_WRONG_STATE` (no start), `VRS_HOST_ERROR_TERMINATED` (SIGINT/SIGTERM),
-/// `VRS_HOST_ERROR_TRANSPORT`, `VRS_HOST_ERROR_OTHER` (e.g. an agent lost with
-/// `on_agent_lost = "abort"`), handle errors.
+/// `VRS_HOST_ERROR_TRANSPORT`, `VRS_HOST_ERROR_AGENT_LOST` (an agent lost with
+/// `on_agent_lost = "abort"` or `"wait"`), handle errors.
 ///
 /// # Safety
 /// Any handle value may be passed; `out_cycle` is NULL or valid for writing a

@@ -101,6 +101,9 @@ impl FfiError {
                 HostCycleError::StaleFrame { .. } => VRS_HOST_ERROR_WRONG_STATE,
                 HostCycleError::Terminated => VRS_HOST_ERROR_TERMINATED,
                 HostCycleError::Transport(_) => VRS_HOST_ERROR_TRANSPORT,
+                HostCycleError::AgentLost { .. } | HostCycleError::AgentNotBack { .. } => {
+                    VRS_HOST_ERROR_AGENT_LOST
+                }
                 _ => VRS_HOST_ERROR_OTHER,
             },
             Self::UnknownAgent(_) => VRS_HOST_ERROR_UNKNOWN_AGENT,
@@ -356,18 +359,15 @@ pub(crate) fn copy_report(
 
 fn outcome(o: AgentOutcome) -> vrs_host_outcome_t {
     use vrs_host_outcome_t::*;
-    // Outcomes added to the bridge later are matched by name, so that this crate builds
-    // against both the older and the newer set.
+    // The wildcard keeps outcomes added to the bridge later from breaking the build.
     #[allow(unreachable_patterns)]
     match o {
         AgentOutcome::Stopped => VRS_HOST_OUTCOME_STOPPED,
         AgentOutcome::TimedOut => VRS_HOST_OUTCOME_TIMED_OUT,
         AgentOutcome::NotAwaited => VRS_HOST_OUTCOME_NOT_AWAITED,
         AgentOutcome::Async => VRS_HOST_OUTCOME_ASYNC,
-        other => match other.as_str() {
-            "evicted" => VRS_HOST_OUTCOME_EVICTED,
-            _ => VRS_HOST_OUTCOME_OTHER,
-        },
+        AgentOutcome::Evicted => VRS_HOST_OUTCOME_EVICTED,
+        _ => VRS_HOST_OUTCOME_OTHER,
     }
 }
 

@@ -59,6 +59,19 @@ fn create(path: &Path) -> *mut vrs_host_t {
     host
 }
 
+/// Waits (up to 10 s) until the host closes the session, skipping frames.
+fn wait_for_close(agent: &mut Agent) {
+    for _ in 0..100 {
+        match agent.wait_start(Some(Duration::from_millis(100))) {
+            Err(vrsync_agent::WaitStartError::HostClosed) => return,
+            Ok(frame) => drop(frame),
+            Err(vrsync_agent::WaitStartError::Timeout { .. }) => {}
+            Err(e) => panic!("waiting for the session to close: {e}"),
+        }
+    }
+    panic!("the host did not close the session");
+}
+
 fn connect_agent(path: &Path, id: u32) -> Agent {
     let config = Config::load(path).unwrap();
     Agent::connect(&config, id).unwrap()
@@ -210,6 +223,7 @@ fn create_reports_bad_arguments_and_config_errors() {
 struct Seen {
     cycle: u64,
     position: [f32; 3],
+    rotation: [f32; 4],
     reward: f32,
     statuses: Vec<(u32, u32)>,
     collisions: Vec<(u32, u32)>,
@@ -233,6 +247,7 @@ fn cycles_through_the_c_abi_with_a_real_agent() {
             seen.push(Seen {
                 cycle: frame.cycle(),
                 position: h.pose.position,
+                rotation: h.pose.rotation,
                 reward: h.reward,
                 statuses: h
                     .statuses()
@@ -261,6 +276,9 @@ fn cycles_through_the_c_abi_with_a_real_agent() {
             agent.send(Command::Turn { angle_deg: -30.0 }).unwrap();
             agent.stop().unwrap();
         }
+        // Stay connected until the host closes the session: an agent that leaves is
+        // evicted, and that would race with the host's last collect.
+        wait_for_close(&mut agent);
         seen
     });
 
@@ -396,6 +414,12 @@ fn cycles_through_the_c_abi_with_a_real_agent() {
                 action_id: 100,
                 state: vrs_host_action_state_t::VRS_HOST_ACTION_WALKING as u32,
             };
+            if n == 2 {
+                // A zero-initialised rotation arrives as the identity.
+                sensors.pose.rotation = [0.0; 4];
+            } else {
+                sensors.pose.rotation = [0.0, 1.0, 0.0, 0.0];
+            }
             if n == 1 {
                 sensors.collision_count = 1;
                 sensors.collisions[0] = vrs_host_collision_t {
@@ -513,21 +537,28 @@ fn cycles_through_the_c_abi_with_a_real_agent() {
         let s = stats.assume_init();
         assert_eq!((s.cycles, s.stop_timeouts, s.commands_received), (3, 0, 6));
     }
+    // SAFETY: a handle from create.
+    assert_eq!(unsafe { vrs_host_destroy(host) }, VRS_HOST_OK);
     let seen = agent.join().unwrap();
     assert_eq!(seen.len(), 3);
     for (n, s) in seen.iter().enumerate() {
         assert_eq!(s.cycle, n as u64);
         assert_eq!(s.position, [n as f32, 0.0, 2.0]);
         assert_eq!(s.reward, 0.25 * n as f32);
+        let rotation = if n == 2 {
+            [0.0, 0.0, 0.0, 1.0]
+        } else {
+            [0.0, 1.0, 0.0, 0.0]
+        };
+        assert_eq!(s.rotation, rotation);
         assert_eq!(s.statuses, vec![(100, 3)]);
         let collisions = if n == 1 { vec![(100, 77)] } else { vec![] };
         assert_eq!(s.collisions, collisions);
         assert_eq!((s.left_first, s.right_last), (10 + n as u8, 200 + n as u8));
         assert_eq!(s.previous_rejected, n.saturating_sub(1) as u32);
     }
-    // SAFETY: a handle from create; then a double free.
+    // SAFETY: a destroyed handle: a double free.
     unsafe {
-        assert_eq!(vrs_host_destroy(host), VRS_HOST_OK);
         assert_eq!(vrs_host_destroy(host), VRS_HOST_ERROR_INVALID_HANDLE);
         assert!(
             last_error().contains("already destroyed"),
@@ -550,6 +581,7 @@ fn missing_agents_and_stop_timeouts_are_outcomes_not_errors() {
             drop(agent.wait_start(Some(Duration::from_secs(5))).unwrap());
             agent.stop().unwrap();
         }
+        wait_for_close(&mut agent);
     });
     let mut missing = [u32::MAX; 1];
     let mut missing_count = 0u32;

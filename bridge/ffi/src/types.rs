@@ -64,6 +64,9 @@ pub enum vrs_host_status_t {
     VRS_HOST_ERROR_NO_FRAME = -8,
     /// An index is past the end of its table (image, camera, agent, command).
     VRS_HOST_ERROR_OUT_OF_RANGE = -9,
+    /// An agent was lost (its process died or disconnected) and the config says
+    /// `on_agent_lost = "abort"`, or `"wait"` and it did not come back in time.
+    VRS_HOST_ERROR_AGENT_LOST = -10,
     /// The transport failed.
     VRS_HOST_ERROR_TRANSPORT = -12,
     /// SIGINT or SIGTERM arrived: the program should end.
@@ -214,6 +217,7 @@ pub struct vrs_host_pose_t {
     /// Position `[x, y, z]` in metres (world frame: x right, y up, z forward).
     pub position: [f32; 3],
     /// Orientation quaternion `[x, y, z, w]` (Unity's `Quaternion` has the same order).
+    /// All zeros (a zero-initialised struct) is sent as the identity.
     pub rotation: [f32; 4],
 }
 
@@ -321,7 +325,7 @@ impl Default for vrs_host_sensors_t {
     }
 }
 
-/// A loaned sensor frame ([`vrs_host_loan_frame`](crate::ffi::vrs_host_loan_frame)).
+/// A loaned sensor frame (`vrs_host_loan_frame`).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct vrs_host_frame_t {
@@ -425,7 +429,7 @@ pub struct vrs_host_info_t {
     pub protocol_version: u32,
 }
 
-/// The end of one cycle ([`vrs_host_collect`](crate::ffi::vrs_host_collect)).
+/// The end of one cycle (`vrs_host_collect`).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct vrs_host_cycle_t {
