@@ -1,0 +1,187 @@
+#!/usr/bin/env bash
+# Tests of the C# binding with a real C# runtime (Mono's mcs and mono), against the real
+# libvrsync_host and real vr-agent processes:
+#   1. layout        C# structs and enums == the C header, field by field (and the library's sizes)
+#   2. api           errors, calls out of order, a missing agent, spans, Dispose, finalizers
+#   3. console host  VrsyncConsoleHost.exe + 2 x `vr-agent --policy wander`, 100 sync cycles:
+#                    0 timeouts, commands from both agents, both bodies moved
+#   4. stop timeout  agent 1 stops late once: a TimedOut outcome, no exception
+# Needs: cargo, mcs, mono (apt-get install -y mono-mcs mono-runtime), a C compiler for 1.
+# Every process runs under `timeout`; children are killed on exit. Usage:
+#   bash bridge/bindings/csharp/test.sh
+set -euo pipefail
+
+here="$(cd "$(dirname "$0")" && pwd)"
+root="$(cd "$here/../../.." && pwd)"
+cd "$root"
+
+step() { printf '\n--- %s (%ss)\n' "$*" "$SECONDS"; }
+fail() {
+    echo "test.sh: FAIL: $*" >&2
+    exit 1
+}
+
+for tool in cargo mcs mono timeout; do
+    command -v "$tool" >/dev/null || fail "$tool not found (apt-get install -y mono-mcs mono-runtime)"
+done
+
+work="$(mktemp -d "${TMPDIR:-/tmp}/vrsync-csharp.XXXXXX")"
+pids=()
+cleanup() {
+    local status=$?
+    for pid in "${pids[@]}"; do
+        kill "$pid" 2>/dev/null || true
+    done
+    for pid in "${pids[@]}"; do
+        wait "$pid" 2>/dev/null || true
+    done
+    if ((status != 0)); then
+        for log in "$work"/*.log; do
+            [[ -e "$log" ]] || continue
+            echo "==== $log (last lines)" >&2
+            tail -n 20 "$log" >&2
+        done
+    fi
+    rm -rf "$work"
+}
+trap cleanup EXIT
+trap 'exit 130' INT TERM
+
+# Unique per run, so parallel runs and leftovers of crashed runs never meet.
+session_base="cs$$-$RANDOM"
+
+step "cargo build -p vrsync-host-ffi (libvrsync_host) and vr-agent"
+timeout 1800 cargo build -p vrsync-host-ffi
+timeout 1800 cargo build -p vrsync-agent --bin vr-agent
+target_dir="$(cargo metadata --format-version 1 --no-deps | grep -o '"target_directory":"[^"]*"' | cut -d'"' -f4)"
+bin="$target_dir/debug"
+[[ -e "$bin/libvrsync_host.so" ]] || fail "$bin/libvrsync_host.so was not built"
+export LD_LIBRARY_PATH="$bin${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+
+step "mcs: binding, console host, tests ($(mcs --version))"
+mcs_flags=(-langversion:7.2 -unsafe -warnaserror -nologo)
+timeout 120 mcs "${mcs_flags[@]}" -target:library -out:"$work/Vrsync.dll" "$here"/src/*.cs
+timeout 120 mcs "${mcs_flags[@]}" -r:"$work/Vrsync.dll" -out:"$work/VrsyncConsoleHost.exe" \
+    "$here"/examples/*.cs
+timeout 120 mcs "${mcs_flags[@]}" -r:"$work/Vrsync.dll" -out:"$work/VrsyncTests.exe" \
+    "$here"/tests/Tests.cs
+
+# write_config FILE SESSION STOP_TIMEOUT_S: agents 0 and 1, small cameras.
+write_config() {
+    cat >"$1" <<EOF
+session = "$2"
+[sync]
+stop_timeout = $3
+connect_timeout = 20.0
+[[agent]]
+id = 0
+[[agent.camera]]
+name = "left"
+width = 32
+height = 16
+[[agent.camera]]
+name = "depth"
+width = 32
+height = 16
+format = "gray8"
+[[agent]]
+id = 1
+[[agent.camera]]
+name = "left"
+width = 32
+height = 16
+[[agent.camera]]
+name = "depth"
+width = 32
+height = 16
+format = "gray8"
+EOF
+}
+
+# agent TAG CONFIG ID [ARGS...]: a vr-agent in the background; its pid goes to agent_pid.
+agent() {
+    local tag=$1 config=$2 id=$3
+    shift 3
+    timeout 90 "$bin/vr-agent" --config "$config" --id "$id" --policy wander "$@" \
+        >"$work/$tag-agent$id.log" 2>&1 &
+    agent_pid=$!
+    pids+=("$agent_pid")
+}
+
+# expect_exit PID WHAT: the process ended with 0.
+expect_exit() {
+    local status=0
+    wait "$1" || status=$?
+    ((status == 0)) || fail "$2 exited with $status"
+}
+
+step "1. layout: C# == vrsync_host.h"
+timeout 60 mono --debug "$work/VrsyncTests.exe" layout >"$work/layout-cs.txt" 2>"$work/layout.log"
+cc=""
+for c in "${CC:-}" cc gcc clang; do
+    if [[ -n "$c" ]] && command -v "$c" >/dev/null; then
+        cc=$c
+        break
+    fi
+done
+if [[ -z "$cc" ]] && command -v g++ >/dev/null; then
+    cc="g++ -x c"
+fi
+[[ -n "$cc" ]] || fail "no C compiler (cc, gcc, clang or g++) for the layout check"
+$cc -std=c11 -I bridge/ffi/include "$here/tests/layout.c" -o "$work/layout"
+timeout 60 "$work/layout" >"$work/layout-c.txt"
+sort "$work/layout-c.txt" >"$work/layout-c.sorted"
+sort "$work/layout-cs.txt" >"$work/layout-cs.sorted"
+if ! diff "$work/layout-c.sorted" "$work/layout-cs.sorted"; then
+    fail "the C# binding and vrsync_host.h disagree (< C header, > C#)"
+fi
+echo "$(wc -l <"$work/layout-c.txt") sizes, offsets and constants agree"
+
+step "2. api: errors, a missing agent, spans, Dispose, finalizers"
+write_config "$work/api.toml" "$session_base-api" 5.0
+agent api "$work/api.toml" 0
+api_agent=$agent_pid
+timeout 90 mono --debug "$work/VrsyncTests.exe" api "$work/api.toml" 2>&1 | tee "$work/api.log"
+[[ ${PIPESTATUS[0]} == 0 ]] || fail "VrsyncTests.exe api"
+expect_exit "$api_agent" "vr-agent 0 (api) after the host closed the session"
+
+step "3. console host: 2 x vr-agent --policy wander, 100 sync cycles"
+sed "s/^session = .*/session = \"$session_base-run\"/" config/default.toml >"$work/run.toml"
+agent run "$work/run.toml" 0
+run_agent0=$agent_pid
+agent run "$work/run.toml" 1
+run_agent1=$agent_pid
+status=0
+timeout 90 mono --debug "$work/VrsyncConsoleHost.exe" --config "$work/run.toml" --cycles 100 \
+    --connect-timeout-ms 20000 >"$work/summary.txt" 2>"$work/run-host.log" || status=$?
+cat "$work/summary.txt"
+((status == 0)) || fail "VrsyncConsoleHost.exe exited with $status"
+expect_exit "$run_agent0" "vr-agent 0 (console host run)"
+expect_exit "$run_agent1" "vr-agent 1 (console host run)"
+value() { sed -n "s/^$1=//p" "$work/summary.txt"; }
+[[ "$(value cycles)" == 100 ]] || fail "cycles=$(value cycles), expected 100"
+[[ "$(value stop_timeouts)" == 0 ]] || fail "stop_timeouts=$(value stop_timeouts), expected 0"
+[[ "$(value agent_timeouts)" == 0 ]] || fail "agent_timeouts=$(value agent_timeouts), expected 0"
+for id in 0 1; do
+    n="$(value "agent${id}_commands")"
+    ((n > 0)) || fail "no commands from agent $id"
+    walked="$(value "agent${id}_walked_m")"
+    awk -v w="$walked" 'BEGIN { exit !(w > 1.0) }' || fail "agent $id walked only ${walked} m"
+done
+echo "100 cycles, 0 timeouts; commands: agent 0 $(value agent0_commands), agent 1" \
+    "$(value agent1_commands); walked: $(value agent0_walked_m) m, $(value agent1_walked_m) m;" \
+    "$(value cycles_per_s) cycles/s"
+
+step "4. stop timeout: agent 1 stops late in cycle 2"
+write_config "$work/late.toml" "$session_base-late" 0.4
+agent late "$work/late.toml" 0
+late_agent0=$agent_pid
+agent late "$work/late.toml" 1 --late-stop-at 2
+late_agent1=$agent_pid
+timeout 90 mono --debug "$work/VrsyncTests.exe" stop-timeout "$work/late.toml" 2>&1 |
+    tee "$work/late.log"
+[[ ${PIPESTATUS[0]} == 0 ]] || fail "VrsyncTests.exe stop-timeout"
+expect_exit "$late_agent0" "vr-agent 0 (stop timeout)"
+expect_exit "$late_agent1" "vr-agent 1 (stop timeout)"
+
+step "C# binding: all tests passed"

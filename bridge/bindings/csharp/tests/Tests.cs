@@ -1,0 +1,375 @@
+// Tests of the C# binding against the real libvrsync_host and real vr-agent processes
+// (started by test.sh). Usage:
+//   VrsyncTests.exe layout                  sizes, offsets and constants, C# side
+//   VrsyncTests.exe api CONFIG              API, errors, missing agent 1 (agent 0 runs)
+//   VrsyncTests.exe stop-timeout CONFIG     agent 1 stops late once: an outcome, not an exception
+// Prints "ok <check>" lines; exits 1 with "FAIL <why>" on the first failed check.
+
+using System;
+using System.Collections.Generic;
+using System.Runtime.InteropServices;
+using System.Text;
+using Vrsync;
+
+static class Tests
+{
+    static int Main(string[] args)
+    {
+        try
+        {
+            switch (args.Length > 0 ? args[0] : "")
+            {
+                case "layout": Layout(); break;
+                case "api": Api(args[1]); break;
+                case "stop-timeout": StopTimeout(args[1]); break;
+                default:
+                    Console.Error.WriteLine("usage: VrsyncTests.exe layout | api CONFIG | stop-timeout CONFIG");
+                    return 2;
+            }
+            return 0;
+        }
+        catch (Exception e)
+        {
+            Console.Error.WriteLine("FAIL " + e);
+            return 1;
+        }
+    }
+
+    static void Ok(string what)
+    {
+        Console.Error.WriteLine("ok " + what);
+    }
+
+    static void Expect(bool condition, string what)
+    {
+        if (!condition)
+            throw new Exception(what);
+    }
+
+    static void Equal<T>(T expected, T actual, string what)
+    {
+        if (!EqualityComparer<T>.Default.Equals(expected, actual))
+            throw new Exception(string.Format("{0}: expected {1}, got {2}", what, expected, actual));
+    }
+
+    static VrsyncException Throws(Status status, Action action, string what)
+    {
+        try
+        {
+            action();
+        }
+        catch (VrsyncException e)
+        {
+            if (e.Status != status)
+                throw new Exception(string.Format("{0}: expected {1}, got {2}: {3}", what, status, e.Status, e.Message));
+            return e;
+        }
+        throw new Exception(what + ": no exception, expected " + status);
+    }
+
+    // ---------------------------------------------------------------------------------
+    // layout: what the C# side believes; test.sh diffs it with tests/layout.c's output.
+
+    static readonly object[] Structs =
+    {
+        "vrs_host_pose_t", typeof(Pose), "position=Position rotation=Rotation",
+        "vrs_host_grid_position_t", typeof(GridPosition), "position=Position rotation_deg=RotationDeg",
+        "vrs_host_head_motion_t", typeof(HeadMotion),
+            "velocity=Velocity acceleration=Acceleration angular_velocity_deg=AngularVelocityDeg angular_acceleration_deg=AngularAccelerationDeg",
+        "vrs_host_eye_position_t", typeof(EyePosition), "rotation_deg=RotationDeg rotation_velocity_deg=RotationVelocityDeg",
+        "vrs_host_action_status_t", typeof(ActionStatus), "action_id=ActionId state=State",
+        "vrs_host_collision_t", typeof(Collision), "action_id=ActionId collider_id=ColliderId",
+        "vrs_host_sensors_t", typeof(Sensors),
+            "pose=Pose reward=Reward grid=Grid head_motion=HeadMotion eye=Eye status_count=StatusCount collision_count=CollisionCount statuses=statuses collisions=collisions",
+        "vrs_host_frame_t", typeof(NativeStructs.Frame), "cycle=Cycle sim_time_ns=SimTimeNs agent_id=AgentId image_count=ImageCount",
+        "vrs_host_image_t", typeof(NativeStructs.Image),
+            "data=Data len=Length stride=Stride width=Width height=Height format=Format camera=Camera name=Name",
+        "vrs_host_camera_t", typeof(CameraInfo),
+            "len=Length stride=Stride width=Width height=Height format=Format fov_horizontal_deg=FovHorizontalDeg fov_vertical_deg=FovVerticalDeg name=name",
+        "vrs_host_agent_info_t", typeof(NativeStructs.AgentInfo), "agent_id=AgentId camera_count=CameraCount connected=Connected reserved=Reserved",
+        "vrs_host_info_t", typeof(HostInfo),
+            "cycle=Cycle sim_time_ns=SimTimeNs simulation_time_per_frame_ns=SimulationTimePerFrameNs stop_timeout_ns=StopTimeoutNs connect_timeout_ns=ConnectTimeoutNs agent_count=AgentCount sync_mode=SyncMode transport=Transport tcp_port=TcpPort max_commands_per_cycle=MaxCommandsPerCycle protocol_version=ProtocolVersion",
+        "vrs_host_cycle_t", typeof(CycleResult),
+            "cycle=Cycle sim_time_ns=SimTimeNs agent_count=AgentCount timed_out_agents=TimedOutAgents late_batches=LateBatches command_count=CommandCount",
+        "vrs_host_command_t", typeof(MotorCommand), "kind=Kind action_id=ActionId object_id=ObjectId reserved=reserved args=Arg0",
+        "vrs_host_agent_report_t", typeof(NativeStructs.AgentReport),
+            "agent_id=AgentId outcome=Outcome command_count=CommandCount reserved=Reserved commands=Commands",
+        "vrs_host_stats_t", typeof(HostStats),
+            "cycles=Cycles stop_timeouts=StopTimeouts agent_timeouts=AgentTimeouts late_batches=LateBatches future_batches=FutureBatches commands_received=CommandsReceived commands_overflowed=CommandsOverflowed frames_undelivered=FramesUndelivered",
+    };
+
+    static string Snake(string pascal)
+    {
+        var sb = new StringBuilder();
+        for (int i = 0; i < pascal.Length; i++)
+        {
+            if (i > 0 && char.IsUpper(pascal[i]))
+                sb.Append('_');
+            sb.Append(char.ToUpperInvariant(pascal[i]));
+        }
+        return sb.ToString();
+    }
+
+    static void Enum<T>(string prefix, Func<long, string> extra)
+    {
+        foreach (T v in System.Enum.GetValues(typeof(T)))
+        {
+            long n = Convert.ToInt64(v);
+            Console.WriteLine("{0}{1}{2} {3}", prefix, extra(n), Snake(v.ToString()), n);
+        }
+    }
+
+    static void Layout()
+    {
+        // The library's own sizes first: throws on a mismatch.
+        foreach (var row in Host.CheckLayout())
+            Console.Error.WriteLine(row);
+        for (int i = 0; i < Structs.Length; i += 3)
+        {
+            string c = (string)Structs[i];
+            var type = (Type)Structs[i + 1];
+            Console.WriteLine("{0} sizeof {1}", c, Marshal.SizeOf(type));
+            foreach (var pair in ((string)Structs[i + 2]).Split(' '))
+            {
+                var names = pair.Split('=');
+                Console.WriteLine("{0}.{1} {2}", c, names[0], Marshal.OffsetOf(type, names[1]).ToInt64());
+            }
+        }
+        Enum<Status>("VRS_HOST_", n => n < 0 ? "ERROR_" : "");
+        Enum<PixelFormat>("VRS_HOST_PIXEL_FORMAT_", n => "");
+        Enum<ActionState>("VRS_HOST_ACTION_", n => "");
+        Enum<AgentOutcome>("VRS_HOST_OUTCOME_", n => "");
+        Enum<CommandKind>("VRS_HOST_COMMAND_", n => "");
+        Enum<Transport>("VRS_HOST_TRANSPORT_", n => "");
+        Console.WriteLine("VRS_HOST_MAX_STATUSES " + Sensors.MaxStatuses);
+        Console.WriteLine("VRS_HOST_MAX_COLLISIONS " + Sensors.MaxCollisions);
+        Console.WriteLine("VRS_HOST_MAX_IMAGES " + SensorFrame.MaxImages);
+        Console.WriteLine("VRS_HOST_CAMERA_NAME_SIZE " + CameraInfo.NameSize);
+
+        // The Sensors helpers write the pairs where the C struct has them.
+        Sensors s = Sensors.Create();
+        for (uint i = 0; i < Sensors.MaxStatuses; i++)
+            Expect(s.AddStatus(100 + i, ActionState.Walking), "AddStatus " + i);
+        Expect(!s.AddStatus(999, ActionState.Finished), "17th status is dropped");
+        Expect(s.AddCollision(7, 1001), "AddCollision");
+        unsafe
+        {
+            uint* p = (uint*)&s;
+            int statuses = (int)Marshal.OffsetOf(typeof(Sensors), "statuses") / 4;
+            int collisions = (int)Marshal.OffsetOf(typeof(Sensors), "collisions") / 4;
+            Equal(115u, p[statuses + 2 * 15], "statuses[15].action_id in memory");
+            Equal((uint)ActionState.Walking, p[statuses + 2 * 15 + 1], "statuses[15].state in memory");
+            Equal(1001u, p[collisions + 1], "collisions[0].collider_id in memory");
+        }
+        Equal(ActionState.Walking, s.GetStatus(3).State, "GetStatus");
+        Equal(1001u, s.GetCollision(0).ColliderId, "GetCollision");
+        Ok("layout and the Sensors helpers");
+    }
+
+    // ---------------------------------------------------------------------------------
+    // api: config with agents 0 and 1; only agent 0 runs (wander).
+
+    static void Api(string config)
+    {
+        var bad = Throws(Status.Config, () => new Host(config + ".missing"), "bad config path");
+        Expect(bad.Message.Contains(config + ".missing"), "message names the file: " + bad.Message);
+        Expect(bad.Message.Contains("VRS_HOST_ERROR_CONFIG"), "message names the status: " + bad.Message);
+        Ok("a missing config is a VrsyncException carrying the native message: " + bad.Message);
+
+        var host = new Host(config);
+        HostInfo info = host.Info;
+        Equal(2u, info.AgentCount, "agents");
+        Equal(1u, info.SyncMode, "sync mode");
+        Equal(Transport.Shm, info.Transport, "transport");
+        Equal(0ul, info.Cycle, "first cycle");
+        Equal(2, host.Agents.Length, "Agents");
+        CameraInfo left = host.GetCamera(1, 0);
+        Equal("left", left.Name, "camera 0 name");
+        Equal(32u, left.Width, "camera width");
+        Equal(PixelFormat.Rgb8, left.Format, "camera format");
+        Equal("depth", host.GetCamera(1, 1).Name, "camera 1 name");
+        Equal(PixelFormat.Gray8, host.GetCamera(1, 1).Format, "camera 1 format");
+        Ok("info and cameras from the config");
+
+        // Agent 0 connects (started by test.sh), agent 1 never does.
+        uint[] missing = null;
+        var deadline = DateTime.UtcNow.AddSeconds(20);
+        while (true)
+        {
+            Expect(!host.TryWaitForAgents(200, out missing), "agent 1 cannot be connected");
+            if (missing.Length == 1)
+                break;
+            Expect(DateTime.UtcNow < deadline, "agent 0 did not connect within 20 s");
+        }
+        Equal(1u, missing[0], "missing id");
+        Expect(host.IsConnected(0) && !host.IsConnected(1), "IsConnected");
+        try
+        {
+            host.WaitForAgents(50);
+            throw new Exception("WaitForAgents did not throw");
+        }
+        catch (AgentsMissingException e)
+        {
+            Equal(1, e.Missing.Length, "AgentsMissingException.Missing");
+            Equal(1u, e.Missing[0], "AgentsMissingException.Missing[0]");
+            Expect(e.Message.Contains("[1]"), "message names agent 1: " + e.Message);
+            Ok("agent 1 missing: " + e.Message);
+        }
+
+        // Calls out of order.
+        Throws(Status.WrongState, () => host.Collect(), "collect before start");
+        Throws(Status.WrongState, () => host.EndCycle(), "end cycle before collect");
+        Throws(Status.UnknownAgent, () => host.LoanFrame(7), "unknown agent");
+        Throws(Status.NoFrame, () => { var s = Sensors.Create(); host.Publish(0, ref s); }, "publish without loan");
+        Ok("calls out of order are exceptions with the native message");
+
+        for (int n = 0; n < 3; n++)
+        {
+            for (uint id = 0; id < 2; id++)
+            {
+                SensorFrame frame = host.LoanFrame(id);
+                Equal((ulong)n, frame.Cycle, "frame cycle");
+                Equal(2, frame.ImageCount, "image count");
+                Image image = frame.GetImage("left");
+                Equal(32 * 3, image.Stride, "stride");
+                Equal(image.Stride * image.Height, image.Pixels.Length, "span length");
+                image.Pixels.Fill((byte)(10 + n));
+                image.CopyFromBottomUp(new byte[image.Length], image.Stride);
+                Image depth = frame.GetImage(1);
+                Equal(PixelFormat.Gray8, depth.Format, "depth format");
+                depth.Row(depth.Height - 1).Fill(255);
+                Throws(Status.InvalidArgument, () => frame.GetImage("nope"), "unknown camera");
+                Throws(Status.OutOfRange, () => frame.GetImage(2), "image index");
+                bool threw = false;
+                try { Span<byte> px = image.Pixels; px[image.Length] = 1; } catch (IndexOutOfRangeException) { threw = true; }
+                Expect(threw, "the span is bounded by the image");
+                if (n == 0 && id == 0)
+                {
+                    Throws(Status.WrongState, () => host.LoanFrame(0), "second loan");
+                    Throws(Status.WrongState, () => host.Start(), "start with a loaned frame");
+                }
+                Sensors sensors = Sensors.Create();
+                sensors.Pose.Position = new Vec3(n, 0, id);
+                sensors.AddStatus(1, ActionState.Finished);
+                frame.Publish(ref sensors);
+            }
+            host.Start();
+            CycleResult cycle = host.Collect();
+            Equal((ulong)n, cycle.Cycle, "collected cycle");
+            Equal(2u, cycle.AgentCount, "reports");
+            Equal(0u, cycle.TimedOutAgents, "timeouts");
+            AgentReport r0 = host.GetReport(0);
+            Equal(AgentOutcome.Stopped, r0.Outcome, "agent 0 outcome");
+            Equal((int)cycle.CommandCount, r0.Commands.Length, "agent 0 commands");
+            for (int i = 0; i < r0.Commands.Length; i++)
+            {
+                MotorCommand copy = host.GetCommand(0, i);
+                Equal(r0.Commands[i].ActionId, copy.ActionId, "command copy");
+                Expect(copy.IsWellFormed, "wander sends well-formed commands: " + copy);
+            }
+            AgentReport r1 = host.GetReport(1);
+            Equal(1u, r1.AgentId, "agent 1 id");
+            Equal(AgentOutcome.NotAwaited, r1.Outcome, "agent 1 (not connected) is not awaited");
+            Equal(0, r1.Commands.Length, "agent 1 commands");
+            Throws(Status.OutOfRange, () => host.GetReport(2), "report index");
+            Throws(Status.WrongState, () => host.LoanFrame(0), "loan before end cycle");
+            host.SetRejected(0, 0);
+            host.EndCycle();
+        }
+        Equal(3ul, host.Info.Cycle, "cycle after 3");
+        HostStats stats = host.Stats;
+        Equal(3ul, stats.Cycles, "stats cycles");
+        Equal(0ul, stats.StopTimeouts, "stats stop timeouts");
+        Equal(3ul, stats.FramesUndelivered, "frames for agent 1 undelivered");
+        Ok("3 cycles: agent 0 stopped, agent 1 not awaited; images through spans");
+
+        // Discard: the agent is not waited for.
+        host.LoanFrame(0).Discard();
+        Throws(Status.NoFrame, () => host.DiscardFrame(0), "double discard");
+        host.Start();
+        Equal(AgentOutcome.NotAwaited, (host.Collect().AgentCount == 2 ? host.GetReport(0).Outcome : AgentOutcome.Other), "discarded");
+        host.EndCycle();
+        Ok("a discarded frame is not waited for");
+
+        host.Dispose();
+        host.Dispose();
+        bool disposed = false;
+        try { var i = host.Info; } catch (ObjectDisposedException) { disposed = true; }
+        Expect(disposed, "use after Dispose is ObjectDisposedException");
+        Ok("Dispose is idempotent; use after Dispose throws ObjectDisposedException");
+
+        // A host left to the garbage collector (Unity: a domain reload without Dispose):
+        // the finalizer thread's destroy is deferred to this thread's next call, so the
+        // session can be created again here.
+        Abandon(config);
+        GC.Collect();
+        GC.WaitForPendingFinalizers();
+        using (var again = new Host(config))
+            Equal(0ul, again.Info.Cycle, "a fresh host");
+        Ok("a finalized host is destroyed on its own thread; the session is reusable");
+
+        Throws(Status.InvalidArgument, () => Host.InitLogging("[[["), "bad log filter");
+        Ok("api");
+    }
+
+    [System.Runtime.CompilerServices.MethodImpl(System.Runtime.CompilerServices.MethodImplOptions.NoInlining)]
+    static void Abandon(string config)
+    {
+        var h = new Host(config);
+        Equal(0ul, h.Info.Cycle, "abandoned host");
+    }
+
+    // ---------------------------------------------------------------------------------
+    // stop-timeout: agents 0 and 1 run; agent 1 stops late (twice stop_timeout) in cycle 2.
+
+    static void StopTimeout(string config)
+    {
+        using (var host = new Host(config))
+        {
+            host.WaitForAgents(20000);
+            double timeoutS = host.Info.StopTimeoutNs / 1e9;
+            var outcomes = new List<AgentOutcome[]>();
+            var timedOut = new List<uint>();
+            const int cycles = 8;
+            for (int n = 0; n < cycles; n++)
+            {
+                for (uint id = 0; id < 2; id++)
+                {
+                    SensorFrame frame = host.LoanFrame(id);
+                    for (int i = 0; i < frame.ImageCount; i++)
+                        frame.GetImage(i).Pixels.Fill(128);
+                    Sensors sensors = Sensors.Create();
+                    frame.Publish(ref sensors);
+                }
+                host.Start();
+                var started = DateTime.UtcNow;
+                CycleResult cycle = host.Collect(); // must not throw
+                double waited = (DateTime.UtcNow - started).TotalSeconds;
+                var row = new AgentOutcome[2];
+                for (int i = 0; i < cycle.AgentCount; i++)
+                {
+                    AgentReport r = host.GetReport(i);
+                    row[r.AgentId] = r.Outcome;
+                }
+                outcomes.Add(row);
+                timedOut.Add(cycle.TimedOutAgents);
+                Console.Error.WriteLine(string.Format("cycle {0}: agent 0 {1}, agent 1 {2}, waited {3:0.000} s",
+                    cycle.Cycle, row[0], row[1], waited));
+                if (row[1] == AgentOutcome.TimedOut)
+                    Expect(waited >= timeoutS * 0.9, "a timed-out cycle waited the stop timeout");
+                host.EndCycle();
+            }
+            Equal(AgentOutcome.TimedOut, outcomes[2][1], "agent 1 in cycle 2");
+            Equal(1u, timedOut[2], "timed-out agents in cycle 2");
+            for (int n = 0; n < cycles; n++)
+                Equal(AgentOutcome.Stopped, outcomes[n][0], "agent 0 in cycle " + n);
+            Equal(AgentOutcome.Stopped, outcomes[cycles - 1][1], "agent 1 caught up by the last cycle");
+            HostStats stats = host.Stats;
+            Expect(stats.StopTimeouts >= 1, "stop timeouts counted");
+            Expect(stats.LateBatches >= 1, "the late stop was dropped as late");
+            Console.Error.WriteLine(string.Format("stop_timeouts={0} agent_timeouts={1} late_batches={2}",
+                stats.StopTimeouts, stats.AgentTimeouts, stats.LateBatches));
+        }
+        Ok("stop-timeout: a late agent is an outcome in its report, not an exception");
+    }
+}
