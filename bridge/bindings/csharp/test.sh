@@ -5,7 +5,8 @@
 #   2. api           errors, calls out of order, a missing agent, spans, Dispose, finalizers
 #   3. console host  VrsyncConsoleHost.exe + 2 x `vr-agent --policy wander`, 100 sync cycles:
 #                    0 timeouts, commands from both agents, both bodies moved
-#   4. stop timeout  agent 1 stops late once: a TimedOut outcome, no exception
+#   4. TCP           the same console host over the TCP transport, 50 cycles
+#   5. stop timeout  agent 1 stops late once: a TimedOut outcome, no exception
 # Needs: cargo, mcs, mono (apt-get install -y mono-mcs mono-runtime), a C compiler for 1.
 # Every process runs under `timeout`; children are killed on exit. Usage:
 #   bash bridge/bindings/csharp/test.sh
@@ -172,7 +173,41 @@ echo "100 cycles, 0 timeouts; commands: agent 0 $(value agent0_commands), agent 
     "$(value agent1_commands); walked: $(value agent0_walked_m) m, $(value agent1_walked_m) m;" \
     "$(value cycles_per_s) cycles/s"
 
-step "4. stop timeout: agent 1 stops late in cycle 2"
+step "4. console host over TCP: 2 x vr-agent, 50 sync cycles"
+# The host binds port 0; the agents get the port it reports.
+sed -e "s/^session = .*/session = \"$session_base-tcp\"/" -e 's/^kind = "shm"/kind = "tcp"/' \
+    -e 's/^tcp_listen = .*/tcp_listen = "127.0.0.1:0"/' config/default.toml >"$work/tcp-host.toml"
+grep -q '^kind = "tcp"' "$work/tcp-host.toml" || fail "config/default.toml: no kind = \"shm\" line to switch"
+timeout 90 mono --debug "$work/VrsyncConsoleHost.exe" --config "$work/tcp-host.toml" --cycles 50 \
+    --connect-timeout-ms 20000 >"$work/tcp-summary.txt" 2>"$work/tcp-host.log" &
+tcp_host=$!
+pids+=("$tcp_host")
+port=""
+for _ in $(seq 400); do # up to 20 s for mono to start and the host to bind
+    port="$(sed -n 's/^tcp_port=//p' "$work/tcp-host.log")"
+    [[ -n "$port" ]] && break
+    kill -0 "$tcp_host" 2>/dev/null || break
+    sleep 0.05
+done
+[[ -n "$port" ]] || fail "the TCP console host did not report its port"
+sed "s/^tcp_listen = .*/tcp_listen = \"127.0.0.1:$port\"/" "$work/tcp-host.toml" >"$work/tcp.toml"
+agent tcp "$work/tcp.toml" 0
+tcp_agent0=$agent_pid
+agent tcp "$work/tcp.toml" 1
+tcp_agent1=$agent_pid
+expect_exit "$tcp_host" "VrsyncConsoleHost.exe over TCP"
+expect_exit "$tcp_agent0" "vr-agent 0 (TCP)"
+expect_exit "$tcp_agent1" "vr-agent 1 (TCP)"
+tcp_value() { sed -n "s/^$1=//p" "$work/tcp-summary.txt"; }
+[[ "$(tcp_value cycles)" == 50 && "$(tcp_value stop_timeouts)" == 0 ]] ||
+    fail "TCP: cycles=$(tcp_value cycles) stop_timeouts=$(tcp_value stop_timeouts)"
+for id in 0 1; do
+    n="$(tcp_value "agent${id}_commands")"
+    ((n > 0)) || fail "TCP: no commands from agent $id"
+done
+echo "TCP: 50 cycles, 0 timeouts, port $port; $(tcp_value cycles_per_s) cycles/s"
+
+step "5. stop timeout: agent 1 stops late in cycle 2"
 write_config "$work/late.toml" "$session_base-late" 0.4
 agent late "$work/late.toml" 0
 late_agent0=$agent_pid

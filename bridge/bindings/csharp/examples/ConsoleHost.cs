@@ -318,6 +318,8 @@ namespace Vrsync.Examples
                 Console.Error.WriteLine(string.Format(
                     "vrsync console host (libvrsync_host {0}): {1} agents, {2}, waiting for them",
                     Host.LibraryVersion, info.AgentCount, info.SyncMode != 0 ? "sync" : "async"));
+                if (info.Transport == Transport.Tcp)
+                    Console.Error.WriteLine("tcp_port=" + info.TcpPort); // agents connect here
                 host.WaitForAgents(connectTimeoutMs);
 
                 var bodies = new List<KinematicBody>();
