@@ -177,6 +177,8 @@ static class Tests
         Ok("a missing config is a VrsyncException carrying the native message: " + bad.Message);
 
         var host = new Host(config);
+        var twice = Throws(Status.Create, () => new Host(config), "a second host of a live session");
+        Ok("a second host of the same session is refused: " + twice.Message);
         HostInfo info = host.Info;
         Equal(2u, info.AgentCount, "agents");
         Equal(1u, info.SyncMode, "sync mode");
@@ -300,7 +302,7 @@ static class Tests
 
         // A host left to the garbage collector (Unity: a domain reload without Dispose):
         // the finalizer thread's destroy is deferred to this thread's next call, so the
-        // session can be created again here.
+        // session can be created again here (while the old host lived, that was refused).
         Abandon(config);
         GC.Collect();
         GC.WaitForPendingFinalizers();
