@@ -24,7 +24,8 @@ namespace Vrsync
         public string Call { get; private set; }
 
         public VrsyncException(Status status, string call, string message)
-            : base(string.Format("{0}: {1} ({2})", call, message, Native.StatusName(status)))
+            : base(string.Format("{0}{1} ({2})",
+                message.StartsWith(call + ":") ? "" : call + ": ", message, Native.StatusName(status)))
         {
             Status = status;
             Call = call;

@@ -219,7 +219,9 @@ static class Tests
         }
 
         // Calls out of order.
-        Throws(Status.WrongState, () => host.Collect(), "collect before start");
+        var early = Throws(Status.WrongState, () => host.Collect(), "collect before start");
+        Equal("vrs_host_collect: the cycle is before vrs_host_start; it belongs after vrs_host_start (VRS_HOST_ERROR_WRONG_STATE)",
+            early.Message, "message");
         Throws(Status.WrongState, () => host.EndCycle(), "end cycle before collect");
         Throws(Status.UnknownAgent, () => host.LoanFrame(7), "unknown agent");
         Throws(Status.NoFrame, () => { var s = Sensors.Create(); host.Publish(0, ref s); }, "publish without loan");
