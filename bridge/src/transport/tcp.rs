@@ -461,18 +461,19 @@ fn read_exact_deadline(
     Ok(())
 }
 
-/// Waits until one of `fds` is readable or `timeout` passes; marks which are readable.
-/// `pfds` is scratch space reused across calls (no allocation in steady state).
+/// Waits until one of `fds` has one of its `(fd, events)` (or a hang-up or error) or
+/// `timeout` passes; marks which are ready. `pfds` is scratch space reused across calls
+/// (no allocation in steady state).
 fn poll_readable(
-    fds: &[i32],
+    fds: &[(i32, i16)],
     timeout: Duration,
     pfds: &mut Vec<libc::pollfd>,
     ready: &mut Vec<bool>,
 ) -> io::Result<usize> {
     pfds.clear();
-    pfds.extend(fds.iter().map(|&fd| libc::pollfd {
+    pfds.extend(fds.iter().map(|&(fd, events)| libc::pollfd {
         fd,
-        events: libc::POLLIN,
+        events,
         revents: 0,
     }));
     let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
@@ -616,7 +617,9 @@ pub struct TcpHost {
     max_frame_body: usize,
     stall_timeout: Duration,
     token: Option<Vec<u8>>,
-    fds: Vec<i32>,
+    /// An agent socket was readable at the last wait and no drain has read it since.
+    unread: bool,
+    fds: Vec<(i32, i16)>,
     pfds: Vec<libc::pollfd>,
     ready: Vec<bool>,
 }
@@ -681,6 +684,7 @@ impl TcpHost {
             max_frame_body,
             stall_timeout: config.sync.stop_timeout.min(STALL_TIMEOUT),
             token: config.transport.tcp_token.clone().map(String::into_bytes),
+            unread: false,
             fds: Vec::new(),
             pfds: Vec::new(),
             ready: Vec::new(),
@@ -1092,6 +1096,7 @@ impl HostTransport for TcpHost {
     }
 
     fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError> {
+        self.unread = false;
         let stall_timeout = self.stall_timeout;
         for slot in 0..self.slots.len() {
             let failure = match &mut self.slots[slot].conn {
@@ -1106,15 +1111,23 @@ impl HostTransport for TcpHost {
     }
 
     fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
+        // Agent sockets whose data the caller has not drained since the last wait stay
+        // readable: waiting on them again would return at once, and a caller that waits
+        // without draining (for agents to connect, for a lost one to come back) would
+        // spin. Until the next drain they are only watched for errors and hang-ups.
+        let agent_events = if self.unread { 0 } else { libc::POLLIN };
         self.fds.clear();
-        self.fds.push(self.listener.as_raw_fd());
-        self.fds
-            .extend(self.pending.iter().map(|p| p.stream.as_raw_fd()));
+        self.fds.push((self.listener.as_raw_fd(), libc::POLLIN));
         self.fds.extend(
-            self.slots
+            self.pending
                 .iter()
-                .filter_map(|s| s.conn.as_ref().map(|c| c.stream.as_raw_fd())),
+                .map(|p| (p.stream.as_raw_fd(), libc::POLLIN)),
         );
+        self.fds.extend(self.slots.iter().filter_map(|s| {
+            s.conn
+                .as_ref()
+                .map(|c| (c.stream.as_raw_fd(), agent_events))
+        }));
         // Pending hellos and incomplete records have their own deadlines: wake for them
         // (the host's next drain drops a stalled agent).
         let timeout = match self.next_deadline() {
@@ -1132,7 +1145,9 @@ impl HostTransport for TcpHost {
         })?;
         // An incomplete record past its deadline on a socket with nothing more to read is
         // a stall: drop it here too, so a caller that only waits makes progress as well.
+        // (Not when readability was not asked for: unread bytes may complete it.)
         let now = Instant::now();
+        let watched_reads = agent_events != 0;
         let mut fd_index = 1 + self.pending.len();
         for slot in 0..self.slots.len() {
             let Some(c) = &self.slots[slot].conn else {
@@ -1140,7 +1155,9 @@ impl HostTransport for TcpHost {
             };
             let readable = self.ready.get(fd_index).copied().unwrap_or(true);
             fd_index += 1;
+            self.unread |= readable;
             if let Some(since) = c.partial_since
+                && watched_reads
                 && !readable
                 && now.duration_since(since) >= self.stall_timeout
             {
@@ -1945,6 +1962,35 @@ mod tests {
         let (k, _) = read_reply_pumping(&mut host, &mut again);
         assert_eq!(k, kind::WELCOME);
         assert!(host.is_connected(0));
+    }
+
+    #[test]
+    fn waiting_without_draining_does_not_spin_on_unread_agent_bytes() {
+        let mut host = tcp_host(5.0);
+        let mut a0 = say_hello(&host, 0);
+        pump(&mut host, false, "agent 0", |h| h.is_connected(0));
+        assert_eq!(read_reply(&mut a0).0, kind::WELCOME);
+        // Bytes the host does not read while it waits for agent 1 to connect.
+        a0.write_all(&motor_record(0)).unwrap();
+        pump(&mut host, false, "agent 0's bytes", |h| h.unread);
+        // The next wait no longer asks for agent 0's readability (it would return at
+        // once, forever) but still for the listener's.
+        host.wait_activity(Duration::from_millis(1)).unwrap();
+        let a0_fd = a0_fd(&host);
+        let events = host.pfds.iter().find(|p| p.fd == a0_fd).unwrap().events;
+        assert_eq!(events, 0);
+        assert_eq!(host.pfds[0].events, libc::POLLIN);
+        // A drain reads the bytes and the socket is watched again.
+        let got = std::cell::Cell::new(0);
+        host.drain(&mut |_, _, _| got.set(got.get() + 1)).unwrap();
+        assert_eq!(got.get(), 1);
+        host.wait_activity(Duration::from_millis(1)).unwrap();
+        let events = host.pfds.iter().find(|p| p.fd == a0_fd).unwrap().events;
+        assert_eq!(events, libc::POLLIN);
+    }
+
+    fn a0_fd(host: &TcpHost) -> i32 {
+        host.slots[0].conn.as_ref().unwrap().stream.as_raw_fd()
     }
 
     fn read_reply_pumping(host: &mut TcpHost, s: &mut TcpStream) -> (u32, Vec<u8>) {
