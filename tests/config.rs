@@ -530,6 +530,18 @@ fn tcp_listens_on_loopback_unless_told_otherwise() {
     assert!(c.transport.tcp_listen.ip().is_unspecified());
 }
 
+#[test]
+fn effective_config_writes_names_and_tokens_as_toml_strings() {
+    // Found by `effective_config_keeps_any_camera_name_and_token`: Rust's `{:?}` wrote
+    // `\u{3347a}`, which TOML rejects, so spawned agents could not load their config.
+    let text = "[transport]\ntcp_token = \"a\\tb\\u0001\\\"\"\n[[agent]]\nid = 0\n\
+                [[agent.camera]]\nname = \"\\U0003347A\\u007f\"\nwidth = 8\n";
+    let c = Config::from_toml_str(text, Path::new("t.toml")).unwrap();
+    let back = Config::from_toml_str(&c.to_toml_string(), Path::new("e.toml")).unwrap();
+    assert_eq!(back.agents[0].cameras[0].name, "\u{3347a}\u{7f}");
+    assert_eq!(back.transport.tcp_token.as_deref(), Some("a\tb\u{1}\""));
+}
+
 // --- the loader on arbitrary and mutated text ------------------------------------------
 
 /// Values that probe ranges, types and parsing corners.
