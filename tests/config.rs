@@ -495,6 +495,29 @@ fn bad_configs_exit_2_naming_file_line_and_key() {
 }
 
 #[test]
+fn an_endless_or_huge_config_file_is_refused_without_reading_it_all() {
+    // /dev/zero never ends; reading it whole would fill memory.
+    let out = util::run(
+        "vr-sim",
+        &["run", "--config", "/dev/zero", "--frames", "1", "--quiet"],
+        Duration::from_secs(60),
+    );
+    assert_eq!(out.code(), Some(2), "{}", out.stderr);
+    assert!(
+        out.stderr.contains("/dev/zero") && out.stderr.contains("larger than 4 MiB"),
+        "{}",
+        out.stderr
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("huge.toml");
+    let mut text = TestConfig::new("huge", 1).toml();
+    text += &"# padding\n".repeat(500_000);
+    std::fs::write(&path, text).unwrap();
+    let e = Config::load(&path).unwrap_err().to_string();
+    assert!(e.contains("huge.toml") && e.contains("larger than"), "{e}");
+}
+
+#[test]
 fn bad_usage_exits_2() {
     let out = util::run("vr-sim", &["run"], Duration::from_secs(30));
     assert_eq!(out.code(), Some(2), "{}", out.stderr);

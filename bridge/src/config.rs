@@ -20,6 +20,8 @@ use crate::wire::{CAMERA_NAME_LEN, MAX_CAMERAS, PixelFormat};
 pub const MAX_AGENT_ID: u32 = 250;
 /// Largest accepted image side in pixels.
 pub const MAX_IMAGE_SIDE_PX: u32 = 8192;
+/// Largest config file [`Config::load`] reads, bytes.
+pub const MAX_CONFIG_BYTES: u64 = 4 << 20;
 
 /// Transport selected by `[transport] kind`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
@@ -326,11 +328,27 @@ impl Config {
     /// # Errors
     /// [`ConfigLoadError`] naming the file, line and key.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ConfigLoadError> {
+        use std::io::Read;
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigLoadError::Read {
+        let read = |source| ConfigLoadError::Read {
             path: path.to_path_buf(),
             source,
-        })?;
+        };
+        // Bounded: a wrong path (a device, a huge file) fails at once instead of filling
+        // memory.
+        let mut text = String::new();
+        std::fs::File::open(path)
+            .and_then(|f| f.take(MAX_CONFIG_BYTES + 1).read_to_string(&mut text))
+            .map_err(read)?;
+        if text.len() as u64 > MAX_CONFIG_BYTES {
+            return Err(read(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!(
+                    "larger than {} MiB: not a vrsync config",
+                    MAX_CONFIG_BYTES >> 20
+                ),
+            )));
+        }
         Self::from_toml_str(&text, path)
     }
 
