@@ -55,6 +55,9 @@ pub struct Row {
     pub allocs_per_cycle: f64,
     /// Agent allocations per cycle in steady state (mean over agents).
     pub agent_allocs_per_cycle: f64,
+    /// Time vr-sim's renderer needs for one agent's 3 images at this size, µs (measured
+    /// separately, not part of the cycle; `null` on floor rows).
+    pub render_us: f64,
 }
 
 const CAMERAS: u32 = 3;
@@ -164,7 +167,23 @@ fn row(case: &Case, hist: &Histogram<u64>, allocs: f64, agent_allocs: f64) -> Ro
         frames_per_s: if mean_us > 0.0 { 1e6 / mean_us } else { 0.0 },
         allocs_per_cycle: allocs,
         agent_allocs_per_cycle: agent_allocs,
+        render_us: f64::NAN,
     }
+}
+
+/// Renders agent 0's frame `n` times into a loaned (never published) sample: what the
+/// simulator would add to each cycle per agent.
+fn measure_render(config: &Config, host: &mut Host, n: u32) -> anyhow::Result<f64> {
+    let world = crate::world::World::from_config(config)?;
+    let mut renderer = crate::render::Renderer::new(0)?;
+    let mut total = Duration::ZERO;
+    for _ in 0..n {
+        let mut frame = host.loan_frame(0)?;
+        let t0 = Instant::now();
+        renderer.render_agent(&world, 0, frame.images_mut());
+        total += t0.elapsed();
+    }
+    Ok(total.as_secs_f64() * 1e6 / f64::from(n.max(1)))
 }
 
 fn config_text(case: &Case, session: &str) -> String {
@@ -218,6 +237,11 @@ fn bench_vrsync(case: &Case, session: &str, dir: &Path) -> anyhow::Result<Row> {
         },
         case.agents,
     )?;
+    let render_us = if case.agents == 1 {
+        measure_render(&config, &mut host, 5)?
+    } else {
+        f64::NAN
+    };
     host.wait_for_agents(Duration::from_secs(30))?;
     let ids: Vec<u32> = host.agent_ids().collect();
     let mut hist = histogram()?;
@@ -258,7 +282,9 @@ fn bench_vrsync(case: &Case, session: &str, dir: &Path) -> anyhow::Result<Row> {
     drop(host);
     let agent_allocs = agents.finish()?;
     let _ = std::fs::remove_file(&path);
-    Ok(row(case, &hist, host_allocs, agent_allocs))
+    let mut r = row(case, &hist, host_allocs, agent_allocs);
+    r.render_us = render_us;
+    Ok(r)
 }
 
 /// The raw iceoryx2 round trip.
@@ -457,7 +483,7 @@ fn print_header() {
 fn print_row(r: &Row) {
     let mb = f64::from(r.cameras) * f64::from(r.width) * f64::from(r.height) * BPP as f64 / 1e6;
     println!(
-        "{:<15} {:>6} {:>10} {:>10.2} {:>10.1} {:>10.1} {:>10.1} {:>10.2} {:>10.2}",
+        "{:<15} {:>6} {:>10} {:>10.2} {:>10.1} {:>10.1} {:>10.1} {:>10.2} {:>10.2} {:>10}",
         r.transport,
         r.agents,
         format!("{}x{}", r.width, r.height),
@@ -466,7 +492,12 @@ fn print_row(r: &Row) {
         r.p99_us,
         r.mean_us,
         r.allocs_per_cycle,
-        r.agent_allocs_per_cycle
+        r.agent_allocs_per_cycle,
+        if r.render_us.is_nan() {
+            "-".to_string()
+        } else {
+            format!("{:.0}", r.render_us)
+        }
     );
     let _ = std::io::stdout().flush();
 }
@@ -546,11 +577,11 @@ fn print_ratios(rows: &[Row]) {
 
 fn write_csv(path: &Path, rows: &[Row]) -> anyhow::Result<()> {
     let mut s = String::from(
-        "transport,agents,cameras,width,height,format,frames,p50_us,p99_us,mean_us,frames_per_s,allocs_per_cycle,agent_allocs_per_cycle\n",
+        "transport,agents,cameras,width,height,format,frames,p50_us,p99_us,mean_us,frames_per_s,allocs_per_cycle,agent_allocs_per_cycle,render_us\n",
     );
     for r in rows {
         s += &format!(
-            "{},{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3}\n",
+            "{},{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.1}\n",
             r.transport,
             r.agents,
             r.cameras,
@@ -563,7 +594,8 @@ fn write_csv(path: &Path, rows: &[Row]) -> anyhow::Result<()> {
             r.mean_us,
             r.frames_per_s,
             r.allocs_per_cycle,
-            r.agent_allocs_per_cycle
+            r.agent_allocs_per_cycle,
+            r.render_us
         );
     }
     std::fs::write(path, s).with_context(|| format!("write {}", path.display()))

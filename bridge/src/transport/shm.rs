@@ -194,6 +194,24 @@ pub fn host_state(session: &str) -> HostState {
     state
 }
 
+/// The process id of `session`'s live host, if there is one.
+pub fn host_pid(session: &str) -> Option<i32> {
+    use iceoryx2::node::NodeView;
+    let wanted = host_node_name(session);
+    let mut pid = None;
+    let _ = Node::<Svc>::list(Config2::global_config(), |node| {
+        if let NodeState::Alive(view) = &node
+            && let Some(d) = view.details().as_ref()
+            && d.name().as_str() == wanted
+        {
+            pid = Some(d.process_id().value());
+            return CallbackProgression::Stop;
+        }
+        CallbackProgression::Continue
+    });
+    pid
+}
+
 /// Whether a live host node exists for `session`.
 pub fn host_alive(session: &str) -> bool {
     host_state(session) == HostState::Alive
@@ -739,6 +757,7 @@ pub enum ShmAgentConnectError {
 pub struct ShmAgent {
     id: u32,
     session: String,
+    host_pid: Option<i32>,
     node: Node<Svc>,
     terminated: core::cell::Cell<bool>,
     _start_service: event_factory::PortFactory<Svc>,
@@ -905,6 +924,7 @@ impl ShmAgent {
         Ok(Self {
             id,
             session: session.clone(),
+            host_pid: host_pid(session),
             node,
             terminated,
             _start_service: start_service,
@@ -992,6 +1012,22 @@ impl ShmAgent {
 
     /// The state of the host's node.
     pub fn host_state(&self) -> HostState {
+        // Cheap and allocation-free: is the host's process still there? Only when it is
+        // gone, ask iceoryx2's registry (which lists every node of the machine) what
+        // became of it.
+        if let Some(pid) = self.host_pid {
+            // SAFETY: kill with signal 0 only checks that the process exists.
+            let rc = unsafe { libc::kill(pid, 0) };
+            let gone =
+                rc != 0 && std::io::Error::last_os_error().raw_os_error() == Some(libc::ESRCH);
+            if !gone {
+                return HostState::Alive;
+            }
+            return match host_state(&self.session) {
+                HostState::Alive => HostState::Dead, // another host took over the session
+                other => other,
+            };
+        }
         host_state(&self.session)
     }
 

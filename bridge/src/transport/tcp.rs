@@ -1048,10 +1048,12 @@ impl HostTransport for TcpHost {
                 agent: slot as u32,
                 reason: "no such agent slot".into(),
             })?;
-        let mut buf = s.buf.take().ok_or_else(|| HostTransportError::Loan {
-            agent: s.id,
-            reason: "the previous frame of this agent is still loaned".into(),
-        })?;
+        // A loan dropped without publishing took its buffer with it: make a new one (rare;
+        // steady state reuses the buffer every cycle).
+        let mut buf = s
+            .buf
+            .take()
+            .unwrap_or_else(|| RecordBuf::with_capacity(s.body_len));
         buf.reserve_body(s.body_len);
         let mut header = s.header.take().unwrap_or_default();
         *header = SensorHeader::default();
