@@ -122,8 +122,11 @@ impl CycleBarrier {
     /// Stops waiting for `slot` this cycle (its process died or disconnected). Returns
     /// whether it was pending.
     pub fn evict(&mut self, slot: usize) -> bool {
-        let pending =
-            self.awaited.get(slot) == Some(&true) && self.stopped.get(slot) == Some(&false);
+        if self.stopped.get(slot) == Some(&true) {
+            // It finished this cycle before it left: the cycle keeps its stop.
+            return false;
+        }
+        let pending = self.awaited.get(slot) == Some(&true);
         if let Some(e) = self.evicted.get_mut(slot) {
             *e = true;
         }
@@ -224,6 +227,8 @@ mod tests {
         assert!(b.is_complete());
         assert_eq!(b.outcome(1), AgentOutcome::Evicted);
         assert!(!b.evict(1), "evicting twice is harmless");
+        assert!(!b.evict(0), "an agent that stopped keeps its stop");
+        assert_eq!(b.outcome(0), AgentOutcome::Stopped);
         assert_eq!(b.on_batch(1, 3, true), BatchVerdict::NotAwaited);
     }
 
