@@ -20,8 +20,9 @@ pub fn workspace() -> PathBuf {
         .to_path_buf()
 }
 
-/// The folder holding `vr-sim` and `vr-agent`, built once per test process with the same
-/// profile as the tests (cargo builds other packages' binaries only on request).
+/// The folder holding `vr-sim`, `vr-agent` and `libvrsync_agent` (the C ABI library the
+/// C/C++ tests install), built once per test process with the same profile as the tests
+/// (`cargo test` builds other packages' binaries and cdylibs only on request).
 pub fn bin_dir() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
@@ -41,7 +42,6 @@ pub fn bin_dir() -> &'static Path {
             "vrsync-sim",
             "-p",
             "vrsync-agent",
-            "--bins",
         ]);
         if release {
             cmd.arg("--release");
