@@ -21,8 +21,12 @@ pub fn workspace() -> PathBuf {
 }
 
 /// The folder holding `vr-sim`, `vr-agent` and `libvrsync_agent` (the C ABI library the
-/// C/C++ tests install), built once per test process with the same profile as the tests
-/// (`cargo test` builds other packages' binaries and cdylibs only on request).
+/// C/C++ tests install), built once per test process with the same profile as the tests.
+///
+/// `cargo test` builds other packages' binaries and cdylibs only on request, so we ask
+/// for them — in a target dir of their own: a `cargo build` into the test's own target dir
+/// while `cargo test` runs leaves a second `vrsync_bridge` rlib (another profile, another
+/// hash) beside the test build's, and the doctests that run afterwards then find two.
 pub fn bin_dir() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
@@ -34,21 +38,18 @@ pub fn bin_dir() -> &'static Path {
             .expect("target/<profile>")
             .to_path_buf();
         let release = profile_dir.file_name().is_some_and(|n| n == "release");
+        let target_dir = profile_dir.parent().expect("target").join("test-bins");
         let mut cmd = Command::new(env!("CARGO"));
-        cmd.current_dir(workspace()).args([
-            "build",
-            "--quiet",
-            "-p",
-            "vrsync-sim",
-            "-p",
-            "vrsync-agent",
-        ]);
+        cmd.current_dir(workspace())
+            .args(["build", "--quiet", "-p", "vrsync-sim", "-p", "vrsync-agent"])
+            .arg("--target-dir")
+            .arg(&target_dir);
         if release {
             cmd.arg("--release");
         }
         let status = cmd.status().expect("run cargo build");
         assert!(status.success(), "cargo build of the binaries failed");
-        profile_dir
+        target_dir.join(if release { "release" } else { "debug" })
     })
 }
 
