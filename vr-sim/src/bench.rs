@@ -61,6 +61,8 @@ pub struct Row {
 }
 
 const CAMERAS: u32 = 3;
+/// Interleaved rounds per case.
+const ROUNDS: u64 = 3;
 const BPP: usize = 3;
 
 struct Case {
@@ -151,6 +153,36 @@ fn histogram() -> anyhow::Result<Histogram<u64>> {
     Histogram::new_with_bounds(100, 600_000_000_000, 3).context("histogram")
 }
 
+/// One measurement of one case: its histogram and allocation figures.
+struct Measured {
+    hist: Histogram<u64>,
+    allocs: f64,
+    agent_allocs: f64,
+    render_us: f64,
+}
+
+impl Measured {
+    fn new(hist: Histogram<u64>, allocs: f64, agent_allocs: f64) -> Self {
+        Self {
+            hist,
+            allocs,
+            agent_allocs,
+            render_us: f64::NAN,
+        }
+    }
+
+    /// Adds another round of the same case (allocation figures: the worst round).
+    fn merge(&mut self, other: Measured) -> anyhow::Result<()> {
+        self.hist.add(&other.hist).context("merge histograms")?;
+        self.allocs = self.allocs.max(other.allocs);
+        self.agent_allocs = self.agent_allocs.max(other.agent_allocs);
+        if self.render_us.is_nan() {
+            self.render_us = other.render_us;
+        }
+        Ok(())
+    }
+}
+
 fn row(case: &Case, hist: &Histogram<u64>, allocs: f64, agent_allocs: f64) -> Row {
     let mean_us = hist.mean() / 1000.0;
     Row {
@@ -210,7 +242,7 @@ fn config_text(case: &Case, session: &str) -> String {
 }
 
 /// A full vrsync cycle through the host API.
-fn bench_vrsync(case: &Case, session: &str, dir: &Path) -> anyhow::Result<Row> {
+fn bench_vrsync(case: &Case, session: &str, dir: &Path, render: bool) -> anyhow::Result<Measured> {
     let text = config_text(case, session);
     let mut config = Config::from_toml_str(&text, Path::new("<bench>"))?;
     let mut host = Host::builder(&config)
@@ -237,7 +269,7 @@ fn bench_vrsync(case: &Case, session: &str, dir: &Path) -> anyhow::Result<Row> {
         },
         case.agents,
     )?;
-    let render_us = if case.agents == 1 {
+    let render_us = if render && case.agents == 1 {
         measure_render(&config, &mut host, 5)?
     } else {
         f64::NAN
@@ -282,13 +314,13 @@ fn bench_vrsync(case: &Case, session: &str, dir: &Path) -> anyhow::Result<Row> {
     drop(host);
     let agent_allocs = agents.finish()?;
     let _ = std::fs::remove_file(&path);
-    let mut r = row(case, &hist, host_allocs, agent_allocs);
-    r.render_us = render_us;
-    Ok(r)
+    let mut m = Measured::new(hist, host_allocs, agent_allocs);
+    m.render_us = render_us;
+    Ok(m)
 }
 
 /// The raw iceoryx2 round trip.
-fn bench_floor_shm(case: &Case, session: &str, spin: bool) -> anyhow::Result<Row> {
+fn bench_floor_shm(case: &Case, session: &str, spin: bool) -> anyhow::Result<Measured> {
     let bytes = case.frame_bytes();
     let mut host = ShmFloorHost::create(session, case.agents, bytes, spin)?;
     let total = case.warmup + case.cycles;
@@ -333,11 +365,11 @@ fn bench_floor_shm(case: &Case, session: &str, spin: bool) -> anyhow::Result<Row
     let host_allocs = (allocations() - allocs_start) as f64 / case.cycles as f64;
     let agent_allocs = agents.finish()?;
     drop(host);
-    Ok(row(case, &hist, host_allocs, agent_allocs))
+    Ok(Measured::new(hist, host_allocs, agent_allocs))
 }
 
 /// The raw TCP round trip.
-fn bench_floor_tcp(case: &Case) -> anyhow::Result<Row> {
+fn bench_floor_tcp(case: &Case) -> anyhow::Result<Measured> {
     let bytes = case.frame_bytes();
     let mut host = TcpFloorHost::create(bytes)?;
     let addr = host.addr()?;
@@ -378,7 +410,7 @@ fn bench_floor_tcp(case: &Case) -> anyhow::Result<Row> {
     }
     let host_allocs = (allocations() - allocs_start) as f64 / case.cycles as f64;
     let agent_allocs = agents.finish()?;
-    Ok(row(case, &hist, host_allocs, agent_allocs))
+    Ok(Measured::new(hist, host_allocs, agent_allocs))
 }
 
 /// Runs the whole benchmark and writes the outputs.
@@ -428,8 +460,8 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
                 agents,
                 width: w,
                 height: h,
-                warmup: (cycles / 10).max(10),
-                cycles,
+                warmup: (cycles / ROUNDS / 10).max(10),
+                cycles: (cycles / ROUNDS).max(10),
             };
             let mut cases = vec![mk("shm", shm_cycles), mk("floor-shm", shm_cycles)];
             // Spinning needs a free core per waiting process: 1 agent + the host on 2 cores.
@@ -439,13 +471,28 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
             }
             cases.push(mk("tcp", tcp_cycles));
             cases.push(mk("floor-tcp", tcp_cycles));
-            for case in cases {
-                let r = match case.transport {
-                    "floor-shm" => bench_floor_shm(&case, &session(&mut n), false)?,
-                    "floor-shm-spin" => bench_floor_shm(&case, &session(&mut n), true)?,
-                    "floor-tcp" => bench_floor_tcp(&case)?,
-                    _ => bench_vrsync(&case, &session(&mut n), &dir)?,
-                };
+            // Rounds interleave the cases, so a change of the machine's state (other load,
+            // CPU idle states) hits vrsync and its floor alike; each round measures a third
+            // of the cycles and the histograms are merged.
+            let mut measured: Vec<Option<Measured>> = cases.iter().map(|_| None).collect();
+            for round in 0..ROUNDS {
+                for (case, acc) in cases.iter().zip(measured.iter_mut()) {
+                    let m = match case.transport {
+                        "floor-shm" => bench_floor_shm(case, &session(&mut n), false)?,
+                        "floor-shm-spin" => bench_floor_shm(case, &session(&mut n), true)?,
+                        "floor-tcp" => bench_floor_tcp(case)?,
+                        _ => bench_vrsync(case, &session(&mut n), &dir, round == 0)?,
+                    };
+                    match acc {
+                        Some(a) => a.merge(m)?,
+                        None => *acc = Some(m),
+                    }
+                }
+            }
+            for (case, m) in cases.iter().zip(measured) {
+                let Some(m) = m else { continue };
+                let mut r = row(case, &m.hist, m.allocs, m.agent_allocs);
+                r.render_us = m.render_us;
                 print_row(&r);
                 rows.push(r);
             }
