@@ -395,17 +395,6 @@ fn c_abi_reports_connect_failures_to_a_cpp_program() {
     );
 }
 
-macro_rules! for_both_transports {
-    ($($name:ident),* $(,)?) => {
-        mod shm {
-            $( #[test] fn $name() { super::$name(crate::util::Transport::Shm) } )*
-        }
-        mod tcp {
-            $( #[test] fn $name() { super::$name(crate::util::Transport::Tcp) } )*
-        }
-    };
-}
-
 for_both_transports!(
     c_and_cpp_agents_run_100_sync_cycles,
     agents_end_when_the_host_is_killed,

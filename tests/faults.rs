@@ -323,17 +323,6 @@ fn sigterm(t: Transport) {
     a_signal_ends_the_run_cleanly(t, libc::SIGTERM);
 }
 
-macro_rules! for_both_transports {
-    ($($name:ident),* $(,)?) => {
-        mod shm {
-            $( #[test] fn $name() { super::$name(crate::util::Transport::Shm) } )*
-        }
-        mod tcp {
-            $( #[test] fn $name() { super::$name(crate::util::Transport::Tcp) } )*
-        }
-    };
-}
-
 for_both_transports!(
     a_killed_agent_is_evicted_and_can_rejoin,
     a_killed_host_is_noticed_and_a_new_host_starts,

@@ -448,18 +448,7 @@ fn a_protocol_mismatch_is_refused_at_connect_with_both_versions_tcp() {
     );
 }
 
-/// The barrier tests, written once, run over both transports (same assertions).
-macro_rules! for_both_transports {
-    ($($name:ident),* $(,)?) => {
-        mod shm {
-            $( #[test] fn $name() { super::$name(crate::util::Transport::Shm) } )*
-        }
-        mod tcp {
-            $( #[test] fn $name() { super::$name(crate::util::Transport::Tcp) } )*
-        }
-    };
-}
-
+// The barrier tests, written once, run over both transports (same assertions).
 for_both_transports!(
     three_agents_500_cycles_see_every_cycle_once_in_order,
     a_late_stop_times_out_its_cycle_and_never_completes_the_next,

@@ -4,6 +4,7 @@
 // Test code: panicking on a broken fixture is the right failure.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+#[macro_use]
 mod util;
 
 mod config;

@@ -68,6 +68,19 @@ pub fn session(tag: &str) -> String {
     )
 }
 
+/// `for_both_transports!(a, b)` makes tests `shm::a`, `tcp::a`, `shm::b`, `tcp::b` that call
+/// `a(Transport::Shm)` … : one test body, the same assertions, over both transports.
+macro_rules! for_both_transports {
+    ($($name:ident),* $(,)?) => {
+        mod shm {
+            $( #[test] fn $name() { super::$name(crate::util::Transport::Shm) } )*
+        }
+        mod tcp {
+            $( #[test] fn $name() { super::$name(crate::util::Transport::Tcp) } )*
+        }
+    };
+}
+
 /// Which transport a test runs over.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Transport {
