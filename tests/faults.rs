@@ -315,6 +315,70 @@ fn sigterm_on_an_agent(t: Transport) {
     assert_eq!(sum["stop_timeouts"], 0);
 }
 
+/// `on_agent_lost = "abort"`: a killed agent ends the run with an error naming it (exit 1),
+/// and the summary is not claimed.
+fn on_agent_lost_abort_ends_the_run(t: Transport) {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = TestConfig::with_transport("abort", 2, t);
+    cfg.stop_timeout_s = 30.0;
+    cfg.sync_extra = "on_agent_lost = \"abort\"\n".into();
+    let config = cfg.write(dir.path());
+    let config = config.to_str().unwrap();
+    let mut host = Proc::spawn(&bin("vr-sim"), &["run", "--config", config, "--quiet"]);
+    host.wait_for_stderr("waiting for agents", Duration::from_secs(30));
+    let a0 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "0"]);
+    let mut a1 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "1"]);
+    a1.wait_for_stderr("first frame received", Duration::from_secs(30));
+    a1.signal(libc::SIGKILL);
+    let _ = a1.wait(Duration::from_secs(10));
+    let out = host.wait(Duration::from_secs(30));
+    assert_eq!(out.code(), Some(1), "stderr:\n{}", out.stderr);
+    assert!(out.stderr.contains("agent 1 was lost"), "{}", out.stderr);
+    assert!(out.stderr.contains("abort"), "{}", out.stderr);
+    assert_eq!(a0.wait(Duration::from_secs(10)).code(), Some(0));
+}
+
+/// `on_agent_lost = "wait"`: the simulation pauses until the agent is back, then goes on;
+/// nobody is left behind.
+fn on_agent_lost_wait_pauses_until_the_agent_is_back(t: Transport) {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = TestConfig::with_transport("waitlost", 2, t);
+    cfg.stop_timeout_s = 30.0;
+    cfg.sync_extra = "on_agent_lost = \"wait\"\n".into();
+    let config = cfg.write(dir.path());
+    let config = config.to_str().unwrap();
+    let s = dir.path().join("summary.json");
+    let mut host = Proc::spawn(
+        &bin("vr-sim"),
+        &[
+            "run",
+            "--config",
+            config,
+            "--summary-json",
+            s.to_str().unwrap(),
+            "--quiet",
+        ],
+    );
+    host.wait_for_stderr("waiting for agents", Duration::from_secs(30));
+    let a0 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "0"]);
+    let mut a1 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "1"]);
+    a1.wait_for_stderr("first frame received", Duration::from_secs(30));
+    a1.signal(libc::SIGKILL);
+    let _ = a1.wait(Duration::from_secs(10));
+    host.wait_for_stderr(
+        "pausing until the agent reconnects",
+        Duration::from_secs(20),
+    );
+    let back = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "1"]);
+    host.wait_for_stderr("agent rejoined", Duration::from_secs(20));
+    host.signal(libc::SIGTERM);
+    let out = host.wait(Duration::from_secs(30));
+    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    assert_eq!(a0.wait(Duration::from_secs(10)).code(), Some(0));
+    assert_eq!(back.wait(Duration::from_secs(10)).code(), Some(0));
+    assert_eq!(summary(&s)["evicted_agents"], serde_json::json!([1]));
+}
+
 fn sigint(t: Transport) {
     a_signal_ends_the_run_cleanly(t, libc::SIGINT);
 }
@@ -330,4 +394,6 @@ for_both_transports!(
     sigint,
     sigterm,
     sigterm_on_an_agent,
+    on_agent_lost_abort_ends_the_run,
+    on_agent_lost_wait_pauses_until_the_agent_is_back,
 );

@@ -109,6 +109,8 @@ pub struct TestConfig {
     pub connect_timeout_s: f64,
     pub width: u32,
     pub extra: String,
+    /// Lines appended to the `[sync]` table.
+    pub sync_extra: String,
 }
 
 impl TestConfig {
@@ -132,6 +134,7 @@ impl TestConfig {
             connect_timeout_s: 20.0,
             width: 64,
             extra: String::new(),
+            sync_extra: String::new(),
         }
     }
 
@@ -146,6 +149,7 @@ impl TestConfig {
             self.stop_timeout_s,
             self.connect_timeout_s
         );
+        s += &self.sync_extra;
         if self.transport == Transport::Tcp {
             s += &format!(
                 "\n[transport]\nkind = \"tcp\"\ntcp_listen = \"127.0.0.1:{}\"\n",
