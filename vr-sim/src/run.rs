@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use serde::Serialize;
 use tracing::{info, warn};
-use vrsync_bridge::{AgentOutcome, Config, Host, HostCycleError, HostWaitError};
+use vrsync_bridge::{Config, Host, HostCycleError, HostWaitError};
 
 use crate::picture::{Trails, dump_image, write_map};
 use crate::render::Renderer;
@@ -385,7 +385,6 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
         interrupted,
     };
     info!(frames = done, wall_s, "run finished");
-    let _ = AgentOutcome::Stopped;
     Ok(summary)
 }
 

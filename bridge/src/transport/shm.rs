@@ -19,6 +19,7 @@ use std::time::{Duration, Instant};
 
 use tracing::debug;
 
+use iceoryx2::config::Config as Config2;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
@@ -27,6 +28,7 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::sample::Sample;
 use iceoryx2::sample_mut::SampleMut;
+use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
 use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as ps_factory};
 
 use super::{BatchSink, FrameLoan, HostTransport, HostTransportError};
@@ -134,8 +136,6 @@ fn attributes() -> Result<AttributeSpecifier, String> {
         .map_err(|e| format!("{e:?}"))
 }
 
-use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
-
 /// Quiets iceoryx2's own logging unless `IOX2_LOG_LEVEL` asks for more. iceoryx2 logs
 /// through `tracing` (feature `tracing`), so what remains shows up in our logs.
 pub fn init_iceoryx2_logging() {
@@ -216,8 +216,6 @@ pub fn host_pid(session: &str) -> Option<i32> {
 pub fn host_alive(session: &str) -> bool {
     host_state(session) == HostState::Alive
 }
-
-use iceoryx2::config::Config as Config2;
 
 /// Removes the stale resources of every dead iceoryx2 node on this machine (crashed runs).
 /// Returns how many nodes were cleaned.
