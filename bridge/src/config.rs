@@ -16,6 +16,9 @@ use toml::Spanned;
 
 use crate::wire::{CAMERA_NAME_LEN, MAX_CAMERAS, PixelFormat};
 
+/// Default of `[sync] spin_before_block_us`.
+pub const DEFAULT_SPIN_BEFORE_BLOCK_US: u64 = 50;
+
 /// Highest agent id accepted (ids are also iceoryx2 event ids).
 pub const MAX_AGENT_ID: u32 = 250;
 /// Largest accepted image side in pixels.
@@ -127,8 +130,24 @@ pub struct SyncConfig {
     pub connect_timeout: Duration,
     /// Block on events or busy-poll (`wait`).
     pub wait: WaitMode,
+    /// In block mode, how long to poll before going to sleep (`spin_before_block_us`).
+    pub spin_before_block: Duration,
     /// What to do when an agent is lost (`on_agent_lost`).
     pub on_agent_lost: AgentLostPolicy,
+}
+
+impl SyncConfig {
+    /// The poll-before-sleep time to use with `agents` agents: `spin_before_block`, or zero
+    /// when the host and the agents together outnumber the cores (polling would then steal
+    /// the CPU from the process that has work to do).
+    pub fn effective_spin_before_block(&self, agents: usize) -> Duration {
+        let cores = std::thread::available_parallelism().map_or(1, usize::from);
+        if agents + 1 > cores {
+            Duration::ZERO
+        } else {
+            self.spin_before_block
+        }
+    }
 }
 
 /// `[transport]` section.
@@ -230,6 +249,7 @@ struct RawSync {
     stop_timeout: Option<Spanned<f64>>,
     connect_timeout: Option<Spanned<f64>>,
     wait: Option<WaitMode>,
+    spin_before_block_us: Option<Spanned<i64>>,
     on_agent_lost: Option<AgentLostPolicy>,
 }
 
@@ -408,6 +428,7 @@ impl Config {
             stop_timeout: None,
             connect_timeout: None,
             wait: None,
+            spin_before_block_us: None,
             on_agent_lost: None,
         });
         let sync = SyncConfig {
@@ -420,6 +441,20 @@ impl Config {
             stop_timeout: ctx.seconds(rs.stop_timeout, "sync.stop_timeout", 5.0)?,
             connect_timeout: ctx.seconds(rs.connect_timeout, "sync.connect_timeout", 30.0)?,
             wait: rs.wait.unwrap_or_default(),
+            spin_before_block: match rs.spin_before_block_us {
+                None => Duration::from_micros(DEFAULT_SPIN_BEFORE_BLOCK_US),
+                Some(v) => {
+                    let us = *v.get_ref();
+                    if !(0..=10_000).contains(&us) {
+                        return Err(ctx.invalid(
+                            v.span(),
+                            "sync.spin_before_block_us",
+                            format!("must be 0..=10000 microseconds, found {us}"),
+                        ));
+                    }
+                    Duration::from_micros(us as u64)
+                }
+            },
             on_agent_lost: rs.on_agent_lost.unwrap_or_default(),
         };
 
@@ -630,7 +665,7 @@ impl Config {
         let _ = writeln!(s, "session = {:?}\nseed = {}", self.session, self.seed);
         let _ = writeln!(
             s,
-            "\n[sync]\nsync_mode = {}\nsimulation_time_per_frame = {:?}\nstop_timeout = {:?}\nconnect_timeout = {:?}\nwait = {:?}\non_agent_lost = {:?}",
+            "\n[sync]\nsync_mode = {}\nsimulation_time_per_frame = {:?}\nstop_timeout = {:?}\nconnect_timeout = {:?}\nwait = {:?}\nspin_before_block_us = {}\non_agent_lost = {:?}",
             self.sync.sync_mode,
             self.sync.simulation_time_per_frame.as_secs_f64(),
             self.sync.stop_timeout.as_secs_f64(),
@@ -639,6 +674,7 @@ impl Config {
                 WaitMode::Block => "block",
                 WaitMode::Spin => "spin",
             },
+            self.sync.spin_before_block.as_micros(),
             match self.sync.on_agent_lost {
                 AgentLostPolicy::Evict => "evict",
                 AgentLostPolicy::Wait => "wait",

@@ -72,6 +72,7 @@ pub struct ShmFloorHost {
     publishers: Vec<Publisher<Svc, [u8], u64>>,
     frame_bytes: usize,
     spin: bool,
+    spin_before_block: Duration,
     seen: Vec<bool>,
 }
 
@@ -93,6 +94,7 @@ impl ShmFloorHost {
         agents: u32,
         frame_bytes: usize,
         spin: bool,
+        spin_before_block: Duration,
     ) -> Result<Self, FloorError> {
         crate::transport::shm::init_iceoryx2_logging();
         let node = NodeBuilder::new()
@@ -159,6 +161,7 @@ impl ShmFloorHost {
             publishers,
             frame_bytes,
             spin,
+            spin_before_block,
             seen: vec![false; n],
         })
     }
@@ -210,7 +213,9 @@ impl ShmFloorHost {
         self.start.notify().map_err(|e| ice("notify", e))?;
         self.seen.fill(false);
         let mut missing = self.seen.len();
-        let deadline = Instant::now() + timeout;
+        let wait_started = Instant::now();
+        let deadline = wait_started + timeout;
+        let mut polled = Duration::ZERO;
         while missing > 0 {
             let seen = &mut self.seen;
             let mut mark = |e: EventActivation| {
@@ -222,9 +227,11 @@ impl ShmFloorHost {
                     missing -= 1;
                 }
             };
-            if self.spin {
+            if self.spin || polled < self.spin_before_block {
+                // Busy-poll, or poll before sleeping as vrsync does (same waiting strategy).
                 let _ = self.back.try_wait(&mut mark);
                 std::hint::spin_loop();
+                polled = wait_started.elapsed();
             } else {
                 let left = deadline.saturating_duration_since(Instant::now());
                 let _ = self.back.timed_wait(&mut mark, left);
@@ -237,20 +244,40 @@ impl ShmFloorHost {
     }
 }
 
+/// How a shared-memory floor agent runs.
+#[derive(Debug, Clone, Copy)]
+pub struct ShmFloorAgentOptions {
+    /// Round trips to run, warm-up included.
+    pub cycles: u64,
+    /// Round trips not counted for allocations.
+    pub warmup: u64,
+    /// Bytes per image row (the touch reads both ends of every row).
+    pub row_len: usize,
+    /// Busy-poll instead of sleeping.
+    pub spin: bool,
+    /// Without `spin`: poll this long before sleeping.
+    pub spin_before_block: Duration,
+    /// Give up after this long.
+    pub timeout: Duration,
+}
+
 /// Agent side of the shared-memory floor: runs until `cycles` round trips are done.
-/// Returns the checksum of the touched bytes.
 ///
 /// # Errors
 /// [`FloorError`].
 pub fn shm_floor_agent(
     session: &str,
     id: u32,
-    cycles: u64,
-    warmup: u64,
-    row_len: usize,
-    spin: bool,
-    timeout: Duration,
+    options: &ShmFloorAgentOptions,
 ) -> Result<FloorAgentReport, FloorError> {
+    let ShmFloorAgentOptions {
+        cycles,
+        warmup,
+        row_len,
+        spin,
+        spin_before_block,
+        timeout,
+    } = *options;
     crate::transport::shm::init_iceoryx2_logging();
     let node = NodeBuilder::new()
         .create::<Svc>()
@@ -302,7 +329,14 @@ pub fn shm_floor_agent(
             return Err(FloorError::Timeout(timeout));
         }
         if !spin {
-            let _ = start.timed_wait(|_| {}, Duration::from_millis(100));
+            // Poll before sleeping, as vrsync agents do (same waiting strategy).
+            let until = Instant::now() + spin_before_block;
+            while Instant::now() < until && !sub.has_samples().unwrap_or(true) {
+                std::hint::spin_loop();
+            }
+            if !sub.has_samples().unwrap_or(true) {
+                let _ = start.timed_wait(|_| {}, Duration::from_millis(100));
+            }
         }
         while let Some(sample) = sub.receive().map_err(|e| ice("receive", e))? {
             sum = sum.wrapping_add(touch_rows(sample.payload(), row_len));

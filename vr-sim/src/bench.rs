@@ -322,7 +322,15 @@ fn bench_vrsync(case: &Case, session: &str, dir: &Path, render: bool) -> anyhow:
 /// The raw iceoryx2 round trip.
 fn bench_floor_shm(case: &Case, session: &str, spin: bool) -> anyhow::Result<Measured> {
     let bytes = case.frame_bytes();
-    let mut host = ShmFloorHost::create(session, case.agents, bytes, spin)?;
+    // The same waiting strategy as vrsync with the default config (see
+    // `SyncConfig::effective_spin_before_block`).
+    let cores = std::thread::available_parallelism().map_or(1, usize::from);
+    let spin_before_block = if case.agents as usize + 1 > cores {
+        Duration::ZERO
+    } else {
+        Duration::from_micros(vrsync_bridge::config::DEFAULT_SPIN_BEFORE_BLOCK_US)
+    };
+    let mut host = ShmFloorHost::create(session, case.agents, bytes, spin, spin_before_block)?;
     let total = case.warmup + case.cycles;
     let row_bytes = case.width as usize * BPP;
     let agents = Agents::spawn(
@@ -340,6 +348,8 @@ fn bench_floor_shm(case: &Case, session: &str, spin: bool) -> anyhow::Result<Mea
                 row_bytes.to_string(),
                 "--warmup".into(),
                 case.warmup.to_string(),
+                "--spin-before-block-us".into(),
+                spin_before_block.as_micros().to_string(),
             ];
             if spin {
                 a.push("--spin".into());

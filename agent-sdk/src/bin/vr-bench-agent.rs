@@ -13,7 +13,7 @@ use clap::{Parser, ValueEnum};
 use vrsync_agent::{AgentBuilder, Command, StopError, WaitStartError};
 use vrsync_bridge::Config;
 use vrsync_bridge::alloc_count::{CountingAlloc, allocations};
-use vrsync_bridge::floor::{shm_floor_agent, tcp_floor_agent, touch_rows};
+use vrsync_bridge::floor::{ShmFloorAgentOptions, shm_floor_agent, tcp_floor_agent, touch_rows};
 
 #[global_allocator]
 static ALLOC: CountingAlloc = CountingAlloc;
@@ -61,6 +61,9 @@ struct Args {
     /// Busy-poll (floor-shm).
     #[arg(long)]
     spin: bool,
+    /// Poll this long before sleeping (floor-shm), µs.
+    #[arg(long, default_value_t = 0)]
+    spin_before_block_us: u64,
 }
 
 fn main() -> ExitCode {
@@ -87,11 +90,14 @@ fn run(args: &Args) -> anyhow::Result<()> {
             let r = shm_floor_agent(
                 &args.session,
                 args.id,
-                args.cycles,
-                args.warmup,
-                args.row_bytes,
-                args.spin,
-                timeout,
+                &ShmFloorAgentOptions {
+                    cycles: args.cycles,
+                    warmup: args.warmup,
+                    row_len: args.row_bytes,
+                    spin: args.spin,
+                    spin_before_block: Duration::from_micros(args.spin_before_block_us),
+                    timeout,
+                },
             )?;
             println!("allocs_per_cycle {}", r.allocs_per_cycle);
             Ok(())

@@ -283,6 +283,7 @@ struct HostAgentPorts {
 /// The host side of the shared-memory transport.
 pub struct ShmHost {
     node: Node<Svc>,
+    spin_before_block: Duration,
     terminated: core::cell::Cell<bool>,
     agent_node_names: Vec<String>,
     spin: bool,
@@ -478,6 +479,7 @@ impl ShmHost {
         let terminated = core::cell::Cell::new(node.wait(Duration::ZERO).is_err());
         Ok(Self {
             node,
+            spin_before_block: config.sync.effective_spin_before_block(config.agents.len()),
             terminated,
             agent_node_names: config
                 .agents
@@ -613,6 +615,24 @@ impl HostTransport for ShmHost {
                 return Err(HostTransportError::Terminated);
             }
             return Ok(());
+        }
+        // Poll the subscribers briefly first: a quick answer is then seen without paying
+        // for a sleep and a wake-up (see `spin_before_block_us`).
+        if !self.spin_before_block.is_zero() {
+            let until = Instant::now() + self.spin_before_block.min(timeout);
+            loop {
+                if self
+                    .agents
+                    .iter()
+                    .any(|p| p.motor_sub.has_samples().unwrap_or(true))
+                {
+                    return Ok(());
+                }
+                if Instant::now() >= until {
+                    break;
+                }
+                std::hint::spin_loop();
+            }
         }
         match self.stop.timed_wait(|_| {}, timeout) {
             Ok(_) => {}
@@ -768,6 +788,7 @@ pub struct ShmAgent {
     motor_pub: Publisher<Svc, [MotorCommand], MotorHeader>,
     max_commands: usize,
     spin: bool,
+    spin_before_block: Duration,
     shutdown_seen: bool,
 }
 
@@ -935,6 +956,7 @@ impl ShmAgent {
             motor_pub,
             max_commands,
             spin: config.sync.wait == crate::config::WaitMode::Spin,
+            spin_before_block: config.sync.effective_spin_before_block(config.agents.len()),
             shutdown_seen: false,
         })
     }
@@ -959,8 +981,21 @@ impl ShmAgent {
         }
     }
 
-    /// Blocks until *start* may have been signalled, or `timeout` passed.
+    /// Blocks until *start* may have been signalled, or `timeout` passed. Polls for a
+    /// frame for up to `spin_before_block_us` first.
     pub fn wait_start(&mut self, timeout: Duration) -> StartSignal {
+        if !self.spin_before_block.is_zero() {
+            let until = Instant::now() + self.spin_before_block.min(timeout);
+            while Instant::now() < until {
+                if self.has_frame() {
+                    return StartSignal {
+                        start: true,
+                        shutdown: false,
+                    };
+                }
+                std::hint::spin_loop();
+            }
+        }
         let mut signal = StartSignal::default();
         let mut record = |e: EventActivation| {
             if e.id.as_value() == SHUTDOWN_EVENT {
