@@ -671,11 +671,16 @@ impl Host {
                 }
                 BatchVerdict::Future => {
                     stats.future_batches += 1;
-                    warn!(
-                        slot,
-                        batch_cycle = header.cycle,
-                        "batch for a future cycle dropped"
-                    );
+                    // A misbehaving agent must not flood the log: warn at the 1st, 2nd,
+                    // 4th, 8th … such batch (the count is in the stats either way).
+                    if stats.future_batches.is_power_of_two() {
+                        warn!(
+                            slot,
+                            batch_cycle = header.cycle,
+                            total = stats.future_batches,
+                            "batch for a future cycle dropped"
+                        );
+                    }
                 }
                 BatchVerdict::NotAwaited => {}
             }
