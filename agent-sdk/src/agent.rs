@@ -441,13 +441,7 @@ impl Agent {
     /// # Errors
     /// [`SendError::QueueFull`] beyond `max_commands_per_cycle`.
     pub fn send_with_id(&mut self, action_id: u32, command: Command) -> Result<(), SendError> {
-        if self.queue.len() >= self.max_commands {
-            return Err(SendError::QueueFull {
-                max: self.max_commands,
-            });
-        }
-        self.queue.push(command.encode(action_id));
-        Ok(())
+        self.send_wire(command.encode(action_id))
     }
 
     /// Queues a command in wire form as is, without any check: for tools and tests that

@@ -722,29 +722,30 @@ impl Host {
         }
     }
 
-    fn collect_sync(&mut self) -> Result<(), HostCycleError> {
-        let started = Instant::now();
-        let deadline = started + self.config.sync.stop_timeout;
-        let mut next_reap = started + REAP_PERIOD;
+    /// Drains batches and watches for lost agents until `until` — in sync mode only until
+    /// every awaited agent stopped — then applies `on_agent_lost`.
+    fn wait_cycle(&mut self, sync: bool, until: Instant) -> Result<(), HostCycleError> {
+        let mut next_reap = Instant::now() + REAP_PERIOD;
         self.lost_this_cycle.clear();
         loop {
-            self.drain(true)?;
+            self.drain(sync)?;
             let now = Instant::now();
             let reap = now >= next_reap;
             if reap {
                 next_reap = now + REAP_PERIOD;
             }
             self.check_lost(reap);
-            if self.barrier.is_complete() {
-                break;
-            }
-            if now >= deadline {
+            if (sync && self.barrier.is_complete()) || now >= until {
                 break;
             }
             self.backend
-                .wait_activity(deadline.min(next_reap).saturating_duration_since(now))?;
+                .wait_activity(until.min(next_reap).saturating_duration_since(now))?;
         }
-        self.handle_lost()?;
+        self.handle_lost()
+    }
+
+    fn collect_sync(&mut self) -> Result<(), HostCycleError> {
+        self.wait_cycle(true, Instant::now() + self.config.sync.stop_timeout)?;
         let mut timed_out = 0u64;
         for (slot, a) in self.report.agents.iter_mut().enumerate() {
             a.outcome = self.barrier.outcome(slot);
@@ -821,23 +822,7 @@ impl Host {
             Some(t) if t + period > now => t,
             _ => now + period,
         };
-        self.lost_this_cycle.clear();
-        let mut next_reap = now + REAP_PERIOD;
-        loop {
-            self.drain(false)?;
-            let now = Instant::now();
-            let reap = now >= next_reap;
-            if reap {
-                next_reap = now + REAP_PERIOD;
-            }
-            self.check_lost(reap);
-            if now >= tick {
-                break;
-            }
-            self.backend
-                .wait_activity(tick.min(next_reap).saturating_duration_since(now))?;
-        }
-        self.handle_lost()?;
+        self.wait_cycle(false, tick)?;
         self.next_tick = Some(tick + period);
         for a in &mut self.report.agents {
             a.outcome = AgentOutcome::Async;

@@ -172,44 +172,39 @@ pub enum HostState {
     Absent,
 }
 
-/// The state of `session`'s host node.
-pub fn host_state(session: &str) -> HostState {
+/// What iceoryx2's node registry says of `session`'s host: its state, and its process id
+/// while it is alive. Lists every node of the machine.
+fn find_host(session: &str) -> (HostState, Option<i32>) {
     use iceoryx2::node::NodeView;
     let wanted = host_node_name(session);
-    let mut state = HostState::Absent;
+    let mut found = (HostState::Absent, None);
     let _ = Node::<Svc>::list(Config2::global_config(), |node| {
-        let (view_state, details) = match &node {
-            NodeState::Alive(view) => (HostState::Alive, view.details().clone()),
-            NodeState::Dead(view) => (HostState::Dead, view.details().clone()),
+        let (state, details) = match &node {
+            NodeState::Alive(view) => (HostState::Alive, view.details()),
+            NodeState::Dead(view) => (HostState::Dead, view.details()),
             _ => return CallbackProgression::Continue,
         };
-        if details.is_some_and(|d| d.name().as_str() == wanted) {
-            state = view_state;
-            if view_state == HostState::Alive {
-                return CallbackProgression::Stop;
-            }
+        let Some(d) = details.as_ref().filter(|d| d.name().as_str() == wanted) else {
+            return CallbackProgression::Continue;
+        };
+        if state == HostState::Alive {
+            found = (state, Some(d.process_id().value()));
+            return CallbackProgression::Stop;
         }
+        found = (state, None);
         CallbackProgression::Continue
     });
-    state
+    found
+}
+
+/// The state of `session`'s host node.
+pub fn host_state(session: &str) -> HostState {
+    find_host(session).0
 }
 
 /// The process id of `session`'s live host, if there is one.
 pub fn host_pid(session: &str) -> Option<i32> {
-    use iceoryx2::node::NodeView;
-    let wanted = host_node_name(session);
-    let mut pid = None;
-    let _ = Node::<Svc>::list(Config2::global_config(), |node| {
-        if let NodeState::Alive(view) = &node
-            && let Some(d) = view.details().as_ref()
-            && d.name().as_str() == wanted
-        {
-            pid = Some(d.process_id().value());
-            return CallbackProgression::Stop;
-        }
-        CallbackProgression::Continue
-    });
-    pid
+    find_host(session).1
 }
 
 /// Whether a live host node exists for `session`.
@@ -699,6 +694,16 @@ pub struct StartSignal {
     pub shutdown: bool,
 }
 
+impl StartSignal {
+    fn record(&mut self, e: EventActivation) {
+        if e.id.as_value() == SHUTDOWN_EVENT {
+            self.shutdown = true;
+        } else {
+            self.start = true;
+        }
+    }
+}
+
 /// A received sensor frame in shared memory, owned by the agent until dropped.
 pub struct ShmFrame {
     sample: Sample<Svc, [u8], SensorHeader>,
@@ -997,13 +1002,7 @@ impl ShmAgent {
             }
         }
         let mut signal = StartSignal::default();
-        let mut record = |e: EventActivation| {
-            if e.id.as_value() == SHUTDOWN_EVENT {
-                signal.shutdown = true;
-            } else {
-                signal.start = true;
-            }
-        };
+        let mut record = |e: EventActivation| signal.record(e);
         if let Ok(n) = self.start.timed_wait(&mut record, timeout)
             && n > 0
         {
@@ -1032,13 +1031,7 @@ impl ShmAgent {
     /// Discards pending *start* notifications; reports a pending shutdown.
     pub fn clear_start(&mut self) -> StartSignal {
         let mut signal = StartSignal::default();
-        let _ = self.start.try_wait(|e: EventActivation| {
-            if e.id.as_value() == SHUTDOWN_EVENT {
-                signal.shutdown = true;
-            } else {
-                signal.start = true;
-            }
-        });
+        let _ = self.start.try_wait(|e: EventActivation| signal.record(e));
         self.shutdown_seen |= signal.shutdown;
         signal
     }
