@@ -44,10 +44,8 @@
 //! # }
 //! ```
 
-pub mod alloc_count;
 pub mod barrier;
 pub mod config;
-pub mod floor;
 pub mod host;
 pub mod transport;
 pub mod wire;

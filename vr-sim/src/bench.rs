@@ -9,9 +9,9 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use hdrhistogram::Histogram;
 use serde::Serialize;
-use vrsync_bridge::alloc_count::allocations;
-use vrsync_bridge::floor::{ShmFloorHost, TcpFloorHost};
 use vrsync_bridge::{Config, Host};
+use vrsync_floor::alloc_count::allocations;
+use vrsync_floor::{ShmFloorHost, TcpFloorHost};
 
 /// What to run and where to write.
 #[derive(Debug)]

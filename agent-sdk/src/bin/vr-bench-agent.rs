@@ -12,8 +12,8 @@ use anyhow::{Context, bail};
 use clap::{Parser, ValueEnum};
 use vrsync_agent::{AgentBuilder, Command, StopError, WaitStartError};
 use vrsync_bridge::Config;
-use vrsync_bridge::alloc_count::{CountingAlloc, allocations};
-use vrsync_bridge::floor::{ShmFloorAgentOptions, shm_floor_agent, tcp_floor_agent, touch_rows};
+use vrsync_floor::alloc_count::{CountingAlloc, allocations};
+use vrsync_floor::{ShmFloorAgentOptions, shm_floor_agent, tcp_floor_agent, touch_rows};
 
 #[global_allocator]
 static ALLOC: CountingAlloc = CountingAlloc;

@@ -1,13 +1,4 @@
-//! Transport floors for the benchmark: the raw round trip each transport allows, measured
-//! with the same bytes and the same fan-out as a vrsync cycle and nothing else.
-//!
-//! - shared memory (iceoryx2): per agent loan + send one `[u8]` sample of the frame size,
-//!   one broadcast notify, then wait until every agent notified back;
-//! - TCP: send the frame bytes to every agent, read an 8-byte reply from each.
-//!
-//! Floor agents read nothing but what the protocol needs (they touch the same bytes as the
-//! benchmark agent: the first and last byte of every row), so `vrsync cycle / floor` is the
-//! overhead of the vrsync protocol itself.
+//! The floors themselves (see the crate doc).
 
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};
@@ -96,7 +87,7 @@ impl ShmFloorHost {
         spin: bool,
         spin_before_block: Duration,
     ) -> Result<Self, FloorError> {
-        crate::transport::shm::init_iceoryx2_logging();
+        vrsync_bridge::transport::shm::init_iceoryx2_logging();
         let node = NodeBuilder::new()
             .create::<Svc>()
             .map_err(|e| ice("node", e))?;
@@ -278,7 +269,7 @@ pub fn shm_floor_agent(
         spin_before_block,
         timeout,
     } = *options;
-    crate::transport::shm::init_iceoryx2_logging();
+    vrsync_bridge::transport::shm::init_iceoryx2_logging();
     let node = NodeBuilder::new()
         .create::<Svc>()
         .map_err(|e| ice("node", e))?;

@@ -2,7 +2,7 @@
 //!
 //! ```ignore
 //! #[global_allocator]
-//! static ALLOC: vrsync_bridge::alloc_count::CountingAlloc = vrsync_bridge::alloc_count::CountingAlloc;
+//! static ALLOC: vrsync_floor::alloc_count::CountingAlloc = vrsync_floor::alloc_count::CountingAlloc;
 //! ```
 
 use std::alloc::{GlobalAlloc, Layout, System};
