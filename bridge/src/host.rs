@@ -464,6 +464,12 @@ impl Host {
             .is_some_and(|s| self.backend.is_connected(s))
     }
 
+    /// Whether agent `id` is evicted: it was lost (process died or disconnected) and no
+    /// frame has reached it since. It rejoins when one does (see [`Host::publish`]).
+    pub fn is_evicted(&self, id: u32) -> bool {
+        self.slot_of(id).is_some_and(|s| self.slots[s].evicted)
+    }
+
     /// The address TCP agents connect to (the bound port when `tcp_listen` has port 0);
     /// `None` on shared memory.
     pub fn tcp_local_addr(&self) -> Option<std::net::SocketAddr> {
