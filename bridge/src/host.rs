@@ -377,6 +377,7 @@ impl<'c> HostBuilder<'c> {
             next_tick: None,
             dead: Vec::with_capacity(n),
             lost_this_cycle: Vec::with_capacity(n),
+            evicted_hook: None,
             config,
         })
     }
@@ -411,6 +412,7 @@ pub struct Host {
     next_tick: Option<Instant>,
     dead: Vec<usize>,
     lost_this_cycle: Vec<usize>,
+    evicted_hook: Option<Box<dyn FnMut(u32, u64)>>,
 }
 
 impl core::fmt::Debug for Host {
@@ -468,6 +470,12 @@ impl Host {
     /// frame has reached it since. It rejoins when one does (see [`Host::publish`]).
     pub fn is_evicted(&self, id: u32) -> bool {
         self.slot_of(id).is_some_and(|s| self.slots[s].evicted)
+    }
+
+    /// Calls `hook(agent, cycle)` each time an agent is evicted, as it happens: also while
+    /// [`Host::collect`] blocks (e.g. when `on_agent_lost = "wait"` pauses for the agent).
+    pub fn on_evicted(&mut self, hook: impl FnMut(u32, u64) + 'static) {
+        self.evicted_hook = Some(Box::new(hook));
     }
 
     /// The address TCP agents connect to (the bound port when `tcp_listen` has port 0);
@@ -720,6 +728,9 @@ impl Host {
                 );
                 self.slots[slot].evicted = true;
                 self.slots[slot].seen = false;
+                if let Some(hook) = &mut self.evicted_hook {
+                    hook(id, self.cycle);
+                }
                 self.lost_this_cycle.push(slot);
                 if let Err(pos) = self.stats.evicted_agents.binary_search(&id) {
                     self.stats.evicted_agents.insert(pos, id);
