@@ -97,6 +97,17 @@ pub struct RunArgs {
     /// Write the run summary as JSON.
     #[arg(long, value_name = "FILE")]
     pub summary_json: Option<PathBuf>,
+    /// Write what happens, one JSON object per line, flushed as it happens (for tests and
+    /// tooling, instead of log text). Each line has "event" and "wall_s" (seconds since
+    /// start); events: listening (session, transport, address: the bound TCP address, so
+    /// tcp_listen port 0 works), waiting_for_agents (agents), agent_connected (agent,
+    /// cycle), all_agents_connected (agents), agent_left, agent_rejoined (agent, cycle),
+    /// agent_evicted (agent, cycle, reason), command_rejected (agent, cycle, kind, reason;
+    /// first per agent and kind), cycle (cycle, timed_out_agents, late_batches; only cycle
+    /// 0, every 1000th and those where something happened), finished (frames,
+    /// interrupted, trajectory_hash, summary) or error (message).
+    #[arg(long, value_name = "FILE")]
+    pub events: Option<PathBuf>,
     /// Write a top-down PNG map of the room with every agent's trajectory at the end.
     #[arg(long, value_name = "FILE.png")]
     pub map: Option<PathBuf>,

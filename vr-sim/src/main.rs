@@ -2,6 +2,7 @@
 
 mod bench;
 mod cli;
+mod events;
 mod geometry;
 mod picture;
 mod render;
@@ -107,19 +108,22 @@ fn demo(args: DemoArgs) -> anyhow::Result<ExitCode> {
     );
     let frames_dir = args.out.join("frames");
     let map = args.out.join("map.png");
-    let summary = run::run(RunOptions {
-        config,
-        agent_config_path: config_path,
-        frames: Some(args.frames),
-        spawn: true,
-        agent_args: vec!["--policy".into(), args.policy.clone()],
-        record: Some(args.out.join("record.jsonl")),
-        progress: true,
-        map: Some(map.clone()),
-        // Four moments of the run.
-        dump_frames: Some((frames_dir.clone(), (args.frames / 4).max(1))),
-        render_threads: args.render_threads,
-    })?;
+    let summary = run::run(
+        RunOptions {
+            config,
+            agent_config_path: config_path,
+            frames: Some(args.frames),
+            spawn: true,
+            agent_args: vec!["--policy".into(), args.policy.clone()],
+            record: Some(args.out.join("record.jsonl")),
+            progress: true,
+            map: Some(map.clone()),
+            // Four moments of the run.
+            dump_frames: Some((frames_dir.clone(), (args.frames / 4).max(1))),
+            render_threads: args.render_threads,
+        },
+        &mut events::Events::disabled(),
+    )?;
     print_summary(&summary);
     write_summary(&args.out.join("summary.json"), &summary)?;
     println!("\n  outputs: {}", args.out.display());
@@ -142,6 +146,21 @@ impl Drop for TempConfig {
 }
 
 fn run_cmd(args: RunArgs) -> anyhow::Result<ExitCode> {
+    let mut events = match &args.events {
+        Some(path) => events::Events::create(path)?,
+        None => events::Events::disabled(),
+    };
+    let result = run_with_events(&args, &mut events);
+    if let Err(e) = &result {
+        // Best effort: the run's own error is what the user must see.
+        let _ = events.emit(events::Event::Error {
+            message: format!("{e:#}"),
+        });
+    }
+    result
+}
+
+fn run_with_events(args: &RunArgs, events: &mut events::Events) -> anyhow::Result<ExitCode> {
     let mut config = Config::load(&args.config)?;
     let mut changed = false;
     if let Some(n) = args.spawn_agents {
@@ -174,21 +193,30 @@ fn run_cmd(args: RunArgs) -> anyhow::Result<ExitCode> {
     } else {
         args.config.clone()
     };
-    let summary = run::run(RunOptions {
-        config,
-        agent_config_path,
-        frames: args.frames,
-        spawn: args.spawn_agents.is_some(),
-        agent_args: args.agent_arg.clone(),
-        record: args.record.clone(),
-        progress: !args.quiet,
-        map: args.map.clone(),
-        dump_frames: args.dump_frames.clone().map(|d| (d, args.every)),
-        render_threads: args.render_threads,
-    })?;
+    let summary = run::run(
+        RunOptions {
+            config,
+            agent_config_path,
+            frames: args.frames,
+            spawn: args.spawn_agents.is_some(),
+            agent_args: args.agent_arg.clone(),
+            record: args.record.clone(),
+            progress: !args.quiet,
+            map: args.map.clone(),
+            dump_frames: args.dump_frames.clone().map(|d| (d, args.every)),
+            render_threads: args.render_threads,
+        },
+        events,
+    )?;
     print_summary(&summary);
     if let Some(path) = &args.summary_json {
         write_summary(path, &summary)?;
     }
+    events.emit(events::Event::Finished {
+        frames: summary.frames,
+        interrupted: summary.interrupted,
+        trajectory_hash: &summary.trajectory_hash,
+        summary: args.summary_json.as_deref(),
+    })?;
     Ok(ExitCode::SUCCESS)
 }

@@ -11,6 +11,7 @@ use serde::Serialize;
 use tracing::{info, warn};
 use vrsync_bridge::{Config, Host, HostCycleError, HostWaitError};
 
+use crate::events::{CYCLE_EVENT_EVERY, Event, Events};
 use crate::picture::{Trails, dump_image, write_map};
 use crate::render::Renderer;
 use crate::spawn::Agents;
@@ -102,7 +103,7 @@ struct RecordLine<'a> {
 ///
 /// # Errors
 /// Host creation, agents missing, transport failures, a spawned agent failing.
-pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
+pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
     let config = &opts.config;
     // The world first: a bad [world] section is a config error, reported before anything
     // is started.
@@ -115,6 +116,25 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
         .create()
         .context("cannot create the host")?;
     let ids: Vec<u32> = host.agent_ids().collect();
+    if events.enabled() {
+        // As it happens: collect may block for a lost agent (on_agent_lost = "wait").
+        let mut hook_events = events.clone();
+        host.on_evicted(move |agent, cycle| {
+            let event = Event::AgentEvicted {
+                agent,
+                cycle,
+                reason: "lost: process died or disconnected".into(),
+            };
+            if let Err(e) = hook_events.emit(event) {
+                warn!("{e:#}");
+            }
+        });
+    }
+    events.emit(Event::Listening {
+        session: &config.session,
+        transport: config.transport.kind.as_str(),
+        address: host.tcp_local_addr().map(|a| a.to_string()),
+    })?;
     // `tcp_listen` with port 0 binds a free port: spawned agents must learn the real one.
     let mut _bound_config = None;
     let mut agent_config_path = opts.agent_config_path.clone();
@@ -140,15 +160,40 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
         Agents::default()
     };
 
-    // Wait for every agent, in slices so a spawned agent that fails is reported at once.
+    // Wait for every agent, in slices so a spawned agent that fails is reported at once
+    // (and connections are reported as events).
+    let mut missing_before: Vec<u32> = ids
+        .iter()
+        .copied()
+        .filter(|&id| !host.is_connected(id))
+        .collect();
+    if !missing_before.is_empty() {
+        events.emit(Event::WaitingForAgents {
+            agents: missing_before.clone(),
+        })?;
+    }
     let wait_started = Instant::now();
     loop {
         let left = config
             .sync
             .connect_timeout
             .saturating_sub(wait_started.elapsed());
-        match host.wait_for_agents(left.min(Duration::from_millis(500))) {
-            Ok(()) => break,
+        let result = host.wait_for_agents(left.min(Duration::from_millis(500)));
+        let missing: &[u32] = match &result {
+            Err(HostWaitError::AgentsMissing { missing, .. }) => missing,
+            _ => &[],
+        };
+        if result.is_ok() || matches!(result, Err(HostWaitError::AgentsMissing { .. })) {
+            for &agent in missing_before.iter().filter(|id| !missing.contains(id)) {
+                events.emit(Event::AgentConnected { agent, cycle: None })?;
+            }
+            missing_before = missing.to_vec();
+        }
+        match result {
+            Ok(()) => {
+                events.emit(Event::AllAgentsConnected { agents: ids.len() })?;
+                break;
+            }
             Err(HostWaitError::AgentsMissing { missing, .. }) => {
                 if let Some((id, status)) = agents.failed() {
                     bail!("agent {id} exited before connecting ({status})");
@@ -197,13 +242,30 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
     // Reused every cycle: no allocation per cycle in the steady state.
     let mut rejected_per_agent: Vec<(u32, u32)> = Vec::with_capacity(ids.len());
     let mut interrupted = false;
+    // What the events report changes of (all connected now, nobody evicted).
+    let mut connected: Vec<bool> = vec![true; ids.len()];
+    let mut evicted: Vec<bool> = vec![false; ids.len()];
     let loop_started = Instant::now();
     let mut done = 0u64;
 
     while opts.frames.is_none_or(|n| done < n) {
         // Frame 1: every connected agent's sensors, written in place, then one start.
-        for &id in &ids {
-            if !host.is_connected(id) {
+        let mut notable = false;
+        for (i, &id) in ids.iter().enumerate() {
+            let now_connected = host.is_connected(id);
+            if now_connected != connected[i] {
+                connected[i] = now_connected;
+                let cycle = host.cycle();
+                events.emit(if now_connected {
+                    Event::AgentConnected {
+                        agent: id,
+                        cycle: Some(cycle),
+                    }
+                } else {
+                    Event::AgentLeft { agent: id, cycle }
+                })?;
+            }
+            if !now_connected {
                 continue;
             }
             let mut frame = host.loan_frame(id)?;
@@ -221,6 +283,11 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
                 }
             }
             host.publish(frame)?;
+            if evicted[i] && !host.is_evicted(id) {
+                evicted[i] = false;
+                notable = true;
+                events.emit(Event::AgentRejoined { agent: id, cycle })?;
+            }
         }
         host.start()?;
 
@@ -231,9 +298,13 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
                 interrupted = true;
                 break;
             }
-            Err(e) => return Err(e).context("cycle failed"),
+            Err(e) => {
+                return Err(e).context("cycle failed");
+            }
         };
         let cycle = report.cycle;
+        let timed_out_agents: Vec<u32> = report.timed_out_agents().collect();
+        let late_batches = report.late_batches;
         let mut per_agent = Vec::with_capacity(if record.is_some() { ids.len() } else { 0 });
         rejected_per_agent.clear();
         for a in report.agents() {
@@ -255,6 +326,12 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
                         rejected += 1;
                         let kind = vrsync_bridge::wire::kind_name(wire.kind);
                         if logged_rejections.insert((a.agent_id, kind)) {
+                            events.emit(Event::CommandRejected {
+                                agent: a.agent_id,
+                                cycle,
+                                kind,
+                                reason: e.to_string(),
+                            })?;
                             warn!(
                                 agent = a.agent_id,
                                 cycle,
@@ -272,6 +349,25 @@ pub fn run(opts: RunOptions) -> anyhow::Result<Summary> {
         }
         for &(id, n) in &rejected_per_agent {
             host.set_rejected(id, n);
+        }
+        for (i, &id) in ids.iter().enumerate() {
+            // Written by the host's on_evicted hook; remembered here for rejoins.
+            if !evicted[i] && host.is_evicted(id) {
+                evicted[i] = true;
+                notable = true;
+            }
+        }
+        if events.enabled()
+            && (notable
+                || cycle % CYCLE_EVENT_EVERY == 0
+                || late_batches > 0
+                || !timed_out_agents.is_empty())
+        {
+            events.emit(Event::Cycle {
+                cycle,
+                timed_out_agents,
+                late_batches,
+            })?;
         }
         world.step();
         hasher.update(&cycle.to_le_bytes());
