@@ -15,7 +15,10 @@ use std::time::Duration;
 
 use serde_json::Value;
 
-use crate::util::{self, Proc, RUN_DEADLINE, TestConfig, Transport, bin, record, summary};
+use crate::util::{
+    self, EVENT_DEADLINE, Events, Proc, RUN_DEADLINE, TestConfig, Transport, bin, record,
+    spawn_host, summary,
+};
 
 /// Deadline of one build step (configure, compile, link) on a loaded 2-core machine.
 const BUILD_DEADLINE: Duration = Duration::from_secs(300);
@@ -129,8 +132,8 @@ fn sdk() -> &'static Sdk {
         }
         let ws = util::workspace();
         let sdk_src = ws.join("agent-sdk");
-        // The cargo build of the tests' profile (built by the fixture) holds the libraries.
-        let lib_dir = util::bin_dir();
+        // The libraries Cargo built for these tests (vrsync-agent is a dev-dependency).
+        let lib_dir = util::lib_dir();
         let work = work_dir();
         let prefix = work.join("prefix");
 
@@ -138,7 +141,7 @@ fn sdk() -> &'static Sdk {
             Command::new("bash")
                 .arg(sdk_src.join("install.sh"))
                 .arg("--lib-dir")
-                .arg(lib_dir)
+                .arg(&lib_dir)
                 .arg(&prefix),
             "install the SDK",
         );
@@ -212,26 +215,25 @@ fn position(entry: &Value) -> [f64; 3] {
 fn c_and_cpp_agents_run_100_sync_cycles(t: Transport) {
     let sdk = sdk();
     let dir = tempfile::tempdir().unwrap();
-    let cfg = TestConfig::with_transport("cpp-sync", 6, t);
-    let config = cfg.write(dir.path());
-    let config = config.to_str().unwrap();
+    let mut cfg = TestConfig::with_transport("cpp-sync", 6, t);
+    let config_path = cfg.write(dir.path());
+    let config = config_path.to_str().unwrap();
     let s = dir.path().join("summary.json");
     let rec = dir.path().join("record.jsonl");
-    let host = Proc::spawn(
-        &bin("vr-sim"),
+    let events = Events::in_dir(dir.path());
+    let host = spawn_host(
+        &config_path,
+        &events,
         &[
-            "run",
-            "--config",
-            config,
             "--frames",
             "100",
             "--summary-json",
             s.to_str().unwrap(),
             "--record",
             rec.to_str().unwrap(),
-            "--quiet",
         ],
     );
+    cfg.follow_host(&events, &config_path);
     // Agent 0 is the Rust example; the others are the C and C++ examples.
     let rust = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "0"]);
     let agents: Vec<(u64, &str, Proc)> = vec![
@@ -322,14 +324,16 @@ fn c_and_cpp_agents_run_100_sync_cycles(t: Transport) {
 fn agents_end_when_the_host_is_killed(t: Transport) {
     let sdk = sdk();
     let dir = tempfile::tempdir().unwrap();
-    let cfg = TestConfig::with_transport("cpp-dead-host", 2, t);
-    let config = cfg.write(dir.path());
-    let config = config.to_str().unwrap();
+    let mut cfg = TestConfig::with_transport("cpp-dead-host", 2, t);
+    let config_path = cfg.write(dir.path());
+    let config = config_path.to_str().unwrap();
+    let events = Events::in_dir(dir.path());
     // No --frames: the host runs until it is killed.
-    let mut host = Proc::spawn(&bin("vr-sim"), &["run", "--config", config, "--quiet"]);
+    let host = spawn_host(&config_path, &events, &[]);
+    cfg.follow_host(&events, &config_path);
     let compat = Proc::spawn(&sdk.compat_agent, &[config, "0"]);
     let cpp = Proc::spawn(&sdk.cpp_agent, &[config, "1"]);
-    host.wait_for_stderr("all agents connected", Duration::from_secs(60));
+    events.wait_for("all_agents_connected", EVENT_DEADLINE);
     host.signal(libc::SIGKILL);
     let _ = host.wait(Duration::from_secs(30));
 

@@ -3,7 +3,10 @@
 
 use std::time::Duration;
 
-use crate::util::{self, Proc, RUN_DEADLINE, TestConfig, Transport, bin, cycle_log, summary};
+use crate::util::{
+    self, EVENT_DEADLINE, Events, Proc, RUN_DEADLINE, TestConfig, Transport, bin, cycle_log,
+    spawn_host, summary, wait_for_cycle_line,
+};
 
 /// Names of iceoryx2 services of `session` that still exist.
 fn services_of(session: &str) -> Vec<String> {
@@ -27,23 +30,16 @@ fn a_killed_agent_is_evicted_and_can_rejoin(t: Transport) {
     let dir = tempfile::tempdir().unwrap();
     let mut cfg = TestConfig::with_transport("evict", 2, t);
     cfg.stop_timeout_s = 30.0; // eviction must not wait for it
-    let config = cfg.write(dir.path());
-    let config = config.to_str().unwrap();
+    let config_path = cfg.write(dir.path());
+    let config = config_path.to_str().unwrap();
     let s = dir.path().join("summary.json");
-    let mut host = Proc::spawn(
-        &bin("vr-sim"),
-        &[
-            "run",
-            "--config",
-            config,
-            "--frames",
-            "60",
-            "--summary-json",
-            s.to_str().unwrap(),
-            "--quiet",
-        ],
+    let events = Events::in_dir(dir.path());
+    let host = spawn_host(
+        &config_path,
+        &events,
+        &["--frames", "60", "--summary-json", s.to_str().unwrap()],
     );
-    host.wait_for_stderr("waiting for agents", Duration::from_secs(30));
+    cfg.follow_host(&events, &config_path);
     let log0 = dir.path().join("a0.log");
     let log1 = dir.path().join("a1.log");
     let a0 = Proc::spawn(
@@ -60,7 +56,7 @@ fn a_killed_agent_is_evicted_and_can_rejoin(t: Transport) {
         ],
     );
     // Agent 1 leaves after 10 cycles by being killed: it stops answering in cycle 10.
-    let mut victim = Proc::spawn(
+    let victim = Proc::spawn(
         &bin("vr-agent"),
         &[
             "--config",
@@ -77,17 +73,21 @@ fn a_killed_agent_is_evicted_and_can_rejoin(t: Transport) {
             "9",
         ],
     );
-    // --late-stop-at 9 makes it sleep 2 × stop_timeout before its 10th stop: kill it then.
-    victim.wait_for_stderr("stopping late on purpose", Duration::from_secs(60));
+    // --late-stop-at 9 makes it sleep 2 × stop_timeout before its 10th stop, after it
+    // logged cycle 9: kill it then.
+    wait_for_cycle_line(&log1, 9, EVENT_DEADLINE);
     victim.signal(libc::SIGKILL);
     let _ = victim.wait(Duration::from_secs(10));
-    host.wait_for_stderr("evicted", Duration::from_secs(20));
+    let evicted = events.wait_for("agent_evicted", EVENT_DEADLINE);
+    assert_eq!(evicted["agent"], 1, "{evicted}");
+    assert_eq!(evicted["cycle"], 9, "{evicted}");
     // Restart agent 1: it rejoins at the next cycle.
     let back = Proc::spawn(
         &bin("vr-agent"),
         &["--config", config, "--id", "1", "--policy", "circle"],
     );
-    host.wait_for_stderr("agent rejoined", Duration::from_secs(20));
+    let rejoined = events.wait_for("agent_rejoined", EVENT_DEADLINE);
+    assert_eq!(rejoined["agent"], 1, "{rejoined}");
     let out = host.wait(RUN_DEADLINE);
     assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
     assert_eq!(a0.wait(Duration::from_secs(10)).code(), Some(0));
@@ -108,17 +108,28 @@ fn a_killed_agent_is_evicted_and_can_rejoin(t: Transport) {
 /// 1 with a clear message); a new host for the same session starts cleanly afterwards.
 fn a_killed_host_is_noticed_and_a_new_host_starts(t: Transport) {
     let dir = tempfile::tempdir().unwrap();
-    let cfg = TestConfig::with_transport("deadhost", 1, t);
-    let config = cfg.write(dir.path());
-    let config = config.to_str().unwrap();
-    let mut host = Proc::spawn(&bin("vr-sim"), &["run", "--config", config, "--quiet"]);
-    host.wait_for_stderr("waiting for agents", Duration::from_secs(30));
-    let mut agent = Proc::spawn(
+    let mut cfg = TestConfig::with_transport("deadhost", 1, t);
+    let config_path = cfg.write(dir.path());
+    let config = config_path.to_str().unwrap();
+    let events = Events::in_dir(dir.path());
+    let host = spawn_host(&config_path, &events, &[]);
+    cfg.follow_host(&events, &config_path);
+    let log = dir.path().join("a0.log");
+    let agent = Proc::spawn(
         &bin("vr-agent"),
-        &["--config", config, "--id", "0", "--policy", "idle"],
+        &[
+            "--config",
+            config,
+            "--id",
+            "0",
+            "--policy",
+            "idle",
+            "--log-cycles",
+            log.to_str().unwrap(),
+        ],
     );
-    host.wait_for_stderr("all agents connected", Duration::from_secs(30));
-    agent.wait_for_stderr("connected", Duration::from_secs(30));
+    events.wait_for("all_agents_connected", EVENT_DEADLINE);
+    wait_for_cycle_line(&log, 0, EVENT_DEADLINE);
     host.signal(libc::SIGKILL);
     let _ = host.wait(Duration::from_secs(10));
     let out = agent.wait(Duration::from_secs(10));
@@ -153,8 +164,19 @@ fn two_live_hosts_for_one_session_are_refused() {
     let cfg = TestConfig::new("twohosts", 1);
     let config = cfg.write(dir.path());
     let config = config.to_str().unwrap();
-    let mut first = Proc::spawn(&bin("vr-sim"), &["run", "--config", config, "--quiet"]);
-    first.wait_for_stderr("waiting for agents", Duration::from_secs(30));
+    let events = Events::in_dir(dir.path());
+    let first = Proc::spawn(
+        &bin("vr-sim"),
+        &[
+            "run",
+            "--config",
+            config,
+            "--events",
+            events.arg(),
+            "--quiet",
+        ],
+    );
+    events.wait_for("waiting_for_agents", EVENT_DEADLINE);
     let out = util::run(
         "vr-sim",
         &["run", "--config", config, "--quiet"],
@@ -202,6 +224,7 @@ fn bad_commands_are_rejected_and_leave_the_world_untouched(t: Transport) {
         let cfg = TestConfig::with_transport("badcmd", 1, t);
         let config = cfg.write(dir.path());
         let s = dir.path().join(format!("s{bad}.json"));
+        let events = Events::in_dir(dir.path());
         let mut args = vec![
             "run".to_string(),
             "--config".into(),
@@ -214,6 +237,8 @@ fn bad_commands_are_rejected_and_leave_the_world_untouched(t: Transport) {
             "--agent-arg=circle".into(),
             "--summary-json".into(),
             s.display().to_string(),
+            "--events".into(),
+            events.arg().into(),
             "--quiet".into(),
         ];
         if bad {
@@ -225,19 +250,21 @@ fn bad_commands_are_rejected_and_leave_the_world_untouched(t: Transport) {
         let sum = summary(&s);
         assert_eq!(sum["commands_applied"], 40);
         assert_eq!(sum["commands_rejected"], if bad { 160 } else { 0 });
-        if bad {
-            // Logged once per agent and kind, not once per command.
-            let logged = out
-                .stderr
-                .lines()
-                .filter(|l| l.contains("command rejected"))
-                .count();
-            assert_eq!(
-                logged, 3,
-                "move (twice: NaN and range), grasp_id, unknown:\n{}",
-                out.stderr
-            );
-        }
+        // Reported once per agent and kind, not once per command.
+        let reported: Vec<String> = events
+            .of("command_rejected")
+            .iter()
+            .map(|e| e["kind"].as_str().unwrap().to_string())
+            .collect();
+        let expected: &[&str] = if bad {
+            &["move", "grasp_id", "unknown"]
+        } else {
+            &[]
+        };
+        assert_eq!(
+            reported, expected,
+            "move (NaN, then out of range), grasp_id, unknown"
+        );
         hashes.push(sum["trajectory_hash"].as_str().unwrap().to_string());
     }
     assert_eq!(hashes[0], hashes[1]);
@@ -247,29 +274,26 @@ fn bad_commands_are_rejected_and_leave_the_world_untouched(t: Transport) {
 /// printed and written, the agent leaves cleanly, and no service of the session remains.
 fn a_signal_ends_the_run_cleanly(t: Transport, sig: i32) {
     let dir = tempfile::tempdir().unwrap();
-    let cfg = TestConfig::with_transport("signal", 1, t);
-    let config = cfg.write(dir.path());
-    let config = config.to_str().unwrap();
+    let mut cfg = TestConfig::with_transport("signal", 1, t);
+    let config_path = cfg.write(dir.path());
+    let config = config_path.to_str().unwrap();
     let s = dir.path().join("summary.json");
-    let mut host = Proc::spawn(
-        &bin("vr-sim"),
-        &[
-            "run",
-            "--config",
-            config,
-            "--summary-json",
-            s.to_str().unwrap(),
-            "--quiet",
-        ],
+    let events = Events::in_dir(dir.path());
+    let host = spawn_host(
+        &config_path,
+        &events,
+        &["--summary-json", s.to_str().unwrap()],
     );
-    host.wait_for_stderr("waiting for agents", Duration::from_secs(30));
+    cfg.follow_host(&events, &config_path);
     let agent = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "0"]);
-    host.wait_for_stderr("all agents connected", Duration::from_secs(30));
+    events.wait_for("all_agents_connected", EVENT_DEADLINE);
     host.signal(sig);
     let out = host.wait(Duration::from_secs(30));
     assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
     assert!(out.stdout.contains("(interrupted)"), "{}", out.stdout);
     assert_eq!(summary(&s)["interrupted"], true);
+    let finished = events.wait_for("finished", EVENT_DEADLINE);
+    assert_eq!(finished["interrupted"], true, "{finished}");
     assert_eq!(agent.wait(Duration::from_secs(10)).code(), Some(0));
     if t == Transport::Shm {
         assert_eq!(services_of(&cfg.session), Vec::<String>::new());
@@ -281,31 +305,37 @@ fn sigterm_on_an_agent(t: Transport) {
     let dir = tempfile::tempdir().unwrap();
     let mut cfg = TestConfig::with_transport("agentsig", 2, t);
     cfg.stop_timeout_s = 30.0;
-    let config = cfg.write(dir.path());
-    let config = config.to_str().unwrap();
+    let config_path = cfg.write(dir.path());
+    let config = config_path.to_str().unwrap();
     let s = dir.path().join("summary.json");
-    let mut host = Proc::spawn(
-        &bin("vr-sim"),
+    let events = Events::in_dir(dir.path());
+    let host = spawn_host(
+        &config_path,
+        &events,
+        &["--summary-json", s.to_str().unwrap()],
+    );
+    cfg.follow_host(&events, &config_path);
+    let log1 = dir.path().join("a1.log");
+    let a0 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "0"]);
+    let a1 = Proc::spawn(
+        &bin("vr-agent"),
         &[
-            "run",
             "--config",
             config,
-            "--summary-json",
-            s.to_str().unwrap(),
-            "--quiet",
+            "--id",
+            "1",
+            "--log-cycles",
+            log1.to_str().unwrap(),
         ],
     );
-    host.wait_for_stderr("waiting for agents", Duration::from_secs(30));
-    let a0 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "0"]);
-    let mut a1 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "1"]);
-    host.wait_for_stderr("all agents connected", Duration::from_secs(30));
+    events.wait_for("all_agents_connected", EVENT_DEADLINE);
     // Only an agent that took part is "lost" when it leaves.
-    a1.wait_for_stderr("first frame received", Duration::from_secs(30));
+    wait_for_cycle_line(&log1, 0, EVENT_DEADLINE);
     a1.signal(libc::SIGTERM);
     let out = a1.wait(Duration::from_secs(10));
     assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
-    assert!(out.stderr.contains("agent finished"), "{}", out.stderr);
-    host.wait_for_stderr("evicted", Duration::from_secs(20));
+    let evicted = events.wait_for("agent_evicted", EVENT_DEADLINE);
+    assert_eq!(evicted["agent"], 1, "{evicted}");
     host.signal(libc::SIGTERM);
     let out = host.wait(Duration::from_secs(30));
     assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
@@ -322,19 +352,41 @@ fn on_agent_lost_abort_ends_the_run(t: Transport) {
     let mut cfg = TestConfig::with_transport("abort", 2, t);
     cfg.stop_timeout_s = 30.0;
     cfg.sync_extra = "on_agent_lost = \"abort\"\n".into();
-    let config = cfg.write(dir.path());
-    let config = config.to_str().unwrap();
-    let mut host = Proc::spawn(&bin("vr-sim"), &["run", "--config", config, "--quiet"]);
-    host.wait_for_stderr("waiting for agents", Duration::from_secs(30));
+    let config_path = cfg.write(dir.path());
+    let config = config_path.to_str().unwrap();
+    let events = Events::in_dir(dir.path());
+    let host = spawn_host(&config_path, &events, &[]);
+    cfg.follow_host(&events, &config_path);
+    let log1 = dir.path().join("a1.log");
     let a0 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "0"]);
-    let mut a1 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "1"]);
-    a1.wait_for_stderr("first frame received", Duration::from_secs(30));
+    let a1 = Proc::spawn(
+        &bin("vr-agent"),
+        &[
+            "--config",
+            config,
+            "--id",
+            "1",
+            "--log-cycles",
+            log1.to_str().unwrap(),
+        ],
+    );
+    wait_for_cycle_line(&log1, 0, EVENT_DEADLINE);
     a1.signal(libc::SIGKILL);
     let _ = a1.wait(Duration::from_secs(10));
     let out = host.wait(Duration::from_secs(30));
     assert_eq!(out.code(), Some(1), "stderr:\n{}", out.stderr);
     assert!(out.stderr.contains("agent 1 was lost"), "{}", out.stderr);
     assert!(out.stderr.contains("abort"), "{}", out.stderr);
+    let error = events.wait_for("error", EVENT_DEADLINE);
+    assert!(
+        error["message"]
+            .as_str()
+            .unwrap()
+            .contains("agent 1 was lost"),
+        "{error}"
+    );
+    let evicted = events.wait_for("agent_evicted", EVENT_DEADLINE);
+    assert_eq!(evicted["agent"], 1, "{evicted}");
     assert_eq!(a0.wait(Duration::from_secs(10)).code(), Some(0));
 }
 
@@ -345,32 +397,55 @@ fn on_agent_lost_wait_pauses_until_the_agent_is_back(t: Transport) {
     let mut cfg = TestConfig::with_transport("waitlost", 2, t);
     cfg.stop_timeout_s = 30.0;
     cfg.sync_extra = "on_agent_lost = \"wait\"\n".into();
-    let config = cfg.write(dir.path());
-    let config = config.to_str().unwrap();
+    let config_path = cfg.write(dir.path());
+    let config = config_path.to_str().unwrap();
     let s = dir.path().join("summary.json");
-    let mut host = Proc::spawn(
-        &bin("vr-sim"),
+    let events = Events::in_dir(dir.path());
+    let host = spawn_host(
+        &config_path,
+        &events,
+        &["--summary-json", s.to_str().unwrap()],
+    );
+    cfg.follow_host(&events, &config_path);
+    let log0 = dir.path().join("a0.log");
+    let log1 = dir.path().join("a1.log");
+    let a0 = Proc::spawn(
+        &bin("vr-agent"),
         &[
-            "run",
             "--config",
             config,
-            "--summary-json",
-            s.to_str().unwrap(),
-            "--quiet",
+            "--id",
+            "0",
+            "--log-cycles",
+            log0.to_str().unwrap(),
         ],
     );
-    host.wait_for_stderr("waiting for agents", Duration::from_secs(30));
-    let a0 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "0"]);
-    let mut a1 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "1"]);
-    a1.wait_for_stderr("first frame received", Duration::from_secs(30));
+    let a1 = Proc::spawn(
+        &bin("vr-agent"),
+        &[
+            "--config",
+            config,
+            "--id",
+            "1",
+            "--log-cycles",
+            log1.to_str().unwrap(),
+        ],
+    );
+    wait_for_cycle_line(&log1, 0, EVENT_DEADLINE);
     a1.signal(libc::SIGKILL);
     let _ = a1.wait(Duration::from_secs(10));
-    host.wait_for_stderr(
-        "pausing until the agent reconnects",
-        Duration::from_secs(20),
-    );
+    let evicted = events.wait_for("agent_evicted", EVENT_DEADLINE);
+    assert_eq!(evicted["agent"], 1, "{evicted}");
+    let paused_at = evicted["cycle"].as_u64().unwrap();
     let back = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "1"]);
-    host.wait_for_stderr("agent rejoined", Duration::from_secs(20));
+    let rejoined = events.wait_for("agent_rejoined", EVENT_DEADLINE);
+    assert_eq!(rejoined["agent"], 1, "{rejoined}");
+    // Nobody was left behind: the host paused, so agent 1 is back at the very next cycle.
+    assert_eq!(
+        rejoined["cycle"].as_u64().unwrap(),
+        paused_at + 1,
+        "{rejoined}"
+    );
     host.signal(libc::SIGTERM);
     let out = host.wait(Duration::from_secs(30));
     assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);

@@ -6,7 +6,8 @@ use std::time::Duration;
 use serde_json::Value;
 
 use crate::util::{
-    self, Proc, RUN_DEADLINE, TestConfig, Transport, bin, cycle_log, record, summary,
+    self, EVENT_DEADLINE, Events, Proc, RUN_DEADLINE, TestConfig, Transport, bin, cycle_log,
+    record, spawn_host, summary,
 };
 
 fn entries_for(rec: &[Value], agent: u64) -> Vec<&Value> {
@@ -101,26 +102,24 @@ fn a_late_stop_times_out_its_cycle_and_never_completes_the_next(t: Transport) {
     let dir = tempfile::tempdir().unwrap();
     let mut cfg = TestConfig::with_transport("late", 2, t);
     cfg.stop_timeout_s = 0.3;
-    let config = cfg.write(dir.path());
-    let config = config.to_str().unwrap();
+    let config_path = cfg.write(dir.path());
+    let config = config_path.to_str().unwrap();
     let s = dir.path().join("summary.json");
     let rec = dir.path().join("record.jsonl");
-    let mut host = Proc::spawn(
-        &bin("vr-sim"),
+    let events = Events::in_dir(dir.path());
+    let host = spawn_host(
+        &config_path,
+        &events,
         &[
-            "run",
-            "--config",
-            config,
             "--frames",
             "12",
             "--summary-json",
             s.to_str().unwrap(),
             "--record",
             rec.to_str().unwrap(),
-            "--quiet",
         ],
     );
-    host.wait_for_stderr("waiting for agents", Duration::from_secs(30));
+    cfg.follow_host(&events, &config_path);
     let logs: Vec<_> = (0..2)
         .map(|i| dir.path().join(format!("a{i}.log")))
         .collect();
@@ -157,12 +156,15 @@ fn a_late_stop_times_out_its_cycle_and_never_completes_the_next(t: Transport) {
     assert_eq!(a0.wait(Duration::from_secs(10)).code(), Some(0));
     assert_eq!(a1.wait(Duration::from_secs(10)).code(), Some(0));
 
-    let timeout_line = out
-        .stderr
-        .lines()
-        .find(|l| l.contains("stop timeout"))
-        .unwrap_or_else(|| panic!("no stop timeout logged:\n{}", out.stderr));
-    assert!(timeout_line.contains("missing=[1]"), "{timeout_line}");
+    // The cycle that timed out names the missing agent.
+    let timed_out: Vec<Value> = events
+        .of("cycle")
+        .into_iter()
+        .filter(|e| e["timed_out_agents"] != serde_json::json!([]))
+        .collect();
+    assert_eq!(timed_out.len(), 1, "{timed_out:?}");
+    assert_eq!(timed_out[0]["cycle"], 5, "{timed_out:?}");
+    assert_eq!(timed_out[0]["timed_out_agents"], serde_json::json!([1]));
 
     let sum = summary(&s);
     assert_eq!(sum["frames"], 12);
@@ -203,20 +205,13 @@ fn async_mode_a_slow_agent_always_reads_the_newest_frame(t: Transport) {
     cfg.dt_s = 0.01;
     let config = cfg.write(dir.path());
     let s = dir.path().join("summary.json");
-    let mut host = Proc::spawn(
-        &bin("vr-sim"),
-        &[
-            "run",
-            "--config",
-            config.to_str().unwrap(),
-            "--frames",
-            "150",
-            "--summary-json",
-            s.to_str().unwrap(),
-            "--quiet",
-        ],
+    let events = Events::in_dir(dir.path());
+    let host = spawn_host(
+        &config,
+        &events,
+        &["--frames", "150", "--summary-json", s.to_str().unwrap()],
     );
-    host.wait_for_stderr("waiting for agents", Duration::from_secs(30));
+    cfg.follow_host(&events, &config);
     let fast_log = dir.path().join("fast.log");
     let slow_log = dir.path().join("slow.log");
     let config = config.to_str().unwrap();
@@ -325,25 +320,19 @@ fn a_protocol_mismatch_is_refused_at_connect_with_both_versions_shm() {
 
 fn without_spawn_the_host_says_which_agents_it_waits_for(t: Transport) {
     let dir = tempfile::tempdir().unwrap();
-    let cfg = TestConfig::with_transport("external", 2, t);
-    let config = cfg.write(dir.path());
-    let config = config.to_str().unwrap();
+    let mut cfg = TestConfig::with_transport("external", 2, t);
+    let config_path = cfg.write(dir.path());
+    let config = config_path.to_str().unwrap();
     let s = dir.path().join("summary.json");
-    let mut host = Proc::spawn(
-        &bin("vr-sim"),
-        &[
-            "run",
-            "--config",
-            config,
-            "--frames",
-            "20",
-            "--summary-json",
-            s.to_str().unwrap(),
-            "--quiet",
-        ],
+    let events = Events::in_dir(dir.path());
+    let host = spawn_host(
+        &config_path,
+        &events,
+        &["--frames", "20", "--summary-json", s.to_str().unwrap()],
     );
-    let line = host.wait_for_stderr("waiting for agents", Duration::from_secs(30));
-    assert!(line.contains("[0, 1]"), "{line}");
+    cfg.follow_host(&events, &config_path);
+    let waiting = events.wait_for("waiting_for_agents", EVENT_DEADLINE);
+    assert_eq!(waiting["agents"], serde_json::json!([0, 1]), "{waiting}");
     // Start them in reverse order: the host starts cycle 0 only when both are there.
     let a1 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "1"]);
     let a0 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "0"]);
@@ -354,12 +343,35 @@ fn without_spawn_the_host_says_which_agents_it_waits_for(t: Transport) {
     let sum = summary(&s);
     assert_eq!(sum["frames"], 20);
     assert_eq!(sum["stop_timeouts"], 0);
+    // Every agent connected before cycle 0, and cycle 0 came after all of them.
+    let kinds: Vec<String> = events
+        .read()
+        .iter()
+        .map(|e| e["event"].as_str().unwrap().to_string())
+        .collect();
+    let connected = |id: u64| {
+        events
+            .of("agent_connected")
+            .iter()
+            .any(|e| e["agent"] == id && e["cycle"].is_null())
+    };
+    assert!(connected(0) && connected(1), "{kinds:?}");
+    let all = kinds.iter().position(|k| k == "all_agents_connected");
+    let first_cycle = kinds.iter().position(|k| k == "cycle");
+    assert!(all.is_some() && all < first_cycle, "{kinds:?}");
+    assert_eq!(
+        kinds.last().map(String::as_str),
+        Some("finished"),
+        "{kinds:?}"
+    );
 }
 
 fn an_agent_without_a_host_fails_with_a_clear_error(t: Transport) {
     let dir = tempfile::tempdir().unwrap();
     let mut cfg = TestConfig::with_transport("nohost", 1, t);
     cfg.connect_timeout_s = 0.5;
+    // A port nobody listens on.
+    cfg.tcp_port = util::free_tcp_port();
     let config = cfg.write(dir.path());
     let out = util::run(
         "vr-agent",
@@ -411,9 +423,10 @@ fn a_protocol_mismatch_is_refused_at_connect_with_both_versions_tcp() {
     let dir = tempfile::tempdir().unwrap();
     let mut cfg = TestConfig::with_transport("mismatch-tcp", 1, Transport::Tcp);
     cfg.connect_timeout_s = 5.0;
-    let config = cfg.write(dir.path());
     // A "host" of another protocol version: reads the hello, answers a welcome for 999.
-    let listener = std::net::TcpListener::bind(("127.0.0.1", cfg.tcp_port)).unwrap();
+    let listener = std::net::TcpListener::bind(("127.0.0.1", 0)).unwrap();
+    cfg.tcp_port = listener.local_addr().unwrap().port();
+    let config = cfg.write(dir.path());
     let agent = Proc::spawn(
         &bin("vr-agent"),
         &["--config", config.to_str().unwrap(), "--id", "0"],
@@ -460,8 +473,8 @@ for_both_transports!(
 #[test]
 fn tcp_port_0_with_spawned_agents_tells_them_the_bound_port() {
     let dir = tempfile::tempdir().unwrap();
-    let mut cfg = TestConfig::with_transport("port0", 2, Transport::Tcp);
-    cfg.tcp_port = 0;
+    let cfg = TestConfig::with_transport("port0", 2, Transport::Tcp);
+    assert_eq!(cfg.tcp_port, 0);
     let config = cfg.write(dir.path());
     let s = dir.path().join("summary.json");
     let out = util::run(

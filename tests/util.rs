@@ -7,8 +7,8 @@ use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};
-use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::mpsc;
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -20,42 +20,63 @@ pub fn workspace() -> PathBuf {
         .to_path_buf()
 }
 
-/// The folder holding `vr-sim`, `vr-agent` and `libvrsync_agent` (the C ABI library the
-/// C/C++ tests install), built once per test process with the same profile as the tests.
-///
-/// `cargo test` builds other packages' binaries and cdylibs only on request, so we ask
-/// for them — in a target dir of their own: a `cargo build` into the test's own target dir
-/// while `cargo test` runs leaves a second `vrsync_bridge` rlib (another profile, another
-/// hash) beside the test build's, and the doctests that run afterwards then find two.
-pub fn bin_dir() -> &'static Path {
-    static DIR: OnceLock<PathBuf> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let exe = std::env::current_exe().expect("test exe");
-        // target/<profile>/deps/tests-<hash>
-        let profile_dir = exe
-            .parent()
-            .and_then(Path::parent)
-            .expect("target/<profile>")
-            .to_path_buf();
-        let release = profile_dir.file_name().is_some_and(|n| n == "release");
-        let target_dir = profile_dir.parent().expect("target").join("test-bins");
-        let mut cmd = Command::new(env!("CARGO"));
-        cmd.current_dir(workspace())
-            .args(["build", "--quiet", "-p", "vrsync-sim", "-p", "vrsync-agent"])
-            .arg("--target-dir")
-            .arg(&target_dir);
-        if release {
-            cmd.arg("--release");
-        }
-        let status = cmd.status().expect("run cargo build");
-        assert!(status.success(), "cargo build of the binaries failed");
-        target_dir.join(if release { "release" } else { "debug" })
-    })
+/// `target/<profile>` of this test build.
+fn profile_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("test exe");
+    // target/<profile>/deps/tests-<hash>
+    exe.parent()
+        .and_then(Path::parent)
+        .expect("target/<profile>")
+        .to_path_buf()
 }
 
-/// Path of a workspace binary.
+/// The folder holding `vr-sim`, `vr-agent` and `vr-bench-agent`: `target/<profile>` of this
+/// test build. Cargo itself builds them there in the same `cargo test --workspace` (no
+/// nested `cargo build`): `vrsync-sim` and `vrsync-agent` have integration tests of their
+/// own, and Cargo builds a package's binaries for its integration tests.
+pub fn bin_dir() -> PathBuf {
+    profile_dir()
+}
+
+/// The folder holding `libvrsync_agent.so` and `libvrsync_agent.a` (the C ABI library the
+/// C/C++ tests install): `target/<profile>/deps`. `vrsync-agent` is a dev-dependency of
+/// this package, so Cargo builds its library, with every crate type, for these tests.
+pub fn lib_dir() -> PathBuf {
+    profile_dir().join("deps")
+}
+
+/// Path of a workspace binary; panics with the command to run when it is missing or
+/// older than one of its sources (a `cargo test -p vrsync-tests` does not rebuild it).
 pub fn bin(name: &str) -> PathBuf {
-    bin_dir().join(format!("{name}{}", std::env::consts::EXE_SUFFIX))
+    let path = bin_dir().join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
+    let hint = "build the binaries with `cargo test --workspace --no-run` (or run the \
+                whole `cargo test --workspace`)";
+    let built = std::fs::metadata(&path)
+        .and_then(|m| m.modified())
+        .unwrap_or_else(|e| panic!("{}: {e}; {hint}", path.display()));
+    // Cargo's dep-info next to the binary: `<binary>: <source> <source> ...`.
+    let dep_info = path.with_extension("d");
+    let text = std::fs::read_to_string(&dep_info)
+        .unwrap_or_else(|e| panic!("{}: {e}; {hint}", dep_info.display()));
+    let sources = text
+        .lines()
+        .next()
+        .and_then(|l| l.split_once(": "))
+        .map_or("", |(_, s)| s);
+    // Paths with spaces are escaped as `\ `; none of ours has one, but keep them whole.
+    let sources = sources.replace("\\ ", "\u{0}");
+    for source in sources.split_whitespace() {
+        let source = source.replace('\u{0}', " ");
+        let newer = std::fs::metadata(&source)
+            .and_then(|m| m.modified())
+            .is_ok_and(|t| t > built);
+        assert!(
+            !newer,
+            "{} is older than its source {source}; {hint}",
+            path.display()
+        );
+    }
+    path
 }
 
 /// A session name unique to this test process and call.
@@ -88,7 +109,9 @@ pub enum Transport {
     Tcp,
 }
 
-/// A loopback port that was free a moment ago (bind port 0, read it, release it).
+/// A loopback port that was free a moment ago (bind port 0, read it, release it). Only for
+/// tests that need a port nobody listens on: hosts bind port 0 and report the bound port
+/// in their `listening` event ([`TestConfig::follow_host`]).
 pub fn free_tcp_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
         .and_then(|l| l.local_addr())
@@ -118,14 +141,11 @@ impl TestConfig {
         Self::with_transport(tag, agents, Transport::Shm)
     }
 
+    /// Over TCP the host binds port 0: see [`TestConfig::follow_host`].
     pub fn with_transport(tag: &str, agents: u32, transport: Transport) -> Self {
         Self {
             transport,
-            tcp_port: if transport == Transport::Tcp {
-                free_tcp_port()
-            } else {
-                0
-            },
+            tcp_port: 0,
             session: session(tag),
             agents,
             sync_mode: true,
@@ -172,6 +192,152 @@ impl TestConfig {
         std::fs::write(&path, self.toml()).expect("write config");
         path
     }
+
+    /// Waits for the host's `listening` event; over TCP, takes the port the host bound
+    /// and rewrites the config at `path` with it, so agents started afterwards find the
+    /// host. The host read its config before it listened, so rewriting is safe.
+    pub fn follow_host(&mut self, events: &Events, path: &Path) {
+        let listening = events.wait_for("listening", EVENT_DEADLINE);
+        if self.transport == Transport::Tcp {
+            let addr: std::net::SocketAddr = listening["address"]
+                .as_str()
+                .and_then(|a| a.parse().ok())
+                .unwrap_or_else(|| panic!("listening event without an address: {listening}"));
+            self.tcp_port = addr.port();
+            std::fs::write(path, self.toml()).expect("rewrite config");
+        }
+    }
+}
+
+/// Deadline for one event of a running process on a loaded 2-core machine.
+pub const EVENT_DEADLINE: Duration = Duration::from_secs(60);
+
+/// The `vr-sim run --events` file of one run: waits read it, each with a deadline.
+#[derive(Debug)]
+pub struct Events {
+    path: PathBuf,
+}
+
+impl Events {
+    /// A new events file in `dir` (not created yet: vr-sim creates it).
+    pub fn in_dir(dir: &Path) -> Self {
+        static N: AtomicU32 = AtomicU32::new(0);
+        Self {
+            path: dir.join(format!(
+                "events-{}.jsonl",
+                N.fetch_add(1, Ordering::Relaxed)
+            )),
+        }
+    }
+
+    /// The path, for `--events`.
+    pub fn arg(&self) -> &str {
+        self.path.to_str().expect("UTF-8 path")
+    }
+
+    /// Every complete event so far.
+    pub fn read(&self) -> Vec<serde_json::Value> {
+        let text = std::fs::read_to_string(&self.path).unwrap_or_default();
+        // A line without its newline may still be being written.
+        let complete = text.rfind('\n').map_or("", |end| &text[..end]);
+        complete
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("event line {l:?}: {e}")))
+            .collect()
+    }
+
+    /// Events of `kind` so far.
+    pub fn of(&self, kind: &str) -> Vec<serde_json::Value> {
+        self.read()
+            .into_iter()
+            .filter(|e| e["event"] == kind)
+            .collect()
+    }
+
+    /// Waits for the first event of `kind`.
+    pub fn wait_for(&self, kind: &str, timeout: Duration) -> serde_json::Value {
+        self.wait_for_match(kind, |_| true, timeout)
+    }
+
+    /// Waits for the first event of `kind` that satisfies `pred`; panics after `timeout`,
+    /// or as soon as the run ended (`finished` or `error`) without it, naming what it
+    /// waited for and showing the events so far.
+    pub fn wait_for_match(
+        &self,
+        kind: &str,
+        pred: impl Fn(&serde_json::Value) -> bool,
+        timeout: Duration,
+    ) -> serde_json::Value {
+        let deadline = Instant::now() + timeout;
+        loop {
+            let events = self.read();
+            if let Some(e) = events.iter().find(|e| e["event"] == kind && pred(e)) {
+                return e.clone();
+            }
+            let ended = events
+                .iter()
+                .any(|e| e["event"] == "finished" || e["event"] == "error");
+            let show = || {
+                events
+                    .iter()
+                    .map(ToString::to_string)
+                    .collect::<Vec<_>>()
+                    .join("\n")
+            };
+            assert!(
+                !ended,
+                "{}: the run ended without the awaited `{kind}` event; events:\n{}",
+                self.path.display(),
+                show()
+            );
+            assert!(
+                Instant::now() < deadline,
+                "{}: no matching `{kind}` event within {timeout:?}; events so far:\n{}",
+                self.path.display(),
+                show()
+            );
+            // The file is appended to by another process: re-read it shortly.
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+}
+
+/// Waits until the `vr-agent --log-cycles` file at `path` holds a line for `cycle` (the
+/// agent writes and flushes it before it sends its stop); panics after `timeout`.
+pub fn wait_for_cycle_line(path: &Path, cycle: u64, timeout: Duration) {
+    let deadline = Instant::now() + timeout;
+    loop {
+        let text = std::fs::read_to_string(path).unwrap_or_default();
+        let complete = text.rfind('\n').map_or("", |end| &text[..end]);
+        let seen = complete
+            .lines()
+            .filter_map(|l| l.split(' ').next()?.parse::<u64>().ok())
+            .any(|c| c == cycle);
+        if seen {
+            return;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "{}: no line for cycle {cycle} within {timeout:?}; so far:\n{text}",
+            path.display()
+        );
+        // The file is appended to by another process: re-read it shortly.
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// Starts `vr-sim run --config CONFIG --events EVENTS --quiet ARGS...`.
+pub fn spawn_host(config: &Path, events: &Events, args: &[&str]) -> Proc {
+    let mut all = vec![
+        "run",
+        "--config",
+        config.to_str().expect("UTF-8 path"),
+        "--events",
+        events.arg(),
+        "--quiet",
+    ];
+    all.extend_from_slice(args);
+    Proc::spawn(&bin("vr-sim"), &all)
 }
 
 /// Captured output of a finished process.
@@ -193,7 +359,6 @@ pub struct Proc {
     name: String,
     child: Option<Child>,
     stdout: Option<JoinHandle<String>>,
-    stderr_lines: Receiver<String>,
     stderr_all: Arc<Mutex<String>>,
     stderr_thread: Option<JoinHandle<()>>,
 }
@@ -216,7 +381,6 @@ impl Proc {
             let _ = out.read_to_string(&mut s);
             s
         });
-        let (tx, rx) = mpsc::channel();
         let all = Arc::new(Mutex::new(String::new()));
         let all2 = Arc::clone(&all);
         let stderr_thread = std::thread::spawn(move || {
@@ -226,7 +390,6 @@ impl Proc {
                     a.push_str(&line);
                     a.push('\n');
                 }
-                let _ = tx.send(line);
             }
         });
         Self {
@@ -240,7 +403,6 @@ impl Proc {
             ),
             child: Some(child),
             stdout: Some(stdout),
-            stderr_lines: rx,
             stderr_all: all,
             stderr_thread: Some(stderr_thread),
         }
@@ -248,28 +410,6 @@ impl Proc {
 
     pub fn pid(&self) -> u32 {
         self.child.as_ref().expect("child").id()
-    }
-
-    /// Waits until a stderr line contains `needle`; panics after `timeout` naming both.
-    pub fn wait_for_stderr(&mut self, needle: &str, timeout: Duration) -> String {
-        let deadline = Instant::now() + timeout;
-        loop {
-            let left = deadline.saturating_duration_since(Instant::now());
-            match self.stderr_lines.recv_timeout(left) {
-                Ok(line) if line.contains(needle) => return line,
-                Ok(_) => {}
-                Err(RecvTimeoutError::Timeout) => panic!(
-                    "`{}`: no stderr line with {needle:?} within {timeout:?}; stderr so far:\n{}",
-                    self.name,
-                    self.stderr_all.lock().expect("lock")
-                ),
-                Err(RecvTimeoutError::Disconnected) => panic!(
-                    "`{}` closed stderr without a line containing {needle:?}; stderr:\n{}",
-                    self.name,
-                    self.stderr_all.lock().expect("lock")
-                ),
-            }
-        }
     }
 
     /// Waits for the process to exit; kills it and panics after `timeout`.

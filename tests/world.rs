@@ -7,7 +7,9 @@ use std::time::Duration;
 
 use serde_json::Value;
 
-use crate::util::{self, Proc, RUN_DEADLINE, bin, record, summary, workspace};
+use crate::util::{
+    self, EVENT_DEADLINE, Events, Proc, RUN_DEADLINE, bin, record, spawn_host, summary, workspace,
+};
 
 fn default_config() -> PathBuf {
     workspace().join("config/default.toml")
@@ -83,26 +85,19 @@ fn trajectory_hash_does_not_depend_on_agent_timing_or_start_order() {
     let text = std::fs::read_to_string(default_config())
         .unwrap()
         .replace("session = \"default\"", &format!("session = {session:?}"));
-    let config = dir.path().join("reverse.toml");
-    std::fs::write(&config, text).unwrap();
-    let config = config.to_str().unwrap();
+    let config_path = dir.path().join("reverse.toml");
+    std::fs::write(&config_path, text).unwrap();
+    let config = config_path.to_str().unwrap();
     let s = dir.path().join("reverse.json");
-    let mut host = Proc::spawn(
-        &bin("vr-sim"),
-        &[
-            "run",
-            "--config",
-            config,
-            "--frames",
-            "300",
-            "--summary-json",
-            s.to_str().unwrap(),
-            "--quiet",
-        ],
+    let events = Events::in_dir(dir.path());
+    let host = spawn_host(
+        &config_path,
+        &events,
+        &["--frames", "300", "--summary-json", s.to_str().unwrap()],
     );
-    host.wait_for_stderr("waiting for agents", Duration::from_secs(30));
-    let mut one = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "1"]);
-    one.wait_for_stderr("connected", Duration::from_secs(30));
+    events.wait_for("waiting_for_agents", EVENT_DEADLINE);
+    let one = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "1"]);
+    events.wait_for_match("agent_connected", |e| e["agent"] == 1, EVENT_DEADLINE);
     let zero = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "0"]);
     let out = host.wait(RUN_DEADLINE);
     assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
@@ -291,7 +286,7 @@ fn the_same_world_over_tcp_gives_the_same_trajectory() {
             .replace("kind = \"shm\"", &format!("kind = {kind:?}"))
             .replace(
                 "tcp_listen = \"127.0.0.1:7400\"",
-                &format!("tcp_listen = \"127.0.0.1:{}\"", util::free_tcp_port()),
+                "tcp_listen = \"127.0.0.1:0\"",
             );
         let config = dir.path().join(format!("{kind}.toml"));
         std::fs::write(&config, text).unwrap();
