@@ -385,7 +385,9 @@ fn an_agent_without_a_host_fails_with_a_clear_error(t: Transport) {
             assert!(out.stderr.contains(&cfg.session), "{}", out.stderr);
         }
         Transport::Tcp => {
-            let addr = format!("no host at 127.0.0.1:{}", cfg.tcp_port);
+            assert!(out.stderr.contains("no host for session"), "{}", out.stderr);
+            assert!(out.stderr.contains(&cfg.session), "{}", out.stderr);
+            let addr = format!("at 127.0.0.1:{}", cfg.tcp_port);
             assert!(out.stderr.contains(&addr), "{}", out.stderr);
         }
     }

@@ -47,8 +47,8 @@ use vrsync_bridge::config::{Config, ConfigLoadError, TransportKind};
 use vrsync_bridge::wire::{self, Command, PixelFormat};
 
 use crate::agent::{
-    Agent, AgentBuilder, AgentConnectError, Frame, HOST_LIVENESS_PERIOD, SendError, StopError,
-    WaitStartError,
+    Agent, AgentBuilder, AgentConnectError, Frame, HOST_LIVENESS_PERIOD, SendError, SignalHandling,
+    StopError, WaitStartError,
 };
 
 // ---------------------------------------------------------------------------------------
@@ -426,7 +426,9 @@ impl FfiError {
                 WaitStartError::HostClosed => VRS_SESSION_CLOSED,
                 WaitStartError::HostGone { .. } => VRS_ERROR_HOST_GONE,
                 WaitStartError::BadFrame { .. } => VRS_ERROR_PROTOCOL,
-                WaitStartError::Receive(_) => VRS_ERROR_TRANSPORT,
+                WaitStartError::Receive(_) | WaitStartError::TooManyFramesHeld { .. } => {
+                    VRS_ERROR_TRANSPORT
+                }
                 WaitStartError::Terminated => VRS_ERROR_TERMINATED,
                 _ => VRS_ERROR_OTHER,
             },
@@ -741,7 +743,9 @@ fn connect_impl(
     // SAFETY: a C string by the caller's contract.
     let path = unsafe { str_arg(config_path, "config_path") }?;
     let config = Config::load(path)?;
-    let mut builder = AgentBuilder::new(&config, agent_id);
+    // The C ABI keeps its documented behaviour: SIGINT/SIGTERM end waits with
+    // VRS_ERROR_TERMINATED.
+    let mut builder = AgentBuilder::new(&config, agent_id).signal_handling(SignalHandling::Install);
     if let Some(t) = timeout_arg(timeout_ms) {
         builder = builder.connect_timeout(t);
     }

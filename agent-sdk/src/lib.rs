@@ -36,6 +36,6 @@ pub mod policy;
 
 pub use agent::{
     Agent, AgentBuilder, AgentConnectError, Frame, HOST_LIVENESS_PERIOD, Image, SendError,
-    StopError, WaitStartError,
+    SignalHandling, StopError, WaitStartError,
 };
 pub use vrsync_bridge::wire::{ActionState, Command, PixelFormat, Pose, SensorHeader};

@@ -16,6 +16,7 @@ use tracing::{debug, info, warn};
 
 use crate::barrier::{AgentOutcome, BatchVerdict, CycleBarrier};
 use crate::config::{AgentLostPolicy, CameraConfig, Config, TransportKind};
+use crate::signal::SignalHandling;
 use crate::transport::shm::{ShmHost, ShmHostCreateError};
 use crate::transport::tcp::{TcpHost, TcpHostCreateError};
 use crate::transport::{FrameLoan, HostTransport, HostTransportError};
@@ -231,9 +232,13 @@ pub enum HostCreateError {
 pub enum HostWaitError {
     /// Some agents did not connect in time.
     #[error(
-        "agents {missing:?} did not connect within {waited:?} (start them with `vr-agent --config <file> --id <id>`)"
+        "agents {missing:?} of session {session:?} did not connect within {waited:?}: start \
+         those agents with this session's config (same session, transport and address), or \
+         raise sync.connect_timeout"
     )]
     AgentsMissing {
+        /// The session.
+        session: String,
         /// Ids still missing.
         missing: Vec<u32>,
         /// How long we waited.
@@ -307,12 +312,25 @@ impl From<HostTransportError> for HostCycleError {
 #[derive(Debug)]
 pub struct HostBuilder<'c> {
     config: &'c Config,
+    signals: SignalHandling,
 }
 
 impl<'c> HostBuilder<'c> {
     /// A builder for `config`.
     pub fn new(config: &'c Config) -> Self {
-        Self { config }
+        Self {
+            config,
+            signals: SignalHandling::default(),
+        }
+    }
+
+    /// Whether the host installs SIGINT/SIGTERM handlers. Default:
+    /// [`SignalHandling::Leave`] (the embedding process keeps its own handlers, and
+    /// [`HostCycleError::Terminated`] is never returned); programs that own their process
+    /// choose [`SignalHandling::Install`]. No config key.
+    pub fn signal_handling(mut self, signals: SignalHandling) -> Self {
+        self.signals = signals;
+        self
     }
 
     /// Creates the transport's services and the host's ports.
@@ -322,8 +340,8 @@ impl<'c> HostBuilder<'c> {
     pub fn create(self) -> Result<Host, HostCreateError> {
         let config = self.config.clone();
         let backend: Box<dyn HostTransport> = match config.transport.kind {
-            TransportKind::Shm => Box::new(ShmHost::create(&config)?),
-            TransportKind::Tcp => Box::new(TcpHost::create(&config)?),
+            TransportKind::Shm => Box::new(ShmHost::create(&config, self.signals)?),
+            TransportKind::Tcp => Box::new(TcpHost::create(&config, self.signals)?),
         };
         let n = config.agents.len();
         let cap = config.transport.max_commands_per_cycle as usize * 2;
@@ -525,6 +543,7 @@ impl Host {
             let now = Instant::now();
             if now >= deadline {
                 return Err(HostWaitError::AgentsMissing {
+                    session: self.config.session.clone(),
                     missing,
                     waited: started.elapsed(),
                 });

@@ -47,6 +47,7 @@
 pub mod barrier;
 pub mod config;
 pub mod host;
+mod signal;
 pub mod transport;
 pub mod wire;
 
@@ -56,6 +57,8 @@ pub use host::{
     AgentReport, CycleReport, Host, HostBuilder, HostCreateError, HostCycleError, HostStats,
     HostWaitError, ImageMut, SensorFrameMut,
 };
+pub use signal::SignalHandling;
+pub use transport::AgentConnectError;
 pub use wire::{
     ActionState, Command, CommandDecodeError, ImageDesc, LAYOUT_HASH, MotorCommand, MotorHeader,
     PROTOCOL_VERSION, PixelFormat, Pose, SensorHeader,

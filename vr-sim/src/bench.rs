@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use hdrhistogram::Histogram;
 use serde::Serialize;
-use vrsync_bridge::{Config, Host};
+use vrsync_bridge::{Config, Host, SignalHandling};
 use vrsync_floor::alloc_count::allocations;
 use vrsync_floor::{ShmFloorHost, TcpFloorHost};
 
@@ -268,6 +268,7 @@ fn bench_vrsync(case: &Case, session: &str, dir: &Path, render: bool) -> anyhow:
     let text = config_text(case, session);
     let mut config = Config::from_toml_str(&text, Path::new("<bench>"))?;
     let mut host = Host::builder(&config)
+        .signal_handling(SignalHandling::Install)
         .create()
         .context("create the bench host")?;
     if let Some(addr) = host.tcp_local_addr() {

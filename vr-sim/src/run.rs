@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use serde::Serialize;
 use tracing::{info, warn};
-use vrsync_bridge::{Config, Host, HostCycleError, HostWaitError};
+use vrsync_bridge::{Config, Host, HostCycleError, HostWaitError, SignalHandling};
 
 use crate::events::{CYCLE_EVENT_EVERY, Event, Events};
 use crate::picture::{Trails, dump_image, write_map};
@@ -113,6 +113,7 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
     let mut host = Host::builder(config)
+        .signal_handling(SignalHandling::Install)
         .create()
         .context("cannot create the host")?;
     let ids: Vec<u32> = host.agent_ids().collect();

@@ -10,7 +10,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tracing::{info, warn};
 use vrsync_agent::policy::{Policy, PolicyKind};
-use vrsync_agent::{Agent, AgentBuilder, AgentConnectError, StopError, WaitStartError};
+use vrsync_agent::{Agent, AgentBuilder, SignalHandling, StopError, WaitStartError};
 use vrsync_bridge::Config;
 
 /// Example vrsync agent: waits for each cycle's start, reads its sensor frame from shared
@@ -109,9 +109,12 @@ fn run(args: &Args) -> anyhow::Result<ExitCode> {
         }
         None => config.sync.stop_timeout + config.sync.connect_timeout,
     };
-    let mut agent = match AgentBuilder::new(&config, args.id).connect() {
+    let connected = AgentBuilder::new(&config, args.id)
+        .signal_handling(SignalHandling::Install)
+        .connect();
+    let mut agent = match connected {
         Ok(a) => a,
-        Err(e @ AgentConnectError::Shm(_)) | Err(e) => {
+        Err(e) => {
             return Err(anyhow::Error::new(e).context(format!(
                 "cannot connect agent {} to session {:?}",
                 args.id, config.session

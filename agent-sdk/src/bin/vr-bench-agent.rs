@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use clap::{Parser, ValueEnum};
-use vrsync_agent::{AgentBuilder, Command, StopError, WaitStartError};
+use vrsync_agent::{AgentBuilder, Command, SignalHandling, StopError, WaitStartError};
 use vrsync_bridge::Config;
 use vrsync_floor::alloc_count::{CountingAlloc, allocations};
 use vrsync_floor::{ShmFloorAgentOptions, shm_floor_agent, tcp_floor_agent, touch_rows};
@@ -125,7 +125,9 @@ fn sdk(args: &Args, timeout: Duration) -> anyhow::Result<()> {
         .as_ref()
         .context("--config is required in sdk mode")?;
     let config = Config::load(path)?;
-    let mut agent = AgentBuilder::new(&config, args.id).connect()?;
+    let mut agent = AgentBuilder::new(&config, args.id)
+        .signal_handling(SignalHandling::Install)
+        .connect()?;
     let mut cycles = 0u64;
     let mut allocs_at_warmup = None;
     let mut sum = 0u64;

@@ -8,7 +8,7 @@ use vrsync_bridge::config::{Config, TransportKind};
 use vrsync_bridge::wire::{
     self, ActionState, ActionStatus, Collision, EyePosition, GridPosition, HeadMotion, Pose,
 };
-use vrsync_bridge::{Host, HostWaitError};
+use vrsync_bridge::{Host, HostWaitError, SignalHandling};
 
 use crate::state::{
     FfiError, ImageView, Phase, boundary, boundary_status, c_name, copy_report, destroy,
@@ -169,7 +169,11 @@ fn create_impl(config_path: *const c_char, out_host: *mut *mut vrs_host_t) -> Re
     // SAFETY: a C string by the caller's contract.
     let path = unsafe { str_arg(config_path, "config_path") }?;
     let config = Config::load(path)?;
-    let host = Host::builder(&config).create()?;
+    // The C ABI keeps its documented behaviour: SIGINT/SIGTERM end waits with
+    // VRS_HOST_ERROR_TERMINATED.
+    let host = Host::builder(&config)
+        .signal_handling(SignalHandling::Install)
+        .create()?;
     let key = register(host)?;
     // SAFETY: as above. The handle is a registry key, never dereferenced.
     unsafe { out_host.write(std::ptr::without_provenance_mut(key)) };

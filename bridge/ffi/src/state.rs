@@ -118,7 +118,9 @@ impl FfiError {
 impl From<HostWaitError> for FfiError {
     fn from(e: HostWaitError) -> Self {
         match e {
-            HostWaitError::AgentsMissing { missing, waited } => Self::AgentsMissing {
+            HostWaitError::AgentsMissing {
+                missing, waited, ..
+            } => Self::AgentsMissing {
                 missing,
                 waited_ms: waited.as_millis() as u64,
             },

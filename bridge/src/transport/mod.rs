@@ -95,6 +95,87 @@ pub enum HostTransportError {
     Terminated,
 }
 
+/// Why an agent could not connect to its host, whatever the transport.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum AgentConnectError {
+    /// No host answered for the session before the connect timeout.
+    #[error(
+        "no host for session {session:?} within {waited:?}: {looked_for} (agent {agent} \
+         connects only after the session's host side, the simulator, has started; start it \
+         first or raise sync.connect_timeout)"
+    )]
+    HostNotFound {
+        /// The session.
+        session: String,
+        /// The agent id that tried to connect.
+        agent: u32,
+        /// How long the agent waited.
+        waited: Duration,
+        /// What was missing: the service or address looked for, and the last error.
+        looked_for: String,
+    },
+    /// The session's host is running but does not serve this agent id.
+    #[error(
+        "the host of session {session:?} serves agents {served:?}, not agent {agent}: use one \
+         of those ids, or add agent {agent} to the host's config"
+    )]
+    IdNotServed {
+        /// The session.
+        session: String,
+        /// The agent id that tried to connect.
+        agent: u32,
+        /// The ids the host serves, ascending.
+        served: Vec<u32>,
+    },
+    /// Host and agent were built with different wire layouts.
+    #[error(
+        "protocol mismatch in session {session:?}: the host speaks vrsync protocol \
+         {host_protocol} (layout {host_layout}), this agent speaks protocol {agent_protocol} \
+         (layout {agent_layout}); rebuild the agent against the host's version"
+    )]
+    VersionMismatch {
+        /// The session.
+        session: String,
+        /// The host's protocol version (as the host announced it).
+        host_protocol: String,
+        /// The host's layout hash (hex).
+        host_layout: String,
+        /// This agent's protocol version.
+        agent_protocol: u32,
+        /// This agent's layout hash (hex).
+        agent_layout: String,
+    },
+    /// Another process already is this agent.
+    #[error("agent {agent} of session {session:?} is already connected by another process")]
+    IdInUse {
+        /// The session.
+        session: String,
+        /// The agent id.
+        agent: u32,
+    },
+    /// The host refused the agent (e.g. a missing or wrong `tcp_token`).
+    #[error("the host of session {session:?} refused agent {agent}: {reason}")]
+    Refused {
+        /// The session.
+        session: String,
+        /// The agent id.
+        agent: u32,
+        /// The host's reason.
+        reason: String,
+    },
+    /// The transport failed in another way.
+    #[error("agent {agent} of session {session:?} cannot connect: {detail}")]
+    Transport {
+        /// The session.
+        session: String,
+        /// The agent id.
+        agent: u32,
+        /// The transport's detail.
+        detail: String,
+    },
+}
+
 /// A sink for received motor batches: `(slot, header, commands)`.
 pub type BatchSink<'a> = dyn FnMut(usize, &MotorHeader, &[MotorCommand]) + 'a;
 

@@ -31,9 +31,10 @@ use iceoryx2::sample_mut::SampleMut;
 use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
 use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as ps_factory};
 
-use super::{BatchSink, FrameLoan, HostTransport, HostTransportError};
+use super::{AgentConnectError, BatchSink, FrameLoan, HostTransport, HostTransportError};
 use crate::config::{Config, MAX_AGENT_ID};
 use crate::host::image_layout;
+use crate::signal::SignalHandling;
 use crate::wire::{LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, SensorHeader};
 
 type Svc = ipc::Service;
@@ -142,21 +143,13 @@ pub fn init_iceoryx2_logging() {
     set_log_level_from_env_or(LogLevel::Error);
 }
 
-/// Whether SIGINT/SIGTERM arrived. iceoryx2 hands a signal out only once (and installs its
-/// handlers on the first query), so the answer is remembered in `flag`.
-fn sticky_termination(node: &Node<Svc>, flag: &core::cell::Cell<bool>) -> bool {
-    if !flag.get() && node.wait(Duration::ZERO).is_err() {
-        flag.set(true);
-    }
-    flag.get()
-}
-
 fn node(name: &str) -> Result<Node<Svc>, String> {
     let node_name =
         NodeName::new(name).map_err(|e| format!("invalid node name {name:?}: {e:?}"))?;
     NodeBuilder::new()
         .name(&node_name)
-        .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+        // Signals are handled by `crate::signal` (or left to the embedding process).
+        .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<Svc>()
         .map_err(|e| format!("cannot create iceoryx2 node {name:?}: {e:?}"))
 }
@@ -277,9 +270,9 @@ struct HostAgentPorts {
 
 /// The host side of the shared-memory transport.
 pub struct ShmHost {
-    node: Node<Svc>,
+    _node: Node<Svc>,
     spin_before_block: Duration,
-    terminated: core::cell::Cell<bool>,
+    signals: SignalHandling,
     agent_node_names: Vec<String>,
     spin: bool,
     spins: u32,
@@ -335,12 +328,14 @@ pub enum ShmHostCreateError {
 }
 
 impl ShmHost {
-    /// Creates every service of the session and the host's ports.
+    /// Creates every service of the session and the host's ports; `signals` says whether
+    /// SIGINT/SIGTERM handlers are installed (see [`SignalHandling`]).
     ///
     /// # Errors
     /// [`ShmHostCreateError`].
-    pub fn create(config: &Config) -> Result<Self, ShmHostCreateError> {
+    pub fn create(config: &Config, signals: SignalHandling) -> Result<Self, ShmHostCreateError> {
         init_iceoryx2_logging();
+        signals.apply();
         let ice = ShmHostCreateError::Iceoryx;
         let session = &config.session;
         if let Err((needed, available)) = check_shm_budget(config) {
@@ -469,13 +464,10 @@ impl ShmHost {
             .default_event_id(EventId::new(START_EVENT))
             .create()
             .map_err(|e| ice(format!("cannot create the start notifier: {e:?}")))?;
-        // Install iceoryx2's SIGINT/SIGTERM handlers now: from here on a signal only sets a
-        // flag that the cycle loop honours.
-        let terminated = core::cell::Cell::new(node.wait(Duration::ZERO).is_err());
         Ok(Self {
-            node,
+            _node: node,
             spin_before_block: config.sync.effective_spin_before_block(config.agents.len()),
-            terminated,
+            signals,
             agent_node_names: config
                 .agents
                 .iter()
@@ -677,7 +669,7 @@ impl HostTransport for ShmHost {
     }
 
     fn termination_requested(&self) -> bool {
-        sticky_termination(&self.node, &self.terminated)
+        self.signals.termination_requested()
     }
 }
 
@@ -728,50 +720,17 @@ impl ShmFrame {
     }
 }
 
-/// Why an agent could not connect over shared memory.
-#[derive(Debug, thiserror::Error)]
+/// Why [`ShmAgent::receive_newest`] failed.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[non_exhaustive]
-pub enum ShmAgentConnectError {
-    /// The host's services did not appear before the deadline.
-    #[error(
-        "no host for session {session:?} within {waited:?}: service {service} does not exist \
-         (is `vr-sim run` running with the same config, and does it have agent {agent}?)"
-    )]
-    HostNotFound {
-        /// The session.
-        session: String,
-        /// The agent id.
-        agent: u32,
-        /// The missing service.
-        service: String,
-        /// How long we waited.
-        waited: Duration,
+pub enum ShmReceiveError {
+    /// The agent still holds [`AGENT_BORROWED_FRAMES`] frames: iceoryx2 lends no more.
+    #[error("the agent holds {max} frames already")]
+    TooManyFramesHeld {
+        /// How many frames an agent may hold at once.
+        max: usize,
     },
-    /// Host and agent were built with different wire layouts.
-    #[error(
-        "protocol mismatch: the host speaks vrsync protocol {host_protocol} (layout {host_layout}), \
-         this agent speaks protocol {agent_protocol} (layout {agent_layout}); rebuild the agent \
-         against the host's version"
-    )]
-    VersionMismatch {
-        /// The host's protocol version.
-        host_protocol: String,
-        /// The host's layout hash.
-        host_layout: String,
-        /// Ours.
-        agent_protocol: u32,
-        /// Ours.
-        agent_layout: String,
-    },
-    /// Another process already is this agent.
-    #[error("agent {agent} of session {session:?} is already connected by another process")]
-    AgentIdInUse {
-        /// The session.
-        session: String,
-        /// The agent id.
-        agent: u32,
-    },
-    /// iceoryx2 refused something else.
+    /// iceoryx2 failed otherwise.
     #[error("iceoryx2: {0}")]
     Iceoryx(String),
 }
@@ -781,8 +740,8 @@ pub struct ShmAgent {
     id: u32,
     session: String,
     host_pid: Option<i32>,
-    node: Node<Svc>,
-    terminated: core::cell::Cell<bool>,
+    _node: Node<Svc>,
+    signals: SignalHandling,
     _start_service: event_factory::PortFactory<Svc>,
     start: Listener<Svc>,
     _stop_service: event_factory::PortFactory<Svc>,
@@ -813,24 +772,61 @@ fn attr(attrs: &AttributeSet, key: &str) -> String {
         .unwrap_or_else(|| "unknown".into())
 }
 
+/// The agent ids whose sensor service exists in `session` (the ids its host serves),
+/// ascending.
+fn served_agent_ids(session: &str) -> Vec<u32> {
+    let prefix = service_name(session, "agent/");
+    let mut ids = Vec::new();
+    let _ = Svc::list(Config2::global_config(), |info| {
+        let name = info.static_details.name().as_str();
+        if let Some(id) = name
+            .strip_prefix(prefix.as_str())
+            .and_then(|rest| rest.strip_suffix("/sensors"))
+            .and_then(|id| id.parse::<u32>().ok())
+        {
+            ids.push(id);
+        }
+        CallbackProgression::Continue
+    });
+    ids.sort_unstable();
+    ids.dedup();
+    ids
+}
+
 impl ShmAgent {
     /// Opens the session's services as agent `id`, retrying until the host created them or
-    /// `timeout` passed. Checks the protocol version and layout first.
+    /// `timeout` passed. Checks the protocol version and layout first. `signals` says
+    /// whether SIGINT/SIGTERM handlers are installed (see [`SignalHandling`]).
     ///
     /// # Errors
-    /// [`ShmAgentConnectError`].
+    /// [`AgentConnectError`].
     pub fn connect(
         config: &Config,
         id: u32,
         timeout: Duration,
-    ) -> Result<Self, ShmAgentConnectError> {
+        signals: SignalHandling,
+    ) -> Result<Self, AgentConnectError> {
         use iceoryx2::service::port_factory::PortFactory as _;
         init_iceoryx2_logging();
-        let ice = ShmAgentConnectError::Iceoryx;
+        signals.apply();
         let session = &config.session;
+        let ice = |detail: String| AgentConnectError::Transport {
+            session: session.clone(),
+            agent: id,
+            detail: format!("iceoryx2: {detail}"),
+        };
         let deadline = Instant::now() + timeout;
         let started = Instant::now();
         let node = node(&agent_node_name(session, id)).map_err(ice)?;
+        let not_found = |what: &str| AgentConnectError::HostNotFound {
+            session: session.clone(),
+            agent: id,
+            waited: started.elapsed(),
+            looked_for: format!(
+                "shared-memory service {} does not exist",
+                service_name(session, what)
+            ),
+        };
 
         // Retry with a short back-off: the host may start after us. Opening does not block
         // in iceoryx2, so there is nothing to wait on but time.
@@ -846,13 +842,8 @@ impl ShmAgent {
                 | Err(iceoryx2::service::builder::event::EventOpenError::InsufficientPermissions)
                 | Err(iceoryx2::service::builder::event::EventOpenError::HangsInCreation) => {
                     let now = Instant::now();
-                    if now >= deadline || node.wait(Duration::ZERO).is_err() {
-                        return Err(ShmAgentConnectError::HostNotFound {
-                            session: session.clone(),
-                            agent: id,
-                            service: service_name(session, "start"),
-                            waited: started.elapsed(),
-                        });
+                    if now >= deadline || signals.termination_requested() {
+                        return Err(not_found("start"));
                     }
                     std::thread::sleep(backoff.min(deadline - now));
                     backoff = (backoff * 2).min(Duration::from_millis(100));
@@ -864,7 +855,8 @@ impl ShmAgent {
         let host_layout = attr(start_service.attributes(), ATTR_LAYOUT);
         let agent_layout = format!("{LAYOUT_HASH:016x}");
         if host_protocol != PROTOCOL_VERSION.to_string() || host_layout != agent_layout {
-            return Err(ShmAgentConnectError::VersionMismatch {
+            return Err(AgentConnectError::VersionMismatch {
+                session: session.clone(),
                 host_protocol,
                 host_layout,
                 agent_protocol: PROTOCOL_VERSION,
@@ -872,21 +864,26 @@ impl ShmAgent {
             });
         }
 
+        let sensors = format!("agent/{id}/sensors");
+        let motor = format!("agent/{id}/motor");
+        // `start` is created last by the host: once it exists, a missing service of this
+        // agent means the host does not serve this id.
         let open_err = |what: &str, e: &dyn core::fmt::Debug| {
             let s = format!("{e:?}");
             if s.contains("DoesNotExist") {
-                ShmAgentConnectError::HostNotFound {
-                    session: session.clone(),
-                    agent: id,
-                    service: service_name(session, what),
-                    waited: started.elapsed(),
+                if what == "stop" {
+                    not_found(what)
+                } else {
+                    AgentConnectError::IdNotServed {
+                        session: session.clone(),
+                        agent: id,
+                        served: served_agent_ids(session),
+                    }
                 }
             } else {
                 ice(format!("cannot open {}: {s}", service_name(session, what)))
             }
         };
-        let sensors = format!("agent/{id}/sensors");
-        let motor = format!("agent/{id}/motor");
         let sensor_service = node
             .service_builder(&svc_name(session, &sensors).map_err(ice)?)
             .publish_subscribe::<[u8]>()
@@ -908,7 +905,7 @@ impl ShmAgent {
         let in_use = |e: &dyn core::fmt::Debug| {
             let s = format!("{e:?}");
             if s.contains("ExceedsMax") {
-                ShmAgentConnectError::AgentIdInUse {
+                AgentConnectError::IdInUse {
                     session: session.clone(),
                     agent: id,
                 }
@@ -943,14 +940,12 @@ impl ShmAgent {
             .map_err(|e| in_use(&e))?;
         // Tell the host we are here (it waits on the stop event while agents join).
         let _ = stop.notify();
-        // Install iceoryx2's SIGINT/SIGTERM handlers now (see ShmHost::create).
-        let terminated = core::cell::Cell::new(node.wait(Duration::ZERO).is_err());
         Ok(Self {
             id,
             session: session.clone(),
             host_pid: host_pid(session),
-            node,
-            terminated,
+            _node: node,
+            signals,
             _start_service: start_service,
             start,
             _stop_service: stop_service,
@@ -969,8 +964,9 @@ impl ShmAgent {
     /// The newest frame not yet received; older queued frames are dropped.
     ///
     /// # Errors
-    /// A string describing the iceoryx2 failure (e.g. too many frames held).
-    pub fn receive_newest(&mut self) -> Result<Option<ShmFrame>, String> {
+    /// [`ShmReceiveError::TooManyFramesHeld`] when the caller still holds
+    /// [`AGENT_BORROWED_FRAMES`] frames.
+    pub fn receive_newest(&mut self) -> Result<Option<ShmFrame>, ShmReceiveError> {
         let mut newest = None;
         loop {
             match self.sensor_sub.receive() {
@@ -980,7 +976,14 @@ impl ShmAgent {
                     if newest.is_some() {
                         return Ok(newest);
                     }
-                    return Err(format!("{e:?}"));
+                    return Err(match e {
+                        iceoryx2::port::ReceiveError::ExceedsMaxBorrows => {
+                            ShmReceiveError::TooManyFramesHeld {
+                                max: AGENT_BORROWED_FRAMES,
+                            }
+                        }
+                        other => ShmReceiveError::Iceoryx(format!("{other:?}")),
+                    });
                 }
             }
         }
@@ -1057,9 +1060,9 @@ impl ShmAgent {
         host_state(&self.session)
     }
 
-    /// Whether SIGINT/SIGTERM was received.
+    /// Whether SIGINT/SIGTERM was received (never, with [`SignalHandling::Leave`]).
     pub fn termination_requested(&self) -> bool {
-        sticky_termination(&self.node, &self.terminated)
+        self.signals.termination_requested()
     }
 
     /// Publishes a motor batch and, if it carries the stop flag, notifies *stop*.

@@ -45,9 +45,10 @@ use std::time::{Duration, Instant};
 use tracing::{debug, info, warn};
 use zerocopy::{FromBytes, IntoBytes};
 
-use super::{BatchSink, FrameLoan, HostTransport, HostTransportError};
+use super::{AgentConnectError, BatchSink, FrameLoan, HostTransport, HostTransportError};
 use crate::config::Config;
 use crate::host::image_layout;
+use crate::signal::SignalHandling;
 use crate::wire::{LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, SensorHeader};
 
 /// Record kinds.
@@ -557,27 +558,6 @@ pub fn decode_reject(body: &[u8]) -> Option<(u32, u32, u64, String)> {
     ))
 }
 
-static TERMINATE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
-
-extern "C" fn on_signal(_: libc::c_int) {
-    TERMINATE.store(true, std::sync::atomic::Ordering::SeqCst);
-}
-
-/// Turns SIGINT/SIGTERM into a termination request (as iceoryx2 does for the shm path).
-fn install_signal_handlers() {
-    let handler: extern "C" fn(libc::c_int) = on_signal;
-    // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
-    unsafe {
-        libc::signal(libc::SIGINT, handler as libc::sighandler_t);
-        libc::signal(libc::SIGTERM, handler as libc::sighandler_t);
-    }
-}
-
-/// Whether SIGINT/SIGTERM arrived since the handlers were installed.
-pub fn termination_requested() -> bool {
-    TERMINATE.load(std::sync::atomic::Ordering::SeqCst)
-}
-
 #[derive(Debug)]
 struct Conn {
     stream: TcpStream,
@@ -622,6 +602,7 @@ pub struct TcpHost {
     fds: Vec<(i32, i16)>,
     pfds: Vec<libc::pollfd>,
     ready: Vec<bool>,
+    signals: SignalHandling,
 }
 
 /// Why the TCP host could not be created.
@@ -639,12 +620,13 @@ pub enum TcpHostCreateError {
 }
 
 impl TcpHost {
-    /// Binds `transport.tcp_listen` and prepares one record buffer per agent.
+    /// Binds `transport.tcp_listen` and prepares one record buffer per agent; `signals`
+    /// says whether SIGINT/SIGTERM handlers are installed (see [`SignalHandling`]).
     ///
     /// # Errors
     /// [`TcpHostCreateError`].
-    pub fn create(config: &Config) -> Result<Self, TcpHostCreateError> {
-        install_signal_handlers();
+    pub fn create(config: &Config, signals: SignalHandling) -> Result<Self, TcpHostCreateError> {
+        signals.apply();
         let addr = config.transport.tcp_listen;
         let bind = |source| TcpHostCreateError::Bind { addr, source };
         let listener = TcpListener::bind(addr).map_err(bind)?;
@@ -688,6 +670,7 @@ impl TcpHost {
             fds: Vec::new(),
             pfds: Vec::new(),
             ready: Vec::new(),
+            signals,
         })
     }
 
@@ -843,7 +826,11 @@ impl TcpHost {
             return refuse(
                 &mut stream,
                 reject::UNKNOWN_AGENT,
-                format!("agent {} is not part of this session", hello.agent_id),
+                format!(
+                    "agent {} is not part of this session (it serves agents {:?})",
+                    hello.agent_id,
+                    self.slots.iter().map(|s| s.id).collect::<Vec<_>>()
+                ),
             );
         };
         if let Some(old) = &self.slots[slot].conn
@@ -1173,7 +1160,7 @@ impl HostTransport for TcpHost {
         if !self.pending.is_empty() {
             self.handle_pending();
         }
-        if termination_requested() {
+        if self.signals.termination_requested() {
             return Err(HostTransportError::Terminated);
         }
         Ok(())
@@ -1182,7 +1169,7 @@ impl HostTransport for TcpHost {
     fn update_connections(&mut self) {}
 
     fn termination_requested(&self) -> bool {
-        termination_requested()
+        self.signals.termination_requested()
     }
 
     fn local_addr(&self) -> Option<SocketAddr> {
@@ -1230,56 +1217,17 @@ impl Drop for TcpFrame {
     }
 }
 
-/// Why a TCP agent could not connect.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum TcpAgentConnectError {
-    /// Nobody accepted the connection before the deadline.
-    #[error(
-        "no host at {addr} within {waited:?}: {reason} (is `vr-sim run` running with the same config?)"
-    )]
-    HostNotFound {
-        /// The address.
-        addr: SocketAddr,
-        /// How long we tried.
-        waited: Duration,
-        /// The last error.
-        reason: String,
-    },
-    /// Host and agent were built with different wire layouts.
-    #[error(
-        "protocol mismatch: the host speaks vrsync protocol {host_protocol} (layout {host_layout:016x}), \
-         this agent speaks protocol {agent_protocol} (layout {agent_layout:016x}); rebuild the agent \
-         against the host's version"
-    )]
-    VersionMismatch {
-        /// The host's protocol.
-        host_protocol: u32,
-        /// The host's layout hash.
-        host_layout: u64,
-        /// Ours.
-        agent_protocol: u32,
-        /// Ours.
-        agent_layout: u64,
-    },
-    /// The host refused the hello.
-    #[error("the host refused agent {agent}: {reason}")]
-    Refused {
-        /// Agent id.
-        agent: u32,
-        /// The host's reason code ([`reject`]).
-        code: u32,
-        /// The host's message.
-        reason: String,
-    },
-    /// The connection failed during the handshake.
-    #[error("TCP handshake with {addr} failed: {reason}")]
-    Handshake {
-        /// The address.
-        addr: SocketAddr,
-        /// Detail.
-        reason: String,
-    },
+/// The ids in the `[…]` list at the end of an unknown-agent reject message.
+fn served_ids_from_reject(message: &str) -> Vec<u32> {
+    let list = message
+        .rfind('[')
+        .and_then(|start| Some(&message[start + 1..start + message[start..].find(']')?]));
+    list.map(|l| {
+        l.split(',')
+            .filter_map(|id| id.trim().parse::<u32>().ok())
+            .collect()
+    })
+    .unwrap_or_default()
 }
 
 /// Why [`TcpAgent::wait_frame`] returned without a frame.
@@ -1301,7 +1249,17 @@ pub enum TcpWaitError {
     /// SIGINT/SIGTERM.
     #[error("termination requested")]
     Terminated,
+    /// The caller still holds [`MAX_HELD_FRAMES`] frames.
+    #[error("the agent holds {max} frames already")]
+    TooManyFramesHeld {
+        /// How many frames an agent may hold at once.
+        max: usize,
+    },
 }
+
+/// Frames a TCP agent may hold at once, as many as on shared memory: each held frame
+/// keeps a frame-sized buffer, so memory stays bounded whatever the caller keeps.
+pub const MAX_HELD_FRAMES: usize = 2;
 
 /// The agent side of the TCP transport.
 #[derive(Debug)]
@@ -1313,20 +1271,25 @@ pub struct TcpAgent {
     pool: Pool,
     out: Vec<u8>,
     closed: bool,
+    signals: SignalHandling,
 }
 
 impl TcpAgent {
     /// Connects to `transport.tcp_listen`, retrying until `timeout`, and says hello.
+    /// `signals` says whether SIGINT/SIGTERM handlers are installed (see
+    /// [`SignalHandling`]).
     ///
     /// # Errors
-    /// [`TcpAgentConnectError`].
+    /// [`AgentConnectError`].
     pub fn connect(
         config: &Config,
         id: u32,
         timeout: Duration,
         token: Option<&[u8]>,
-    ) -> Result<Self, TcpAgentConnectError> {
-        install_signal_handlers();
+        signals: SignalHandling,
+    ) -> Result<Self, AgentConnectError> {
+        signals.apply();
+        let session = &config.session;
         let addr = config.transport.tcp_listen;
         let started = Instant::now();
         let deadline = started + timeout;
@@ -1337,11 +1300,12 @@ impl TcpAgent {
                 Ok(s) => break s,
                 Err(e) => {
                     let now = Instant::now();
-                    if now >= deadline || termination_requested() {
-                        return Err(TcpAgentConnectError::HostNotFound {
-                            addr,
+                    if now >= deadline || signals.termination_requested() {
+                        return Err(AgentConnectError::HostNotFound {
+                            session: session.clone(),
+                            agent: id,
                             waited: started.elapsed(),
-                            reason: e.to_string(),
+                            looked_for: format!("nothing accepts TCP connections at {addr} ({e})"),
                         });
                     }
                     // The host may start after us; there is nothing to wait on but time.
@@ -1350,7 +1314,18 @@ impl TcpAgent {
                 }
             }
         };
-        let hs = |reason: String| TcpAgentConnectError::Handshake { addr, reason };
+        let hs = |reason: String| AgentConnectError::Transport {
+            session: session.clone(),
+            agent: id,
+            detail: format!("TCP handshake with {addr} failed: {reason}"),
+        };
+        let mismatch = |host_protocol: u32, host_layout: u64| AgentConnectError::VersionMismatch {
+            session: session.clone(),
+            host_protocol: host_protocol.to_string(),
+            host_layout: format!("{host_layout:016x}"),
+            agent_protocol: PROTOCOL_VERSION,
+            agent_layout: format!("{LAYOUT_HASH:016x}"),
+        };
         set_nodelay(&stream).map_err(|e| hs(e.to_string()))?;
         let hello = Hello {
             protocol_version: PROTOCOL_VERSION,
@@ -1376,12 +1351,7 @@ impl TcpAgent {
                     return Err(hs("malformed welcome".into()));
                 };
                 if proto != PROTOCOL_VERSION || layout != LAYOUT_HASH {
-                    return Err(TcpAgentConnectError::VersionMismatch {
-                        host_protocol: proto,
-                        host_layout: layout,
-                        agent_protocol: PROTOCOL_VERSION,
-                        agent_layout: LAYOUT_HASH,
-                    });
+                    return Err(mismatch(proto, layout));
                 }
                 let max_frame_body = max as usize;
                 let pool: Pool = Default::default();
@@ -1400,23 +1370,28 @@ impl TcpAgent {
                                 * core::mem::size_of::<MotorCommand>(),
                     ),
                     closed: false,
+                    signals,
                 })
             }
             kind::REJECT => {
                 let (code, host_protocol, host_layout, reason) =
                     decode_reject(&body).ok_or_else(|| hs("malformed reject".into()))?;
-                if code == reject::VERSION {
-                    return Err(TcpAgentConnectError::VersionMismatch {
-                        host_protocol,
-                        host_layout,
-                        agent_protocol: PROTOCOL_VERSION,
-                        agent_layout: LAYOUT_HASH,
-                    });
-                }
-                Err(TcpAgentConnectError::Refused {
-                    agent: id,
-                    code,
-                    reason,
+                Err(match code {
+                    reject::VERSION => mismatch(host_protocol, host_layout),
+                    reject::UNKNOWN_AGENT => AgentConnectError::IdNotServed {
+                        session: session.clone(),
+                        agent: id,
+                        served: served_ids_from_reject(&reason),
+                    },
+                    reject::ID_IN_USE => AgentConnectError::IdInUse {
+                        session: session.clone(),
+                        agent: id,
+                    },
+                    _ => AgentConnectError::Refused {
+                        session: session.clone(),
+                        agent: id,
+                        reason,
+                    },
                 })
             }
             other => Err(hs(format!("unexpected reply kind {other}"))),
@@ -1431,8 +1406,15 @@ impl TcpAgent {
         if self.closed {
             return Err(TcpWaitError::HostClosed);
         }
-        if termination_requested() {
+        if self.signals.termination_requested() {
             return Err(TcpWaitError::Terminated);
+        }
+        // Every frame the caller holds keeps a pool reference (the agent keeps one more).
+        let held = std::rc::Rc::strong_count(&self.pool) - 1;
+        if held >= MAX_HELD_FRAMES {
+            return Err(TcpWaitError::TooManyFramesHeld {
+                max: MAX_HELD_FRAMES,
+            });
         }
         let mut newest: Option<TcpFrame> = None;
         loop {
@@ -1444,7 +1426,7 @@ impl TcpAgent {
             let mut prefix = [0u8; PREFIX];
             let mut got = 0;
             while got == 0 {
-                if termination_requested() {
+                if self.signals.termination_requested() {
                     return Err(TcpWaitError::Terminated);
                 }
                 let slice = match deadline {
@@ -1821,7 +1803,7 @@ mod tests {
              [[agent]]\nid = 1\n[[agent.camera]]\nname = \"c\"\nwidth = 8\n"
         );
         let config = Config::from_toml_str(&text, std::path::Path::new("t.toml")).unwrap();
-        TcpHost::create(&config).unwrap()
+        TcpHost::create(&config, SignalHandling::Leave).unwrap()
     }
 
     fn say_hello(host: &TcpHost, id: u32) -> TcpStream {
