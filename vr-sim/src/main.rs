@@ -11,7 +11,7 @@ mod spawn;
 mod world;
 mod world_config;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::ExitCode;
 
 use anyhow::Context;
@@ -136,15 +136,6 @@ fn demo(args: DemoArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// A temporary effective config, removed on drop.
-struct TempConfig(PathBuf);
-
-impl Drop for TempConfig {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.0);
-    }
-}
-
 fn run_cmd(args: RunArgs) -> anyhow::Result<ExitCode> {
     let mut events = match &args.events {
         Some(path) => events::Events::create(path)?,
@@ -179,16 +170,11 @@ fn run_with_events(args: &RunArgs, events: &mut events::Events) -> anyhow::Resul
             reason: "must be at least 1".into(),
         });
     }
-    let mut _temp = None;
+    let mut _private = None;
     let agent_config_path = if changed {
-        let path = std::env::temp_dir().join(format!(
-            "vrsync-{}-{}.toml",
-            config.session,
-            std::process::id()
-        ));
-        std::fs::write(&path, config.to_toml_string())
-            .with_context(|| format!("cannot write {}", path.display()))?;
-        _temp = Some(TempConfig(path.clone()));
+        let private = spawn::PrivateConfig::write(&config)?;
+        let path = private.path().to_path_buf();
+        _private = Some(private);
         path
     } else {
         args.config.clone()

@@ -145,15 +145,9 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
     {
         let mut bound = config.clone();
         bound.transport.tcp_listen = addr;
-        let path = std::env::temp_dir().join(format!(
-            "vrsync-{}-{}-bound.toml",
-            config.session,
-            std::process::id()
-        ));
-        std::fs::write(&path, bound.to_toml_string())
-            .with_context(|| format!("cannot write {}", path.display()))?;
-        agent_config_path = path.clone();
-        _bound_config = Some(crate::spawn::RemoveOnDrop(path));
+        let private = crate::spawn::PrivateConfig::write(&bound)?;
+        agent_config_path = private.path().to_path_buf();
+        _bound_config = Some(private);
     }
     let mut agents = if opts.spawn {
         Agents::spawn(&agent_config_path, &ids, &opts.agent_args)?

@@ -101,12 +101,75 @@ impl Drop for Agents {
     }
 }
 
-/// A file removed when this value is dropped.
+/// An effective config for spawned agents, readable by this user only (it may hold
+/// `tcp_token`): `config.toml` with mode 0600 in a fresh temp dir with a random name and
+/// mode 0700, so no other user can read it or plant a file at a path they could predict.
+/// Removed with its folder on drop.
 #[derive(Debug)]
-pub struct RemoveOnDrop(pub PathBuf);
+pub struct PrivateConfig {
+    _dir: tempfile::TempDir,
+    path: PathBuf,
+}
 
-impl Drop for RemoveOnDrop {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.0);
+impl PrivateConfig {
+    /// Writes `config`.
+    ///
+    /// # Errors
+    /// The folder or the file cannot be created.
+    pub fn write(config: &vrsync_bridge::Config) -> anyhow::Result<Self> {
+        use std::io::Write;
+        use std::os::unix::fs::{OpenOptionsExt, PermissionsExt};
+        let dir = tempfile::Builder::new()
+            .prefix("vrsync-")
+            .permissions(std::fs::Permissions::from_mode(0o700))
+            .tempdir()
+            .context("cannot create a private temp dir for the effective config")?;
+        let path = dir.path().join("config.toml");
+        let mut file = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .mode(0o600)
+            .open(&path)
+            .with_context(|| format!("cannot create {}", path.display()))?;
+        file.write_all(config.to_toml_string().as_bytes())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        Ok(Self { _dir: dir, path })
+    }
+
+    /// The file to give the agents.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::os::unix::fs::PermissionsExt;
+
+    use super::*;
+
+    #[test]
+    fn the_effective_config_is_private_unpredictable_and_removed() {
+        let mut config = vrsync_bridge::Config::embedded_default().unwrap();
+        config.transport.tcp_token = Some("s3cret".into());
+        let a = PrivateConfig::write(&config).unwrap();
+        let b = PrivateConfig::write(&config).unwrap();
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode(a.path()), 0o600);
+        assert_eq!(mode(a.path().parent().unwrap()), 0o700);
+        assert_ne!(
+            a.path().parent().unwrap(),
+            b.path().parent().unwrap(),
+            "a fresh folder per run"
+        );
+        let text = std::fs::read_to_string(a.path()).unwrap();
+        let back = vrsync_bridge::Config::from_toml_str(&text, a.path()).unwrap();
+        assert_eq!(back.transport.tcp_token.as_deref(), Some("s3cret"));
+        let (dir, path) = (
+            a.path().parent().unwrap().to_path_buf(),
+            a.path().to_path_buf(),
+        );
+        drop(a);
+        assert!(!path.exists() && !dir.exists());
     }
 }
