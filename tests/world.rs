@@ -261,7 +261,7 @@ fn a_bad_world_section_is_a_config_error_naming_the_key() {
         .unwrap()
         .replace("color = [40, 170, 70]", "colour = [40, 170, 70]");
     let config = dir.path().join("bad.toml");
-    std::fs::write(&config, text).unwrap();
+    std::fs::write(&config, &text).unwrap();
     let out = util::run(
         "vr-sim",
         &["run", "--config", config.to_str().unwrap(), "--frames", "1"],
@@ -273,6 +273,14 @@ fn a_bad_world_section_is_a_config_error_naming_the_key() {
         "stderr:\n{}",
         out.stderr
     );
+    // With the line of the unknown key.
+    let line = text
+        .lines()
+        .position(|l| l.starts_with("colour = "))
+        .unwrap()
+        + 1;
+    let at = format!("bad.toml:{line}: invalid");
+    assert!(out.stderr.contains(&at), "{at} in:\n{}", out.stderr);
 }
 
 #[test]

@@ -297,6 +297,7 @@ impl World {
         )
         .map_err(|(key, reason)| WorldConfigError::Invalid {
             path: config.source.clone(),
+            line: crate::world_config::line_in_source(config, &key),
             key,
             reason,
         })

@@ -23,10 +23,13 @@ pub type Rgb = [u8; 3];
 #[non_exhaustive]
 pub enum WorldConfigError {
     /// A key has the wrong type, is unknown, or its value is out of range.
-    #[error("{path}: invalid `{key}`: {reason}")]
+    #[error("{path}:{line}: invalid `{key}`: {reason}")]
     Invalid {
         /// The config file.
         path: PathBuf,
+        /// 1-based line of the key (of its table when the key is missing); 0 when the
+        /// config has no text to point into (built in code).
+        line: usize,
         /// Dotted key, e.g. `world.object[1].radius`.
         key: String,
         /// What is wrong.
@@ -272,14 +275,30 @@ struct RawGoal {
 
 struct Ctx {
     path: PathBuf,
+    /// The config's TOML text, to find the line of a key.
+    text: Option<String>,
 }
 
 impl Ctx {
     fn err(&self, key: impl Into<String>, reason: impl Into<String>) -> WorldConfigError {
+        let key = key.into();
+        let reason = reason.into();
+        let line = self.text.as_deref().map_or(0, |text| {
+            // An unknown key: point at it rather than at its table.
+            let unknown = reason
+                .split_once("unknown field `")
+                .and_then(|(_, rest)| rest.split_once('`'))
+                .map(|(field, _)| format!("{key}.{field}"));
+            match unknown.map(|k| locate(text, &k)) {
+                Some((line, true)) => line,
+                _ => locate(text, &key).0,
+            }
+        });
         WorldConfigError::Invalid {
             path: self.path.clone(),
-            key: key.into(),
-            reason: reason.into(),
+            line,
+            key,
+            reason,
         }
     }
 
@@ -328,6 +347,60 @@ impl Ctx {
     }
 }
 
+/// The 1-based line of dotted `key` (or of the deepest part of it found) in the file
+/// `config` was loaded from; 0 if there is none.
+pub fn line_in_source(config: &Config, key: &str) -> usize {
+    std::fs::read_to_string(&config.source).map_or(0, |text| locate(&text, key).0)
+}
+
+/// Where dotted `key` (`world.object[1].radius`) is in TOML `text`: the 1-based line of the
+/// deepest part of it found (0 if none), and whether all of it was found.
+fn locate(text: &str, key: &str) -> (usize, bool) {
+    use toml::de::{DeTable, DeValue};
+    let Ok(root) = DeTable::parse(text) else {
+        return (0, false);
+    };
+    let line_of = |span: core::ops::Range<usize>| {
+        text[..span.start.min(text.len())].matches('\n').count() + 1
+    };
+    let mut table = root.get_ref();
+    let mut line = 0;
+    let mut parts = key.split('.').peekable();
+    while let Some(part) = parts.next() {
+        let (name, indexes) = part
+            .split_once('[')
+            .map_or((part, ""), |(n, rest)| (n, rest));
+        let Some((k, mut value)) = table.iter().find(|(k, _)| k.get_ref() == name) else {
+            return (line, false);
+        };
+        line = line_of(k.span());
+        for index in indexes.split('[') {
+            let Some(i) = index
+                .strip_suffix(']')
+                .and_then(|i| i.parse::<usize>().ok())
+            else {
+                continue;
+            };
+            let DeValue::Array(items) = value.get_ref() else {
+                return (line, false);
+            };
+            let Some(item) = items.get(i) else {
+                return (line, false);
+            };
+            line = line_of(item.span());
+            value = item;
+        }
+        if parts.peek().is_none() {
+            return (line, true);
+        }
+        let DeValue::Table(t) = value.get_ref() else {
+            return (line, false);
+        };
+        table = t;
+    }
+    (line, true)
+}
+
 fn finite(values: &[f32]) -> bool {
     values.iter().all(|v| v.is_finite())
 }
@@ -338,8 +411,16 @@ impl WorldConfig {
     /// # Errors
     /// [`WorldConfigError`] naming the file and the key.
     pub fn from_config(config: &Config) -> Result<Self, WorldConfigError> {
+        // The text the config was loaded from, for line numbers (none for built-in configs).
+        let text = std::fs::read_to_string(&config.source).ok();
+        Self::from_config_text(config, text)
+    }
+
+    /// [`WorldConfig::from_config`] with the config's TOML text given (for line numbers).
+    fn from_config_text(config: &Config, text: Option<String>) -> Result<Self, WorldConfigError> {
         let ctx = Ctx {
             path: config.source.clone(),
+            text,
         };
         match &config.world {
             None => Ok(Self::default()),
@@ -570,7 +651,35 @@ mod tests {
     fn world(text: &str) -> Result<WorldConfig, WorldConfigError> {
         let full = format!("[[agent]]\nid = 0\n[world]\n{text}");
         let c = Config::from_toml_str(&full, Path::new("w.toml")).unwrap();
-        WorldConfig::from_config(&c)
+        WorldConfig::from_config_text(&c, Some(full))
+    }
+
+    /// The line an error names (the `[world]` header is line 3 of [`world`]'s text).
+    fn error_line(text: &str) -> usize {
+        match world(text).unwrap_err() {
+            WorldConfigError::Invalid { line, .. } => line,
+        }
+    }
+
+    #[test]
+    fn errors_carry_the_line_of_the_key() {
+        assert_eq!(error_line("room_width = 1.0\nroom_depth = -3.0\n"), 5);
+        assert_eq!(error_line("room_width = \"wide\"\n"), 4);
+        // An unknown key: its own line.
+        assert_eq!(error_line("room_width = 9.0\n\nbogus = 1\n"), 6);
+        let objects = "[[world.object]]\nid = 1\nshape = \"box\"\nposition = [0.0, 0.5, 0.0]\n\
+                       size = [1.0, 1.0, 1.0]\ncolor = [1, 2, 3]\n\
+                       [[world.object]]\nid = 2\nshape = \"sphere\"\nposition = [0.0, 0.5, 0.0]\n\
+                       radius = 0.5\ncolour = [1, 2, 3]\n";
+        assert_eq!(error_line(objects), 15);
+        let range = "[[world.object]]\nid = 1\nshape = \"box\"\nposition = [0.0, 0.5, 0.0]\n\
+                     size = [1.0, 1.0, 1.0]\ncolor = [1, 2, 300]\n";
+        assert_eq!(error_line(range), 9);
+        let msg = world("room_width = -3.0\n").unwrap_err().to_string();
+        assert!(
+            msg.starts_with("w.toml:4: invalid `world.room_width`"),
+            "{msg}"
+        );
     }
 
     fn expect_key(text: &str, key: &str) {
