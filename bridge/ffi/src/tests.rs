@@ -734,3 +734,15 @@ fn panics_become_a_status() {
     assert_eq!(st, VRS_HOST_ERROR_PANIC);
     assert!(last_error().contains("boom"), "{}", last_error());
 }
+
+#[test]
+fn every_outcome_has_its_own_abi_code() {
+    use vrsync_bridge::AgentOutcome::*;
+    let all = [Stopped, TimedOut, NotAwaited, Async, Evicted];
+    let codes: std::collections::HashSet<u32> = all
+        .iter()
+        .map(|&o| crate::state::outcome(o) as u32)
+        .collect();
+    assert_eq!(codes.len(), all.len());
+    assert!(!codes.contains(&(vrs_host_outcome_t::VRS_HOST_OUTCOME_OTHER as u32)));
+}
