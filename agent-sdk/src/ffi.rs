@@ -41,14 +41,14 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::thread::ThreadId;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use vrsync_bridge::config::{Config, ConfigLoadError, TransportKind};
+use vrsync_bridge::config::{Config, ConfigLoadError};
 use vrsync_bridge::wire::{self, Command, PixelFormat};
 
 use crate::agent::{
-    Agent, AgentBuilder, AgentConnectError, Frame, HOST_LIVENESS_PERIOD, SendError, SignalHandling,
-    StopError, WaitStartError,
+    Agent, AgentBuilder, AgentConnectError, Frame, SendError, SignalHandling, StopError,
+    WaitStartError,
 };
 
 // ---------------------------------------------------------------------------------------
@@ -517,10 +517,6 @@ struct AgentState {
     // Declared before `agent`: the frame's sample is released before the ports.
     frame: Option<Frame>,
     agent: Agent,
-    session: String,
-    transport: TransportKind,
-    /// When the host was last known alive (see `wait_start_impl`).
-    host_seen: Instant,
 }
 
 impl Drop for AgentState {
@@ -754,9 +750,6 @@ fn connect_impl(
         handle,
         frame: None,
         agent,
-        session: config.session.clone(),
-        transport: config.transport.kind,
-        host_seen: Instant::now(),
     })?;
     // SAFETY: as above. The handle is a registry key, never dereferenced.
     unsafe { out_agent.write(std::ptr::without_provenance_mut(key)) };
@@ -789,53 +782,15 @@ fn wait_start_impl(
     with_agent(agent, |st| {
         // The previous frame ends here, whatever this wait returns.
         st.frame = None;
-        let timeout = timeout_arg(timeout_ms);
-        match st
-            .agent
-            .wait_start(tcp_poll_workaround(st.transport, timeout))
-        {
-            Ok(frame) => {
-                st.host_seen = Instant::now();
-                // SAFETY: null or writable by the caller's contract.
-                unsafe { write_opt(out_frame, frame_info(&frame, st.agent.frames_skipped())) };
-                st.frame = Some(frame);
-                Ok(())
-            }
-            Err(WaitStartError::Timeout { waited, last_cycle }) => {
-                // `Agent::wait_start` checks the host's liveness every HOST_LIVENESS_PERIOD
-                // *within* one call, so a caller that polls with short timeouts would
-                // never find out that the host died. Check here across calls.
-                let now = Instant::now();
-                if timeout.is_none_or(|t| t >= HOST_LIVENESS_PERIOD) {
-                    st.host_seen = now;
-                } else if now.duration_since(st.host_seen) >= HOST_LIVENESS_PERIOD {
-                    if st.transport == TransportKind::Shm
-                        && !vrsync_bridge::transport::shm::host_alive(&st.session)
-                    {
-                        return Err(WaitStartError::HostGone {
-                            session: st.session.clone(),
-                        }
-                        .into());
-                    }
-                    st.host_seen = now;
-                }
-                Err(WaitStartError::Timeout { waited, last_cycle }.into())
-            }
-            Err(e) => Err(e.into()),
-        }
+        // Polling with short timeouts is fine on both transports: `Agent::wait_start`
+        // checks the host's liveness every HOST_LIVENESS_PERIOD across calls, and a
+        // zero-timeout wait still takes a frame that has already arrived.
+        let frame = st.agent.wait_start(timeout_arg(timeout_ms))?;
+        // SAFETY: null or writable by the caller's contract.
+        unsafe { write_opt(out_frame, frame_info(&frame, st.agent.frames_skipped())) };
+        st.frame = Some(frame);
+        Ok(())
     })
-}
-
-/// The TCP agent returns `Timeout` without reading the socket when the deadline has
-/// already passed, so a zero-timeout poll would never see a frame (nor the host's end).
-/// Over TCP a poll therefore waits up to 1 ms: it returns at once when data is there.
-/// Remove once `TcpAgent::wait_frame` reads what is available before timing out.
-fn tcp_poll_workaround(transport: TransportKind, timeout: Option<Duration>) -> Option<Duration> {
-    const MIN_TCP_POLL: Duration = Duration::from_millis(1);
-    match (transport, timeout) {
-        (TransportKind::Tcp, Some(t)) if t < MIN_TCP_POLL => Some(MIN_TCP_POLL),
-        _ => timeout,
-    }
 }
 
 fn frame_impl(agent: *mut vrs_agent_t, out_frame: *mut vrs_frame_t) -> Result<(), FfiError> {
