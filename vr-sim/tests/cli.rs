@@ -30,3 +30,25 @@ fn run_help_documents_the_events_file() {
         assert!(help.contains(word), "{word} missing from:\n{help}");
     }
 }
+
+#[test]
+fn git_ignores_the_demo_output_folder() {
+    let out = Command::new(env!("CARGO_BIN_EXE_vr-sim"))
+        .args(["demo", "--help"])
+        .output()
+        .unwrap();
+    let help = String::from_utf8(out.stdout).unwrap();
+    let default = help
+        .split("[default: ")
+        .map(|s| s.split(']').next().unwrap())
+        .find(|d| d.starts_with("vrsync-demo"))
+        .unwrap_or_else(|| panic!("no default output folder in:\n{help}"));
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let status = Command::new("git")
+        .current_dir(&root)
+        .args(["check-ignore", "--quiet", "--no-index"])
+        .arg(format!("{default}/summary.json"))
+        .status()
+        .expect("git is needed for this test");
+    assert!(status.success(), "{default}/ is not in .gitignore");
+}
