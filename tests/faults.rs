@@ -336,6 +336,18 @@ fn sigterm_on_an_agent(t: Transport) {
     assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
     let evicted = events.wait_for("agent_evicted", EVENT_DEADLINE);
     assert_eq!(evicted["agent"], 1, "{evicted}");
+    // Its connection is reported gone at the cycle boundary that first sees it: the one
+    // before the cycle that evicted it (it left between cycles) or the one after.
+    let left = events.wait_for("agent_left", EVENT_DEADLINE);
+    assert_eq!(left["agent"], 1, "{left}");
+    let (left_at, evicted_at) = (
+        left["cycle"].as_u64().unwrap(),
+        evicted["cycle"].as_u64().unwrap(),
+    );
+    assert!(
+        left_at == evicted_at || left_at == evicted_at + 1,
+        "{left} and {evicted}"
+    );
     host.signal(libc::SIGTERM);
     let out = host.wait(Duration::from_secs(30));
     assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
