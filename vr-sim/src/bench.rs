@@ -466,7 +466,16 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
         &[(320, 240), (640, 480), (1280, 720), (1920, 1080)]
     };
     let agent_counts: &[u32] = if opts.quick { &[1, 4] } else { &[1, 2, 4] };
-    let dir = std::env::temp_dir();
+    // The bench agents' configs: in a private temp dir (random name, mode 0700), not at a
+    // predictable /tmp path; removed at the end.
+    let dir = {
+        use std::os::unix::fs::PermissionsExt;
+        tempfile::Builder::new()
+            .prefix("vrsync-bench-")
+            .permissions(std::fs::Permissions::from_mode(0o700))
+            .tempdir()
+            .context("cannot create a temp dir for the bench configs")?
+    };
     let mut rows = Vec::new();
     let mut n = 0u32;
     let session = |n: &mut u32| {
@@ -515,7 +524,7 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
                         "floor-shm" => bench_floor_shm(case, &session(&mut n), false)?,
                         "floor-shm-spin" => bench_floor_shm(case, &session(&mut n), true)?,
                         "floor-tcp" => bench_floor_tcp(case)?,
-                        _ => bench_vrsync(case, &session(&mut n), &dir, round == 0)?,
+                        _ => bench_vrsync(case, &session(&mut n), dir.path(), round == 0)?,
                     };
                     match acc {
                         Some(a) => a.merge(m)?,
