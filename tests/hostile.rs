@@ -4,12 +4,15 @@
 //! a scripted agent written here (raw `TcpStream`, the wire format by hand), which lets
 //! the test hold the host inside a chosen cycle. At cycle [`ATTACK_AT`] — agent 0 has
 //! stopped, the host waits for agent 1 — the attack runs: either a stranger connects and
-//! misbehaves, or agent 1 itself does. The test waits for the host's log line naming the
-//! reason, then lets the run finish and checks the host and agent 0 were unaffected: exit
-//! 0, every cycle, no stop timeout.
+//! misbehaves, or agent 1 itself does. The test checks what the peer sees (the host's
+//! REJECT with its reason, the connection closed) and, when agent 1 is dropped, the host's
+//! `agent_evicted` event (`vr-sim run --events`), then lets the run finish and checks the
+//! host and agent 0 were unaffected: exit 0, every cycle, no stop timeout. (The host's
+//! reasons for dropping a stranger that gets no REJECT, and the count of connections turned
+//! away at once, are only logged; the TCP transport's unit tests check them.)
 //!
-//! No sleeps: a peer that "stalls" keeps its socket open while the test waits for the
-//! host's log line; every wait has a deadline.
+//! No sleeps: a peer that "stalls" keeps its socket open while the test waits for the host
+//! to close it; every wait has a deadline.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
