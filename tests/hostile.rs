@@ -7,9 +7,10 @@
 //! misbehaves, or agent 1 itself does. The test checks what the peer sees (the host's
 //! REJECT with its reason, the connection closed) and, when agent 1 is dropped, the host's
 //! `agent_evicted` event (`vr-sim run --events`), then lets the run finish and checks the
-//! host and agent 0 were unaffected: exit 0, every cycle, no stop timeout. (The host's
-//! reasons for dropping a stranger that gets no REJECT, and the count of connections turned
-//! away at once, are only logged; the TCP transport's unit tests check them.)
+//! host and agent 0 were unaffected: exit 0, every cycle, no stop timeout. (How many
+//! connections are turned away at once is checked by the TCP transport's unit tests; the
+//! reason the host gives for dropping a stranger that gets no REJECT is only logged, and
+//! no test reads logs.)
 //!
 //! No sleeps: a peer that "stalls" keeps its socket open while the test waits for the host
 //! to close it; every wait has a deadline.
