@@ -14,7 +14,7 @@ use std::time::Duration;
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::wire::{CAMERA_NAME_LEN, MAX_CAMERAS, PixelFormat};
+use crate::wire::{CAMERA_NAME_LEN, ImageDesc, MAX_CAMERAS, MAX_TOKEN, PixelFormat};
 
 /// Default of `[sync] spin_before_block_us`.
 pub const DEFAULT_SPIN_BEFORE_BLOCK_US: u64 = 50;
@@ -111,9 +111,19 @@ pub struct AgentConfig {
 }
 
 impl AgentConfig {
+    /// The image table of this agent's sensor frames and their payload size in bytes
+    /// (see [`crate::wire::image_layout`]).
+    pub fn image_layout(&self) -> ([ImageDesc; MAX_CAMERAS], usize) {
+        crate::wire::image_layout(
+            self.cameras
+                .iter()
+                .map(|c| (c.name.as_str(), c.width_px, c.height_px, c.format)),
+        )
+    }
+
     /// Bytes of all images of one sensor frame of this agent.
     pub fn frame_bytes(&self) -> usize {
-        crate::host::image_layout(&self.cameras).1
+        self.image_layout().1
     }
 }
 
@@ -495,14 +505,11 @@ impl Config {
             None => None,
             Some(t) => {
                 let len = t.get_ref().len();
-                if len == 0 || len > crate::transport::tcp::MAX_TOKEN {
+                if len == 0 || len > MAX_TOKEN {
                     return Err(ctx.invalid(
                         t.span(),
                         "transport.tcp_token",
-                        format!(
-                            "must be 1..={} bytes, found {len}",
-                            crate::transport::tcp::MAX_TOKEN
-                        ),
+                        format!("must be 1..={} bytes, found {len}", MAX_TOKEN),
                     ));
                 }
                 Some(t.into_inner())
@@ -525,8 +532,6 @@ impl Config {
         }
         let mut seen = BTreeSet::new();
         let mut agents = Vec::with_capacity(raw.agent.len());
-        // The largest camera, to point at when the session does not fit /dev/shm.
-        let mut largest: Option<(usize, Range<usize>)> = None;
         for a in raw.agent {
             let agent_span = a.span();
             let a = a.into_inner();
@@ -559,11 +564,7 @@ impl Config {
             let mut names = BTreeSet::new();
             let mut cameras = Vec::with_capacity(a.camera.len());
             for c in a.camera {
-                let span = c.span();
                 let cam = ctx.camera(c.into_inner(), id, &mut names)?;
-                if largest.as_ref().is_none_or(|(b, _)| cam.image_bytes() > *b) {
-                    largest = Some((cam.image_bytes(), span));
-                }
                 cameras.push(cam);
             }
             agents.push(AgentConfig { id, cameras });
@@ -579,20 +580,6 @@ impl Config {
             agents,
             world: raw.world,
         };
-        if config.transport.kind == TransportKind::Shm
-            && let Err((needed, available)) = crate::transport::shm::check_shm_budget(&config)
-        {
-            return Err(ctx.invalid(
-                largest.map_or(0..0, |(_, span)| span),
-                "agent.camera",
-                format!(
-                    "the cameras of all agents need {} MB of shared memory but /dev/shm has {} MB free: {}",
-                    needed / 1_000_000,
-                    available / 1_000_000,
-                    crate::transport::shm::SHM_BUDGET_FIX
-                ),
-            ));
-        }
         Ok(config)
     }
 

@@ -15,49 +15,15 @@ use std::time::{Duration, Instant};
 use tracing::{debug, info, warn};
 
 use crate::barrier::{AgentOutcome, BatchVerdict, CycleBarrier};
-use crate::config::{AgentLostPolicy, CameraConfig, Config, TransportKind};
+use crate::config::{AgentLostPolicy, Config, TransportKind};
 use crate::signal::SignalHandling;
 use crate::transport::shm::{ShmHost, ShmHostCreateError};
 use crate::transport::tcp::{TcpHost, TcpHostCreateError};
 use crate::transport::{FrameLoan, HostTransport, HostTransportError};
 use crate::wire::{
-    CAMERA_NAME_LEN, ImageDesc, MAX_CAMERAS, MotorCommand, PROTOCOL_VERSION, SENSOR_FLAG_SYNC_MODE,
-    SensorHeader, WireOutcome,
+    ImageDesc, MAX_CAMERAS, MotorCommand, PROTOCOL_VERSION, SENSOR_FLAG_SYNC_MODE, SensorHeader,
+    WireOutcome,
 };
-
-/// Alignment of every image in a sensor frame's payload, in bytes.
-pub const IMAGE_ALIGN: usize = 64;
-
-/// The image table for `cameras` and the total payload size in bytes. Images are packed in
-/// camera order, each starting at a multiple of [`IMAGE_ALIGN`].
-pub fn image_layout(cameras: &[CameraConfig]) -> ([ImageDesc; MAX_CAMERAS], usize) {
-    let mut descs = [ImageDesc::default(); MAX_CAMERAS];
-    let mut offset = 0usize;
-    for (i, (d, c)) in descs.iter_mut().zip(cameras).enumerate() {
-        let mut name = [0u8; CAMERA_NAME_LEN];
-        let n = c.name.len().min(CAMERA_NAME_LEN);
-        name[..n].copy_from_slice(&c.name.as_bytes()[..n]);
-        let len = c.image_bytes();
-        *d = ImageDesc {
-            name,
-            camera: i as u32,
-            format: c.format as u32,
-            width_px: c.width_px,
-            height_px: c.height_px,
-            stride_bytes: c.stride_bytes() as u32,
-            reserved: 0,
-            offset: offset as u64,
-            len: len as u64,
-        };
-        offset = (offset + len).next_multiple_of(IMAGE_ALIGN);
-    }
-    let count = cameras.len().min(MAX_CAMERAS);
-    let total = match count {
-        0 => 0,
-        n => (descs[n - 1].offset + descs[n - 1].len) as usize,
-    };
-    (descs, total)
-}
 
 /// One writable image of a loaned sensor frame.
 #[derive(Debug)]
@@ -349,7 +315,7 @@ impl<'c> HostBuilder<'c> {
             .agents
             .iter()
             .map(|a| {
-                let (descs, _) = image_layout(&a.cameras);
+                let (descs, _) = a.image_layout();
                 SlotState {
                     id: a.id,
                     descs,

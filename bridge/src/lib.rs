@@ -15,6 +15,10 @@
 //! - The **host API** ([`Host`]) is what a simulator calls; agents use the `vrsync-agent`
 //!   crate.
 //!
+//! Inside the crate, modules import one way: `wire` (the `#[repr(C)]` types, the image
+//! layout) ← `config` ← `transport` (with `signal`) ← `barrier` ← `host`; no module
+//! imports one that imports it back.
+//!
 //! ```no_run
 //! use std::time::Duration;
 //! use vrsync_bridge::{Config, Host};
@@ -59,6 +63,7 @@ pub use host::{
 };
 pub use signal::SignalHandling;
 pub use transport::AgentConnectError;
+pub use transport::shm::{ShmBudgetError, check_shm_budget};
 pub use wire::{
     ActionState, Command, CommandDecodeError, ImageDesc, LAYOUT_HASH, MotorCommand, MotorHeader,
     PROTOCOL_VERSION, PixelFormat, Pose, SensorHeader,

@@ -29,6 +29,9 @@ pub const MAX_STATUSES: usize = 16;
 pub const MAX_COLLISIONS: usize = 8;
 /// Maximum length of a camera name in bytes (UTF-8, zero padded).
 pub const CAMERA_NAME_LEN: usize = 16;
+/// Longest accepted TCP access token (`transport.tcp_token`), bytes: it travels in the
+/// TCP hello.
+pub const MAX_TOKEN: usize = 256;
 
 /// Body pose: position and orientation in the world frame.
 #[repr(C)]
@@ -266,6 +269,48 @@ impl PixelFormat {
             Self::Depth32f => "depth32f",
         }
     }
+}
+
+/// Alignment of every image in a sensor frame's payload, in bytes.
+pub const IMAGE_ALIGN: usize = 64;
+
+/// The image table for `cameras`, given as `(name, width_px, height_px, format)` in
+/// camera order (at most [`MAX_CAMERAS`] are used), and the total payload size in bytes.
+/// Images are packed in camera order, rows without padding, each image starting at a
+/// multiple of [`IMAGE_ALIGN`].
+pub fn image_layout<'a>(
+    cameras: impl IntoIterator<Item = (&'a str, u32, u32, PixelFormat)>,
+) -> ([ImageDesc; MAX_CAMERAS], usize) {
+    let mut descs = [ImageDesc::default(); MAX_CAMERAS];
+    let mut offset = 0usize;
+    let mut count = 0;
+    for (i, (d, (cam_name, width_px, height_px, format))) in
+        descs.iter_mut().zip(cameras).enumerate()
+    {
+        let mut name = [0u8; CAMERA_NAME_LEN];
+        let n = cam_name.len().min(CAMERA_NAME_LEN);
+        name[..n].copy_from_slice(&cam_name.as_bytes()[..n]);
+        let stride = width_px as usize * format.bytes_per_pixel();
+        let len = stride * height_px as usize;
+        *d = ImageDesc {
+            name,
+            camera: i as u32,
+            format: format as u32,
+            width_px,
+            height_px,
+            stride_bytes: stride as u32,
+            reserved: 0,
+            offset: offset as u64,
+            len: len as u64,
+        };
+        offset = (offset + len).next_multiple_of(IMAGE_ALIGN);
+        count = i + 1;
+    }
+    let total = match count {
+        0 => 0,
+        n => (descs[n - 1].offset + descs[n - 1].len) as usize,
+    };
+    (descs, total)
 }
 
 /// Where one image lies in the payload of a sensor frame.
@@ -910,6 +955,26 @@ pub const LAYOUT_HASH: u64 = layout_hash();
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn images_are_packed_in_camera_order_each_aligned() {
+        let (descs, total) = image_layout([
+            ("left", 3, 2, PixelFormat::Rgb8),
+            ("depth", 5, 1, PixelFormat::Depth32f),
+        ]);
+        assert_eq!(descs[0].name(), "left");
+        assert_eq!(
+            (descs[0].offset, descs[0].len, descs[0].stride_bytes),
+            (0, 18, 9)
+        );
+        assert_eq!(descs[1].camera, 1);
+        assert_eq!(
+            (descs[1].offset, descs[1].len, descs[1].stride_bytes),
+            (64, 20, 20)
+        );
+        assert_eq!(total, 84);
+        assert_eq!(image_layout([]).1, 0);
+    }
 
     fn all_commands() -> Vec<Command> {
         vec![

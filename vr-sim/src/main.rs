@@ -54,6 +54,7 @@ fn main() -> ExitCode {
         Err(e) => {
             eprintln!("vr-sim: error: {e:#}");
             if e.downcast_ref::<ConfigLoadError>().is_some()
+                || e.downcast_ref::<vrsync_bridge::ShmBudgetError>().is_some()
                 || e.downcast_ref::<world_config::WorldConfigError>().is_some()
             {
                 ExitCode::from(EXIT_USAGE)

@@ -33,7 +33,6 @@ use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe 
 
 use super::{AgentConnectError, BatchSink, FrameLoan, HostTransport, HostTransportError};
 use crate::config::{Config, MAX_AGENT_ID};
-use crate::host::image_layout;
 use crate::signal::SignalHandling;
 use crate::wire::{LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, SensorHeader};
 
@@ -79,7 +78,7 @@ pub fn reserved_bytes(config: &Config) -> u64 {
         .agents
         .iter()
         .map(|a| {
-            let frame = image_layout(&a.cameras).1.max(1) as u64 + header;
+            let frame = a.frame_bytes().max(1) as u64 + header;
             let motor = (u64::from(config.transport.max_commands_per_cycle)
                 * core::mem::size_of::<MotorCommand>() as u64
                 + 64)
@@ -105,21 +104,48 @@ pub fn shm_free_bytes() -> Option<u64> {
     Some(st.f_bavail as u64 * st.f_frsize as u64)
 }
 
-/// Checks that the services of `config` fit into `/dev/shm`. tmpfs is filled lazily: an
-/// undersized one gives SIGBUS at write time, long after start, so we refuse up front.
+/// The shared memory a session needs does not fit into `/dev/shm`.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+#[error(
+    "{config}: agent.camera: the cameras of all agents need {needed_mb} MB of shared memory but \
+     /dev/shm has {available_mb} MB free: {fix}",
+    config = config.display(),
+    needed_mb = needed / 1_000_000,
+    available_mb = available / 1_000_000,
+    fix = SHM_BUDGET_FIX
+)]
+pub struct ShmBudgetError {
+    /// The config file whose cameras do not fit.
+    pub config: std::path::PathBuf,
+    /// Bytes the session's services reserve.
+    pub needed: u64,
+    /// Bytes free in `/dev/shm`.
+    pub available: u64,
+}
+
+/// Checks that the shared memory of `config`'s session fits into `/dev/shm`. tmpfs is
+/// filled lazily: an undersized one gives SIGBUS at write time, long after start, so the
+/// host refuses up front ([`ShmHost::create`] runs this check); a program can run it
+/// earlier as a pre-flight, e.g. to report it as a configuration error. A config is never
+/// checked when it is merely parsed (an agent or a tool may parse it on another machine).
 ///
 /// # Errors
-/// `(needed, available)` in bytes when they do not fit.
-pub fn check_shm_budget(config: &Config) -> Result<(), (u64, u64)> {
+/// [`ShmBudgetError`] with the bytes needed and free.
+pub fn check_shm_budget(config: &Config) -> Result<(), ShmBudgetError> {
     let needed = reserved_bytes(config);
     match shm_free_bytes() {
-        Some(available) if needed > available => Err((needed, available)),
+        Some(available) if needed > available => Err(ShmBudgetError {
+            config: config.source.clone(),
+            needed,
+            available,
+        }),
         _ => Ok(()),
     }
 }
 
 /// The advice printed with a budget error.
-pub const SHM_BUDGET_FIX: &str = "use fewer or smaller cameras or fewer agents, or give /dev/shm more room      (`mount -o remount,size=16G /dev/shm`; in Docker `--shm-size=16g` or `--ipc=host`)";
+pub const SHM_BUDGET_FIX: &str = "use fewer or smaller cameras or fewer agents, or give /dev/shm more room (`mount -o remount,size=16G /dev/shm`; in Docker `--shm-size=16g` or `--ipc=host`)";
 
 fn svc_name(session: &str, suffix: &str) -> Result<ServiceName, String> {
     let name = service_name(session, suffix);
@@ -310,18 +336,8 @@ pub enum ShmHostCreateError {
         service: String,
     },
     /// The services would not fit into `/dev/shm`.
-    #[error(
-        "the shared memory of this session needs {needed_mb} MB but /dev/shm has only {available_mb} MB free: {fix}",
-        needed_mb = needed / 1_000_000,
-        available_mb = available / 1_000_000,
-        fix = SHM_BUDGET_FIX
-    )]
-    ShmBudget {
-        /// Bytes the services reserve.
-        needed: u64,
-        /// Bytes free in /dev/shm.
-        available: u64,
-    },
+    #[error(transparent)]
+    ShmBudget(#[from] ShmBudgetError),
     /// iceoryx2 refused to create a node, service or port.
     #[error("iceoryx2: {0}")]
     Iceoryx(String),
@@ -338,9 +354,7 @@ impl ShmHost {
         signals.apply();
         let ice = ShmHostCreateError::Iceoryx;
         let session = &config.session;
-        if let Err((needed, available)) = check_shm_budget(config) {
-            return Err(ShmHostCreateError::ShmBudget { needed, available });
-        }
+        check_shm_budget(config)?;
         cleanup_dead_nodes();
         if host_alive(session) {
             return Err(ShmHostCreateError::SessionInUse {
@@ -383,7 +397,7 @@ impl ShmHost {
 
         let mut agents = Vec::with_capacity(n);
         for a in &config.agents {
-            let (_, frame_bytes) = image_layout(&a.cameras);
+            let frame_bytes = a.frame_bytes();
             let sensors = format!("agent/{}/sensors", a.id);
             let mut builder = node
                 .service_builder(&svc_name(session, &sensors).map_err(ice)?)
@@ -396,7 +410,7 @@ impl ShmHost {
                 .subscriber_max_buffer_size(SENSOR_QUEUE)
                 .subscriber_max_borrowed_samples(AGENT_BORROWED_FRAMES)
                 .enable_safe_overflow(true);
-            if let Some(align) = Alignment::new(crate::host::IMAGE_ALIGN) {
+            if let Some(align) = Alignment::new(crate::wire::IMAGE_ALIGN) {
                 builder = builder.payload_alignment(align);
             }
             let sensor_service = builder

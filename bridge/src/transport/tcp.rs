@@ -47,7 +47,6 @@ use zerocopy::{FromBytes, IntoBytes};
 
 use super::{AgentConnectError, BatchSink, FrameLoan, HostTransport, HostTransportError};
 use crate::config::Config;
-use crate::host::image_layout;
 use crate::signal::SignalHandling;
 use crate::wire::{LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, SensorHeader};
 
@@ -71,8 +70,7 @@ pub mod kind {
 pub const PREFIX: usize = 8;
 /// Magic at the start of a hello.
 pub const HELLO_MAGIC: [u8; 4] = *b"VRSY";
-/// Longest accepted token, bytes.
-pub const MAX_TOKEN: usize = 256;
+pub use crate::wire::MAX_TOKEN;
 /// Longest hello body.
 pub const MAX_HELLO: usize = 4 + 4 + 8 + 4 + 4 + MAX_TOKEN;
 /// How long a new connection may take to say hello.
@@ -640,7 +638,7 @@ impl TcpHost {
             .agents
             .iter()
             .map(|a| {
-                let body_len = HEADER + image_layout(&a.cameras).1;
+                let body_len = HEADER + a.frame_bytes();
                 max_frame_body = max_frame_body.max(body_len);
                 TcpSlot {
                     id: a.id,
