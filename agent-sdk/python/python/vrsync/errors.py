@@ -1,0 +1,96 @@
+"""The exceptions vrsync raises.
+
+Every one is a :class:`VrsyncError`; where a built-in fits, it is that too, so generic
+handlers work: :class:`HostGoneError` is a :class:`ConnectionError`,
+:class:`WaitTimeoutError` a :class:`TimeoutError`, :class:`ConfigError` a
+:class:`ValueError`. Most carry the ``session`` and ``agent_id`` they concern as
+attributes.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "VrsyncError",
+    "ConfigError",
+    "HostNotFoundError",
+    "VersionMismatchError",
+    "AgentIdInUseError",
+    "ConnectionRefusedByHostError",
+    "HostClosedError",
+    "HostGoneError",
+    "WaitTimeoutError",
+    "TooManyFramesHeldError",
+    "QueueFullError",
+    "UsageError",
+    "ProtocolError",
+    "TransportError",
+]
+
+
+class VrsyncError(Exception):
+    """Base class of every vrsync error."""
+
+    session: str | None = None
+    agent_id: int | None = None
+
+
+class ConfigError(VrsyncError, ValueError):
+    """The config file cannot be read, or is invalid (the message names file, line, key)."""
+
+    path: str | None = None
+
+
+class HostNotFoundError(VrsyncError, ConnectionError):
+    """No host serves this session (and agent id) within the connect timeout."""
+
+    waited: float | None = None
+
+
+class VersionMismatchError(VrsyncError):
+    """Host and agent speak different protocol versions or layouts (both are named)."""
+
+    host_version: str | None = None
+    agent_version: str | None = None
+
+
+class AgentIdInUseError(VrsyncError, ConnectionError):
+    """Another process is already connected as this agent id."""
+
+
+class ConnectionRefusedByHostError(VrsyncError, ConnectionError):
+    """The host refused the connection (wrong token, id it does not serve, …)."""
+
+
+class HostClosedError(VrsyncError):
+    """The host ended the session cleanly. ``Agent.frames()`` ends instead of raising it."""
+
+
+class HostGoneError(VrsyncError, ConnectionError):
+    """The host process died without closing the session (crashed or killed)."""
+
+
+class WaitTimeoutError(VrsyncError, TimeoutError):
+    """No new frame arrived within the timeout given to ``wait``/``frames``."""
+
+
+class TooManyFramesHeldError(VrsyncError):
+    """The agent cannot receive: image arrays of earlier frames keep too many frames alive.
+
+    Copy what you keep beyond the current cycle (``arr.copy()``) or drop the arrays.
+    """
+
+
+class QueueFullError(VrsyncError):
+    """More commands in one cycle than the config's ``max_commands_per_cycle``."""
+
+
+class UsageError(VrsyncError):
+    """An API call out of order, e.g. ``stop()`` before the first frame or twice a cycle."""
+
+
+class ProtocolError(VrsyncError):
+    """The host sent a frame that violates the protocol."""
+
+
+class TransportError(VrsyncError):
+    """The transport failed in a way not covered by a more specific error."""

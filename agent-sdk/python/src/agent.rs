@@ -1,0 +1,611 @@
+//! `vrsync.Agent`: connect, wait for frames, send commands, stop.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::thread::{self, ThreadId};
+use std::time::{Duration, Instant};
+
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use vrsync_agent::{
+    Agent, AgentBuilder, AgentConnectError, SendError, StopError, WaitStartError,
+};
+use vrsync_bridge::config::{Config, TransportKind};
+use vrsync_bridge::transport::shm::ShmAgentConnectError;
+use vrsync_bridge::transport::tcp::TcpAgentConnectError;
+
+use crate::commands::PyCommand;
+use crate::errors::{error, obj};
+use crate::frame::{Graveyard, PyFrame};
+
+/// The longest the GIL is released in one go while waiting: Ctrl-C is seen within this.
+const WAIT_SLICE: Duration = Duration::from_millis(50);
+
+/// Moves a value that is not `Send` through [`Python::detach`], which runs its closure on
+/// the *calling* thread: nothing crosses a thread.
+struct SameThread<T>(T);
+// SAFETY: only used to pass values into and out of `Python::detach`, whose closure runs
+// synchronously on the current thread.
+unsafe impl<T> Send for SameThread<T> {}
+
+/// The Rust agent, used only on its owner thread (see [`PyAgent::enter`]).
+struct AgentCell(Agent);
+// SAFETY: every use goes through `PyAgent::enter`, which admits only the owner thread (or
+// moves ownership when no frame of the agent is alive anywhere); PyO3's borrow flag
+// makes those uses exclusive.
+unsafe impl Send for AgentCell {}
+// SAFETY: as above; there is no shared (`&`) use of the agent.
+unsafe impl Sync for AgentCell {}
+
+/// One camera of this agent, as configured: what `Frame.image(name)` returns for it.
+#[pyclass(module = "vrsync._vrsync", name = "Camera", frozen, get_all)]
+#[derive(Debug, Clone)]
+pub(crate) struct PyCamera {
+    /// Camera name.
+    name: String,
+    /// Width in pixels.
+    width: u32,
+    /// Height in pixels.
+    height: u32,
+    /// `"rgb8"`, `"rgba8"`, `"gray8"` or `"depth32f"`.
+    format: String,
+    /// Horizontal field of view in degrees.
+    fov_horizontal_deg: f32,
+    /// Vertical field of view in degrees.
+    fov_vertical_deg: f32,
+}
+
+#[pymethods]
+impl PyCamera {
+    /// The numpy shape of this camera's images: (H, W, 3), (H, W, 4) or (H, W).
+    #[getter]
+    fn shape(&self) -> Vec<u32> {
+        match self.format.as_str() {
+            "rgb8" => vec![self.height, self.width, 3],
+            "rgba8" => vec![self.height, self.width, 4],
+            _ => vec![self.height, self.width],
+        }
+    }
+
+    /// The numpy dtype name of this camera's images: `"uint8"` or `"float32"`.
+    #[getter]
+    fn dtype(&self) -> &'static str {
+        if self.format == "depth32f" {
+            "float32"
+        } else {
+            "uint8"
+        }
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Camera(name={:?}, width={}, height={}, format={:?})",
+            self.name, self.width, self.height, self.format
+        )
+    }
+}
+
+fn format_name(f: vrsync_agent::PixelFormat) -> &'static str {
+    use vrsync_agent::PixelFormat as P;
+    match f {
+        P::Rgb8 => "rgb8",
+        P::Rgba8 => "rgba8",
+        P::Gray8 => "gray8",
+        P::Depth32f => "depth32f",
+    }
+}
+
+/// An agent connected to a vrsync host: receives one sensor frame per cycle and answers
+/// with motor commands and a stop.
+///
+/// ```python
+/// with vrsync.Agent.connect("config/default.toml", agent_id=0) as agent:
+///     for frame in agent.frames(timeout=10):   # ends when the host closes the session
+///         left = frame.image("left")           # read-only numpy view, no copy
+///         agent.send(vrsync.Turn(angle_deg=10))
+///         agent.stop()
+/// ```
+///
+/// An agent is used from one thread at a time; it moves to another thread only while no
+/// frame of it is alive.
+#[pyclass(module = "vrsync._vrsync", name = "Agent")]
+pub(crate) struct PyAgent {
+    agent: Option<AgentCell>,
+    owner: ThreadId,
+    graveyard: Arc<Graveyard>,
+    id: u32,
+    session: String,
+    config_path: PathBuf,
+    transport: &'static str,
+    sync_mode: bool,
+    stop_timeout: Duration,
+    simulation_time_per_frame: Duration,
+    max_commands: u32,
+    cameras: Vec<PyCamera>,
+}
+
+fn secs(name: &str, v: Option<f64>) -> PyResult<Option<Duration>> {
+    v.map(|s| {
+        Duration::try_from_secs_f64(s).map_err(|_| {
+            PyValueError::new_err(format!(
+                "{name} must be a non-negative number of seconds, got {s}"
+            ))
+        })
+    })
+    .transpose()
+}
+
+fn connect_error(py: Python<'_>, e: AgentConnectError, session: &str, id: u32) -> PyErr {
+    let msg = e.to_string();
+    match e {
+        AgentConnectError::Shm(ShmAgentConnectError::HostNotFound { waited, .. })
+        | AgentConnectError::Tcp(TcpAgentConnectError::HostNotFound { waited, .. }) => error(
+            py,
+            "HostNotFoundError",
+            msg,
+            &[
+                ("session", obj(py, session)),
+                ("agent_id", obj(py, id)),
+                ("waited", obj(py, waited.as_secs_f64())),
+            ],
+        ),
+        AgentConnectError::Shm(ShmAgentConnectError::VersionMismatch {
+            host_protocol,
+            agent_protocol,
+            ..
+        }) => error(
+            py,
+            "VersionMismatchError",
+            msg,
+            &[
+                ("host_version", obj(py, host_protocol)),
+                ("agent_version", obj(py, agent_protocol.to_string())),
+            ],
+        ),
+        AgentConnectError::Tcp(TcpAgentConnectError::VersionMismatch {
+            host_protocol,
+            agent_protocol,
+            ..
+        }) => error(
+            py,
+            "VersionMismatchError",
+            msg,
+            &[
+                ("host_version", obj(py, host_protocol.to_string())),
+                ("agent_version", obj(py, agent_protocol.to_string())),
+            ],
+        ),
+        AgentConnectError::Shm(ShmAgentConnectError::AgentIdInUse { .. }) => error(
+            py,
+            "AgentIdInUseError",
+            msg,
+            &[("session", obj(py, session)), ("agent_id", obj(py, id))],
+        ),
+        AgentConnectError::Tcp(TcpAgentConnectError::Refused { ref reason, .. })
+            if reason.contains("in use") || reason.contains("already connected") =>
+        {
+            error(
+                py,
+                "AgentIdInUseError",
+                msg,
+                &[("session", obj(py, session)), ("agent_id", obj(py, id))],
+            )
+        }
+        AgentConnectError::Tcp(TcpAgentConnectError::Refused { .. }) => error(
+            py,
+            "ConnectionRefusedByHostError",
+            msg,
+            &[("session", obj(py, session)), ("agent_id", obj(py, id))],
+        ),
+        _ => error(py, "TransportError", msg, &[]),
+    }
+}
+
+impl PyAgent {
+    /// Admits the calling thread: the owner, or any thread while no frame of this agent
+    /// is alive (ownership moves with it). Drops frames released on other threads.
+    fn enter(&mut self) -> PyResult<&mut Agent> {
+        let me = thread::current().id();
+        if me != self.owner {
+            if self.graveyard.alive() > 0 {
+                return Err(PyRuntimeError::new_err(
+                    "this vrsync Agent is used by another thread that still holds frames of it; \
+                     use an agent from one thread (or release its frames before handing it on)",
+                ));
+            }
+            self.owner = me;
+        }
+        self.graveyard.drain();
+        match self.agent.as_mut() {
+            Some(cell) => Ok(&mut cell.0),
+            None => Err(PyRuntimeError::new_err(format!(
+                "agent {} of session {:?} is closed",
+                self.id, self.session
+            ))),
+        }
+    }
+
+    fn wait_error(&self, py: Python<'_>, e: WaitStartError, waited: Duration) -> PyErr {
+        let msg = e.to_string();
+        let base = [
+            ("session", obj(py, self.session.as_str())),
+            ("agent_id", obj(py, self.id)),
+        ];
+        match e {
+            WaitStartError::HostClosed => error(py, "HostClosedError", msg, &base),
+            WaitStartError::HostGone { .. } => error(py, "HostGoneError", msg, &base),
+            WaitStartError::Terminated => pyo3::exceptions::PyKeyboardInterrupt::new_err(msg),
+            WaitStartError::BadFrame { .. } => error(py, "ProtocolError", msg, &base),
+            WaitStartError::Timeout { last_cycle, .. } => error(
+                py,
+                "WaitTimeoutError",
+                format!(
+                    "no frame from the host of session {:?} within {:.3} s (last cycle seen: {})",
+                    self.session,
+                    waited.as_secs_f64(),
+                    last_cycle.map_or_else(|| "none".to_owned(), |c| c.to_string())
+                ),
+                &base,
+            ),
+            WaitStartError::Receive(ref detail) if detail.contains("ExceedsMaxBorrow") => error(
+                py,
+                "TooManyFramesHeldError",
+                format!(
+                    "agent {} holds too many frames: the arrays of earlier frames keep them \
+                     alive; copy what you keep (`arr.copy()`) or drop the arrays ({detail})",
+                    self.id
+                ),
+                &base,
+            ),
+            _ => error(py, "TransportError", msg, &base),
+        }
+    }
+
+    /// Waits for the next frame, releasing the GIL in short slices so that Ctrl-C (and
+    /// any other signal handler) runs at once.
+    fn wait_frame(&mut self, py: Python<'_>, timeout: Option<Duration>) -> PyResult<PyFrame> {
+        let started = Instant::now();
+        let deadline = timeout.map(|t| started + t);
+        loop {
+            let slice = deadline.map_or(WAIT_SLICE, |d| {
+                d.saturating_duration_since(Instant::now()).min(WAIT_SLICE)
+            });
+            let agent = SameThread(self.enter()?);
+            let result = py.detach(move || {
+                let agent = agent;
+                SameThread(agent.0.wait_start(Some(slice)))
+            });
+            match result.0 {
+                Ok(frame) => {
+                    let skipped = self.agent.as_ref().map_or(0, |a| a.0.frames_skipped());
+                    return Ok(PyFrame::new(frame, self.graveyard.clone(), skipped));
+                }
+                Err(WaitStartError::Timeout { .. }) => {
+                    py.check_signals()?;
+                    if deadline.is_some_and(|d| Instant::now() >= d) {
+                        let e = WaitStartError::Timeout {
+                            waited: started.elapsed(),
+                            last_cycle: self.agent.as_ref().and_then(|a| a.0.last_cycle()),
+                        };
+                        return Err(self.wait_error(py, e, started.elapsed()));
+                    }
+                }
+                Err(e) => return Err(self.wait_error(py, e, started.elapsed())),
+            }
+        }
+    }
+}
+
+#[pymethods]
+impl PyAgent {
+    /// Connects agent `agent_id` to the host of the session in `config` (a vrsync TOML
+    /// file), waiting up to `connect_timeout` seconds for the host (default: the config's
+    /// `connect_timeout`). `session` overrides the config's session name.
+    ///
+    /// Raises `ConfigError` (bad file), `HostNotFoundError`, `VersionMismatchError`,
+    /// `AgentIdInUseError`, `ConnectionRefusedByHostError`, `TransportError`.
+    #[staticmethod]
+    #[pyo3(signature = (config, agent_id, *, session = None, connect_timeout = None))]
+    fn connect(
+        py: Python<'_>,
+        config: PathBuf,
+        agent_id: i64,
+        session: Option<String>,
+        connect_timeout: Option<f64>,
+    ) -> PyResult<Self> {
+        let id = u32::try_from(agent_id).map_err(|_| {
+            PyValueError::new_err(format!("agent_id must be ≥ 0, got {agent_id}"))
+        })?;
+        let mut cfg = Config::load(&config).map_err(|e| {
+            error(
+                py,
+                "ConfigError",
+                e.to_string(),
+                &[("path", obj(py, config.clone()))],
+            )
+        })?;
+        if let Some(s) = session {
+            cfg.session = s;
+        }
+        let timeout = secs("connect_timeout", connect_timeout)?.unwrap_or(cfg.sync.connect_timeout);
+        let agent_cfg = cfg.agents.iter().find(|a| a.id == id).ok_or_else(|| {
+            let ids: Vec<u32> = cfg.agents.iter().map(|a| a.id).collect();
+            error(
+                py,
+                "ConfigError",
+                format!(
+                    "{} has no [[agent]] with id {id} (its agents: {ids:?})",
+                    config.display()
+                ),
+                &[("path", obj(py, config.clone()))],
+            )
+        })?;
+        let cameras = agent_cfg
+            .cameras
+            .iter()
+            .map(|c| PyCamera {
+                name: c.name.clone(),
+                width: c.width_px,
+                height: c.height_px,
+                format: format_name(c.format).to_owned(),
+                fov_horizontal_deg: c.fov_horizontal_deg,
+                fov_vertical_deg: c.fov_vertical_deg,
+            })
+            .collect();
+
+        // Connect in slices too, so that Ctrl-C works while the host is not up yet.
+        let started = Instant::now();
+        let agent = loop {
+            let left = timeout.saturating_sub(started.elapsed());
+            let slice = left.min(Duration::from_millis(200));
+            let cfg_ref = &cfg;
+            let attempt = py.detach(|| {
+                SameThread(
+                    AgentBuilder::new(cfg_ref, id)
+                        .connect_timeout(slice)
+                        .connect()
+                        .map(AgentCell),
+                )
+            });
+            match attempt.0 {
+                Ok(agent) => break agent,
+                Err(
+                    AgentConnectError::Shm(ShmAgentConnectError::HostNotFound { .. })
+                    | AgentConnectError::Tcp(TcpAgentConnectError::HostNotFound { .. }),
+                ) if started.elapsed() < timeout => py.check_signals()?,
+                Err(e) => return Err(connect_error(py, e, &cfg.session, id)),
+            }
+        };
+        Ok(Self {
+            agent: Some(agent),
+            owner: thread::current().id(),
+            graveyard: Arc::default(),
+            id,
+            session: cfg.session.clone(),
+            config_path: config,
+            transport: match cfg.transport.kind {
+                TransportKind::Shm => "shm",
+                TransportKind::Tcp => "tcp",
+            },
+            sync_mode: cfg.sync.sync_mode,
+            stop_timeout: cfg.sync.stop_timeout,
+            simulation_time_per_frame: cfg.sync.simulation_time_per_frame,
+            max_commands: cfg.transport.max_commands_per_cycle,
+            cameras,
+        })
+    }
+
+    /// Waits for the next frame (newer than the last one returned) and returns it.
+    /// `timeout` in seconds; `None` waits without limit (the host's liveness is still
+    /// checked, and Ctrl-C raises `KeyboardInterrupt`).
+    ///
+    /// Raises `HostClosedError` when the host ended the session, `HostGoneError` (a
+    /// `ConnectionError`) when its process died, `WaitTimeoutError` (a `TimeoutError`),
+    /// `TooManyFramesHeldError`.
+    #[pyo3(signature = (timeout = None))]
+    fn wait(&mut self, py: Python<'_>, timeout: Option<f64>) -> PyResult<PyFrame> {
+        let timeout = secs("timeout", timeout)?;
+        self.wait_frame(py, timeout)
+    }
+
+    /// Iterates over frames until the host closes the session (the loop then ends
+    /// cleanly). `timeout` applies to each wait, as in `wait`.
+    #[pyo3(signature = (timeout = None))]
+    fn frames(slf: Bound<'_, Self>, timeout: Option<f64>) -> PyResult<FrameIter> {
+        Ok(FrameIter {
+            agent: slf.unbind(),
+            timeout: secs("timeout", timeout)?,
+        })
+    }
+
+    /// Queues `command` for this cycle and returns its action id (frames report the
+    /// action's status and collisions under this id). Nothing reaches the host before
+    /// `stop()`.
+    ///
+    /// Raises `QueueFullError` beyond the config's `max_commands_per_cycle`.
+    fn send(&mut self, py: Python<'_>, command: PyRef<'_, PyCommand>) -> PyResult<u32> {
+        let cmd = command.command;
+        let id = self.id;
+        let agent = self.enter()?;
+        agent.send(cmd).map_err(|e| send_error(py, e, id))
+    }
+
+    /// Queues `command` with an action id of your choice (0 ..= 2³²−1).
+    fn send_with_id(
+        &mut self,
+        py: Python<'_>,
+        action_id: i64,
+        command: PyRef<'_, PyCommand>,
+    ) -> PyResult<()> {
+        let action_id = u32::try_from(action_id).map_err(|_| {
+            PyValueError::new_err(format!(
+                "action_id must be in 0..={}, got {action_id}",
+                u32::MAX
+            ))
+        })?;
+        let cmd = command.command;
+        let id = self.id;
+        let agent = self.enter()?;
+        agent
+            .send_with_id(action_id, cmd)
+            .map_err(|e| send_error(py, e, id))
+    }
+
+    /// Sends the queued commands with the *stop* flag: this agent is done with the cycle
+    /// of the newest frame. Raises `HostClosedError` when the session already ended.
+    fn stop(&mut self, py: Python<'_>) -> PyResult<()> {
+        let session = self.session.clone();
+        let id = self.id;
+        let agent = self.enter()?;
+        agent.stop().map_err(|e| {
+            let msg = e.to_string();
+            let base = [("session", obj(py, session.as_str())), ("agent_id", obj(py, id))];
+            match e {
+                StopError::HostClosed => error(py, "HostClosedError", msg, &base),
+                StopError::NoFrame | StopError::AlreadyStopped { .. } => {
+                    error(py, "UsageError", msg, &base)
+                }
+                _ => error(py, "TransportError", msg, &base),
+            }
+        })
+    }
+
+    /// Disconnects. Frames still held stay readable. Idempotent.
+    fn close(&mut self) {
+        if self.agent.is_some() && thread::current().id() == self.owner {
+            self.graveyard.drain();
+        }
+        self.agent = None;
+    }
+
+    fn __enter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {
+        slf
+    }
+
+    #[pyo3(signature = (*_args))]
+    fn __exit__(&mut self, _args: &Bound<'_, pyo3::types::PyTuple>) -> bool {
+        self.close();
+        false
+    }
+
+    /// This agent's id.
+    #[getter]
+    fn id(&self) -> u32 {
+        self.id
+    }
+
+    /// The session name.
+    #[getter]
+    fn session(&self) -> &str {
+        &self.session
+    }
+
+    /// The config file this agent was connected with.
+    #[getter]
+    fn config_path(&self) -> PathBuf {
+        self.config_path.clone()
+    }
+
+    /// `"shm"` or `"tcp"`.
+    #[getter]
+    fn transport(&self) -> &'static str {
+        self.transport
+    }
+
+    /// Whether the session runs in lock-step (sync) mode.
+    #[getter]
+    fn sync_mode(&self) -> bool {
+        self.sync_mode
+    }
+
+    /// Seconds the host waits for this agent's stop before counting it late.
+    #[getter]
+    fn stop_timeout(&self) -> f64 {
+        self.stop_timeout.as_secs_f64()
+    }
+
+    /// Simulated seconds per cycle.
+    #[getter]
+    fn simulation_time_per_frame(&self) -> f64 {
+        self.simulation_time_per_frame.as_secs_f64()
+    }
+
+    /// Most commands this agent may send per cycle.
+    #[getter]
+    fn max_commands_per_cycle(&self) -> u32 {
+        self.max_commands
+    }
+
+    /// The agent's cameras as configured, in image order.
+    #[getter]
+    fn cameras(&self) -> Vec<PyCamera> {
+        self.cameras.clone()
+    }
+
+    /// The cycle of the newest frame received, or `None` before the first.
+    #[getter]
+    fn last_cycle(&self) -> Option<u64> {
+        self.agent.as_ref().and_then(|a| a.0.last_cycle())
+    }
+
+    /// Frames this agent never saw because a newer one was waiting.
+    #[getter]
+    fn frames_skipped(&self) -> u64 {
+        self.agent.as_ref().map_or(0, |a| a.0.frames_skipped())
+    }
+
+    /// Whether `close()` was called.
+    #[getter]
+    fn closed(&self) -> bool {
+        self.agent.is_none()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "<vrsync.Agent id={} session={:?} transport={}{}>",
+            self.id,
+            self.session,
+            self.transport,
+            if self.agent.is_none() { " closed" } else { "" }
+        )
+    }
+}
+
+fn send_error(py: Python<'_>, e: SendError, id: u32) -> PyErr {
+    error(py, "QueueFullError", e.to_string(), &[("agent_id", obj(py, id))])
+}
+
+/// Iterator returned by `Agent.frames()`: yields frames until the host closes the session.
+#[pyclass(module = "vrsync._vrsync")]
+pub(crate) struct FrameIter {
+    agent: Py<PyAgent>,
+    timeout: Option<Duration>,
+}
+
+#[pymethods]
+impl FrameIter {
+    fn __iter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {
+        slf
+    }
+
+    fn __next__(&self, py: Python<'_>) -> PyResult<Option<PyFrame>> {
+        let mut agent = self.agent.bind(py).try_borrow_mut()?;
+        match agent.wait_frame(py, self.timeout) {
+            Ok(f) => Ok(Some(f)),
+            Err(e) => {
+                let closed = py
+                    .import("vrsync.errors")
+                    .and_then(|m| m.getattr("HostClosedError"))
+                    .is_ok_and(|cls| e.is_instance(py, &cls));
+                if closed { Ok(None) } else { Err(e) }
+            }
+        }
+    }
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyAgent>()?;
+    m.add_class::<FrameIter>()?;
+    m.add_class::<PyCamera>()?;
+    Ok(())
+}

@@ -1,0 +1,396 @@
+//! The command catalogue: one small immutable class per command, all subclasses of
+//! `Command`. Arguments are checked when a command is built, so a bad value raises
+//! `ValueError`/`TypeError` in the line that made it, before anything is sent. Limits that
+//! depend on the world (room size, eye range) are the simulator's to check; it reports a
+//! rejected command in the next frame (`Frame.previous_rejected`).
+
+use glam::Vec3;
+use pyo3::exceptions::PyValueError;
+use pyo3::PyClass;
+use pyo3::prelude::*;
+use vrsync_bridge::wire::Command;
+
+/// Largest magnitude accepted for an angle in degrees (ten turns), as the host checks.
+const MAX_ANGLE_DEG: f64 = 3600.0;
+/// Largest magnitude accepted for an eye angle in degrees.
+const MAX_EYE_DEG: f64 = 180.0;
+
+fn finite(name: &str, v: f64) -> PyResult<f32> {
+    if !v.is_finite() {
+        return Err(PyValueError::new_err(format!(
+            "{name} must be a finite number, got {v}"
+        )));
+    }
+    if v.abs() > f64::from(f32::MAX) {
+        return Err(PyValueError::new_err(format!(
+            "{name} = {v} does not fit a 32-bit float"
+        )));
+    }
+    Ok(v as f32)
+}
+
+fn angle(name: &str, v: f64, max: f64) -> PyResult<f32> {
+    let a = finite(name, v)?;
+    if v.abs() > max {
+        return Err(PyValueError::new_err(format!(
+            "{name} = {v}° is out of range (±{max}°)"
+        )));
+    }
+    Ok(a)
+}
+
+fn non_negative(name: &str, v: f64) -> PyResult<f32> {
+    let x = finite(name, v)?;
+    if v < 0.0 {
+        return Err(PyValueError::new_err(format!(
+            "{name} must be ≥ 0, got {v}"
+        )));
+    }
+    Ok(x)
+}
+
+fn id(name: &str, v: i64) -> PyResult<u32> {
+    u32::try_from(v).map_err(|_| {
+        PyValueError::new_err(format!(
+            "{name} must be in 0..={}, got {v}",
+            u32::MAX
+        ))
+    })
+}
+
+/// The base class of every command. Send one with `Agent.send(command)`.
+#[pyclass(module = "vrsync._vrsync", name = "Command", subclass, frozen)]
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct PyCommand {
+    pub(crate) command: Command,
+}
+
+#[pymethods]
+impl PyCommand {
+    /// The command's short name as in logs and recordings (`"move"`, `"turn"`, …).
+    #[getter]
+    fn name(&self) -> &'static str {
+        self.command.name()
+    }
+
+    fn __eq__(&self, other: &Bound<'_, PyAny>) -> bool {
+        other
+            .cast::<PyCommand>()
+            .is_ok_and(|o| o.get().command == self.command)
+    }
+
+    fn __repr__(&self) -> String {
+        use Command as C;
+        match self.command {
+            C::Move {
+                heading_deg,
+                distance,
+            } => format!("Move(heading_deg={heading_deg}, distance_m={distance})"),
+            C::Turn { angle_deg } => format!("Turn(angle_deg={angle_deg})"),
+            C::MoveTo { target } => format!("MoveTo(x={}, y={}, z={})", target.x, target.y, target.z),
+            C::CancelMove => "CancelMove()".into(),
+            C::EyeMovement {
+                pan_left_deg,
+                pan_right_deg,
+                tilt_deg,
+            } => format!(
+                "EyeMovement(pan_left_deg={pan_left_deg}, pan_right_deg={pan_right_deg}, tilt_deg={tilt_deg})"
+            ),
+            C::EyeFixation { target } => {
+                format!("EyeFixation(x={}, y={}, z={})", target.x, target.y, target.z)
+            }
+            C::GraspId { object_id } => format!("GraspId(object_id={object_id})"),
+            C::GraspPos { x_px, y_px } => format!("GraspPos(x_px={x_px}, y_px={y_px})"),
+            C::PointId { object_id } => format!("PointId(object_id={object_id})"),
+            C::PointPos { x_px, y_px } => format!("PointPos(x_px={x_px}, y_px={y_px})"),
+            C::InteractId { object_id } => format!("InteractId(object_id={object_id})"),
+            C::InteractPos { x_px, y_px } => format!("InteractPos(x_px={x_px}, y_px={y_px})"),
+            C::GraspRelease => "GraspRelease()".into(),
+            C::EnvironmentReset { reset_type } => {
+                format!("EnvironmentReset(reset_type={reset_type})")
+            }
+            C::TrialReset { reset_type } => format!("TrialReset(reset_type={reset_type})"),
+        }
+    }
+}
+
+fn sub<T>(me: T, base: PyCommand) -> PyClassInitializer<T>
+where
+    T: PyClass<BaseType = PyCommand>,
+{
+    PyClassInitializer::from(base).add_subclass(me)
+}
+
+/// Walk towards `heading_deg` (world frame, 0 = +z, clockwise seen from above) for
+/// `distance_m` metres.
+#[pyclass(module = "vrsync._vrsync", extends = PyCommand, frozen, get_all)]
+pub(crate) struct Move {
+    heading_deg: f32,
+    distance_m: f32,
+}
+
+#[pymethods]
+impl Move {
+    #[new]
+    fn new(heading_deg: f64, distance_m: f64) -> PyResult<PyClassInitializer<Self>> {
+        let heading_deg = angle("heading_deg", heading_deg, MAX_ANGLE_DEG)?;
+        let distance_m = non_negative("distance_m", distance_m)?;
+        Ok(sub(
+            Self {
+                heading_deg,
+                distance_m,
+            },
+            PyCommand {
+                command: Command::Move {
+                    heading_deg,
+                    distance: distance_m,
+                },
+            },
+        ))
+    }
+}
+
+/// Turn in place by `angle_deg` (positive = clockwise seen from above).
+#[pyclass(module = "vrsync._vrsync", extends = PyCommand, frozen, get_all)]
+pub(crate) struct Turn {
+    angle_deg: f32,
+}
+
+#[pymethods]
+impl Turn {
+    #[new]
+    fn new(angle_deg: f64) -> PyResult<PyClassInitializer<Self>> {
+        let angle_deg = angle("angle_deg", angle_deg, MAX_ANGLE_DEG)?;
+        Ok(sub(
+            Self { angle_deg },
+            PyCommand {
+                command: Command::Turn { angle_deg },
+            },
+        ))
+    }
+}
+
+fn point(x: f64, y: f64, z: f64) -> PyResult<Vec3> {
+    Ok(Vec3::new(
+        finite("x", x)?,
+        finite("y", y)?,
+        finite("z", z)?,
+    ))
+}
+
+/// Walk in a straight line to the world position (`x`, `y`, `z`) in metres.
+#[pyclass(module = "vrsync._vrsync", extends = PyCommand, frozen, get_all)]
+pub(crate) struct MoveTo {
+    x: f32,
+    y: f32,
+    z: f32,
+}
+
+#[pymethods]
+impl MoveTo {
+    #[new]
+    fn new(x: f64, y: f64, z: f64) -> PyResult<PyClassInitializer<Self>> {
+        let target = point(x, y, z)?;
+        Ok(sub(
+            Self {
+                x: target.x,
+                y: target.y,
+                z: target.z,
+            },
+            PyCommand {
+                command: Command::MoveTo { target },
+            },
+        ))
+    }
+}
+
+/// Fixate the world point (`x`, `y`, `z`) in metres with both eyes.
+#[pyclass(module = "vrsync._vrsync", extends = PyCommand, frozen, get_all)]
+pub(crate) struct EyeFixation {
+    x: f32,
+    y: f32,
+    z: f32,
+}
+
+#[pymethods]
+impl EyeFixation {
+    #[new]
+    fn new(x: f64, y: f64, z: f64) -> PyResult<PyClassInitializer<Self>> {
+        let target = point(x, y, z)?;
+        Ok(sub(
+            Self {
+                x: target.x,
+                y: target.y,
+                z: target.z,
+            },
+            PyCommand {
+                command: Command::EyeFixation { target },
+            },
+        ))
+    }
+}
+
+/// Move the eyes: pan of each eye and tilt of both, in degrees.
+#[pyclass(module = "vrsync._vrsync", extends = PyCommand, frozen, get_all)]
+pub(crate) struct EyeMovement {
+    pan_left_deg: f32,
+    pan_right_deg: f32,
+    tilt_deg: f32,
+}
+
+#[pymethods]
+impl EyeMovement {
+    #[new]
+    #[pyo3(signature = (pan_left_deg, pan_right_deg, tilt_deg = 0.0))]
+    fn new(pan_left_deg: f64, pan_right_deg: f64, tilt_deg: f64) -> PyResult<PyClassInitializer<Self>> {
+        let pan_left_deg = angle("pan_left_deg", pan_left_deg, MAX_EYE_DEG)?;
+        let pan_right_deg = angle("pan_right_deg", pan_right_deg, MAX_EYE_DEG)?;
+        let tilt_deg = angle("tilt_deg", tilt_deg, MAX_EYE_DEG)?;
+        Ok(sub(
+            Self {
+                pan_left_deg,
+                pan_right_deg,
+                tilt_deg,
+            },
+            PyCommand {
+                command: Command::EyeMovement {
+                    pan_left_deg,
+                    pan_right_deg,
+                    tilt_deg,
+                },
+            },
+        ))
+    }
+}
+
+/// Commands without arguments.
+macro_rules! unit_command {
+    ($($(#[$doc:meta])* $cls:ident => $variant:ident;)*) => {$(
+        $(#[$doc])*
+        #[pyclass(module = "vrsync._vrsync", extends = PyCommand, frozen)]
+        pub(crate) struct $cls;
+
+        #[pymethods]
+        impl $cls {
+            #[new]
+            fn new() -> PyClassInitializer<Self> {
+                sub(Self, PyCommand { command: Command::$variant })
+            }
+        }
+    )*};
+}
+
+unit_command! {
+    /// Cancel the running movement.
+    CancelMove => CancelMove;
+    /// Release the grasped object.
+    GraspRelease => GraspRelease;
+}
+
+/// Commands on an object id.
+macro_rules! id_command {
+    ($($(#[$doc:meta])* $cls:ident => $variant:ident;)*) => {$(
+        $(#[$doc])*
+        #[pyclass(module = "vrsync._vrsync", extends = PyCommand, frozen, get_all)]
+        pub(crate) struct $cls {
+            object_id: u32,
+        }
+
+        #[pymethods]
+        impl $cls {
+            #[new]
+            fn new(object_id: i64) -> PyResult<PyClassInitializer<Self>> {
+                let object_id = id("object_id", object_id)?;
+                Ok(sub(Self { object_id }, PyCommand { command: Command::$variant { object_id } }))
+            }
+        }
+    )*};
+}
+
+id_command! {
+    /// Grasp the object with id `object_id`.
+    GraspId => GraspId;
+    /// Point at the object with id `object_id`.
+    PointId => PointId;
+    /// Interact with the object with id `object_id`.
+    InteractId => InteractId;
+}
+
+/// Commands on a left-eye image position.
+macro_rules! pos_command {
+    ($($(#[$doc:meta])* $cls:ident => $variant:ident;)*) => {$(
+        $(#[$doc])*
+        #[pyclass(module = "vrsync._vrsync", extends = PyCommand, frozen, get_all)]
+        pub(crate) struct $cls {
+            x_px: f32,
+            y_px: f32,
+        }
+
+        #[pymethods]
+        impl $cls {
+            #[new]
+            fn new(x_px: f64, y_px: f64) -> PyResult<PyClassInitializer<Self>> {
+                let x_px = non_negative("x_px", x_px)?;
+                let y_px = non_negative("y_px", y_px)?;
+                Ok(sub(Self { x_px, y_px }, PyCommand { command: Command::$variant { x_px, y_px } }))
+            }
+        }
+    )*};
+}
+
+pos_command! {
+    /// Grasp what is seen at left-eye pixel (`x_px`, `y_px`); 0/0 is the top left.
+    GraspPos => GraspPos;
+    /// Point at what is seen at left-eye pixel (`x_px`, `y_px`).
+    PointPos => PointPos;
+    /// Interact with what is seen at left-eye pixel (`x_px`, `y_px`).
+    InteractPos => InteractPos;
+}
+
+/// Commands with a reset type.
+macro_rules! reset_command {
+    ($($(#[$doc:meta])* $cls:ident => $variant:ident;)*) => {$(
+        $(#[$doc])*
+        #[pyclass(module = "vrsync._vrsync", extends = PyCommand, frozen, get_all)]
+        pub(crate) struct $cls {
+            reset_type: u32,
+        }
+
+        #[pymethods]
+        impl $cls {
+            #[new]
+            #[pyo3(signature = (reset_type = 0))]
+            fn new(reset_type: i64) -> PyResult<PyClassInitializer<Self>> {
+                let reset_type = id("reset_type", reset_type)?;
+                Ok(sub(Self { reset_type }, PyCommand { command: Command::$variant { reset_type } }))
+            }
+        }
+    )*};
+}
+
+reset_command! {
+    /// Reset the environment (`reset_type` 0 = the default reset).
+    EnvironmentReset => EnvironmentReset;
+    /// Reset the trial (`reset_type` 0 = the default reset).
+    TrialReset => TrialReset;
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyCommand>()?;
+    m.add_class::<Move>()?;
+    m.add_class::<Turn>()?;
+    m.add_class::<MoveTo>()?;
+    m.add_class::<CancelMove>()?;
+    m.add_class::<EyeMovement>()?;
+    m.add_class::<EyeFixation>()?;
+    m.add_class::<GraspId>()?;
+    m.add_class::<GraspPos>()?;
+    m.add_class::<PointId>()?;
+    m.add_class::<PointPos>()?;
+    m.add_class::<InteractId>()?;
+    m.add_class::<InteractPos>()?;
+    m.add_class::<GraspRelease>()?;
+    m.add_class::<EnvironmentReset>()?;
+    m.add_class::<TrialReset>()?;
+    Ok(())
+}

@@ -1,0 +1,444 @@
+//! A received frame, and its images as zero-copy, read-only buffers.
+//!
+//! # Threads
+//! The frame owns a sample of the agent's subscriber (shared memory) or a buffer of its
+//! receive pool (TCP); both refer to per-agent state that is not thread-safe, and the
+//! agent's wait touches that state with the GIL released. So a frame is *dropped* only on
+//! the thread that owns the agent: a frame whose last reference goes away on another
+//! thread is handed to the agent's [`Graveyard`] and dropped by the owner's next call. Any
+//! thread may *read* a frame: the header and the pixels are plain memory that nobody
+//! writes while the frame is held.
+
+use std::ffi::{CStr, c_int, c_void};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::thread::{self, ThreadId};
+
+use pyo3::exceptions::{PyBufferError, PyKeyError};
+use pyo3::prelude::*;
+use pyo3::sync::PyOnceLock;
+use pyo3::types::PyDict;
+use pyo3::{ffi, intern};
+use vrsync_agent::{Frame, PixelFormat};
+use vrsync_bridge::wire::WireOutcome;
+
+use crate::sensors::{
+    PyActionStatus, PyCollision, PyEyePosition, PyGridPosition, PyHeadMotion, PyPose,
+};
+
+/// A frame moved to another thread only to be dropped later on its owner's thread.
+struct Corpse(#[allow(dead_code)] Frame);
+
+// SAFETY: a `Corpse` is never used; it is only stored until the owner thread drops it
+// (see the module docs).
+unsafe impl Send for Corpse {}
+
+/// Frames released on foreign threads, waiting to be dropped by their agent's owner
+/// thread; plus the number of this agent's frames alive anywhere (held or buried).
+#[derive(Default)]
+pub(crate) struct Graveyard {
+    corpses: Mutex<Vec<Corpse>>,
+    alive: AtomicUsize,
+}
+
+impl Graveyard {
+    /// Drops the buried frames. Call only on the owner thread, with the agent idle.
+    pub(crate) fn drain(&self) {
+        let corpses = std::mem::take(
+            &mut *self
+                .corpses
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner),
+        );
+        self.alive.fetch_sub(corpses.len(), Ordering::AcqRel);
+        drop(corpses);
+    }
+
+    /// Frames of this agent alive anywhere (held by Python or buried).
+    pub(crate) fn alive(&self) -> usize {
+        self.alive.load(Ordering::Acquire)
+    }
+}
+
+/// A frame with the thread that may drop it.
+pub(crate) struct OwnedFrame {
+    frame: Option<Frame>,
+    owner: ThreadId,
+    graveyard: Arc<Graveyard>,
+}
+
+impl OwnedFrame {
+    pub(crate) fn new(frame: Frame, graveyard: Arc<Graveyard>) -> Self {
+        graveyard.alive.fetch_add(1, Ordering::AcqRel);
+        Self {
+            frame: Some(frame),
+            owner: thread::current().id(),
+            graveyard,
+        }
+    }
+}
+
+impl Drop for OwnedFrame {
+    fn drop(&mut self) {
+        let Some(frame) = self.frame.take() else {
+            return;
+        };
+        if thread::current().id() == self.owner {
+            drop(frame);
+            self.graveyard.alive.fetch_sub(1, Ordering::AcqRel);
+        } else {
+            self.graveyard
+                .corpses
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .push(Corpse(frame));
+        }
+    }
+}
+
+// SAFETY: see the module docs: every thread only reads the frame (header and pixels are
+// memory nobody writes while it is held), and `Drop` moves it back to the owner thread.
+unsafe impl Send for OwnedFrame {}
+// SAFETY: as above; shared access is read-only.
+unsafe impl Sync for OwnedFrame {}
+
+/// One sensor frame: the cycle, simulated time, pose and the other sensors, and the
+/// camera images as read-only numpy arrays that view the frame's memory without a copy.
+///
+/// An image array keeps its frame alive. An agent can hold only a few frames at once
+/// (the one it is reading and the one being received): keep copies (`arr.copy()`) of
+/// what you need beyond the current cycle, or the next wait raises
+/// `TooManyFramesHeldError`.
+#[pyclass(module = "vrsync._vrsync", name = "Frame", frozen)]
+pub(crate) struct PyFrame {
+    owned: OwnedFrame,
+    frames_skipped: u64,
+}
+
+impl PyFrame {
+    pub(crate) fn new(frame: Frame, graveyard: Arc<Graveyard>, frames_skipped: u64) -> Self {
+        Self {
+            owned: OwnedFrame::new(frame, graveyard),
+            frames_skipped,
+        }
+    }
+
+    fn frame(&self) -> &Frame {
+        // `frame` is `Some` until `Drop`, and nothing reads a frame while dropping it.
+        match &self.owned.frame {
+            Some(f) => f,
+            None => unreachable_frame(),
+        }
+    }
+
+    pub(crate) fn header(&self) -> &vrsync_agent::SensorHeader {
+        self.frame().header()
+    }
+}
+
+#[cold]
+fn unreachable_frame() -> ! {
+    // A `PyFrame` is only reachable through Python references, which keep `owned.frame`
+    // set; `Drop` runs when the last one is gone.
+    std::process::abort()
+}
+
+fn outcome_name(v: u32) -> &'static str {
+    match v {
+        x if x == WireOutcome::Stopped as u32 => "stopped",
+        x if x == WireOutcome::TimedOut as u32 => "timed_out",
+        _ => "none",
+    }
+}
+
+fn as_array<'py>(py: Python<'py>, buffer: Bound<'py, ImageBuffer>) -> PyResult<Bound<'py, PyAny>> {
+    static ASARRAY: PyOnceLock<Py<PyAny>> = PyOnceLock::new();
+    let asarray = ASARRAY.get_or_try_init(py, || {
+        Ok::<_, PyErr>(py.import("numpy")?.getattr("asarray")?.unbind())
+    })?;
+    asarray.bind(py).call1((buffer,))
+}
+
+#[pymethods]
+impl PyFrame {
+    /// The cycle number `f` of this frame.
+    #[getter]
+    fn cycle(&self) -> u64 {
+        self.header().cycle
+    }
+
+    /// Simulated time at the start of this cycle, in seconds.
+    #[getter]
+    fn sim_time(&self) -> f64 {
+        self.header().sim_time_ns as f64 * 1e-9
+    }
+
+    /// Simulated time at the start of this cycle, in nanoseconds (exact).
+    #[getter]
+    fn sim_time_ns(&self) -> u64 {
+        self.header().sim_time_ns
+    }
+
+    /// The agent this frame is for.
+    #[getter]
+    fn agent_id(&self) -> u32 {
+        self.header().agent_id
+    }
+
+    /// Whether the host runs in lock-step (sync) mode.
+    #[getter]
+    fn sync_mode(&self) -> bool {
+        self.header().sync_mode()
+    }
+
+    /// Body pose (position in metres, rotation quaternion x, y, z, w).
+    #[getter]
+    fn pose(&self) -> PyPose {
+        self.header().pose.into()
+    }
+
+    /// Grid position sensor (position, Euler rotation in degrees).
+    #[getter]
+    fn grid(&self) -> PyGridPosition {
+        self.header().grid.into()
+    }
+
+    /// Head motion sensor.
+    #[getter]
+    fn head_motion(&self) -> PyHeadMotion {
+        self.header().head_motion.into()
+    }
+
+    /// Eye position sensor.
+    #[getter]
+    fn eye(&self) -> PyEyePosition {
+        self.header().eye.into()
+    }
+
+    /// Reward received since the previous frame.
+    #[getter]
+    fn reward(&self) -> f32 {
+        self.header().reward
+    }
+
+    /// Action statuses reported in this frame, in the host's order.
+    #[getter]
+    fn statuses(&self) -> Vec<PyActionStatus> {
+        self.header()
+            .statuses()
+            .iter()
+            .filter_map(PyActionStatus::from_wire)
+            .collect()
+    }
+
+    /// The newest state per action id reported in this frame, as a dict.
+    #[getter]
+    fn action_states<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        for s in self.statuses() {
+            let s = Bound::new(py, s)?;
+            d.set_item(s.getattr(intern!(py, "action_id"))?, s.getattr(intern!(py, "state"))?)?;
+        }
+        Ok(d)
+    }
+
+    /// Collisions since the previous frame.
+    #[getter]
+    fn collisions(&self) -> Vec<PyCollision> {
+        self.header().collisions().iter().map(Into::into).collect()
+    }
+
+    /// How this agent's previous cycle ended: `"stopped"`, `"timed_out"` (the host did not
+    /// get the stop in time) or `"none"` (first frame, or async mode).
+    #[getter]
+    fn previous_outcome(&self) -> &'static str {
+        outcome_name(self.header().previous_outcome)
+    }
+
+    /// How many of this agent's commands the host rejected in the previous cycle.
+    #[getter]
+    fn previous_rejected(&self) -> u32 {
+        self.header().previous_rejected
+    }
+
+    /// Frames the host published that this agent never saw because a newer one was
+    /// waiting (async mode, or after a late stop), counted since the agent connected.
+    #[getter]
+    fn frames_skipped(&self) -> u64 {
+        self.frames_skipped
+    }
+
+    /// Camera names, in image order.
+    #[getter]
+    fn camera_names(&self) -> Vec<String> {
+        self.frame().images().map(|i| i.name().to_owned()).collect()
+    }
+
+    /// The image of camera `name` as a read-only numpy array viewing the frame's memory:
+    /// H×W×3 (rgb8) or H×W×4 (rgba8) `uint8`, H×W `uint8` (gray8), H×W `float32` (depth
+    /// in metres). The array keeps this frame alive.
+    ///
+    /// Raises `KeyError` for an unknown camera.
+    fn image<'py>(slf: &Bound<'py, Self>, name: &str) -> PyResult<Bound<'py, PyAny>> {
+        let me = slf.get();
+        let index = me
+            .frame()
+            .images()
+            .position(|i| i.name() == name)
+            .ok_or_else(|| {
+                PyKeyError::new_err(format!(
+                    "no camera {name:?} in this frame (cameras: {:?})",
+                    me.camera_names()
+                ))
+            })?;
+        image_at(slf, index)
+    }
+
+    /// Every image by camera name (see `image`), in camera order.
+    #[getter]
+    fn images<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyDict>> {
+        let py = slf.py();
+        let d = PyDict::new(py);
+        for (i, name) in slf.get().camera_names().into_iter().enumerate() {
+            d.set_item(name, image_at(slf, i)?)?;
+        }
+        Ok(d)
+    }
+
+    /// The address range `(start, end)` of this frame's images in memory. For checking
+    /// that image arrays are views (their data pointer lies inside it), not copies.
+    #[getter]
+    fn memory_range(&self) -> (usize, usize) {
+        let mut start = usize::MAX;
+        let mut end = 0;
+        for img in self.frame().images() {
+            let d = img.data();
+            start = start.min(d.as_ptr() as usize);
+            end = end.max(d.as_ptr() as usize + d.len());
+        }
+        if start > end { (0, 0) } else { (start, end) }
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "<vrsync.Frame agent={} cycle={} sim_time={:.3}s images={:?}>",
+            self.header().agent_id,
+            self.header().cycle,
+            self.sim_time(),
+            self.camera_names()
+        )
+    }
+}
+
+fn image_at<'py>(frame: &Bound<'py, PyFrame>, index: usize) -> PyResult<Bound<'py, PyAny>> {
+    let py = frame.py();
+    let img = frame
+        .get()
+        .frame()
+        .image(index)
+        .ok_or_else(|| PyKeyError::new_err(format!("no image {index} in this frame")))?;
+    let (w, h, stride) = (
+        img.width() as isize,
+        img.height() as isize,
+        img.stride() as isize,
+    );
+    let format = img.format();
+    let (fmt, itemsize, ndim, shape, strides): (&'static CStr, isize, c_int, _, _) = match format {
+        PixelFormat::Rgb8 => (c"B", 1, 3, [h, w, 3], [stride, 3, 1]),
+        PixelFormat::Rgba8 => (c"B", 1, 3, [h, w, 4], [stride, 4, 1]),
+        PixelFormat::Gray8 => (c"B", 1, 2, [h, w, 0], [stride, 1, 0]),
+        PixelFormat::Depth32f => (c"f", 4, 2, [h, w, 0], [stride, 4, 0]),
+    };
+    let data = img.data();
+    let buffer = Bound::new(
+        py,
+        ImageBuffer {
+            _frame: frame.clone().unbind(),
+            ptr: data.as_ptr() as usize,
+            len: data.len() as isize,
+            format: fmt,
+            itemsize,
+            ndim,
+            shape,
+            strides,
+        },
+    )?;
+    as_array(py, buffer)
+}
+
+/// The memory of one image, exported through the buffer protocol as a read-only
+/// N-dimensional view (what numpy wraps without copying). Keeps its frame alive.
+#[pyclass(module = "vrsync._vrsync", frozen)]
+pub(crate) struct ImageBuffer {
+    _frame: Py<PyFrame>,
+    ptr: usize,
+    len: isize,
+    format: &'static CStr,
+    itemsize: isize,
+    ndim: c_int,
+    shape: [isize; 3],
+    strides: [isize; 3],
+}
+
+#[pymethods]
+impl ImageBuffer {
+    /// Exports the image read-only. A request for a writable buffer raises `BufferError`.
+    ///
+    /// # Safety
+    /// `view` must be a valid `Py_buffer` to fill (Python's buffer protocol guarantees it).
+    unsafe fn __getbuffer__(
+        slf: Bound<'_, Self>,
+        view: *mut ffi::Py_buffer,
+        flags: c_int,
+    ) -> PyResult<()> {
+        if view.is_null() {
+            return Err(PyBufferError::new_err("null Py_buffer"));
+        }
+        if flags & ffi::PyBUF_WRITABLE == ffi::PyBUF_WRITABLE {
+            return Err(PyBufferError::new_err(
+                "vrsync images are read-only views of shared memory; copy the array to modify it",
+            ));
+        }
+        let me = slf.get();
+        let contiguous_row = me.shape[1] * me.itemsize * me.shape[2].max(1);
+        if flags & ffi::PyBUF_STRIDES != ffi::PyBUF_STRIDES && me.strides[0] != contiguous_row {
+            return Err(PyBufferError::new_err(
+                "this image has padded rows: request a strided buffer (numpy does)",
+            ));
+        }
+        // SAFETY: `view` is valid (checked non-null, guaranteed by the protocol). The
+        // pointers stored in it (`buf`, `format`, `shape`, `strides`) point into the frame
+        // (kept alive by `_frame`) and into this object (kept alive by `obj`).
+        unsafe {
+            (*view).buf = me.ptr as *mut c_void;
+            (*view).len = me.len;
+            (*view).readonly = 1;
+            (*view).itemsize = me.itemsize;
+            (*view).format = if flags & ffi::PyBUF_FORMAT == ffi::PyBUF_FORMAT {
+                me.format.as_ptr().cast_mut()
+            } else {
+                std::ptr::null_mut()
+            };
+            if flags & ffi::PyBUF_ND == ffi::PyBUF_ND {
+                (*view).ndim = me.ndim;
+                (*view).shape = me.shape.as_ptr().cast_mut();
+            } else {
+                // A simple request: one dimension of `len` bytes.
+                (*view).ndim = 1;
+                (*view).itemsize = 1;
+                (*view).shape = std::ptr::null_mut();
+            }
+            (*view).strides = if flags & ffi::PyBUF_STRIDES == ffi::PyBUF_STRIDES {
+                me.strides.as_ptr().cast_mut()
+            } else {
+                std::ptr::null_mut()
+            };
+            (*view).suboffsets = std::ptr::null_mut();
+            (*view).internal = std::ptr::null_mut();
+            (*view).obj = slf.into_any().into_ptr();
+        }
+        Ok(())
+    }
+
+    unsafe fn __releasebuffer__(&self, _view: *mut ffi::Py_buffer) {}
+}

@@ -1,0 +1,37 @@
+//! # vrsync-python
+//!
+//! The extension module `vrsync._vrsync`: the Rust agent SDK ([`vrsync_agent::Agent`]) seen
+//! from Python. One implementation of the protocol, so the version/layout check, the
+//! newest-frame rule, host-liveness detection and both transports are the Rust ones.
+//!
+//! - [`agent::PyAgent`] connects, waits (releasing the GIL, in slices short enough that
+//!   Ctrl-C raises `KeyboardInterrupt` at once), sends and stops.
+//! - [`frame::PyFrame`] holds one received frame; its images are exported through the
+//!   buffer protocol as read-only, zero-copy views whose base keeps the frame alive.
+//! - [`commands`] holds one small class per command of the catalogue, checked when built.
+//! - Errors are the exception classes of `vrsync.errors` (pure Python, so that they can
+//!   inherit from both `VrsyncError` and the matching built-in such as `TimeoutError`).
+//!
+//! The pure-Python part of the package (`python/vrsync/`) adds the Gymnasium and PettingZoo
+//! environments and the original client's names.
+
+mod agent;
+mod commands;
+mod errors;
+mod frame;
+mod sensors;
+
+use pyo3::prelude::*;
+
+/// The extension module `vrsync._vrsync`.
+#[pymodule]
+fn _vrsync(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    agent::register(m)?;
+    m.add_class::<frame::PyFrame>()?;
+    m.add_class::<frame::ImageBuffer>()?;
+    sensors::register(m)?;
+    commands::register(m)?;
+    m.add("PROTOCOL_VERSION", vrsync_bridge::wire::PROTOCOL_VERSION)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}
