@@ -603,7 +603,18 @@ impl FrameIter {
     }
 }
 
+/// The agent ids of the config file `config` (its `[[agent]]` entries), sorted.
+///
+/// Raises `ConfigError` for a file that does not load.
+#[pyfunction]
+fn config_agent_ids(py: Python<'_>, config: PathBuf) -> PyResult<Vec<u32>> {
+    let cfg = Config::load(&config)
+        .map_err(|e| error(py, "ConfigError", e.to_string(), &[("path", obj(py, config.clone()))]))?;
+    Ok(cfg.agents.iter().map(|a| a.id).collect())
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(config_agent_ids, m)?)?;
     m.add_class::<PyAgent>()?;
     m.add_class::<FrameIter>()?;
     m.add_class::<PyCamera>()?;

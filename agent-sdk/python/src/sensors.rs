@@ -20,6 +20,14 @@ pub(crate) struct PyPose {
 
 #[pymethods]
 impl PyPose {
+    /// The heading (yaw about +y) in degrees, 0 ≤ h < 360: 0 faces +z, 90 faces +x (the
+    /// convention of `Move.heading_deg`).
+    #[getter]
+    fn heading_deg(&self) -> f32 {
+        let (_, y, _, w) = self.rotation;
+        (2.0 * y.atan2(w)).to_degrees().rem_euclid(360.0)
+    }
+
     fn __repr__(&self) -> String {
         format!(
             "Pose(position={:?}, rotation={:?})",

@@ -52,6 +52,7 @@ from ._vrsync import (
     TrialReset,
     Turn,
     __version__,
+    config_agent_ids,
 )
 from .errors import (
     AgentIdInUseError,
@@ -113,5 +114,6 @@ __all__ = [
     "VrsyncError",
     "WaitTimeoutError",
     "__version__",
+    "config_agent_ids",
     "errors",
 ]

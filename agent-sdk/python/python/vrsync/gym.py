@@ -1,0 +1,249 @@
+"""A Gymnasium environment over one vrsync agent.
+
+::
+
+    import gymnasium as gym
+    from vrsync.gym import VrsyncEnv
+
+    env = VrsyncEnv("config/default.toml", agent_id=0)
+    obs, info = env.reset(seed=0)
+    for _ in range(100):
+        obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+        if terminated or truncated:
+            obs, info = env.reset()
+    env.close()
+
+One ``step`` is one lock-step cycle: the action's commands are sent with the stop, the
+host advances the world by exactly ``simulation_time_per_frame``, and the next frame is
+the observation. ``reset`` sends the protocol's trial reset (or, with
+``options={"reset": "environment"}``, the environment reset) and returns the frame in
+which the reset is done.
+
+The world's randomness comes from the host's config (``seed``); ``reset(seed=…)`` seeds
+only this env's ``np_random`` (for your sampling), as Gymnasium asks.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Callable, Mapping, Sequence
+from os import PathLike
+from typing import Any, Union
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+
+from . import Agent, Command, Frame, Move, Turn
+
+__all__ = ["VrsyncEnv", "DEFAULT_ACTIONS", "LateLearnerWarning"]
+
+ActionEntry = Union[Command, Callable[[Frame], Union[Command, Sequence[Command], None]], None]
+"""What a discrete action maps to: a command, a function of the current frame returning
+command(s), or ``None`` (do nothing this cycle)."""
+
+
+def _forward(distance_m: float) -> Callable[[Frame], Command]:
+    def move(frame: Frame) -> Command:
+        return Move(heading_deg=frame.pose.heading_deg, distance_m=distance_m)
+
+    return move
+
+
+DEFAULT_ACTIONS: tuple[ActionEntry, ...] = (
+    None,  # 0: do nothing
+    _forward(0.5),  # 1: walk 0.5 m straight ahead
+    Turn(angle_deg=-30.0),  # 2: turn 30° to the left
+    Turn(angle_deg=30.0),  # 3: turn 30° to the right
+)
+"""The default action set: ``Discrete(4)`` = nothing, forward 0.5 m, turn left 30°,
+turn right 30°."""
+
+
+class LateLearnerWarning(RuntimeWarning):
+    """The learner took longer between two steps than the host's stop timeout, so the
+    host went on without this agent's commands for that cycle."""
+
+
+def _box_for(camera: Any) -> spaces.Box:
+    if camera.dtype == "float32":
+        return spaces.Box(0.0, np.inf, shape=tuple(camera.shape), dtype=np.float32)
+    return spaces.Box(0, 255, shape=tuple(camera.shape), dtype=np.uint8)
+
+
+class VrsyncEnv(gymnasium.Env[dict[str, Any], Any]):
+    """Gymnasium env for one vrsync agent (sync mode: one step = one cycle).
+
+    Args:
+        config: the vrsync config file the host runs with.
+        agent_id: which agent of the config this env drives.
+        actions: the discrete action set (see :data:`DEFAULT_ACTIONS`); ignored when
+            ``action_space`` and ``action_fn`` are given.
+        action_space: a custom action space; requires ``action_fn``.
+        action_fn: ``action_fn(action, frame) -> Command | list[Command] | None``.
+        terminated_fn: ``terminated_fn(frame) -> bool``; default: never terminates
+            (wrap in ``gymnasium.wrappers.TimeLimit`` for episodes).
+        copy_observations: observations are fresh copies (the default, as Gymnasium
+            expects); ``False`` returns read-only views into shared memory — fastest,
+            but an agent can hold only a few frames: never store such views.
+        session: override the config's session name.
+        connect_timeout: seconds to wait for the host.
+        step_timeout: seconds to wait for the next frame in ``step``/``reset``
+            (default: ``2 × stop_timeout + 5``).
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(
+        self,
+        config: str | PathLike[str],
+        agent_id: int = 0,
+        *,
+        actions: Sequence[ActionEntry] = DEFAULT_ACTIONS,
+        action_space: spaces.Space[Any] | None = None,
+        action_fn: Callable[[Any, Frame], Command | Sequence[Command] | None] | None = None,
+        terminated_fn: Callable[[Frame], bool] | None = None,
+        copy_observations: bool = True,
+        session: str | None = None,
+        connect_timeout: float | None = None,
+        step_timeout: float | None = None,
+    ) -> None:
+        if (action_space is None) != (action_fn is None):
+            raise ValueError("give action_space and action_fn together (or neither)")
+        if action_space is None and not actions:
+            raise ValueError("actions must not be empty")
+        self.agent = Agent.connect(
+            config, agent_id, session=session, connect_timeout=connect_timeout
+        )
+        self._actions = tuple(actions)
+        self._action_fn = action_fn
+        self.action_space = (
+            action_space if action_space is not None else spaces.Discrete(len(self._actions))
+        )
+        self._terminated_fn = terminated_fn
+        self._copy = copy_observations
+        self._step_timeout = (
+            step_timeout if step_timeout is not None else 2 * self.agent.stop_timeout + 5.0
+        )
+        cams = {c.name: _box_for(c) for c in self.agent.cameras}
+        self.observation_space = spaces.Dict(
+            {
+                **cams,
+                "position": spaces.Box(-np.inf, np.inf, shape=(3,), dtype=np.float32),
+                "rotation": spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32),
+            }
+        )
+        self.frame: Frame | None = None
+        """The current frame (the one the last observation came from)."""
+        self._frame_at = 0.0
+        self._episode_start_ns = 0
+        self._episode_steps = 0
+        self._episode_skipped = 0
+
+    # ---- helpers -------------------------------------------------------------------
+    def _observe(self, frame: Frame) -> dict[str, Any]:
+        obs: dict[str, Any] = {}
+        for name, img in frame.images.items():
+            obs[name] = np.array(img) if self._copy else img
+        pose = frame.pose
+        obs["position"] = np.array(pose.position, dtype=np.float32)
+        obs["rotation"] = np.clip(np.array(pose.rotation, dtype=np.float32), -1.0, 1.0)
+        return obs
+
+    def _info(self, frame: Frame) -> dict[str, Any]:
+        # Only what is the same for the same seed and actions: the absolute cycle and the
+        # action ids live on `self.frame` and `self.agent`.
+        return {
+            "episode_step": self._episode_steps,
+            "episode_sim_time": (frame.sim_time_ns - self._episode_start_ns) * 1e-9,
+            "collisions": [c.collider_id for c in frame.collisions],
+            "previous_outcome": frame.previous_outcome,
+            "frames_skipped": self.agent.frames_skipped - self._episode_skipped,
+        }
+
+    def _commands(self, action: Any, frame: Frame) -> list[Command]:
+        if self._action_fn is not None:
+            out = self._action_fn(action, frame)
+        else:
+            index = int(action)
+            if not 0 <= index < len(self._actions):
+                raise ValueError(f"action {action!r} is not in {self.action_space}")
+            entry = self._actions[index]
+            out = entry(frame) if callable(entry) and not isinstance(entry, Command) else entry
+        if out is None:
+            return []
+        if isinstance(out, Command):
+            return [out]
+        return list(out)
+
+    def _send_stop(self, commands: list[Command]) -> None:
+        """Sends `commands` and the stop for the current frame (warns if it is late)."""
+        late = time.monotonic() - self._frame_at
+        if self.agent.sync_mode and late > self.agent.stop_timeout:
+            warnings.warn(
+                f"agent {self.agent.id}: the learner took {late:.2f} s between steps, more "
+                f"than the host's stop_timeout of {self.agent.stop_timeout:g} s, so the host "
+                "went on without this agent's commands (raise [sync] stop_timeout in the "
+                "config, or step faster)",
+                LateLearnerWarning,
+                stacklevel=4,
+            )
+        for c in commands:
+            self.agent.send(c)
+        self.agent.stop()
+        self.frame = None  # release the old frame before waiting for the next
+
+    def _receive(self) -> Frame:
+        """Waits for the next frame and makes it the current one."""
+        frame = self.agent.wait(timeout=self._step_timeout)
+        self._frame_at = time.monotonic()
+        self.frame = frame
+        return frame
+
+    def _start_episode(self, kind: str) -> None:
+        """Sends the reset of `kind` ("trial" or "environment") with this cycle's stop."""
+        from . import EnvironmentReset, TrialReset
+
+        if kind not in ("trial", "environment"):
+            raise ValueError(f'options["reset"] must be "trial" or "environment", got {kind!r}')
+        if self.frame is None:
+            self._receive()
+        self._send_stop([TrialReset() if kind == "trial" else EnvironmentReset()])
+
+    def _episode_begun(self, frame: Frame) -> tuple[dict[str, Any], dict[str, Any]]:
+        self._episode_start_ns = frame.sim_time_ns
+        self._episode_steps = 0
+        self._episode_skipped = self.agent.frames_skipped
+        return self._observe(frame), self._info(frame)
+
+    def _step_done(self, frame: Frame) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
+        self._episode_steps += 1
+        terminated = bool(self._terminated_fn(frame)) if self._terminated_fn else False
+        return self._observe(frame), float(frame.reward), terminated, False, self._info(frame)
+
+    # ---- the Gymnasium API ---------------------------------------------------------
+    def reset(
+        self, *, seed: int | None = None, options: Mapping[str, Any] | None = None
+    ) -> tuple[dict[str, Any], dict[str, Any]]:
+        """Resets the trial (``options={"reset": "environment"}`` resets the whole
+        environment) and returns the observation of the frame in which it is done."""
+        super().reset(seed=seed)
+        self._start_episode((options or {}).get("reset", "trial"))
+        return self._episode_begun(self._receive())
+
+    def step(
+        self, action: Any
+    ) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
+        """Sends the action's commands with this cycle's stop and returns the next frame's
+        observation, its reward, ``terminated_fn(frame)``, ``False`` and an info dict."""
+        if self.frame is None:
+            raise RuntimeError("call reset() before step()")
+        self._send_stop(self._commands(action, self.frame))
+        return self._step_done(self._receive())
+
+    def close(self) -> None:
+        """Disconnects the agent (the host evicts it and goes on)."""
+        self.frame = None
+        self.agent.close()
+        super().close()

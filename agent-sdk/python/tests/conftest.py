@@ -1,0 +1,177 @@
+"""Fixtures: isolated sessions, config files, and real `vr-sim` host processes.
+
+Every host gets its own session name (and a TCP port of its own); every wait has a
+deadline; every process a test starts is killed when the test ends.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[3]
+_COUNTER = itertools.count()
+
+
+def bin_dir() -> Path:
+    """Where `vr-sim` and `vr-agent` are: $VRSYNC_BIN_DIR, else target/debug."""
+    return Path(os.environ.get("VRSYNC_BIN_DIR", ROOT / "target" / "debug"))
+
+
+def binary(name: str) -> Path:
+    path = bin_dir() / name
+    if not path.exists():
+        pytest.fail(
+            f"{path} does not exist: build it first (`cargo build -p vrsync-sim -p vrsync-agent`) "
+            "or set VRSYNC_BIN_DIR; scripts/test-all does both",
+            pytrace=False,
+        )
+    return path
+
+
+def session(tag: str) -> str:
+    """A session name unique to this test process and call."""
+    return f"py{os.getpid()}-{next(_COUNTER)}-{tag}"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+CAMERAS_SMALL = (("left", 64, "rgb8"), ("right", 64, "rgb8"))
+
+
+def write_config(
+    directory: Path,
+    tag: str,
+    *,
+    agents: int = 1,
+    transport: str = "shm",
+    sync_mode: bool = True,
+    stop_timeout: float = 5.0,
+    connect_timeout: float = 20.0,
+    cameras: Sequence[tuple[str, int, str]] = CAMERAS_SMALL,
+) -> tuple[Path, str]:
+    """Writes a config for `agents` agents with `cameras` ((name, width, format); height
+    from a 120°×90° field of view) and returns (path, session)."""
+    name = session(tag)
+    port = free_port() if transport == "tcp" else 7400
+    lines = [
+        f'session = "{name}"',
+        "seed = 7",
+        "[sync]",
+        f"sync_mode = {'true' if sync_mode else 'false'}",
+        "simulation_time_per_frame = 0.1",
+        f"stop_timeout = {stop_timeout}",
+        f"connect_timeout = {connect_timeout}",
+        "[transport]",
+        f'kind = "{transport}"',
+        f'tcp_listen = "127.0.0.1:{port}"',
+    ]
+    for i in range(agents):
+        lines += ["[[agent]]", f"id = {i}"]
+        for cam, width, fmt in cameras:
+            lines += [
+                "[[agent.camera]]",
+                f'name = "{cam}"',
+                f"width = {width}",
+                f'format = "{fmt}"',
+                "fov_horizontal_deg = 120.0",
+                "fov_vertical_deg = 90.0",
+            ]
+    path = directory / f"{name}.toml"
+    path.write_text("\n".join(lines) + "\n")
+    return path, name
+
+
+class Host:
+    """A `vr-sim run` process; killed at the end of the test if still running."""
+
+    def __init__(self, config: Path, frames: int | None, extra: Sequence[str] = ()) -> None:
+        self.summary_path = config.with_suffix(".summary.json")
+        args = [str(binary("vr-sim")), "run", "--config", str(config), "--quiet"]
+        if frames is not None:
+            args += ["--frames", str(frames)]
+        args += ["--summary-json", str(self.summary_path), *extra]
+        self.proc = subprocess.Popen(
+            args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
+
+    def finish(self, timeout: float = 60.0) -> dict[str, Any]:
+        """Waits for the host to exit 0 and returns its summary."""
+        try:
+            out, err = self.proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.kill()
+            pytest.fail(f"vr-sim did not finish within {timeout} s")
+        assert self.proc.returncode == 0, f"vr-sim exited {self.proc.returncode}:\n{err}"
+        return json.loads(self.summary_path.read_text())
+
+    def kill(self, sig: int = signal.SIGKILL) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            self.proc.wait(timeout=30)
+
+
+@pytest.fixture
+def hosts() -> Iterator[list[Host]]:
+    """Start hosts with `hosts.append(Host(...))`; all are killed at the end."""
+    started: list[Host] = []
+    yield started
+    for h in started:
+        h.kill()
+
+
+@pytest.fixture
+def start_host(hosts: list[Host]):  # type: ignore[no-untyped-def]
+    def start(config: Path, frames: int | None = None, extra: Sequence[str] = ()) -> Host:
+        h = Host(config, frames, extra)
+        hosts.append(h)
+        return h
+
+    return start
+
+
+def run_python(code: str, timeout: float = 60.0, **popen: Any) -> subprocess.Popen[str]:
+    """Starts `python -c code` (same interpreter); the caller waits with a deadline."""
+    return subprocess.Popen(
+        [sys.executable, "-c", code],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **popen,
+    )
+
+
+def wait_line(proc: subprocess.Popen[str], expected: str, timeout: float) -> None:
+    """Waits until the child prints `expected` on a line of its own (a readiness marker the
+    test's own child prints, not log text)."""
+    import selectors
+
+    assert proc.stdout is not None
+    sel = selectors.DefaultSelector()
+    sel.register(proc.stdout, selectors.EVENT_READ)
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if sel.select(timeout=max(0.0, deadline - time.monotonic())):
+            line = proc.stdout.readline()
+            if not line:
+                break
+            if line.strip() == expected:
+                return
+    proc.kill()
+    _, err = proc.communicate(timeout=10)
+    pytest.fail(f"child did not print {expected!r} within {timeout} s; stderr:\n{err}")
