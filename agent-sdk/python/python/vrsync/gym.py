@@ -66,9 +66,14 @@ class LateLearnerWarning(RuntimeWarning):
     host went on without this agent's commands for that cycle."""
 
 
+# Bounds of positions and depths in metres: finite (Gymnasium warns about infinite
+# bounds), far beyond any world vr-sim builds.
+_FAR_M = 1.0e6
+
+
 def _box_for(camera: Any) -> spaces.Box:
     if camera.dtype == "float32":
-        return spaces.Box(0.0, np.inf, shape=tuple(camera.shape), dtype=np.float32)
+        return spaces.Box(0.0, _FAR_M, shape=tuple(camera.shape), dtype=np.float32)
     return spaces.Box(0, 255, shape=tuple(camera.shape), dtype=np.uint8)
 
 
@@ -130,7 +135,7 @@ class VrsyncEnv(gymnasium.Env[dict[str, Any], Any]):
         self.observation_space = spaces.Dict(
             {
                 **cams,
-                "position": spaces.Box(-np.inf, np.inf, shape=(3,), dtype=np.float32),
+                "position": spaces.Box(-_FAR_M, _FAR_M, shape=(3,), dtype=np.float32),
                 "rotation": spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32),
             }
         )
