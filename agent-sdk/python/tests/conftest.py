@@ -92,8 +92,12 @@ def write_config(
                 "fov_horizontal_deg = 120.0",
                 "fov_vertical_deg = 90.0",
             ]
+    text = "\n".join(lines) + "\n"
+    # The world of the default config (room, objects, starts, rewards).
+    default = (ROOT / "config" / "default.toml").read_text()
+    text += default[default.index("\n[world]") :]
     path = directory / f"{name}.toml"
-    path.write_text("\n".join(lines) + "\n")
+    path.write_text(text)
     return path, name
 
 

@@ -1,0 +1,372 @@
+"""Type stubs of the extension module `vrsync._vrsync` (built from Rust with PyO3)."""
+
+from collections.abc import Iterator
+from os import PathLike
+from typing import Any, final
+
+import numpy.typing as npt
+
+PROTOCOL_VERSION: int
+__version__: str
+
+def config_agent_ids(config: str | PathLike[str]) -> list[int]:
+    """The agent ids of the config file (its ``[[agent]]`` entries), sorted."""
+
+@final
+class Pose:
+    """Body pose: ``position`` (x, y, z metres, y up), ``rotation`` quaternion (x, y, z, w)."""
+
+    @property
+    def position(self) -> tuple[float, float, float]: ...
+    @property
+    def rotation(self) -> tuple[float, float, float, float]: ...
+    @property
+    def heading_deg(self) -> float:
+        """Yaw about +y in degrees, 0 ≤ h < 360 (0 faces +z): ``Move.heading_deg``'s convention."""
+
+@final
+class GridPosition:
+    """Grid position sensor: position (metres) and Euler rotation (degrees)."""
+
+    @property
+    def position(self) -> tuple[float, float, float]: ...
+    @property
+    def rotation_deg(self) -> tuple[float, float, float]: ...
+
+@final
+class HeadMotion:
+    """Head motion sensor (each x, y, z)."""
+
+    @property
+    def velocity(self) -> tuple[float, float, float]: ...
+    @property
+    def acceleration(self) -> tuple[float, float, float]: ...
+    @property
+    def angular_velocity_deg(self) -> tuple[float, float, float]: ...
+    @property
+    def angular_acceleration_deg(self) -> tuple[float, float, float]: ...
+
+@final
+class EyePosition:
+    """Eye position sensor: rotation (pan left, pan right, tilt) and its change per cycle."""
+
+    @property
+    def rotation_deg(self) -> tuple[float, float, float]: ...
+    @property
+    def rotation_velocity_deg(self) -> tuple[float, float, float]: ...
+
+@final
+class ActionState:
+    """Execution state of an action (values of the original protocol)."""
+
+    InExecution: ActionState
+    Finished: ActionState
+    Aborted: ActionState
+    Walking: ActionState
+    Rotating: ActionState
+    WalkingRotating: ActionState
+    @property
+    def done(self) -> bool:
+        """``Finished`` or ``Aborted``."""
+    def __int__(self) -> int: ...
+
+@final
+class ActionStatus:
+    """An action's state as reported in a frame."""
+
+    @property
+    def action_id(self) -> int: ...
+    @property
+    def state(self) -> ActionState: ...
+
+@final
+class Collision:
+    """A collision: the running action and what was hit."""
+
+    @property
+    def action_id(self) -> int: ...
+    @property
+    def collider_id(self) -> int: ...
+
+@final
+class Camera:
+    """One configured camera of an agent."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def width(self) -> int: ...
+    @property
+    def height(self) -> int: ...
+    @property
+    def format(self) -> str:
+        """``"rgb8"``, ``"rgba8"``, ``"gray8"`` or ``"depth32f"``."""
+    @property
+    def fov_horizontal_deg(self) -> float: ...
+    @property
+    def fov_vertical_deg(self) -> float: ...
+    @property
+    def shape(self) -> list[int]:
+        """The numpy shape of its images: (H, W, 3), (H, W, 4) or (H, W)."""
+    @property
+    def dtype(self) -> str:
+        """``"uint8"`` or ``"float32"``."""
+
+@final
+class Frame:
+    """One sensor frame. Image arrays are read-only views of its memory and keep it alive;
+    copy what you keep beyond the cycle (an agent can hold only a few frames)."""
+
+    @property
+    def cycle(self) -> int: ...
+    @property
+    def sim_time(self) -> float:
+        """Simulated seconds at the start of this cycle."""
+    @property
+    def sim_time_ns(self) -> int: ...
+    @property
+    def agent_id(self) -> int: ...
+    @property
+    def sync_mode(self) -> bool: ...
+    @property
+    def pose(self) -> Pose: ...
+    @property
+    def grid(self) -> GridPosition: ...
+    @property
+    def head_motion(self) -> HeadMotion: ...
+    @property
+    def eye(self) -> EyePosition: ...
+    @property
+    def reward(self) -> float: ...
+    @property
+    def statuses(self) -> list[ActionStatus]: ...
+    @property
+    def action_states(self) -> dict[int, ActionState]:
+        """The newest state per action id reported in this frame."""
+    @property
+    def collisions(self) -> list[Collision]: ...
+    @property
+    def previous_outcome(self) -> str:
+        """``"stopped"``, ``"timed_out"`` or ``"none"``."""
+    @property
+    def previous_rejected(self) -> int: ...
+    @property
+    def frames_skipped(self) -> int: ...
+    @property
+    def camera_names(self) -> list[str]: ...
+    def image(self, name: str) -> npt.NDArray[Any]:
+        """Camera ``name`` as a read-only view: H×W×3/H×W×4/H×W uint8 or H×W float32.
+
+        Raises ``KeyError`` for an unknown camera."""
+    @property
+    def images(self) -> dict[str, npt.NDArray[Any]]:
+        """Every image by camera name, in camera order."""
+    @property
+    def memory_range(self) -> tuple[int, int]:
+        """Address range of this frame's images (to check that arrays are views)."""
+
+@final
+class ImageBuffer:
+    """The buffer-protocol exporter behind an image array (internal)."""
+
+class Command:
+    """Base class of every command; send one with ``Agent.send``."""
+
+    @property
+    def name(self) -> str: ...
+
+@final
+class Move(Command):
+    """Walk towards ``heading_deg`` (world frame) for ``distance_m`` metres."""
+
+    def __init__(self, heading_deg: float, distance_m: float) -> None: ...
+    @property
+    def heading_deg(self) -> float: ...
+    @property
+    def distance_m(self) -> float: ...
+
+@final
+class Turn(Command):
+    """Turn in place by ``angle_deg`` (positive = clockwise seen from above)."""
+
+    def __init__(self, angle_deg: float) -> None: ...
+    @property
+    def angle_deg(self) -> float: ...
+
+@final
+class MoveTo(Command):
+    """Walk straight to the world position (x, y, z)."""
+
+    def __init__(self, x: float, y: float, z: float) -> None: ...
+    @property
+    def x(self) -> float: ...
+    @property
+    def y(self) -> float: ...
+    @property
+    def z(self) -> float: ...
+
+@final
+class CancelMove(Command):
+    """Cancel the running movement."""
+
+    def __init__(self) -> None: ...
+
+@final
+class EyeMovement(Command):
+    """Move the eyes (degrees, each within ±180)."""
+
+    def __init__(self, pan_left_deg: float, pan_right_deg: float, tilt_deg: float = 0.0) -> None: ...
+    @property
+    def pan_left_deg(self) -> float: ...
+    @property
+    def pan_right_deg(self) -> float: ...
+    @property
+    def tilt_deg(self) -> float: ...
+
+@final
+class EyeFixation(Command):
+    """Fixate the world point (x, y, z) with both eyes."""
+
+    def __init__(self, x: float, y: float, z: float) -> None: ...
+    @property
+    def x(self) -> float: ...
+    @property
+    def y(self) -> float: ...
+    @property
+    def z(self) -> float: ...
+
+@final
+class GraspId(Command):
+    """Grasp the object ``object_id``."""
+
+    def __init__(self, object_id: int) -> None: ...
+    @property
+    def object_id(self) -> int: ...
+
+@final
+class PointId(Command):
+    """Point at the object ``object_id``."""
+
+    def __init__(self, object_id: int) -> None: ...
+    @property
+    def object_id(self) -> int: ...
+
+@final
+class InteractId(Command):
+    """Interact with the object ``object_id``."""
+
+    def __init__(self, object_id: int) -> None: ...
+    @property
+    def object_id(self) -> int: ...
+
+@final
+class GraspPos(Command):
+    """Grasp what is seen at left-image pixel (x_px, y_px)."""
+
+    def __init__(self, x_px: float, y_px: float) -> None: ...
+    @property
+    def x_px(self) -> float: ...
+    @property
+    def y_px(self) -> float: ...
+
+@final
+class PointPos(Command):
+    """Point at what is seen at left-image pixel (x_px, y_px)."""
+
+    def __init__(self, x_px: float, y_px: float) -> None: ...
+    @property
+    def x_px(self) -> float: ...
+    @property
+    def y_px(self) -> float: ...
+
+@final
+class InteractPos(Command):
+    """Interact with what is seen at left-image pixel (x_px, y_px)."""
+
+    def __init__(self, x_px: float, y_px: float) -> None: ...
+    @property
+    def x_px(self) -> float: ...
+    @property
+    def y_px(self) -> float: ...
+
+@final
+class GraspRelease(Command):
+    """Release the grasped object."""
+
+    def __init__(self) -> None: ...
+
+@final
+class EnvironmentReset(Command):
+    """Reset the environment."""
+
+    def __init__(self, reset_type: int = 0) -> None: ...
+    @property
+    def reset_type(self) -> int: ...
+
+@final
+class TrialReset(Command):
+    """Reset the trial."""
+
+    def __init__(self, reset_type: int = 0) -> None: ...
+    @property
+    def reset_type(self) -> int: ...
+
+@final
+class FrameIter(Iterator[Frame]):
+    """Iterator of ``Agent.frames()``; ends when the host closes the session."""
+
+    def __iter__(self) -> FrameIter: ...
+    def __next__(self) -> Frame: ...
+
+@final
+class Agent:
+    """An agent connected to a vrsync host."""
+
+    @staticmethod
+    def connect(
+        config: str | PathLike[str],
+        agent_id: int,
+        *,
+        session: str | None = None,
+        connect_timeout: float | None = None,
+    ) -> Agent:
+        """Connects agent ``agent_id`` to the host of ``config``'s session."""
+    def wait(self, timeout: float | None = None) -> Frame:
+        """Waits for the next frame (raises ``HostClosedError`` at the end of the session)."""
+    def frames(self, timeout: float | None = None) -> FrameIter:
+        """Frames until the host closes the session."""
+    def send(self, command: Command) -> int:
+        """Queues ``command``; returns its action id."""
+    def send_with_id(self, action_id: int, command: Command) -> None:
+        """Queues ``command`` with an action id of your choice."""
+    def stop(self) -> None:
+        """Sends the queued commands with the stop for this cycle."""
+    def close(self) -> None:
+        """Disconnects (idempotent)."""
+    def __enter__(self) -> Agent: ...
+    def __exit__(self, *args: object) -> bool: ...
+    @property
+    def id(self) -> int: ...
+    @property
+    def session(self) -> str: ...
+    @property
+    def config_path(self) -> str: ...
+    @property
+    def transport(self) -> str: ...
+    @property
+    def sync_mode(self) -> bool: ...
+    @property
+    def stop_timeout(self) -> float: ...
+    @property
+    def simulation_time_per_frame(self) -> float: ...
+    @property
+    def max_commands_per_cycle(self) -> int: ...
+    @property
+    def cameras(self) -> list[Camera]: ...
+    @property
+    def last_cycle(self) -> int | None: ...
+    @property
+    def frames_skipped(self) -> int: ...
+    @property
+    def closed(self) -> bool: ...
+
