@@ -30,6 +30,9 @@ pub struct BenchOptions {
     pub csv: Option<PathBuf>,
     /// SVG plot.
     pub plot: Option<PathBuf>,
+    /// Python interpreter for the `python` rows (the agent is `python -m
+    /// vrsync.bench_agent`); `None`: no Python rows.
+    pub python: Option<PathBuf>,
 }
 
 /// One measured configuration (DESIGN §8 bench JSON keys, plus allocations).
@@ -106,11 +109,18 @@ struct Agents(Vec<Child>);
 
 impl Agents {
     fn spawn(args_for: impl Fn(u32) -> Vec<String>, n: u32) -> anyhow::Result<Self> {
-        let exe = exe("vr-bench-agent")?;
+        Self::spawn_program(&exe("vr-bench-agent")?, args_for, n)
+    }
+
+    fn spawn_program(
+        exe: &Path,
+        args_for: impl Fn(u32) -> Vec<String>,
+        n: u32,
+    ) -> anyhow::Result<Self> {
         let mut children = Vec::new();
         for id in 0..n {
             children.push(
-                Command::new(&exe)
+                Command::new(exe)
                     .args(args_for(id))
                     .stdout(Stdio::piped())
                     .stderr(Stdio::inherit())
@@ -263,8 +273,36 @@ fn config_text(case: &Case, session: &str) -> String {
     s
 }
 
+/// The interpreter for the `python` rows, if it can import `vrsync` (else the rows are
+/// left out, saying why).
+fn python_agent(python: Option<&Path>) -> Option<PathBuf> {
+    let python = python?;
+    let ok = Command::new(python)
+        .args(["-c", "import vrsync.bench_agent"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if ok {
+        Some(python.to_path_buf())
+    } else {
+        println!(
+            "python rows left out: {} cannot import vrsync (pip install ./agent-sdk/python, \
+             or give --python)",
+            python.display()
+        );
+        None
+    }
+}
+
 /// A full vrsync cycle through the host API.
-fn bench_vrsync(case: &Case, session: &str, dir: &Path, render: bool) -> anyhow::Result<Measured> {
+fn bench_vrsync(
+    case: &Case,
+    session: &str,
+    dir: &Path,
+    render: bool,
+    python: Option<&Path>,
+) -> anyhow::Result<Measured> {
     let text = config_text(case, session);
     let mut config = Config::from_toml_str(&text, Path::new("<bench>"))?;
     let mut host = Host::builder(&config)
@@ -283,21 +321,40 @@ fn bench_vrsync(case: &Case, session: &str, dir: &Path, render: bool) -> anyhow:
         f64::NAN
     };
     let warmup = case.warmup;
-    let agents = Agents::spawn(
-        |id| {
-            vec![
-                "--mode".into(),
-                "sdk".into(),
-                "--config".into(),
-                path.display().to_string(),
-                "--id".into(),
-                id.to_string(),
-                "--warmup".into(),
-                warmup.to_string(),
-            ]
-        },
-        case.agents,
-    )?;
+    let config_arg = path.display().to_string();
+    let agents = match python {
+        // The Python agent does the Rust agent's work (first and last byte of every row,
+        // one command, stop) through the Python SDK.
+        Some(python) if case.transport == "python" => Agents::spawn_program(
+            python,
+            |id| {
+                vec![
+                    "-m".into(),
+                    "vrsync.bench_agent".into(),
+                    "--config".into(),
+                    config_arg.clone(),
+                    "--id".into(),
+                    id.to_string(),
+                ]
+            },
+            case.agents,
+        )?,
+        _ => Agents::spawn(
+            |id| {
+                vec![
+                    "--mode".into(),
+                    "sdk".into(),
+                    "--config".into(),
+                    config_arg.clone(),
+                    "--id".into(),
+                    id.to_string(),
+                    "--warmup".into(),
+                    warmup.to_string(),
+                ]
+            },
+            case.agents,
+        )?,
+    };
     host.wait_for_agents(Duration::from_secs(30))?;
     let ids: Vec<u32> = host.agent_ids().collect();
     let mut hist = histogram()?;
@@ -466,6 +523,7 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
         &[(320, 240), (640, 480), (1280, 720), (1920, 1080)]
     };
     let agent_counts: &[u32] = if opts.quick { &[1, 4] } else { &[1, 2, 4] };
+    let python = python_agent(opts.python.as_deref());
     // The bench agents' configs: in a private temp dir (random name, mode 0700), not at a
     // predictable /tmp path; removed at the end.
     let dir = {
@@ -514,6 +572,10 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
             }
             cases.push(mk("tcp", tcp_cycles));
             cases.push(mk("floor-tcp", tcp_cycles));
+            // The Python agent (1 agent, the smallest and the largest image set).
+            if python.is_some() && agents == 1 && (w == 320 || w == 1920) {
+                cases.push(mk("python", shm_cycles));
+            }
             // Rounds interleave the cases, so a change of the machine's state (other load,
             // CPU idle states) hits vrsync and its floor alike; each round measures a third
             // of the cycles and the histograms are merged.
@@ -524,7 +586,13 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
                         "floor-shm" => bench_floor_shm(case, &session(&mut n), false)?,
                         "floor-shm-spin" => bench_floor_shm(case, &session(&mut n), true)?,
                         "floor-tcp" => bench_floor_tcp(case)?,
-                        _ => bench_vrsync(case, &session(&mut n), dir.path(), round == 0)?,
+                        _ => bench_vrsync(
+                            case,
+                            &session(&mut n),
+                            dir.path(),
+                            round == 0,
+                            python.as_deref(),
+                        )?,
                     };
                     match acc {
                         Some(a) => a.merge(m)?,
@@ -591,6 +659,10 @@ fn print_row(r: &Row) {
     let _ = std::io::stdout().flush();
 }
 
+fn size_name(w: u32) -> &'static str {
+    if w == 1920 { "3x1920x1080" } else { "3x320x240" }
+}
+
 fn find<'a>(rows: &'a [Row], t: &str, agents: u32, w: u32) -> Option<&'a Row> {
     rows.iter()
         .find(|r| r.transport == t && r.agents == agents && r.width == w)
@@ -647,6 +719,21 @@ fn print_ratios(rows: &[Row]) {
                 find(rows, "shm", agents, 1920),
             ),
             if agents == 1 { ">= 200" } else { "report" },
+        );
+    }
+    for w in [320, 1920] {
+        line(
+            &format!("python / shm (Rust agent), 1 agent, {}", size_name(w)),
+            ratio(find(rows, "python", 1, w), find(rows, "shm", 1, w)),
+            "<= 2",
+        );
+    }
+    let growth = |t: &str| ratio(find(rows, t, 1, 1920), find(rows, t, 1, 320));
+    if let (Some(py), Some(rust)) = (growth("python"), growth("shm")) {
+        line(
+            "python 1080p/320x240 growth / Rust agent's growth",
+            Some(py / rust),
+            "<= 1.2",
         );
     }
     line(

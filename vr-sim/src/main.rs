@@ -82,6 +82,7 @@ fn bench_cmd(args: BenchArgs) -> anyhow::Result<ExitCode> {
         json: args.json,
         csv: args.csv,
         plot: args.plot,
+        python: (!args.no_python).then_some(args.python),
     })?;
     Ok(ExitCode::SUCCESS)
 }
