@@ -660,7 +660,11 @@ fn print_row(r: &Row) {
 }
 
 fn size_name(w: u32) -> &'static str {
-    if w == 1920 { "3x1920x1080" } else { "3x320x240" }
+    if w == 1920 {
+        "3x1920x1080"
+    } else {
+        "3x320x240"
+    }
 }
 
 fn find<'a>(rows: &'a [Row], t: &str, agents: u32, w: u32) -> Option<&'a Row> {

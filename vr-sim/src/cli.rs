@@ -48,7 +48,12 @@ pub struct BenchArgs {
     /// Python interpreter for the `python` rows (`python -m vrsync.bench_agent`, the
     /// Python SDK doing the Rust bench agent's work); rows are left out, saying why, when
     /// it cannot import vrsync (`pip install ./agent-sdk/python`).
-    #[arg(long, value_name = "PYTHON", env = "VRSYNC_PYTHON", default_value = "python3")]
+    #[arg(
+        long,
+        value_name = "PYTHON",
+        env = "VRSYNC_PYTHON",
+        default_value = "python3"
+    )]
     pub python: PathBuf,
     /// Leave out the Python rows.
     #[arg(long)]

@@ -7,9 +7,7 @@ use std::time::{Duration, Instant};
 
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use vrsync_agent::{
-    Agent, AgentBuilder, AgentConnectError, SendError, StopError, WaitStartError,
-};
+use vrsync_agent::{Agent, AgentBuilder, AgentConnectError, SendError, StopError, WaitStartError};
 use vrsync_bridge::config::{Config, TransportKind};
 use vrsync_bridge::transport::shm::ShmAgentConnectError;
 use vrsync_bridge::transport::tcp::TcpAgentConnectError;
@@ -313,9 +311,8 @@ impl PyAgent {
         session: Option<String>,
         connect_timeout: Option<f64>,
     ) -> PyResult<Self> {
-        let id = u32::try_from(agent_id).map_err(|_| {
-            PyValueError::new_err(format!("agent_id must be ≥ 0, got {agent_id}"))
-        })?;
+        let id = u32::try_from(agent_id)
+            .map_err(|_| PyValueError::new_err(format!("agent_id must be ≥ 0, got {agent_id}")))?;
         let mut cfg = Config::load(&config).map_err(|e| {
             error(
                 py,
@@ -459,7 +456,10 @@ impl PyAgent {
         let agent = self.enter()?;
         agent.stop().map_err(|e| {
             let msg = e.to_string();
-            let base = [("session", obj(py, session.as_str())), ("agent_id", obj(py, id))];
+            let base = [
+                ("session", obj(py, session.as_str())),
+                ("agent_id", obj(py, id)),
+            ];
             match e {
                 StopError::HostClosed => error(py, "HostClosedError", msg, &base),
                 StopError::NoFrame | StopError::AlreadyStopped { .. } => {
@@ -572,7 +572,12 @@ impl PyAgent {
 }
 
 fn send_error(py: Python<'_>, e: SendError, id: u32) -> PyErr {
-    error(py, "QueueFullError", e.to_string(), &[("agent_id", obj(py, id))])
+    error(
+        py,
+        "QueueFullError",
+        e.to_string(),
+        &[("agent_id", obj(py, id))],
+    )
 }
 
 /// Iterator returned by `Agent.frames()`: yields frames until the host closes the session.
@@ -608,8 +613,14 @@ impl FrameIter {
 /// Raises `ConfigError` for a file that does not load.
 #[pyfunction]
 fn config_agent_ids(py: Python<'_>, config: PathBuf) -> PyResult<Vec<u32>> {
-    let cfg = Config::load(&config)
-        .map_err(|e| error(py, "ConfigError", e.to_string(), &[("path", obj(py, config.clone()))]))?;
+    let cfg = Config::load(&config).map_err(|e| {
+        error(
+            py,
+            "ConfigError",
+            e.to_string(),
+            &[("path", obj(py, config.clone()))],
+        )
+    })?;
     Ok(cfg.agents.iter().map(|a| a.id).collect())
 }
 

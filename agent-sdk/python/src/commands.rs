@@ -5,8 +5,8 @@
 //! rejected command in the next frame (`Frame.previous_rejected`).
 
 use glam::Vec3;
-use pyo3::exceptions::PyValueError;
 use pyo3::PyClass;
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use vrsync_bridge::wire::Command;
 
@@ -50,12 +50,8 @@ fn non_negative(name: &str, v: f64) -> PyResult<f32> {
 }
 
 fn id(name: &str, v: i64) -> PyResult<u32> {
-    u32::try_from(v).map_err(|_| {
-        PyValueError::new_err(format!(
-            "{name} must be in 0..={}, got {v}",
-            u32::MAX
-        ))
-    })
+    u32::try_from(v)
+        .map_err(|_| PyValueError::new_err(format!("{name} must be in 0..={}, got {v}", u32::MAX)))
 }
 
 /// The base class of every command. Send one with `Agent.send(command)`.
@@ -87,7 +83,9 @@ impl PyCommand {
                 distance,
             } => format!("Move(heading_deg={heading_deg}, distance_m={distance})"),
             C::Turn { angle_deg } => format!("Turn(angle_deg={angle_deg})"),
-            C::MoveTo { target } => format!("MoveTo(x={}, y={}, z={})", target.x, target.y, target.z),
+            C::MoveTo { target } => {
+                format!("MoveTo(x={}, y={}, z={})", target.x, target.y, target.z)
+            }
             C::CancelMove => "CancelMove()".into(),
             C::EyeMovement {
                 pan_left_deg,
@@ -97,7 +95,10 @@ impl PyCommand {
                 "EyeMovement(pan_left_deg={pan_left_deg}, pan_right_deg={pan_right_deg}, tilt_deg={tilt_deg})"
             ),
             C::EyeFixation { target } => {
-                format!("EyeFixation(x={}, y={}, z={})", target.x, target.y, target.z)
+                format!(
+                    "EyeFixation(x={}, y={}, z={})",
+                    target.x, target.y, target.z
+                )
             }
             C::GraspId { object_id } => format!("GraspId(object_id={object_id})"),
             C::GraspPos { x_px, y_px } => format!("GraspPos(x_px={x_px}, y_px={y_px})"),
@@ -171,11 +172,7 @@ impl Turn {
 }
 
 fn point(x: f64, y: f64, z: f64) -> PyResult<Vec3> {
-    Ok(Vec3::new(
-        finite("x", x)?,
-        finite("y", y)?,
-        finite("z", z)?,
-    ))
+    Ok(Vec3::new(finite("x", x)?, finite("y", y)?, finite("z", z)?))
 }
 
 /// Walk in a straight line to the world position (`x`, `y`, `z`) in metres.
@@ -242,7 +239,11 @@ pub(crate) struct EyeMovement {
 impl EyeMovement {
     #[new]
     #[pyo3(signature = (pan_left_deg, pan_right_deg, tilt_deg = 0.0))]
-    fn new(pan_left_deg: f64, pan_right_deg: f64, tilt_deg: f64) -> PyResult<PyClassInitializer<Self>> {
+    fn new(
+        pan_left_deg: f64,
+        pan_right_deg: f64,
+        tilt_deg: f64,
+    ) -> PyResult<PyClassInitializer<Self>> {
         let pan_left_deg = angle("pan_left_deg", pan_left_deg, MAX_EYE_DEG)?;
         let pan_right_deg = angle("pan_right_deg", pan_right_deg, MAX_EYE_DEG)?;
         let tilt_deg = angle("tilt_deg", tilt_deg, MAX_EYE_DEG)?;

@@ -4,8 +4,8 @@
 //! `VrsyncError` and a `ConnectionError`, and IDEs see their docstrings); this module looks
 //! them up when an error is raised, which is rare and never on the per-cycle path.
 
-use pyo3::exceptions::PyRuntimeError;
 use pyo3::IntoPyObjectExt;
+use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
 
 /// Builds an instance of `vrsync.errors.<class>` with `message`, and sets `attrs` on it.
@@ -27,7 +27,9 @@ pub(crate) fn error(
     // The error classes live in the package that imports this module, so the lookup can
     // fail only for a broken installation: still raise something that names the error.
     build().unwrap_or_else(|e| {
-        PyRuntimeError::new_err(format!("{message} (and vrsync.errors.{class} is missing: {e})"))
+        PyRuntimeError::new_err(format!(
+            "{message} (and vrsync.errors.{class} is missing: {e})"
+        ))
     })
 }
 

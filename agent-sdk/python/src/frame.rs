@@ -44,12 +44,8 @@ pub(crate) struct Graveyard {
 impl Graveyard {
     /// Drops the buried frames. Call only on the owner thread, with the agent idle.
     pub(crate) fn drain(&self) {
-        let corpses = std::mem::take(
-            &mut *self
-                .corpses
-                .lock()
-                .unwrap_or_else(PoisonError::into_inner),
-        );
+        let corpses =
+            std::mem::take(&mut *self.corpses.lock().unwrap_or_else(PoisonError::into_inner));
         self.alive.fetch_sub(corpses.len(), Ordering::AcqRel);
         drop(corpses);
     }
@@ -237,7 +233,10 @@ impl PyFrame {
         let d = PyDict::new(py);
         for s in self.statuses() {
             let s = Bound::new(py, s)?;
-            d.set_item(s.getattr(intern!(py, "action_id"))?, s.getattr(intern!(py, "state"))?)?;
+            d.set_item(
+                s.getattr(intern!(py, "action_id"))?,
+                s.getattr(intern!(py, "state"))?,
+            )?;
         }
         Ok(d)
     }

@@ -4,11 +4,11 @@
 //! from Python. One implementation of the protocol, so the version/layout check, the
 //! newest-frame rule, host-liveness detection and both transports are the Rust ones.
 //!
-//! - [`agent::PyAgent`] connects, waits (releasing the GIL, in slices short enough that
+//! - `agent::PyAgent` connects, waits (releasing the GIL, in slices short enough that
 //!   Ctrl-C raises `KeyboardInterrupt` at once), sends and stops.
-//! - [`frame::PyFrame`] holds one received frame; its images are exported through the
+//! - `frame::PyFrame` holds one received frame; its images are exported through the
 //!   buffer protocol as read-only, zero-copy views whose base keeps the frame alive.
-//! - [`commands`] holds one small class per command of the catalogue, checked when built.
+//! - `commands` holds one small class per command of the catalogue, checked when built.
 //! - Errors are the exception classes of `vrsync.errors` (pure Python, so that they can
 //!   inherit from both `VrsyncError` and the matching built-in such as `TimeoutError`).
 //!

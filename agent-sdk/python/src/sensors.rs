@@ -91,7 +91,10 @@ impl PyHeadMotion {
         format!(
             "HeadMotion(velocity={:?}, acceleration={:?}, angular_velocity_deg={:?}, \
              angular_acceleration_deg={:?})",
-            self.velocity, self.acceleration, self.angular_velocity_deg, self.angular_acceleration_deg
+            self.velocity,
+            self.acceleration,
+            self.angular_velocity_deg,
+            self.angular_acceleration_deg
         )
     }
 }
@@ -136,7 +139,14 @@ impl From<wire::EyePosition> for PyEyePosition {
 }
 
 /// Execution state of an action (the values of the original `MsgActionExecutationStatus`).
-#[pyclass(module = "vrsync._vrsync", name = "ActionState", frozen, eq, eq_int, hash)]
+#[pyclass(
+    module = "vrsync._vrsync",
+    name = "ActionState",
+    frozen,
+    eq,
+    eq_int,
+    hash
+)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub(crate) enum PyActionState {
     /// Accepted, not finished yet.

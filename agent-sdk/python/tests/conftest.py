@@ -10,7 +10,6 @@ import itertools
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -45,12 +44,6 @@ def session(tag: str) -> str:
     return f"py{os.getpid()}-{next(_COUNTER)}-{tag}"
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 CAMERAS_SMALL = (("left", 64, "rgb8"), ("right", 64, "rgb8"))
 
 
@@ -64,11 +57,13 @@ def write_config(
     stop_timeout: float = 5.0,
     connect_timeout: float = 20.0,
     cameras: Sequence[tuple[str, int, str]] = CAMERAS_SMALL,
+    tcp_port: int = 0,
 ) -> tuple[Path, str]:
     """Writes a config for `agents` agents with `cameras` ((name, width, format); height
-    from a 120°×90° field of view) and returns (path, session)."""
+    from a 120°×90° field of view) and returns (path, session). TCP hosts bind port 0
+    unless `tcp_port` is given; `start_host` puts the bound port into the file."""
     name = session(tag)
-    port = free_port() if transport == "tcp" else 7400
+    port = tcp_port
     lines = [
         f'session = "{name}"',
         "seed = 7",
@@ -101,18 +96,50 @@ def write_config(
     return path, name
 
 
+EVENT_DEADLINE = 60.0
+
+
 class Host:
-    """A `vr-sim run` process; killed at the end of the test if still running."""
+    """A `vr-sim run` process; killed at the end of the test if still running.
+
+    Once it listens, a config whose `tcp_listen` port is 0 is rewritten with the bound
+    port (from vr-sim's `listening` event), so agents started afterwards find the host.
+    """
 
     def __init__(self, config: Path, frames: int | None, extra: Sequence[str] = ()) -> None:
         self.summary_path = config.with_suffix(".summary.json")
+        self.events_path = config.with_suffix(".events.jsonl")
         args = [str(binary("vr-sim")), "run", "--config", str(config), "--quiet"]
         if frames is not None:
             args += ["--frames", str(frames)]
-        args += ["--summary-json", str(self.summary_path), *extra]
+        args += ["--summary-json", str(self.summary_path), "--events", str(self.events_path)]
+        args += list(extra)
         self.proc = subprocess.Popen(
-            args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+            args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
         )
+        listening = self.wait_event("listening")
+        address = listening.get("address")
+        text = config.read_text()
+        if address and ':0"' in text:
+            port = address.rsplit(":", 1)[1]
+            config.write_text(text.replace('tcp_listen = "127.0.0.1:0"', f'tcp_listen = "127.0.0.1:{port}"'))
+
+    def wait_event(self, kind: str, timeout: float = EVENT_DEADLINE) -> dict[str, Any]:
+        """Waits for the first event `kind` in the host's events file."""
+        deadline = time.monotonic() + timeout
+        while True:
+            if self.events_path.exists():
+                for line in self.events_path.read_text().splitlines():
+                    if line.strip():
+                        event = json.loads(line)
+                        if event.get("event") == kind:
+                            return event
+            if self.proc.poll() is not None:
+                _, err = self.proc.communicate(timeout=10)
+                pytest.fail(f"vr-sim exited {self.proc.returncode} before {kind!r}:\n{err}")
+            if time.monotonic() >= deadline:
+                pytest.fail(f"vr-sim wrote no {kind!r} event within {timeout} s")
+            time.sleep(0.02)  # polling a file, with a deadline
 
     def finish(self, timeout: float = 60.0) -> dict[str, Any]:
         """Waits for the host to exit 0 and returns its summary."""

@@ -187,9 +187,8 @@ def test_a_bad_config_is_a_config_error(tmp_path: Path) -> None:
 
 
 def test_a_host_of_another_protocol_version_is_refused_naming_both(tmp_path: Path) -> None:
-    config, _ = write_config(tmp_path, "version", transport="tcp")
-    port = int(config.read_text().split('tcp_listen = "127.0.0.1:')[1].split('"')[0])
-    listener = socket.create_server(("127.0.0.1", port))
+    listener = socket.create_server(("127.0.0.1", 0))
+    config, _ = write_config(tmp_path, "version", transport="tcp", tcp_port=listener.getsockname()[1])
     listener.settimeout(20)
 
     def fake_host() -> None:
@@ -284,6 +283,11 @@ except KeyboardInterrupt:
     assert out.split()[-2] == "interrupted", out + err
 
 
+@pytest.mark.xfail(
+    strict=True,
+    reason="the agent SDK installs iceoryx2's SIGINT/SIGTERM handlers until the signal "
+    "opt-out of the transport-contract work lands; strict: remove this mark then",
+)
 def test_connecting_leaves_python_signal_handlers_alone(tmp_path: Path, start_host) -> None:
     config, _ = write_config(tmp_path, "handlers", agents=2)
     start_host(config)
