@@ -7,10 +7,10 @@ use std::time::{Duration, Instant};
 
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use vrsync_agent::{Agent, AgentBuilder, AgentConnectError, SendError, StopError, WaitStartError};
+use vrsync_agent::{
+    Agent, AgentBuilder, AgentConnectError, SendError, SignalHandling, StopError, WaitStartError,
+};
 use vrsync_bridge::config::{Config, TransportKind};
-use vrsync_bridge::transport::shm::ShmAgentConnectError;
-use vrsync_bridge::transport::tcp::TcpAgentConnectError;
 
 use crate::commands::PyCommand;
 use crate::errors::{error, obj};
@@ -135,9 +135,9 @@ fn secs(name: &str, v: Option<f64>) -> PyResult<Option<Duration>> {
 
 fn connect_error(py: Python<'_>, e: AgentConnectError, session: &str, id: u32) -> PyErr {
     let msg = e.to_string();
+    let base = [("session", obj(py, session)), ("agent_id", obj(py, id))];
     match e {
-        AgentConnectError::Shm(ShmAgentConnectError::HostNotFound { waited, .. })
-        | AgentConnectError::Tcp(TcpAgentConnectError::HostNotFound { waited, .. }) => error(
+        AgentConnectError::HostNotFound { waited, .. } => error(
             py,
             "HostNotFoundError",
             msg,
@@ -147,55 +147,33 @@ fn connect_error(py: Python<'_>, e: AgentConnectError, session: &str, id: u32) -
                 ("waited", obj(py, waited.as_secs_f64())),
             ],
         ),
-        AgentConnectError::Shm(ShmAgentConnectError::VersionMismatch {
+        AgentConnectError::IdNotServed { served, .. } => error(
+            py,
+            "AgentIdNotServedError",
+            msg,
+            &[
+                ("session", obj(py, session)),
+                ("agent_id", obj(py, id)),
+                ("served", obj(py, served)),
+            ],
+        ),
+        AgentConnectError::VersionMismatch {
             host_protocol,
             agent_protocol,
             ..
-        }) => error(
+        } => error(
             py,
             "VersionMismatchError",
             msg,
             &[
+                ("session", obj(py, session)),
                 ("host_version", obj(py, host_protocol)),
                 ("agent_version", obj(py, agent_protocol.to_string())),
             ],
         ),
-        AgentConnectError::Tcp(TcpAgentConnectError::VersionMismatch {
-            host_protocol,
-            agent_protocol,
-            ..
-        }) => error(
-            py,
-            "VersionMismatchError",
-            msg,
-            &[
-                ("host_version", obj(py, host_protocol.to_string())),
-                ("agent_version", obj(py, agent_protocol.to_string())),
-            ],
-        ),
-        AgentConnectError::Shm(ShmAgentConnectError::AgentIdInUse { .. }) => error(
-            py,
-            "AgentIdInUseError",
-            msg,
-            &[("session", obj(py, session)), ("agent_id", obj(py, id))],
-        ),
-        AgentConnectError::Tcp(TcpAgentConnectError::Refused { ref reason, .. })
-            if reason.contains("in use") || reason.contains("already connected") =>
-        {
-            error(
-                py,
-                "AgentIdInUseError",
-                msg,
-                &[("session", obj(py, session)), ("agent_id", obj(py, id))],
-            )
-        }
-        AgentConnectError::Tcp(TcpAgentConnectError::Refused { .. }) => error(
-            py,
-            "ConnectionRefusedByHostError",
-            msg,
-            &[("session", obj(py, session)), ("agent_id", obj(py, id))],
-        ),
-        _ => error(py, "TransportError", msg, &[]),
+        AgentConnectError::IdInUse { .. } => error(py, "AgentIdInUseError", msg, &base),
+        AgentConnectError::Refused { .. } => error(py, "ConnectionRefusedByHostError", msg, &base),
+        _ => error(py, "TransportError", msg, &base),
     }
 }
 
@@ -232,7 +210,6 @@ impl PyAgent {
         match e {
             WaitStartError::HostClosed => error(py, "HostClosedError", msg, &base),
             WaitStartError::HostGone { .. } => error(py, "HostGoneError", msg, &base),
-            WaitStartError::Terminated => pyo3::exceptions::PyKeyboardInterrupt::new_err(msg),
             WaitStartError::BadFrame { .. } => error(py, "ProtocolError", msg, &base),
             WaitStartError::Timeout { last_cycle, .. } => error(
                 py,
@@ -245,15 +222,20 @@ impl PyAgent {
                 ),
                 &base,
             ),
-            WaitStartError::Receive(ref detail) if detail.contains("ExceedsMaxBorrow") => error(
+            WaitStartError::TooManyFramesHeld { max } => error(
                 py,
                 "TooManyFramesHeldError",
                 format!(
-                    "agent {} holds too many frames: the arrays of earlier frames keep them \
-                     alive; copy what you keep (`arr.copy()`) or drop the arrays ({detail})",
+                    "agent {} already holds {max} frames, the most it may: numpy arrays of \
+                     earlier frames keep their frames alive; copy what you keep beyond the \
+                     cycle (`arr.copy()`) or drop those arrays",
                     self.id
                 ),
-                &base,
+                &[
+                    ("session", obj(py, self.session.as_str())),
+                    ("agent_id", obj(py, self.id)),
+                    ("max", obj(py, max)),
+                ],
             ),
             _ => error(py, "TransportError", msg, &base),
         }
@@ -360,16 +342,18 @@ impl PyAgent {
                 SameThread(
                     AgentBuilder::new(cfg_ref, id)
                         .connect_timeout(slice)
+                        // Python keeps its own SIGINT/SIGTERM handlers (Ctrl-C raises
+                        // KeyboardInterrupt while waiting, see `wait_frame`).
+                        .signal_handling(SignalHandling::Leave)
                         .connect()
                         .map(AgentCell),
                 )
             });
             match attempt.0 {
                 Ok(agent) => break agent,
-                Err(
-                    AgentConnectError::Shm(ShmAgentConnectError::HostNotFound { .. })
-                    | AgentConnectError::Tcp(TcpAgentConnectError::HostNotFound { .. }),
-                ) if started.elapsed() < timeout => py.check_signals()?,
+                Err(AgentConnectError::HostNotFound { .. }) if started.elapsed() < timeout => {
+                    py.check_signals()?;
+                }
                 Err(e) => return Err(connect_error(py, e, &cfg.session, id)),
             }
         };

@@ -102,16 +102,18 @@ def test_images_are_read_only_views_of_the_frame(tmp_path: Path, start_host, tra
     host.finish()
 
 
-def test_holding_too_many_frames_raises_a_clear_error(tmp_path: Path, start_host) -> None:
-    config, _ = write_config(tmp_path, "held")
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_holding_too_many_frames_raises_a_clear_error(tmp_path: Path, start_host, transport: str) -> None:
+    config, _ = write_config(tmp_path, "held", transport=transport)
     host = start_host(config, 10)
     with vrsync.Agent.connect(config, 0, connect_timeout=20) as agent:
         kept = []
-        with pytest.raises(vrsync.TooManyFramesHeldError, match="copy"):
+        with pytest.raises(vrsync.TooManyFramesHeldError, match="copy") as info:
             for _ in range(5):
                 frame = agent.wait(timeout=30)
                 kept.append(frame.image("left"))  # a view keeps its frame alive
                 agent.stop()
+        assert info.value.max == 2
         kept.clear()
         # Dropping the arrays is the fix: the agent goes on.
         for frame in agent.frames(timeout=30):
@@ -173,6 +175,17 @@ def test_no_host_names_the_session(tmp_path: Path) -> None:
         vrsync.Agent.connect(config, 0, connect_timeout=0.3)
     assert isinstance(info.value, ConnectionError)
     assert info.value.session == name and name in str(info.value)
+
+
+def test_an_id_the_host_does_not_serve_names_the_served_ids(tmp_path: Path, start_host) -> None:
+    host_config, name = write_config(tmp_path, "served", agents=2)
+    start_host(host_config)
+    # The agent's config has a third agent the host does not serve.
+    agent_config, _ = write_config(tmp_path, "served3", agents=3)
+    with pytest.raises(vrsync.AgentIdNotServedError) as info:
+        vrsync.Agent.connect(agent_config, 2, session=name, connect_timeout=10)
+    assert info.value.served == [0, 1] and info.value.agent_id == 2
+    assert isinstance(info.value, ConnectionError)
 
 
 def test_a_bad_config_is_a_config_error(tmp_path: Path) -> None:
@@ -283,11 +296,6 @@ except KeyboardInterrupt:
     assert out.split()[-2] == "interrupted", out + err
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the agent SDK installs iceoryx2's SIGINT/SIGTERM handlers until the signal "
-    "opt-out of the transport-contract work lands; strict: remove this mark then",
-)
 def test_connecting_leaves_python_signal_handlers_alone(tmp_path: Path, start_host) -> None:
     config, _ = write_config(tmp_path, "handlers", agents=2)
     start_host(config)

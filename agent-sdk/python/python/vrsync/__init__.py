@@ -56,6 +56,7 @@ from ._vrsync import (
 )
 from .errors import (
     AgentIdInUseError,
+    AgentIdNotServedError,
     ConfigError,
     ConnectionRefusedByHostError,
     HostClosedError,
@@ -77,6 +78,7 @@ __all__ = [
     "ActionStatus",
     "Agent",
     "AgentIdInUseError",
+    "AgentIdNotServedError",
     "Camera",
     "CancelMove",
     "Collision",

@@ -14,6 +14,7 @@ __all__ = [
     "ConfigError",
     "HostNotFoundError",
     "VersionMismatchError",
+    "AgentIdNotServedError",
     "AgentIdInUseError",
     "ConnectionRefusedByHostError",
     "HostClosedError",
@@ -53,12 +54,18 @@ class VersionMismatchError(VrsyncError):
     agent_version: str | None = None
 
 
+class AgentIdNotServedError(VrsyncError, ConnectionError):
+    """The session's host runs but does not serve this agent id (``served`` lists its ids)."""
+
+    served: list[int] | None = None
+
+
 class AgentIdInUseError(VrsyncError, ConnectionError):
     """Another process is already connected as this agent id."""
 
 
 class ConnectionRefusedByHostError(VrsyncError, ConnectionError):
-    """The host refused the connection (wrong token, id it does not serve, …)."""
+    """The host refused the connection (e.g. a missing or wrong ``tcp_token``)."""
 
 
 class HostClosedError(VrsyncError):
@@ -77,7 +84,10 @@ class TooManyFramesHeldError(VrsyncError):
     """The agent cannot receive: image arrays of earlier frames keep too many frames alive.
 
     Copy what you keep beyond the current cycle (``arr.copy()``) or drop the arrays.
+    ``max`` is how many frames an agent may hold.
     """
+
+    max: int | None = None
 
 
 class QueueFullError(VrsyncError):
