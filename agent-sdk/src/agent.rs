@@ -2,18 +2,18 @@
 
 use std::time::{Duration, Instant};
 
-use tracing::debug;
 use vrsync_bridge::config::{Config, TransportKind};
-use vrsync_bridge::transport::shm::{HostState, ShmAgent, ShmFrame, ShmReceiveError};
-use vrsync_bridge::transport::tcp::{TcpAgent, TcpFrame, TcpWaitError};
+pub use vrsync_bridge::transport::HOST_LIVENESS_PERIOD;
+use vrsync_bridge::transport::shm::{ShmAgent, ShmFrame};
+use vrsync_bridge::transport::tcp::{TcpAgent, TcpFrame};
+use vrsync_bridge::transport::{
+    AgentReceiveError, AgentSendError, AgentTransport, AgentWaitError, wait_for_newer_frame,
+};
 use vrsync_bridge::wire::{
     Command, ImageDesc, MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION, PixelFormat,
     Pose, SensorHeader,
 };
 pub use vrsync_bridge::{AgentConnectError, SignalHandling};
-
-/// How often a waiting agent checks that the host process is still alive.
-pub const HOST_LIVENESS_PERIOD: Duration = Duration::from_millis(250);
 
 /// Why [`Agent::wait_start`] returned without a frame.
 #[derive(Debug, thiserror::Error)]
@@ -395,43 +395,36 @@ impl Agent {
     pub fn wait_start(&mut self, timeout: Option<Duration>) -> Result<Frame, WaitStartError> {
         let started = Instant::now();
         let deadline = timeout.map(|t| started + t);
-        let inner = match &mut self.backend {
-            Backend::Shm(shm) => FrameInner::Shm(wait_shm(
-                shm,
-                deadline,
-                self.last_cycle,
-                &self.session,
-                &mut self.next_liveness,
-            )?),
-            Backend::Tcp(tcp) => loop {
-                let frame = tcp.wait_frame(deadline).map_err(|e| match e {
-                    TcpWaitError::Timeout => WaitStartError::Timeout {
-                        waited: started.elapsed(),
-                        last_cycle: self.last_cycle,
-                    },
-                    TcpWaitError::HostClosed => WaitStartError::HostClosed,
-                    TcpWaitError::HostGone(_) => WaitStartError::HostGone {
-                        session: self.session.clone(),
-                    },
-                    TcpWaitError::Bad(reason) => WaitStartError::BadFrame {
-                        cycle: self.last_cycle.map_or(0, |c| c + 1),
-                        reason,
-                    },
-                    TcpWaitError::Terminated => WaitStartError::Terminated,
-                    TcpWaitError::TooManyFramesHeld { max } => {
-                        WaitStartError::TooManyFramesHeld { max }
-                    }
-                    other => WaitStartError::Receive(other.to_string()),
-                })?;
-                if self
-                    .last_cycle
-                    .is_none_or(|last| frame.header().cycle > last)
-                {
-                    break FrameInner::Tcp(frame);
-                }
-                debug!(cycle = frame.header().cycle, "old frame ignored");
-            },
+        let (last, liveness) = (self.last_cycle, &mut self.next_liveness);
+        let waited = match &mut self.backend {
+            Backend::Shm(shm) => {
+                wait_for_newer_frame(&mut **shm, last, deadline, liveness).map(FrameInner::Shm)
+            }
+            Backend::Tcp(tcp) => {
+                wait_for_newer_frame(tcp, last, deadline, liveness).map(FrameInner::Tcp)
+            }
         };
+        let inner = waited.map_err(|e| match e {
+            AgentWaitError::Timeout => WaitStartError::Timeout {
+                waited: started.elapsed(),
+                last_cycle: self.last_cycle,
+            },
+            AgentWaitError::HostClosed => WaitStartError::HostClosed,
+            AgentWaitError::HostGone { .. } => WaitStartError::HostGone {
+                session: self.session.clone(),
+            },
+            AgentWaitError::Receive(AgentReceiveError::TooManyFramesHeld { max }) => {
+                WaitStartError::TooManyFramesHeld { max }
+            }
+            AgentWaitError::Receive(AgentReceiveError::Protocol(reason)) => {
+                WaitStartError::BadFrame {
+                    cycle: self.last_cycle.map_or(0, |c| c + 1),
+                    reason,
+                }
+            }
+            AgentWaitError::Terminated => WaitStartError::Terminated,
+            other => WaitStartError::Receive(other.to_string()),
+        })?;
         let h = inner.header();
         let cycle = h.cycle;
         validate(h, inner.payload().len(), self.id)
@@ -496,97 +489,17 @@ impl Agent {
             command_count: self.queue.len() as u32,
         };
         let sent = match &mut self.backend {
-            Backend::Shm(shm) => shm.send_batch(&header, &self.queue),
-            Backend::Tcp(tcp) => tcp.send_batch(&header, &self.queue),
+            Backend::Shm(shm) => AgentTransport::send_batch(&mut **shm, &header, &self.queue),
+            Backend::Tcp(tcp) => AgentTransport::send_batch(tcp, &header, &self.queue),
         };
-        if let Err(e) = sent {
-            return Err(match &self.backend {
-                Backend::Tcp(tcp) if tcp.host_closed() => StopError::HostClosed,
-                _ => StopError::Transport(e),
-            });
+        match sent {
+            Ok(()) => {}
+            Err(AgentSendError::HostClosed) => return Err(StopError::HostClosed),
+            Err(e) => return Err(StopError::Transport(e.to_string())),
         }
         self.queue.clear();
         self.stopped_cycle = Some(cycle);
         Ok(())
-    }
-}
-
-/// Shared-memory wait: the newest frame newer than `last_cycle`. `next_liveness` persists
-/// across calls so that zero-timeout polls also notice a dead host.
-fn wait_shm(
-    shm: &mut ShmAgent,
-    deadline: Option<Instant>,
-    last_cycle: Option<u64>,
-    session: &str,
-    next_liveness: &mut Instant,
-) -> Result<ShmFrame, WaitStartError> {
-    let started = Instant::now();
-    // Pending notifications carry nothing we rely on: the frame itself tells whether it is
-    // new. Clearing them first means a stale wake-up cannot return early, and a frame
-    // published after this point always comes with a fresh notification. A shutdown seen
-    // here is remembered by the transport even if a frame is returned first.
-    shm.clear_start();
-    loop {
-        // Checked before taking a frame too: in a fast run a frame is always waiting.
-        if shm.termination_requested() {
-            return Err(WaitStartError::Terminated);
-        }
-        let received = shm.receive_newest().map_err(|e| match e {
-            ShmReceiveError::TooManyFramesHeld { max } => WaitStartError::TooManyFramesHeld { max },
-            other => WaitStartError::Receive(other.to_string()),
-        })?;
-        if let Some(frame) = received {
-            let cycle = frame.header().cycle;
-            if last_cycle.is_none_or(|last| cycle > last) {
-                return Ok(frame);
-            }
-            debug!(cycle, "old frame ignored");
-        }
-        if shm.shutdown_seen() {
-            debug!("host closed the session (shutdown event)");
-            return Err(WaitStartError::HostClosed);
-        }
-        let now = Instant::now();
-        if now >= *next_liveness {
-            match shm.host_state() {
-                HostState::Alive => {}
-                HostState::Absent | HostState::Dead => {
-                    // The shutdown event may have raced with the node's removal: look once
-                    // more before calling the host gone.
-                    shm.clear_start();
-                    if shm.shutdown_seen() {
-                        return Err(WaitStartError::HostClosed);
-                    }
-                    return Err(WaitStartError::HostGone {
-                        session: session.to_string(),
-                    });
-                }
-            }
-            *next_liveness = now + HOST_LIVENESS_PERIOD;
-        }
-        let mut slice = next_liveness.saturating_duration_since(now);
-        if let Some(d) = deadline {
-            if now >= d {
-                return Err(WaitStartError::Timeout {
-                    waited: started.elapsed(),
-                    last_cycle,
-                });
-            }
-            slice = slice.min(d - now);
-        }
-        if shm.spins() {
-            // Busy-poll the subscriber (checked at the top of the loop) until the slice ends.
-            let until = Instant::now() + slice;
-            while Instant::now() < until {
-                if shm.has_frame() {
-                    break;
-                }
-                std::hint::spin_loop();
-            }
-            shm.clear_start();
-            continue;
-        }
-        shm.wait_start(slice);
     }
 }
 

@@ -21,17 +21,36 @@
 //! - [`HostTransport::is_connected`] tells whether an agent's receiving side is attached, so
 //!   the host can refuse to start cycle 0 before every agent can see it.
 //!
-//! Agent side (e.g. [`shm::ShmAgent`]):
-//! - `receive_newest` returns the newest sensor frame not yet seen and drops older ones
-//!   (a slow agent never works through a backlog);
-//! - `wait_start` blocks until *start* may have been signalled;
-//! - `send_batch` publishes a motor batch; with the stop flag it also signals *stop*,
-//!   after the batch is visible to the host.
+//! Agent side ([`AgentTransport`]):
+//! - [`AgentTransport::try_receive_newest`] returns, without blocking, the newest sensor
+//!   frame that arrived since the last call and drops older ones (a slow agent never works
+//!   through a backlog). The frame keeps its memory until dropped (on shared memory it *is*
+//!   the host's sample); an agent holds at most [`AGENT_MAX_HELD_FRAMES`] frames at once,
+//!   beyond that the call fails with [`AgentReceiveError::TooManyFramesHeld`].
+//! - [`AgentTransport::wait_readable`] blocks until a frame may have arrived, the host's
+//!   state may have changed, or the timeout passed. It may wake spuriously and never loses
+//!   a wake-up: a frame published before or during the call (after the last
+//!   [`AgentTransport::discard_wakeups`]) ends the wait.
+//! - [`AgentTransport::host_liveness`]: [`HostLiveness::Closed`] once the host closed the
+//!   session cleanly (after the frames it sent before), [`HostLiveness::Gone`] when its
+//!   process died or the connection broke without a close. A cheap check every call; the
+//!   expensive one (the host's process) only when asked.
+//! - [`AgentTransport::send_batch`] publishes a motor batch; with the stop flag it also
+//!   signals *stop*, which becomes visible to the host only after its batch.
+//! - [`AgentTransport::termination_requested`]: SIGINT/SIGTERM arrived (see
+//!   [`crate::SignalHandling`]).
+//!
+//! What is written once, over the contract, for every transport: [`wait_for_newer_frame`]
+//! (the newest frame newer than cycle *f* until a deadline, the host's liveness every
+//! [`HOST_LIVENESS_PERIOD`]), and [`retry_until`] (connect-retry with back-off while the
+//! host is not there yet).
 
 pub mod shm;
 pub mod tcp;
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
+
+use tracing::debug;
 
 use crate::wire::{MotorCommand, MotorHeader, SensorHeader};
 
@@ -225,5 +244,214 @@ pub trait HostTransport {
     /// The network address agents connect to, for network transports.
     fn local_addr(&self) -> Option<std::net::SocketAddr> {
         None
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Agent side
+// ---------------------------------------------------------------------------------------
+
+/// Frames an agent may hold at once, on every transport: the current one and one more.
+pub const AGENT_MAX_HELD_FRAMES: usize = 2;
+
+/// How often a waiting agent checks that the host process is still alive.
+pub const HOST_LIVENESS_PERIOD: Duration = Duration::from_millis(250);
+
+/// A received sensor frame: header and image bytes, read-only, valid while held.
+pub trait AgentFrame {
+    /// The header.
+    fn header(&self) -> &SensorHeader;
+    /// The image bytes (the header's image table points into them).
+    fn payload(&self) -> &[u8];
+}
+
+/// What an agent knows of its host.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum HostLiveness {
+    /// Running, as far as this check can tell.
+    Alive,
+    /// The host closed the session cleanly.
+    Closed,
+    /// The host's process died, or the connection broke without a close.
+    Gone {
+        /// What was seen.
+        reason: String,
+    },
+}
+
+/// Why [`AgentTransport::try_receive_newest`] failed.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum AgentReceiveError {
+    /// The caller still holds `max` frames.
+    #[error("the agent holds {max} frames already")]
+    TooManyFramesHeld {
+        /// How many frames an agent may hold at once.
+        max: usize,
+    },
+    /// The host sent something that violates the protocol.
+    #[error("protocol violation: {0}")]
+    Protocol(String),
+    /// The transport failed otherwise.
+    #[error("{0}")]
+    Transport(String),
+}
+
+/// Why [`AgentTransport::send_batch`] failed.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum AgentSendError {
+    /// The host closed the session before the batch could be sent.
+    #[error("the host closed the session")]
+    HostClosed,
+    /// The transport failed.
+    #[error("{0}")]
+    Transport(String),
+}
+
+/// Agent side of a transport (the contract is in the module docs).
+pub trait AgentTransport {
+    /// A received frame.
+    type Frame: AgentFrame;
+    /// The newest frame that arrived since the last call, older ones dropped; never blocks
+    /// for a frame (a record already arriving is read to its end).
+    ///
+    /// # Errors
+    /// [`AgentReceiveError`].
+    fn try_receive_newest(&mut self) -> Result<Option<Self::Frame>, AgentReceiveError>;
+    /// Blocks until a frame may have arrived, the host's state may have changed, or
+    /// `timeout` passed.
+    fn wait_readable(&mut self, timeout: Duration);
+    /// Forgets pending wake-ups, so that the next [`AgentTransport::wait_readable`] waits
+    /// for something new (a frame arriving later always brings its own).
+    fn discard_wakeups(&mut self);
+    /// The host's state; `check_process` asks for the expensive check of the host's
+    /// process too (made every [`HOST_LIVENESS_PERIOD`] by [`wait_for_newer_frame`]).
+    fn host_liveness(&mut self, check_process: bool) -> HostLiveness;
+    /// Sends a motor batch; with the stop flag in `header`, also signals *stop* (visible to
+    /// the host only after the batch).
+    ///
+    /// # Errors
+    /// [`AgentSendError`].
+    fn send_batch(
+        &mut self,
+        header: &MotorHeader,
+        commands: &[MotorCommand],
+    ) -> Result<(), AgentSendError>;
+    /// Whether SIGINT/SIGTERM arrived (never, with [`crate::SignalHandling::Leave`]).
+    fn termination_requested(&self) -> bool;
+}
+
+/// Why [`wait_for_newer_frame`] returned without a frame.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum AgentWaitError {
+    /// No newer frame before the deadline.
+    #[error("timeout")]
+    Timeout,
+    /// The host closed the session.
+    #[error("the host closed the session")]
+    HostClosed,
+    /// The host is gone.
+    #[error("the host is gone: {reason}")]
+    HostGone {
+        /// What was seen.
+        reason: String,
+    },
+    /// Receiving failed.
+    #[error(transparent)]
+    Receive(#[from] AgentReceiveError),
+    /// SIGINT/SIGTERM.
+    #[error("termination requested")]
+    Terminated,
+}
+
+/// Waits for the newest frame newer than `last_cycle` until `deadline` (`None`: no
+/// limit), checking the host's liveness every [`HOST_LIVENESS_PERIOD`] (`next_liveness`
+/// persists across calls, so zero-timeout polls notice a dead host too). Older frames are
+/// dropped; a frame that arrived is taken even past the deadline.
+///
+/// # Errors
+/// [`AgentWaitError`].
+pub fn wait_for_newer_frame<T: AgentTransport>(
+    transport: &mut T,
+    last_cycle: Option<u64>,
+    deadline: Option<Instant>,
+    next_liveness: &mut Instant,
+) -> Result<T::Frame, AgentWaitError> {
+    // Pending wake-ups carry nothing we rely on: the frame itself tells whether it is new.
+    // Forgetting them first means a stale wake-up cannot end a wait early, and a frame
+    // published after this point always comes with a fresh one.
+    transport.discard_wakeups();
+    loop {
+        // Checked before taking a frame too: in a fast run a frame is always waiting.
+        if transport.termination_requested() {
+            return Err(AgentWaitError::Terminated);
+        }
+        if let Some(frame) = transport.try_receive_newest()? {
+            let cycle = frame.header().cycle;
+            if last_cycle.is_none_or(|last| cycle > last) {
+                return Ok(frame);
+            }
+            debug!(cycle, "old frame ignored");
+        }
+        let now = Instant::now();
+        let check_process = now >= *next_liveness;
+        match transport.host_liveness(check_process) {
+            HostLiveness::Alive => {}
+            HostLiveness::Closed => return Err(AgentWaitError::HostClosed),
+            HostLiveness::Gone { reason } => return Err(AgentWaitError::HostGone { reason }),
+        }
+        if check_process {
+            *next_liveness = now + HOST_LIVENESS_PERIOD;
+        }
+        let mut slice = next_liveness.saturating_duration_since(now);
+        if let Some(d) = deadline {
+            if now >= d {
+                return Err(AgentWaitError::Timeout);
+            }
+            slice = slice.min(d - now);
+        }
+        transport.wait_readable(slice);
+    }
+}
+
+/// What one connection attempt of [`retry_until`] found.
+#[derive(Debug)]
+pub enum Attempt<T, E> {
+    /// Connected.
+    Done(T),
+    /// The host is not there (yet): try again; the text says what was missing.
+    NotYet(String),
+    /// A final answer: give up.
+    Failed(E),
+}
+
+/// Runs `attempt` with a short back-off (5 ms doubling to 100 ms) until it is done or
+/// failed, or `deadline` passed or a termination was requested: then returns the last
+/// "not yet" text. The host may start after its agents; there is nothing to wait on but
+/// time.
+///
+/// # Errors
+/// `Err(Ok(missing))` when the deadline passed, `Err(Err(e))` when an attempt failed.
+pub fn retry_until<T, E>(
+    deadline: Instant,
+    terminated: impl Fn() -> bool,
+    mut attempt: impl FnMut() -> Attempt<T, E>,
+) -> Result<T, Result<String, E>> {
+    let mut backoff = Duration::from_millis(5);
+    loop {
+        match attempt() {
+            Attempt::Done(t) => return Ok(t),
+            Attempt::Failed(e) => return Err(Err(e)),
+            Attempt::NotYet(missing) => {
+                let now = Instant::now();
+                if now >= deadline || terminated() {
+                    return Err(Ok(missing));
+                }
+                std::thread::sleep(backoff.min(deadline - now));
+                backoff = (backoff * 2).min(Duration::from_millis(100));
+            }
+        }
     }
 }

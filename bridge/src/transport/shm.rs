@@ -31,7 +31,11 @@ use iceoryx2::sample_mut::SampleMut;
 use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
 use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as ps_factory};
 
-use super::{AgentConnectError, BatchSink, FrameLoan, HostTransport, HostTransportError};
+use super::{
+    AGENT_MAX_HELD_FRAMES, AgentConnectError, AgentFrame, AgentReceiveError, AgentSendError,
+    AgentTransport, Attempt, BatchSink, FrameLoan, HostLiveness, HostTransport, HostTransportError,
+    retry_until,
+};
 use crate::config::{Config, MAX_AGENT_ID};
 use crate::signal::SignalHandling;
 use crate::wire::{LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, SensorHeader};
@@ -43,7 +47,7 @@ pub const START_EVENT: usize = 0;
 /// Event id on the `start` service telling agents the host closed the session cleanly.
 pub const SHUTDOWN_EVENT: usize = 1;
 /// Frames an agent may hold at once (the current one and the one being received).
-pub const AGENT_BORROWED_FRAMES: usize = 2;
+pub const AGENT_BORROWED_FRAMES: usize = AGENT_MAX_HELD_FRAMES;
 /// Sensor frames queued per agent: only the newest is kept (safe overflow).
 pub const SENSOR_QUEUE: usize = 1;
 /// Size of each agent's sensor sample pool: queued + borrowed + one loaned by the host.
@@ -734,21 +738,6 @@ impl ShmFrame {
     }
 }
 
-/// Why [`ShmAgent::receive_newest`] failed.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[non_exhaustive]
-pub enum ShmReceiveError {
-    /// The agent still holds [`AGENT_BORROWED_FRAMES`] frames: iceoryx2 lends no more.
-    #[error("the agent holds {max} frames already")]
-    TooManyFramesHeld {
-        /// How many frames an agent may hold at once.
-        max: usize,
-    },
-    /// iceoryx2 failed otherwise.
-    #[error("iceoryx2: {0}")]
-    Iceoryx(String),
-}
-
 /// The agent side of the shared-memory transport.
 pub struct ShmAgent {
     id: u32,
@@ -842,29 +831,26 @@ impl ShmAgent {
             ),
         };
 
-        // Retry with a short back-off: the host may start after us. Opening does not block
-        // in iceoryx2, so there is nothing to wait on but time.
-        let mut backoff = Duration::from_millis(5);
-        let start_service = loop {
-            match node
-                .service_builder(&svc_name(session, "start").map_err(ice)?)
-                .event()
-                .open()
-            {
-                Ok(s) => break s,
-                Err(iceoryx2::service::builder::event::EventOpenError::DoesNotExist)
-                | Err(iceoryx2::service::builder::event::EventOpenError::InsufficientPermissions)
-                | Err(iceoryx2::service::builder::event::EventOpenError::HangsInCreation) => {
-                    let now = Instant::now();
-                    if now >= deadline || signals.termination_requested() {
-                        return Err(not_found("start"));
+        // Opening does not block in iceoryx2: retry until the host created the services.
+        let start_name = svc_name(session, "start").map_err(ice)?;
+        let start_service = retry_until(
+            deadline,
+            || signals.termination_requested(),
+            || {
+                use iceoryx2::service::builder::event::EventOpenError as E;
+                match node.service_builder(&start_name).event().open() {
+                    Ok(s) => Attempt::Done(s),
+                    Err(E::DoesNotExist | E::InsufficientPermissions | E::HangsInCreation) => {
+                        Attempt::NotYet(String::new())
                     }
-                    std::thread::sleep(backoff.min(deadline - now));
-                    backoff = (backoff * 2).min(Duration::from_millis(100));
+                    Err(e) => Attempt::Failed(ice(format!("cannot open the start service: {e:?}"))),
                 }
-                Err(e) => return Err(ice(format!("cannot open the start service: {e:?}"))),
-            }
-        };
+            },
+        )
+        .map_err(|e| match e {
+            Ok(_) => not_found("start"),
+            Err(e) => e,
+        })?;
         let host_protocol = attr(start_service.attributes(), ATTR_PROTOCOL);
         let host_layout = attr(start_service.attributes(), ATTR_LAYOUT);
         let agent_layout = format!("{LAYOUT_HASH:016x}");
@@ -978,9 +964,9 @@ impl ShmAgent {
     /// The newest frame not yet received; older queued frames are dropped.
     ///
     /// # Errors
-    /// [`ShmReceiveError::TooManyFramesHeld`] when the caller still holds
+    /// [`AgentReceiveError::TooManyFramesHeld`] when the caller still holds
     /// [`AGENT_BORROWED_FRAMES`] frames.
-    pub fn receive_newest(&mut self) -> Result<Option<ShmFrame>, ShmReceiveError> {
+    pub fn receive_newest(&mut self) -> Result<Option<ShmFrame>, AgentReceiveError> {
         let mut newest = None;
         loop {
             match self.sensor_sub.receive() {
@@ -992,11 +978,11 @@ impl ShmAgent {
                     }
                     return Err(match e {
                         iceoryx2::port::ReceiveError::ExceedsMaxBorrows => {
-                            ShmReceiveError::TooManyFramesHeld {
+                            AgentReceiveError::TooManyFramesHeld {
                                 max: AGENT_BORROWED_FRAMES,
                             }
                         }
-                        other => ShmReceiveError::Iceoryx(format!("{other:?}")),
+                        other => AgentReceiveError::Transport(format!("iceoryx2: {other:?}")),
                     });
                 }
             }
@@ -1107,5 +1093,82 @@ impl ShmAgent {
                 .map_err(|e| format!("cannot notify stop: {e:?}"))?;
         }
         Ok(())
+    }
+}
+
+impl AgentFrame for ShmFrame {
+    fn header(&self) -> &SensorHeader {
+        self.sample.user_header()
+    }
+
+    fn payload(&self) -> &[u8] {
+        self.sample.payload()
+    }
+}
+
+impl AgentTransport for ShmAgent {
+    type Frame = ShmFrame;
+
+    fn try_receive_newest(&mut self) -> Result<Option<ShmFrame>, AgentReceiveError> {
+        self.receive_newest()
+    }
+
+    fn wait_readable(&mut self, timeout: Duration) {
+        if self.spin {
+            // Busy-poll the subscriber until the slice ends (`[sync] wait = "spin"`).
+            let until = Instant::now() + timeout;
+            while Instant::now() < until {
+                if self.has_frame() {
+                    break;
+                }
+                std::hint::spin_loop();
+            }
+            self.clear_start();
+            return;
+        }
+        self.wait_start(timeout);
+    }
+
+    fn discard_wakeups(&mut self) {
+        self.clear_start();
+    }
+
+    fn host_liveness(&mut self, check_process: bool) -> HostLiveness {
+        if self.shutdown_seen {
+            return HostLiveness::Closed;
+        }
+        if !check_process {
+            return HostLiveness::Alive;
+        }
+        match self.host_state() {
+            HostState::Alive => HostLiveness::Alive,
+            state => {
+                // The shutdown event may have raced with the node's removal: look once
+                // more before calling the host gone.
+                self.clear_start();
+                if self.shutdown_seen {
+                    HostLiveness::Closed
+                } else {
+                    HostLiveness::Gone {
+                        reason: match state {
+                            HostState::Dead => "its process died".into(),
+                            _ => "its node is gone".into(),
+                        },
+                    }
+                }
+            }
+        }
+    }
+
+    fn send_batch(
+        &mut self,
+        header: &MotorHeader,
+        commands: &[MotorCommand],
+    ) -> Result<(), AgentSendError> {
+        ShmAgent::send_batch(self, header, commands).map_err(AgentSendError::Transport)
+    }
+
+    fn termination_requested(&self) -> bool {
+        self.signals.termination_requested()
     }
 }

@@ -45,7 +45,11 @@ use std::time::{Duration, Instant};
 use tracing::{debug, info, warn};
 use zerocopy::{FromBytes, IntoBytes};
 
-use super::{AgentConnectError, BatchSink, FrameLoan, HostTransport, HostTransportError};
+use super::{
+    AGENT_MAX_HELD_FRAMES, AgentConnectError, AgentFrame, AgentReceiveError, AgentSendError,
+    AgentTransport, Attempt, BatchSink, FrameLoan, HostLiveness, HostTransport, HostTransportError,
+    retry_until,
+};
 use crate::config::Config;
 use crate::signal::SignalHandling;
 use crate::wire::{LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, SensorHeader};
@@ -1228,37 +1232,6 @@ fn served_ids_from_reject(message: &str) -> Vec<u32> {
     .unwrap_or_default()
 }
 
-/// Why [`TcpAgent::wait_frame`] returned without a frame.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum TcpWaitError {
-    /// No frame before the deadline.
-    #[error("timeout")]
-    Timeout,
-    /// The host sent shutdown.
-    #[error("host closed the session")]
-    HostClosed,
-    /// The connection broke without a shutdown.
-    #[error("connection to the host lost: {0}")]
-    HostGone(String),
-    /// A record violated the protocol.
-    #[error("protocol violation: {0}")]
-    Bad(String),
-    /// SIGINT/SIGTERM.
-    #[error("termination requested")]
-    Terminated,
-    /// The caller still holds [`MAX_HELD_FRAMES`] frames.
-    #[error("the agent holds {max} frames already")]
-    TooManyFramesHeld {
-        /// How many frames an agent may hold at once.
-        max: usize,
-    },
-}
-
-/// Frames a TCP agent may hold at once, as many as on shared memory: each held frame
-/// keeps a frame-sized buffer, so memory stays bounded whatever the caller keeps.
-pub const MAX_HELD_FRAMES: usize = 2;
-
 /// The agent side of the TCP transport.
 #[derive(Debug)]
 pub struct TcpAgent {
@@ -1269,6 +1242,8 @@ pub struct TcpAgent {
     pool: Pool,
     out: Vec<u8>,
     closed: bool,
+    /// Why the connection broke without a shutdown, once it did.
+    gone: Option<String>,
     signals: SignalHandling,
 }
 
@@ -1291,25 +1266,29 @@ impl TcpAgent {
         let addr = config.transport.tcp_listen;
         let started = Instant::now();
         let deadline = started + timeout;
-        let mut backoff = Duration::from_millis(5);
-        let mut stream = loop {
-            let left = deadline.saturating_duration_since(Instant::now());
-            match TcpStream::connect_timeout(&addr, left.max(Duration::from_millis(1))) {
-                Ok(s) => break s,
-                Err(e) => {
-                    let now = Instant::now();
-                    if now >= deadline || signals.termination_requested() {
-                        return Err(AgentConnectError::HostNotFound {
-                            session: session.clone(),
-                            agent: id,
-                            waited: started.elapsed(),
-                            looked_for: format!("nothing accepts TCP connections at {addr} ({e})"),
-                        });
-                    }
-                    // The host may start after us; there is nothing to wait on but time.
-                    std::thread::sleep(backoff.min(deadline - now));
-                    backoff = (backoff * 2).min(Duration::from_millis(100));
+        let stream = retry_until(
+            deadline,
+            || signals.termination_requested(),
+            || {
+                let left = deadline.saturating_duration_since(Instant::now());
+                match TcpStream::connect_timeout(&addr, left.max(Duration::from_millis(1))) {
+                    Ok(s) => Attempt::<_, ()>::Done(s),
+                    Err(e) => Attempt::NotYet(e.to_string()),
                 }
+            },
+        );
+        let mut stream = match stream {
+            Ok(s) => s,
+            Err(e) => {
+                return Err(AgentConnectError::HostNotFound {
+                    session: session.clone(),
+                    agent: id,
+                    waited: started.elapsed(),
+                    looked_for: format!(
+                        "nothing accepts TCP connections at {addr} ({})",
+                        e.unwrap_or_default()
+                    ),
+                });
             }
         };
         let hs = |reason: String| AgentConnectError::Transport {
@@ -1368,6 +1347,7 @@ impl TcpAgent {
                                 * core::mem::size_of::<MotorCommand>(),
                     ),
                     closed: false,
+                    gone: None,
                     signals,
                 })
             }
@@ -1396,90 +1376,64 @@ impl TcpAgent {
         }
     }
 
-    /// Reads records until a frame arrived and nothing newer is pending; returns the newest.
-    ///
-    /// # Errors
-    /// [`TcpWaitError`].
-    pub fn wait_frame(&mut self, deadline: Option<Instant>) -> Result<TcpFrame, TcpWaitError> {
-        if self.closed {
-            return Err(TcpWaitError::HostClosed);
-        }
-        if self.signals.termination_requested() {
-            return Err(TcpWaitError::Terminated);
-        }
+    /// Reads the records that arrived, without waiting for one; returns the newest frame
+    /// among them. A shutdown record marks the session closed; a close or a broken
+    /// connection marks the host gone (frames read before are still returned).
+    fn read_arrived(&mut self) -> Result<Option<TcpFrame>, AgentReceiveError> {
         // Every frame the caller holds keeps a pool reference (the agent keeps one more).
         let held = std::rc::Rc::strong_count(&self.pool) - 1;
-        if held >= MAX_HELD_FRAMES {
-            return Err(TcpWaitError::TooManyFramesHeld {
-                max: MAX_HELD_FRAMES,
+        if held >= AGENT_MAX_HELD_FRAMES {
+            return Err(AgentReceiveError::TooManyFramesHeld {
+                max: AGENT_MAX_HELD_FRAMES,
             });
         }
         let mut newest: Option<TcpFrame> = None;
-        loop {
-            let more = newest.is_none() || self.readable_now();
-            if !more {
+        while !self.closed && self.gone.is_none() && self.readable_now() {
+            // A record has begun (or the connection ended): read it whole, bounded by the
+            // stall timeout.
+            let stall = Instant::now() + self.stall_timeout;
+            let mut prefix = [0u8; PREFIX];
+            match self.stream.read(&mut prefix[..1]) {
+                Ok(0) => {
+                    self.gone = Some("connection closed without shutdown".into());
+                    break;
+                }
+                Ok(_) => {}
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        ErrorKind::WouldBlock | ErrorKind::TimedOut | ErrorKind::Interrupted
+                    ) =>
+                {
+                    continue;
+                }
+                Err(e) => {
+                    self.gone = Some(e.to_string());
+                    break;
+                }
+            }
+            if let Err(e) = read_exact_deadline(&mut self.stream, &mut prefix[1..], stall) {
+                self.gone = Some(e.to_string());
                 break;
             }
-            // Wait for the first byte of the next record (bounded slices: termination).
-            let mut prefix = [0u8; PREFIX];
-            let mut got = 0;
-            while got == 0 {
-                if self.signals.termination_requested() {
-                    return Err(TcpWaitError::Terminated);
-                }
-                let slice = match deadline {
-                    Some(d) => {
-                        let left = d.saturating_duration_since(Instant::now());
-                        if left.is_zero() {
-                            // Past the deadline (or a zero-timeout poll): still take what
-                            // has already arrived.
-                            if newest.is_some() || !self.readable_now() {
-                                return newest.ok_or(TcpWaitError::Timeout);
-                            }
-                            Duration::from_millis(1)
-                        } else {
-                            left.min(Duration::from_millis(250))
-                        }
-                    }
-                    None => Duration::from_millis(250),
-                };
-                self.stream
-                    .set_read_timeout(Some(slice))
-                    .map_err(|e| TcpWaitError::HostGone(e.to_string()))?;
-                match self.stream.read(&mut prefix) {
-                    Ok(0) => {
-                        return newest.ok_or_else(|| {
-                            TcpWaitError::HostGone("connection closed without shutdown".into())
-                        });
-                    }
-                    Ok(n) => got = n,
-                    Err(e)
-                        if matches!(
-                            e.kind(),
-                            ErrorKind::WouldBlock | ErrorKind::TimedOut | ErrorKind::Interrupted
-                        ) => {}
-                    Err(e) => return Err(TcpWaitError::HostGone(e.to_string())),
-                }
-            }
-            let stall = Instant::now() + self.stall_timeout;
-            read_exact_deadline(&mut self.stream, &mut prefix[got..], stall)
-                .map_err(|e| TcpWaitError::HostGone(e.to_string()))?;
             let (len, k) = decode_prefix(prefix, self.max_frame_body)
-                .map_err(|e| TcpWaitError::Bad(e.to_string()))?;
+                .map_err(|e| AgentReceiveError::Protocol(e.to_string()))?;
             match k {
                 kind::FRAME => {
                     if len < HEADER {
-                        return Err(TcpWaitError::Bad(format!(
+                        return Err(AgentReceiveError::Protocol(format!(
                             "frame of {len} bytes has no header"
                         )));
                     }
                     let mut buf = self.pool.borrow_mut().pop().unwrap_or_default();
                     buf.reserve_body(len);
                     let body = &mut buf.bytes_mut()[PREFIX..];
-                    read_exact_deadline(&mut self.stream, body, stall)
-                        .map_err(|e| TcpWaitError::HostGone(e.to_string()))?;
+                    if let Err(e) = read_exact_deadline(&mut self.stream, body, stall) {
+                        self.gone = Some(e.to_string());
+                        break;
+                    }
                     let header = SensorHeader::read_from_bytes(&buf.body()[..HEADER])
-                        .map_err(|_| TcpWaitError::Bad("frame header".into()))?;
+                        .map_err(|_| AgentReceiveError::Protocol("frame header".into()))?;
                     // Dropping an older frame returns its buffer to the pool.
                     newest = Some(TcpFrame {
                         header,
@@ -1487,14 +1441,15 @@ impl TcpAgent {
                         pool: self.pool.clone(),
                     });
                 }
-                kind::SHUTDOWN => {
-                    self.closed = true;
-                    return newest.ok_or(TcpWaitError::HostClosed);
+                kind::SHUTDOWN => self.closed = true,
+                other => {
+                    return Err(AgentReceiveError::Protocol(format!(
+                        "unexpected record kind {other}"
+                    )));
                 }
-                other => return Err(TcpWaitError::Bad(format!("unexpected record kind {other}"))),
             }
         }
-        newest.ok_or(TcpWaitError::Timeout)
+        Ok(newest)
     }
 
     fn readable_now(&self) -> bool {
@@ -1511,7 +1466,7 @@ impl TcpAgent {
     ///
     /// # Errors
     /// A string describing the I/O failure.
-    pub fn send_batch(
+    fn send_record(
         &mut self,
         header: &MotorHeader,
         commands: &[MotorCommand],
@@ -1569,6 +1524,74 @@ impl TcpAgent {
     /// This agent's id.
     pub fn id(&self) -> u32 {
         self.id
+    }
+}
+
+impl AgentFrame for TcpFrame {
+    fn header(&self) -> &SensorHeader {
+        &self.header
+    }
+
+    fn payload(&self) -> &[u8] {
+        TcpFrame::payload(self)
+    }
+}
+
+impl AgentTransport for TcpAgent {
+    type Frame = TcpFrame;
+
+    fn try_receive_newest(&mut self) -> Result<Option<TcpFrame>, AgentReceiveError> {
+        self.read_arrived()
+    }
+
+    fn wait_readable(&mut self, timeout: Duration) {
+        if self.closed || self.gone.is_some() {
+            return;
+        }
+        let mut pfd = libc::pollfd {
+            fd: self.stream.as_raw_fd(),
+            events: libc::POLLIN,
+            revents: 0,
+        };
+        let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
+        // Round sub-millisecond timeouts up so a short wait does not spin.
+        let ms = if ms == 0 && !timeout.is_zero() { 1 } else { ms };
+        // SAFETY: one valid pollfd for the duration of the call. A failed or interrupted
+        // poll ends the wait early; the next read reports what broke.
+        unsafe { libc::poll(&mut pfd, 1, ms) };
+    }
+
+    fn discard_wakeups(&mut self) {}
+
+    fn host_liveness(&mut self, _check_process: bool) -> HostLiveness {
+        // TCP sees the host's end directly: the shutdown record, or the close.
+        if self.closed {
+            HostLiveness::Closed
+        } else if let Some(reason) = &self.gone {
+            HostLiveness::Gone {
+                reason: reason.clone(),
+            }
+        } else {
+            HostLiveness::Alive
+        }
+    }
+
+    fn send_batch(
+        &mut self,
+        header: &MotorHeader,
+        commands: &[MotorCommand],
+    ) -> Result<(), AgentSendError> {
+        self.send_record(header, commands).map_err(|e| {
+            if self.closed {
+                AgentSendError::HostClosed
+            } else {
+                AgentSendError::Transport(e)
+            }
+        })
+    }
+
+    fn termination_requested(&self) -> bool {
+        self.signals.termination_requested()
     }
 }
 
