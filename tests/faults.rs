@@ -34,10 +34,12 @@ fn a_killed_agent_is_evicted_and_can_rejoin(t: Transport) {
     let config = config_path.to_str().unwrap();
     let s = dir.path().join("summary.json");
     let events = Events::in_dir(dir.path());
+    // No --frames: the run goes on (fast: nobody is waited for) until the restarted agent
+    // took part, then SIGTERM ends it.
     let host = spawn_host(
         &config_path,
         &events,
-        &["--frames", "60", "--summary-json", s.to_str().unwrap()],
+        &["--summary-json", s.to_str().unwrap()],
     );
     cfg.follow_host(&events, &config_path);
     let log0 = dir.path().join("a0.log");
@@ -81,27 +83,50 @@ fn a_killed_agent_is_evicted_and_can_rejoin(t: Transport) {
     let evicted = events.wait_for("agent_evicted", EVENT_DEADLINE);
     assert_eq!(evicted["agent"], 1, "{evicted}");
     assert_eq!(evicted["cycle"], 9, "{evicted}");
-    // Restart agent 1: it rejoins at the next cycle.
+    // Restart agent 1: it rejoins at the next cycle and takes part from there.
+    let log_back = dir.path().join("back.log");
     let back = Proc::spawn(
         &bin("vr-agent"),
-        &["--config", config, "--id", "1", "--policy", "circle"],
+        &[
+            "--config",
+            config,
+            "--id",
+            "1",
+            "--policy",
+            "circle",
+            "--log-cycles",
+            log_back.to_str().unwrap(),
+        ],
     );
     let rejoined = events.wait_for("agent_rejoined", EVENT_DEADLINE);
     assert_eq!(rejoined["agent"], 1, "{rejoined}");
+    let rejoined_at = rejoined["cycle"].as_u64().unwrap();
+    assert!(rejoined_at > 9, "{rejoined}");
+    wait_for_cycle_line(&log_back, rejoined_at, EVENT_DEADLINE);
+    host.signal(libc::SIGTERM);
     let out = host.wait(RUN_DEADLINE);
     assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
     assert_eq!(a0.wait(Duration::from_secs(10)).code(), Some(0));
     assert_eq!(back.wait(Duration::from_secs(10)).code(), Some(0));
     let sum = summary(&s);
-    assert_eq!(sum["frames"], 60);
+    let frames = sum["frames"].as_u64().unwrap();
+    assert!(frames > rejoined_at, "{sum}");
     assert_eq!(sum["evicted_agents"], serde_json::json!([1]));
     assert_eq!(
         sum["stop_timeouts"], 0,
         "a dead agent is evicted, not waited for"
     );
-    // The survivor saw every cycle, without a gap.
+    // The survivor saw every cycle, without a gap (and maybe the frame of the cycle the
+    // signal interrupted).
     let cycles: Vec<u64> = cycle_log(&log0).iter().map(|l| l.cycle).collect();
-    assert_eq!(cycles, (0..60).collect::<Vec<_>>());
+    let seen = cycles.len() as u64;
+    assert!(
+        seen == frames || seen == frames + 1,
+        "{frames} cycles: {cycles:?}"
+    );
+    assert_eq!(cycles, (0..seen).collect::<Vec<_>>());
+    // The restarted agent's first frame is the cycle it rejoined at.
+    assert_eq!(cycle_log(&log_back)[0].cycle, rejoined_at);
 }
 
 /// The host is SIGKILLed: a waiting agent's wait_start reports "host gone" (vr-agent exits
