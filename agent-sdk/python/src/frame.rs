@@ -10,6 +10,7 @@
 //! writes while the frame is held.
 
 use std::ffi::{CStr, c_int, c_void};
+use std::mem::ManuallyDrop;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::{self, ThreadId};
@@ -58,7 +59,7 @@ impl Graveyard {
 
 /// A frame with the thread that may drop it.
 pub(crate) struct OwnedFrame {
-    frame: Option<Frame>,
+    frame: ManuallyDrop<Frame>,
     owner: ThreadId,
     graveyard: Arc<Graveyard>,
 }
@@ -67,7 +68,7 @@ impl OwnedFrame {
     pub(crate) fn new(frame: Frame, graveyard: Arc<Graveyard>) -> Self {
         graveyard.alive.fetch_add(1, Ordering::AcqRel);
         Self {
-            frame: Some(frame),
+            frame: ManuallyDrop::new(frame),
             owner: thread::current().id(),
             graveyard,
         }
@@ -76,9 +77,8 @@ impl OwnedFrame {
 
 impl Drop for OwnedFrame {
     fn drop(&mut self) {
-        let Some(frame) = self.frame.take() else {
-            return;
-        };
+        // SAFETY: `drop` runs once, and `frame` is not used after this.
+        let frame = unsafe { ManuallyDrop::take(&mut self.frame) };
         if thread::current().id() == self.owner {
             drop(frame);
             self.graveyard.alive.fetch_sub(1, Ordering::AcqRel);
@@ -120,23 +120,12 @@ impl PyFrame {
     }
 
     fn frame(&self) -> &Frame {
-        // `frame` is `Some` until `Drop`, and nothing reads a frame while dropping it.
-        match &self.owned.frame {
-            Some(f) => f,
-            None => unreachable_frame(),
-        }
+        &self.owned.frame
     }
 
     pub(crate) fn header(&self) -> &vrsync_agent::SensorHeader {
         self.frame().header()
     }
-}
-
-#[cold]
-fn unreachable_frame() -> ! {
-    // A `PyFrame` is only reachable through Python references, which keep `owned.frame`
-    // set; `Drop` runs when the last one is gone.
-    std::process::abort()
 }
 
 fn outcome_name(v: u32) -> &'static str {
