@@ -283,19 +283,26 @@ fn a_bad_world_section_is_a_config_error_naming_the_key() {
     assert!(out.stderr.contains(&at), "{at} in:\n{}", out.stderr);
 }
 
+/// The same world over shm, over tcp, and mixed (agent 0 on shm, agent 1 on tcp, one
+/// host serving both): the same trajectory.
 #[test]
-fn the_same_world_over_tcp_gives_the_same_trajectory() {
+fn the_same_world_over_tcp_or_mixed_transports_gives_the_same_trajectory() {
     let dir = tempfile::tempdir().unwrap();
     let run = |kind: &str| {
         let session = util::session(&format!("world-{kind}"));
-        let text = std::fs::read_to_string(default_config())
+        let mut text = std::fs::read_to_string(default_config())
             .unwrap()
             .replace("session = \"default\"", &format!("session = {session:?}"))
-            .replace("kind = \"shm\"", &format!("kind = {kind:?}"))
             .replace(
                 "tcp_listen = \"127.0.0.1:7400\"",
                 "tcp_listen = \"127.0.0.1:0\"",
             );
+        if kind == "mixed" {
+            text = text.replacen("\nid = 1\n", "\nid = 1\ntransport = \"tcp\"\n", 1);
+            assert!(text.contains("transport = \"tcp\""));
+        } else {
+            text = text.replace("kind = \"shm\"", &format!("kind = {kind:?}"));
+        }
         let config = dir.path().join(format!("{kind}.toml"));
         std::fs::write(&config, text).unwrap();
         let s = dir.path().join(format!("{kind}.json"));
@@ -322,7 +329,11 @@ fn the_same_world_over_tcp_gives_the_same_trajectory() {
     };
     let shm = run("shm");
     let tcp = run("tcp");
+    let mixed = run("mixed");
     assert_eq!(tcp["transport"], "tcp");
     // seek decides from the images: equal trajectories mean equal pixels arrived.
     assert_eq!(shm["trajectory_hash"], tcp["trajectory_hash"]);
+    assert_eq!(shm["trajectory_hash"], mixed["trajectory_hash"]);
+    assert_eq!(mixed["frames"], 150);
+    assert_eq!(mixed["stop_timeouts"], 0);
 }

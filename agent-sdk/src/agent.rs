@@ -306,7 +306,12 @@ impl<'c> AgentBuilder<'c> {
         let timeout = self
             .connect_timeout
             .unwrap_or(self.config.sync.connect_timeout);
-        let backend = match self.config.transport.kind {
+        // The agent's own transport (`[[agent]] transport`), else `[transport] kind`.
+        let kind = self
+            .config
+            .agent(self.id)
+            .map_or(self.config.transport.kind, |a| a.transport);
+        let backend = match kind {
             TransportKind::Shm => Backend::Shm(Box::new(ShmAgent::connect(
                 self.config,
                 self.id,

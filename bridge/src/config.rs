@@ -106,6 +106,8 @@ impl CameraConfig {
 pub struct AgentConfig {
     /// Agent id (`0..=250`).
     pub id: u32,
+    /// The transport this agent uses (`[[agent]] transport`, default `[transport] kind`).
+    pub transport: TransportKind,
     /// Cameras, in image order.
     pub cameras: Vec<CameraConfig>,
 }
@@ -276,6 +278,7 @@ struct RawTransport {
 #[serde(deny_unknown_fields)]
 struct RawAgent {
     id: Spanned<i64>,
+    transport: Option<TransportKind>,
     #[serde(default)]
     camera: Vec<Spanned<RawCamera>>,
 }
@@ -567,7 +570,11 @@ impl Config {
                 let cam = ctx.camera(c.into_inner(), id, &mut names)?;
                 cameras.push(cam);
             }
-            agents.push(AgentConfig { id, cameras });
+            agents.push(AgentConfig {
+                id,
+                transport: a.transport.unwrap_or(transport.kind),
+                cameras,
+            });
         }
         agents.sort_by_key(|a| a.id);
 
@@ -613,10 +620,15 @@ impl Config {
             .unwrap_or_default();
         let mut agents = Vec::with_capacity(count as usize);
         for id in 0..count {
-            let cameras = self
-                .agent(id)
-                .map_or_else(|| template.clone(), |a| a.cameras.clone());
-            agents.push(AgentConfig { id, cameras });
+            let (cameras, transport) = self.agent(id).map_or_else(
+                || (template.clone(), self.transport.kind),
+                |a| (a.cameras.clone(), a.transport),
+            );
+            agents.push(AgentConfig {
+                id,
+                transport,
+                cameras,
+            });
         }
         self.agents = agents;
         Ok(self)
@@ -679,7 +691,12 @@ impl Config {
             let _ = writeln!(s, "tcp_token = {}", toml_string(token));
         }
         for a in &self.agents {
-            let _ = writeln!(s, "\n[[agent]]\nid = {}", a.id);
+            let _ = writeln!(
+                s,
+                "\n[[agent]]\nid = {}\ntransport = {:?}",
+                a.id,
+                a.transport.as_str()
+            );
             for c in &a.cameras {
                 let _ = writeln!(
                     s,
@@ -854,6 +871,26 @@ mod tests {
                 assert_eq!(cam.format, PixelFormat::Rgb8);
             }
         }
+    }
+
+    #[test]
+    fn each_agent_has_a_transport_defaulting_to_the_kind() {
+        let text = "session = \"t\"\n[transport]\nkind = \"tcp\"\n\
+                    [[agent]]\nid = 0\ntransport = \"shm\"\n[[agent]]\nid = 1\n";
+        let c = parse(text).unwrap();
+        assert_eq!(c.agents[0].transport, TransportKind::Shm);
+        assert_eq!(c.agents[1].transport, TransportKind::Tcp);
+        // The effective config keeps each agent's choice, and resizing keeps it too.
+        let again = parse(&c.to_toml_string()).unwrap();
+        assert_eq!(again.agents, c.agents);
+        let more = c.with_agent_count(3).unwrap();
+        let kinds: Vec<_> = more.agents.iter().map(|a| a.transport).collect();
+        assert_eq!(
+            kinds,
+            [TransportKind::Shm, TransportKind::Tcp, TransportKind::Tcp]
+        );
+        let err = parse("[[agent]]\nid = 0\ntransport = \"carrier-pigeon\"\n").unwrap_err();
+        assert!(err.to_string().contains("transport"), "{err}");
     }
 
     #[test]

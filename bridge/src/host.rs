@@ -15,11 +15,12 @@ use std::time::{Duration, Instant};
 use tracing::{debug, info, warn};
 
 use crate::barrier::{AgentOutcome, BatchVerdict, CycleBarrier};
-use crate::config::{AgentLostPolicy, Config, TransportKind};
+use crate::config::{AgentLostPolicy, Config};
 use crate::signal::SignalHandling;
-use crate::transport::shm::{ShmHost, ShmHostCreateError};
-use crate::transport::tcp::{TcpHost, TcpHostCreateError};
-use crate::transport::{FrameLoan, HostTransport, HostTransportError};
+use crate::transport::mixed::{AnyLoan, Transports, TransportsCreateError};
+use crate::transport::shm::ShmHostCreateError;
+use crate::transport::tcp::TcpHostCreateError;
+use crate::transport::{FrameLoanMut, HostTransport, HostTransportError};
 use crate::wire::{
     ImageDesc, MAX_CAMERAS, MotorCommand, PROTOCOL_VERSION, SENSOR_FLAG_SYNC_MODE, SensorHeader,
     WireOutcome,
@@ -68,7 +69,7 @@ pub struct SensorFrameMut {
     slot: usize,
     agent_id: u32,
     cycle: u64,
-    loan: FrameLoan,
+    loan: AnyLoan,
     descs: [ImageDesc; MAX_CAMERAS],
     image_count: usize,
 }
@@ -305,10 +306,10 @@ impl<'c> HostBuilder<'c> {
     /// [`HostCreateError`].
     pub fn create(self) -> Result<Host, HostCreateError> {
         let config = self.config.clone();
-        let backend: Box<dyn HostTransport> = match config.transport.kind {
-            TransportKind::Shm => Box::new(ShmHost::create(&config, self.signals)?),
-            TransportKind::Tcp => Box::new(TcpHost::create(&config, self.signals)?),
-        };
+        let backend = Transports::create(&config, self.signals).map_err(|e| match e {
+            TransportsCreateError::Shm(e) => HostCreateError::Shm(e),
+            TransportsCreateError::Tcp(e) => HostCreateError::Tcp(e),
+        })?;
         let n = config.agents.len();
         let cap = config.transport.max_commands_per_cycle as usize * 2;
         let slots = config
@@ -386,7 +387,7 @@ pub const REAP_PERIOD: Duration = Duration::from_millis(100);
 /// The host side of a vrsync session.
 pub struct Host {
     config: Config,
-    backend: Box<dyn HostTransport>,
+    backend: Transports,
     slots: Vec<SlotState>,
     barrier: CycleBarrier,
     cycle: u64,

@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use serde::Serialize;
 use tracing::{info, warn};
-use vrsync_bridge::{Config, Host, HostCycleError, HostWaitError, SignalHandling, TransportKind};
+use vrsync_bridge::{Config, Host, HostCycleError, HostWaitError, SignalHandling};
 
 use crate::events::{CYCLE_EVENT_EVERY, Event, Events};
 use crate::picture::{Trails, dump_image, write_map};
@@ -107,9 +107,7 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
     let config = &opts.config;
     // Pre-flight: a session that does not fit /dev/shm is a configuration error (exit 2),
     // found before anything starts rather than as a SIGBUS later.
-    if config.transport.kind == TransportKind::Shm {
-        vrsync_bridge::check_shm_budget(config)?;
-    }
+    vrsync_bridge::check_shm_budget(config)?;
     // The world first: a bad [world] section is a config error, reported before anything
     // is started.
     let mut world = World::from_config(config)?;

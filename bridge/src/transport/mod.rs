@@ -20,6 +20,9 @@
 //!   the batches.
 //! - [`HostTransport::is_connected`] tells whether an agent's receiving side is attached, so
 //!   the host can refuse to start cycle 0 before every agent can see it.
+//! - Each transport has its own loan type ([`HostTransport::Loan`]); a host serving agents
+//!   over several transports routes each agent's slot to its transport and waits for all
+//!   of them at once ([`HostTransport::activity_fd`]): one wait, whoever answers.
 //!
 //! Agent side ([`AgentTransport`]):
 //! - [`AgentTransport::try_receive_newest`] returns, without blocking, the newest sensor
@@ -45,6 +48,7 @@
 //! [`HOST_LIVENESS_PERIOD`]), and [`retry_until`] (connect-retry with back-off while the
 //! host is not there yet).
 
+pub(crate) mod mixed;
 pub mod shm;
 pub mod tcp;
 
@@ -54,31 +58,13 @@ use tracing::debug;
 
 use crate::wire::{MotorCommand, MotorHeader, SensorHeader};
 
-/// Writable memory for one sensor frame, loaned from a transport.
-#[derive(Debug)]
-pub enum FrameLoan {
-    /// A loaned iceoryx2 sample.
-    Shm(shm::ShmFrameLoan),
-    /// A TCP record buffer.
-    Tcp(tcp::TcpFrameLoan),
-}
-
-impl FrameLoan {
+/// Writable memory for one sensor frame, loaned from a transport
+/// ([`HostTransport::Loan`]).
+pub trait FrameLoanMut {
     /// The header and the image bytes, both writable.
-    pub fn parts_mut(&mut self) -> (&mut SensorHeader, &mut [u8]) {
-        match self {
-            Self::Shm(s) => s.parts_mut(),
-            Self::Tcp(t) => t.parts_mut(),
-        }
-    }
-
+    fn parts_mut(&mut self) -> (&mut SensorHeader, &mut [u8]);
     /// The header.
-    pub fn header(&self) -> &SensorHeader {
-        match self {
-            Self::Shm(s) => s.header(),
-            Self::Tcp(t) => t.header(),
-        }
-    }
+    fn header(&self) -> &SensorHeader;
 }
 
 /// Errors of the host side of a transport.
@@ -201,20 +187,23 @@ pub type BatchSink<'a> = dyn FnMut(usize, &MotorHeader, &[MotorCommand]) + 'a;
 /// Host side of a transport. Agents are addressed by *slot*: their index in the config's
 /// agent list.
 pub trait HostTransport {
+    /// A loaned sensor frame of this transport: only this transport's own loans come back
+    /// to [`HostTransport::publish`], so no backend checks at run time what it got.
+    type Loan: FrameLoanMut;
     /// Whether agent `slot` has attached its receiving side.
     fn is_connected(&self, slot: usize) -> bool;
     /// Loans writable memory for agent `slot`'s next sensor frame.
     ///
     /// # Errors
     /// [`HostTransportError::Loan`].
-    fn loan(&mut self, slot: usize) -> Result<FrameLoan, HostTransportError>;
+    fn loan(&mut self, slot: usize) -> Result<Self::Loan, HostTransportError>;
     /// Publishes a loaned frame to agent `slot`. Returns whether it was delivered: `false`
     /// when the agent is not connected (any more), or — async mode on TCP — its socket is
     /// full and it misses this frame.
     ///
     /// # Errors
     /// [`HostTransportError::Send`].
-    fn publish(&mut self, slot: usize, frame: FrameLoan) -> Result<bool, HostTransportError>;
+    fn publish(&mut self, slot: usize, frame: Self::Loan) -> Result<bool, HostTransportError>;
     /// Wakes every agent.
     ///
     /// # Errors
@@ -245,6 +234,18 @@ pub trait HostTransport {
     fn local_addr(&self) -> Option<std::net::SocketAddr> {
         None
     }
+
+    /// A file descriptor that is readable whenever [`HostTransport::wait_activity`] would
+    /// return at once, so that a host serving agents over several transports waits for
+    /// all of them in one `poll(2)`; after such a wait, [`HostTransport::clear_activity`]
+    /// is called. `None`: the transport cannot be waited on that way.
+    fn activity_fd(&self) -> Option<std::os::fd::RawFd> {
+        None
+    }
+
+    /// Forgets pending wake-ups of [`HostTransport::activity_fd`] (a batch that arrives
+    /// later makes it readable again).
+    fn clear_activity(&mut self) {}
 }
 
 // ---------------------------------------------------------------------------------------

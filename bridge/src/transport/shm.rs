@@ -33,8 +33,8 @@ use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe 
 
 use super::{
     AGENT_MAX_HELD_FRAMES, AgentConnectError, AgentFrame, AgentReceiveError, AgentSendError,
-    AgentTransport, Attempt, BatchSink, FrameLoan, HostLiveness, HostTransport, HostTransportError,
-    retry_until,
+    AgentTransport, Attempt, BatchSink, FrameLoanMut, HostLiveness, HostTransport,
+    HostTransportError, retry_until,
 };
 use crate::config::{Config, MAX_AGENT_ID};
 use crate::signal::SignalHandling;
@@ -75,12 +75,14 @@ pub fn agent_node_name(session: &str, id: u32) -> String {
     format!("vrsync-agent.{session}.{id}")
 }
 
-/// Bytes of shared memory the host's services of `config` reserve (sensor pools dominate).
+/// Bytes of shared memory the host's services of `config` reserve for its agents on shared
+/// memory (sensor pools dominate).
 pub fn reserved_bytes(config: &Config) -> u64 {
     let header = core::mem::size_of::<SensorHeader>() as u64 + 64;
     config
         .agents
         .iter()
+        .filter(|a| a.transport == crate::config::TransportKind::Shm)
         .map(|a| {
             let frame = a.frame_bytes().max(1) as u64 + header;
             let motor = (u64::from(config.transport.max_commands_per_cycle)
@@ -268,9 +270,8 @@ impl core::fmt::Debug for ShmFrameLoan {
     }
 }
 
-impl ShmFrameLoan {
-    /// Header and payload, both writable.
-    pub fn parts_mut(&mut self) -> (&mut SensorHeader, &mut [u8]) {
+impl FrameLoanMut for ShmFrameLoan {
+    fn parts_mut(&mut self) -> (&mut SensorHeader, &mut [u8]) {
         let payload = self.sample.payload_mut();
         let (ptr, len) = (payload.as_mut_ptr(), payload.len());
         let header = self.sample.user_header_mut();
@@ -281,8 +282,7 @@ impl ShmFrameLoan {
         (header, payload)
     }
 
-    /// The header.
-    pub fn header(&self) -> &SensorHeader {
+    fn header(&self) -> &SensorHeader {
         self.sample.user_header()
     }
 }
@@ -528,11 +528,13 @@ fn is_dyn_connected(p: &HostAgentPorts) -> bool {
 }
 
 impl HostTransport for ShmHost {
+    type Loan = ShmFrameLoan;
+
     fn is_connected(&self, slot: usize) -> bool {
         self.agents.get(slot).is_some_and(is_dyn_connected)
     }
 
-    fn loan(&mut self, slot: usize) -> Result<FrameLoan, HostTransportError> {
+    fn loan(&mut self, slot: usize) -> Result<ShmFrameLoan, HostTransportError> {
         let id = self.agent(slot)?.id;
         let Some(p) = self.agents.get_mut(slot) else {
             return Err(HostTransportError::Loan {
@@ -560,17 +562,11 @@ impl HostTransport for ShmHost {
         // the same chunk); shared memory is never de-initialised by anyone afterwards.
         let mut sample = unsafe { sample.assume_init() };
         *sample.user_header_mut() = SensorHeader::default();
-        Ok(FrameLoan::Shm(ShmFrameLoan { sample }))
+        Ok(ShmFrameLoan { sample })
     }
 
-    fn publish(&mut self, slot: usize, frame: FrameLoan) -> Result<bool, HostTransportError> {
+    fn publish(&mut self, slot: usize, frame: ShmFrameLoan) -> Result<bool, HostTransportError> {
         let id = self.agent(slot)?.id;
-        let FrameLoan::Shm(frame) = frame else {
-            return Err(HostTransportError::Send {
-                what: format!("the sensor frame of agent {id}"),
-                reason: "not a shared-memory frame".into(),
-            });
-        };
         frame
             .sample
             .send()
@@ -688,6 +684,15 @@ impl HostTransport for ShmHost {
 
     fn termination_requested(&self) -> bool {
         self.signals.termination_requested()
+    }
+
+    fn activity_fd(&self) -> Option<std::os::fd::RawFd> {
+        // SAFETY: the descriptor stays owned by the listener; it is only polled.
+        Some(unsafe { self.stop.file_descriptor().native_handle() })
+    }
+
+    fn clear_activity(&mut self) {
+        let _ = self.stop.try_wait(|_| {});
     }
 }
 

@@ -47,8 +47,8 @@ use zerocopy::{FromBytes, IntoBytes};
 
 use super::{
     AGENT_MAX_HELD_FRAMES, AgentConnectError, AgentFrame, AgentReceiveError, AgentSendError,
-    AgentTransport, Attempt, BatchSink, FrameLoan, HostLiveness, HostTransport, HostTransportError,
-    retry_until,
+    AgentTransport, Attempt, BatchSink, FrameLoanMut, HostLiveness, HostTransport,
+    HostTransportError, retry_until,
 };
 use crate::config::Config;
 use crate::signal::SignalHandling;
@@ -512,16 +512,15 @@ pub struct TcpFrameLoan {
 
 const HEADER: usize = core::mem::size_of::<SensorHeader>();
 
-impl TcpFrameLoan {
+impl FrameLoanMut for TcpFrameLoan {
     /// Header and image bytes, both writable. The header is copied into the record when
     /// the frame is published (592 bytes); the images are written where they are sent from.
-    pub fn parts_mut(&mut self) -> (&mut SensorHeader, &mut [u8]) {
+    fn parts_mut(&mut self) -> (&mut SensorHeader, &mut [u8]) {
         let payload = &mut self.buf.bytes_mut()[PREFIX + HEADER..];
         (&mut self.header, payload)
     }
 
-    /// The header.
-    pub fn header(&self) -> &SensorHeader {
+    fn header(&self) -> &SensorHeader {
         &self.header
     }
 }
@@ -674,6 +673,87 @@ impl TcpHost {
             ready: Vec::new(),
             signals,
         })
+    }
+
+    /// [`HostTransport::wait_activity`] that also wakes when `extra` (another transport's
+    /// [`HostTransport::activity_fd`]) becomes readable: one wait for a host that serves
+    /// agents over several transports. Returns whether `extra` was readable.
+    ///
+    /// # Errors
+    /// As [`HostTransport::wait_activity`].
+    pub fn wait_activity_with(
+        &mut self,
+        timeout: Duration,
+        extra: Option<std::os::fd::RawFd>,
+    ) -> Result<bool, HostTransportError> {
+        // Agent sockets whose data the caller has not drained since the last wait stay
+        // readable: waiting on them again would return at once, and a caller that waits
+        // without draining (for agents to connect, for a lost one to come back) would
+        // spin. Until the next drain they are only watched for errors and hang-ups.
+        let agent_events = if self.unread { 0 } else { libc::POLLIN };
+        self.fds.clear();
+        self.fds.push((self.listener.as_raw_fd(), libc::POLLIN));
+        self.fds.extend(
+            self.pending
+                .iter()
+                .map(|p| (p.stream.as_raw_fd(), libc::POLLIN)),
+        );
+        self.fds.extend(self.slots.iter().filter_map(|s| {
+            s.conn
+                .as_ref()
+                .map(|c| (c.stream.as_raw_fd(), agent_events))
+        }));
+        let extra_index = self.fds.len();
+        if let Some(fd) = extra {
+            self.fds.push((fd, libc::POLLIN));
+        }
+        // Pending hellos and incomplete records have their own deadlines: wake for them
+        // (the host's next drain drops a stalled agent).
+        let timeout = match self.next_deadline() {
+            Some(d) => timeout.min(d.saturating_duration_since(Instant::now())),
+            None => timeout,
+        };
+        let mut ready = std::mem::take(&mut self.ready);
+        let mut pfds = std::mem::take(&mut self.pfds);
+        let result = poll_readable(&self.fds, timeout, &mut pfds, &mut ready);
+        self.ready = ready;
+        self.pfds = pfds;
+        result.map_err(|e| HostTransportError::Receive {
+            agent: u32::MAX,
+            reason: format!("poll: {e}"),
+        })?;
+        // An incomplete record past its deadline on a socket with nothing more to read is
+        // a stall: drop it here too, so a caller that only waits makes progress as well.
+        // (Not when readability was not asked for: unread bytes may complete it.)
+        let now = Instant::now();
+        let watched_reads = agent_events != 0;
+        let mut fd_index = 1 + self.pending.len();
+        for slot in 0..self.slots.len() {
+            let Some(c) = &self.slots[slot].conn else {
+                continue;
+            };
+            let readable = self.ready.get(fd_index).copied().unwrap_or(true);
+            fd_index += 1;
+            self.unread |= readable;
+            if let Some(since) = c.partial_since
+                && watched_reads
+                && !readable
+                && now.duration_since(since) >= self.stall_timeout
+            {
+                let why = stall_reason(&c.reader, self.stall_timeout);
+                self.drop_conn(slot, &why);
+            }
+        }
+        if self.ready.first().copied().unwrap_or(false) {
+            self.accept_new();
+        }
+        if !self.pending.is_empty() {
+            self.handle_pending();
+        }
+        if self.signals.termination_requested() {
+            return Err(HostTransportError::Terminated);
+        }
+        Ok(extra.is_some() && self.ready.get(extra_index).copied().unwrap_or(false))
     }
 
     /// The address actually bound (resolves port 0).
@@ -1025,11 +1105,13 @@ impl Drop for TcpHost {
 }
 
 impl HostTransport for TcpHost {
+    type Loan = TcpFrameLoan;
+
     fn is_connected(&self, slot: usize) -> bool {
         self.slots.get(slot).is_some_and(|s| s.conn.is_some())
     }
 
-    fn loan(&mut self, slot: usize) -> Result<FrameLoan, HostTransportError> {
+    fn loan(&mut self, slot: usize) -> Result<TcpFrameLoan, HostTransportError> {
         let s = self
             .slots
             .get_mut(slot)
@@ -1046,16 +1128,11 @@ impl HostTransport for TcpHost {
         buf.reserve_body(s.body_len);
         let mut header = s.header.take().unwrap_or_default();
         *header = SensorHeader::default();
-        Ok(FrameLoan::Tcp(TcpFrameLoan { header, buf }))
+        Ok(TcpFrameLoan { header, buf })
     }
 
-    fn publish(&mut self, slot: usize, frame: FrameLoan) -> Result<bool, HostTransportError> {
-        let FrameLoan::Tcp(TcpFrameLoan { header, mut buf }) = frame else {
-            return Err(HostTransportError::Send {
-                what: "frame".into(),
-                reason: "not a TCP frame".into(),
-            });
-        };
+    fn publish(&mut self, slot: usize, frame: TcpFrameLoan) -> Result<bool, HostTransportError> {
+        let TcpFrameLoan { header, mut buf } = frame;
         buf.bytes_mut()[PREFIX..PREFIX + HEADER].copy_from_slice(header.as_bytes());
         buf.set_prefix(kind::FRAME);
         let deadline = Instant::now() + self.write_timeout;
@@ -1102,70 +1179,7 @@ impl HostTransport for TcpHost {
     }
 
     fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
-        // Agent sockets whose data the caller has not drained since the last wait stay
-        // readable: waiting on them again would return at once, and a caller that waits
-        // without draining (for agents to connect, for a lost one to come back) would
-        // spin. Until the next drain they are only watched for errors and hang-ups.
-        let agent_events = if self.unread { 0 } else { libc::POLLIN };
-        self.fds.clear();
-        self.fds.push((self.listener.as_raw_fd(), libc::POLLIN));
-        self.fds.extend(
-            self.pending
-                .iter()
-                .map(|p| (p.stream.as_raw_fd(), libc::POLLIN)),
-        );
-        self.fds.extend(self.slots.iter().filter_map(|s| {
-            s.conn
-                .as_ref()
-                .map(|c| (c.stream.as_raw_fd(), agent_events))
-        }));
-        // Pending hellos and incomplete records have their own deadlines: wake for them
-        // (the host's next drain drops a stalled agent).
-        let timeout = match self.next_deadline() {
-            Some(d) => timeout.min(d.saturating_duration_since(Instant::now())),
-            None => timeout,
-        };
-        let mut ready = std::mem::take(&mut self.ready);
-        let mut pfds = std::mem::take(&mut self.pfds);
-        let result = poll_readable(&self.fds, timeout, &mut pfds, &mut ready);
-        self.ready = ready;
-        self.pfds = pfds;
-        result.map_err(|e| HostTransportError::Receive {
-            agent: u32::MAX,
-            reason: format!("poll: {e}"),
-        })?;
-        // An incomplete record past its deadline on a socket with nothing more to read is
-        // a stall: drop it here too, so a caller that only waits makes progress as well.
-        // (Not when readability was not asked for: unread bytes may complete it.)
-        let now = Instant::now();
-        let watched_reads = agent_events != 0;
-        let mut fd_index = 1 + self.pending.len();
-        for slot in 0..self.slots.len() {
-            let Some(c) = &self.slots[slot].conn else {
-                continue;
-            };
-            let readable = self.ready.get(fd_index).copied().unwrap_or(true);
-            fd_index += 1;
-            self.unread |= readable;
-            if let Some(since) = c.partial_since
-                && watched_reads
-                && !readable
-                && now.duration_since(since) >= self.stall_timeout
-            {
-                let why = stall_reason(&c.reader, self.stall_timeout);
-                self.drop_conn(slot, &why);
-            }
-        }
-        if self.ready.first().copied().unwrap_or(false) {
-            self.accept_new();
-        }
-        if !self.pending.is_empty() {
-            self.handle_pending();
-        }
-        if self.signals.termination_requested() {
-            return Err(HostTransportError::Terminated);
-        }
-        Ok(())
+        self.wait_activity_with(timeout, None).map(|_| ())
     }
 
     fn update_connections(&mut self) {}

@@ -1,0 +1,263 @@
+//! One host, agents on several transports: each agent's slot is routed to the transport
+//! its config names (`[[agent]] transport`), and one wait covers them all.
+//!
+//! Each transport is created for its own agents only (a sub-config with those agents);
+//! slots inside a transport are its own, this module maps them to the host's. The shm
+//! transport's wake-up descriptor joins the TCP transport's `poll(2)`, so a stop over
+//! shared memory and a batch over TCP end the same wait.
+
+use std::time::Duration;
+
+use super::shm::{ShmFrameLoan, ShmHost, ShmHostCreateError};
+use super::tcp::{TcpFrameLoan, TcpHost, TcpHostCreateError};
+use super::{BatchSink, FrameLoanMut, HostTransport, HostTransportError};
+use crate::config::{Config, TransportKind};
+use crate::signal::SignalHandling;
+use crate::wire::SensorHeader;
+
+/// Why the transports could not be created.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum TransportsCreateError {
+    /// The shared-memory transport failed.
+    #[error(transparent)]
+    Shm(#[from] ShmHostCreateError),
+    /// The TCP transport failed.
+    #[error(transparent)]
+    Tcp(#[from] TcpHostCreateError),
+}
+
+/// A loan of whichever transport serves the agent.
+#[derive(Debug)]
+pub enum AnyLoan {
+    /// Shared memory.
+    Shm(ShmFrameLoan),
+    /// TCP.
+    Tcp(TcpFrameLoan),
+}
+
+impl FrameLoanMut for AnyLoan {
+    fn parts_mut(&mut self) -> (&mut SensorHeader, &mut [u8]) {
+        match self {
+            Self::Shm(l) => l.parts_mut(),
+            Self::Tcp(l) => l.parts_mut(),
+        }
+    }
+
+    fn header(&self) -> &SensorHeader {
+        match self {
+            Self::Shm(l) => l.header(),
+            Self::Tcp(l) => l.header(),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Route {
+    kind: TransportKind,
+    /// The slot inside that transport.
+    local: usize,
+}
+
+/// Every transport a host's agents use, routed per agent.
+pub struct Transports {
+    shm: Option<ShmHost>,
+    tcp: Option<TcpHost>,
+    routes: Vec<Route>,
+    /// Host slot of each shm slot / tcp slot.
+    shm_slots: Vec<usize>,
+    tcp_slots: Vec<usize>,
+    scratch: Vec<usize>,
+    signals: SignalHandling,
+}
+
+impl core::fmt::Debug for Transports {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Transports")
+            .field("shm_slots", &self.shm_slots)
+            .field("tcp_slots", &self.tcp_slots)
+            .finish()
+    }
+}
+
+impl Transports {
+    /// Creates the transports `config`'s agents use, each for its own agents.
+    ///
+    /// # Errors
+    /// [`TransportsCreateError`].
+    pub fn create(config: &Config, signals: SignalHandling) -> Result<Self, TransportsCreateError> {
+        let mut routes = Vec::with_capacity(config.agents.len());
+        let (mut shm_slots, mut tcp_slots) = (Vec::new(), Vec::new());
+        for (slot, a) in config.agents.iter().enumerate() {
+            let list = match a.transport {
+                TransportKind::Shm => &mut shm_slots,
+                TransportKind::Tcp => &mut tcp_slots,
+            };
+            routes.push(Route {
+                kind: a.transport,
+                local: list.len(),
+            });
+            list.push(slot);
+        }
+        let only = |kind: TransportKind| {
+            let mut sub = config.clone();
+            sub.agents.retain(|a| a.transport == kind);
+            sub
+        };
+        let shm = if shm_slots.is_empty() {
+            None
+        } else {
+            Some(ShmHost::create(&only(TransportKind::Shm), signals)?)
+        };
+        let tcp = if tcp_slots.is_empty() {
+            None
+        } else {
+            Some(TcpHost::create(&only(TransportKind::Tcp), signals)?)
+        };
+        Ok(Self {
+            shm,
+            tcp,
+            routes,
+            scratch: Vec::with_capacity(shm_slots.len().max(tcp_slots.len())),
+            shm_slots,
+            tcp_slots,
+            signals,
+        })
+    }
+
+    fn route(&self, slot: usize) -> Result<Route, HostTransportError> {
+        self.routes
+            .get(slot)
+            .copied()
+            .ok_or_else(|| HostTransportError::Loan {
+                agent: u32::MAX,
+                reason: format!("no agent slot {slot}"),
+            })
+    }
+
+    fn missing(kind: TransportKind) -> HostTransportError {
+        HostTransportError::Send {
+            what: format!("a frame over {}", kind.as_str()),
+            reason: "that transport serves no agent".into(),
+        }
+    }
+}
+
+impl HostTransport for Transports {
+    type Loan = AnyLoan;
+
+    fn is_connected(&self, slot: usize) -> bool {
+        let Some(r) = self.routes.get(slot) else {
+            return false;
+        };
+        match r.kind {
+            TransportKind::Shm => self.shm.as_ref().is_some_and(|t| t.is_connected(r.local)),
+            TransportKind::Tcp => self.tcp.as_ref().is_some_and(|t| t.is_connected(r.local)),
+        }
+    }
+
+    fn loan(&mut self, slot: usize) -> Result<AnyLoan, HostTransportError> {
+        let r = self.route(slot)?;
+        match r.kind {
+            TransportKind::Shm => match &mut self.shm {
+                Some(t) => t.loan(r.local).map(AnyLoan::Shm),
+                None => Err(Self::missing(r.kind)),
+            },
+            TransportKind::Tcp => match &mut self.tcp {
+                Some(t) => t.loan(r.local).map(AnyLoan::Tcp),
+                None => Err(Self::missing(r.kind)),
+            },
+        }
+    }
+
+    fn publish(&mut self, slot: usize, frame: AnyLoan) -> Result<bool, HostTransportError> {
+        let r = self.route(slot)?;
+        // A loan comes from `loan` of the same slot, so its kind is the route's.
+        match (frame, &mut self.shm, &mut self.tcp) {
+            (AnyLoan::Shm(l), Some(t), _) if r.kind == TransportKind::Shm => t.publish(r.local, l),
+            (AnyLoan::Tcp(l), _, Some(t)) if r.kind == TransportKind::Tcp => t.publish(r.local, l),
+            _ => Err(HostTransportError::Send {
+                what: format!("the sensor frame of slot {slot}"),
+                reason: "the frame was loaned for another agent".into(),
+            }),
+        }
+    }
+
+    fn signal_start(&mut self) -> Result<(), HostTransportError> {
+        if let Some(t) = &mut self.shm {
+            t.signal_start()?;
+        }
+        if let Some(t) = &mut self.tcp {
+            t.signal_start()?;
+        }
+        Ok(())
+    }
+
+    fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError> {
+        if let Some(t) = &mut self.shm {
+            let map = &self.shm_slots;
+            t.drain(&mut |local, header, commands| {
+                if let Some(&slot) = map.get(local) {
+                    sink(slot, header, commands);
+                }
+            })?;
+        }
+        if let Some(t) = &mut self.tcp {
+            let map = &self.tcp_slots;
+            t.drain(&mut |local, header, commands| {
+                if let Some(&slot) = map.get(local) {
+                    sink(slot, header, commands);
+                }
+            })?;
+        }
+        Ok(())
+    }
+
+    fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
+        match (&mut self.shm, &mut self.tcp) {
+            (Some(shm), None) => shm.wait_activity(timeout),
+            (None, Some(tcp)) => tcp.wait_activity(timeout),
+            (Some(shm), Some(tcp)) => {
+                // One poll(2) over the TCP sockets and the shm stop listener.
+                if tcp.wait_activity_with(timeout, shm.activity_fd())? {
+                    shm.clear_activity();
+                }
+                if self.signals.termination_requested() {
+                    return Err(HostTransportError::Terminated);
+                }
+                Ok(())
+            }
+            (None, None) => Ok(()),
+        }
+    }
+
+    fn update_connections(&mut self) {
+        if let Some(t) = &mut self.shm {
+            t.update_connections();
+        }
+        if let Some(t) = &mut self.tcp {
+            t.update_connections();
+        }
+    }
+
+    fn termination_requested(&self) -> bool {
+        self.signals.termination_requested()
+    }
+
+    fn reap_dead_agents(&mut self, dead: &mut Vec<usize>) {
+        if let Some(t) = &mut self.shm {
+            self.scratch.clear();
+            t.reap_dead_agents(&mut self.scratch);
+            dead.extend(self.scratch.iter().filter_map(|&l| self.shm_slots.get(l)));
+        }
+        if let Some(t) = &mut self.tcp {
+            self.scratch.clear();
+            t.reap_dead_agents(&mut self.scratch);
+            dead.extend(self.scratch.iter().filter_map(|&l| self.tcp_slots.get(l)));
+        }
+    }
+
+    fn local_addr(&self) -> Option<std::net::SocketAddr> {
+        self.tcp.as_ref().and_then(HostTransport::local_addr)
+    }
+}
