@@ -319,6 +319,7 @@ impl PyAgent {
                 &[("path", obj(py, config.clone()))],
             )
         })?;
+        let agent_transport = agent_cfg.transport;
         let cameras = agent_cfg
             .cameras
             .iter()
@@ -364,7 +365,7 @@ impl PyAgent {
             id,
             session: cfg.session.clone(),
             config_path: config,
-            transport: match cfg.transport.kind {
+            transport: match agent_transport {
                 TransportKind::Shm => "shm",
                 TransportKind::Tcp => "tcp",
             },

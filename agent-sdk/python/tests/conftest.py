@@ -58,9 +58,11 @@ def write_config(
     connect_timeout: float = 20.0,
     cameras: Sequence[tuple[str, int, str]] = CAMERAS_SMALL,
     tcp_port: int = 0,
+    agent_transports: dict[int, str] | None = None,
 ) -> tuple[Path, str]:
     """Writes a config for `agents` agents with `cameras` ((name, width, format); height
-    from a 120°×90° field of view) and returns (path, session). TCP hosts bind port 0
+    from a 120°×90° field of view) and returns (path, session). `agent_transports` gives
+    agents a transport of their own (default: `transport`). TCP hosts bind port 0
     unless `tcp_port` is given; `start_host` puts the bound port into the file."""
     name = session(tag)
     port = tcp_port
@@ -78,6 +80,8 @@ def write_config(
     ]
     for i in range(agents):
         lines += ["[[agent]]", f"id = {i}"]
+        if agent_transports and i in agent_transports:
+            lines.append(f'transport = "{agent_transports[i]}"')
         for cam, width, fmt in cameras:
             lines += [
                 "[[agent.camera]]",
@@ -185,24 +189,3 @@ def run_python(code: str, timeout: float = 60.0, **popen: Any) -> subprocess.Pop
         text=True,
         **popen,
     )
-
-
-def wait_line(proc: subprocess.Popen[str], expected: str, timeout: float) -> None:
-    """Waits until the child prints `expected` on a line of its own (a readiness marker the
-    test's own child prints, not log text)."""
-    import selectors
-
-    assert proc.stdout is not None
-    sel = selectors.DefaultSelector()
-    sel.register(proc.stdout, selectors.EVENT_READ)
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if sel.select(timeout=max(0.0, deadline - time.monotonic())):
-            line = proc.stdout.readline()
-            if not line:
-                break
-            if line.strip() == expected:
-                return
-    proc.kill()
-    _, err = proc.communicate(timeout=10)
-    pytest.fail(f"child did not print {expected!r} within {timeout} s; stderr:\n{err}")

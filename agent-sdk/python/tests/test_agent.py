@@ -8,14 +8,13 @@ import signal
 import socket
 import struct
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 import vrsync
 
-from conftest import binary, run_python, wait_line, write_config
+from conftest import binary, run_python, write_config
 
 TRANSPORTS = ["shm", "tcp"]
 
@@ -277,11 +276,27 @@ def test_ctrl_c_while_waiting_raises_keyboard_interrupt(tmp_path: Path, start_ho
     # waits without limit until SIGINT.
     config, _ = write_config(tmp_path, "sigint", agents=2)
     start_host(config)
+    # The child interrupts itself once its main thread is inside `agent.wait()` (seen
+    # from a helper thread through the main thread's current line), so the signal
+    # certainly arrives while waiting.
     child = run_python(
         f"""
-import time, vrsync
+import os, signal, sys, threading, time, vrsync
 agent = vrsync.Agent.connect({str(config)!r}, 0, connect_timeout=20)
-print("waiting", flush=True)
+main = threading.main_thread().ident
+
+def interrupt_when_waiting():
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        frame = sys._current_frames().get(main)
+        if frame is not None and frame.f_code.co_name == "<module>" and frame.f_lineno == WAIT_LINE:
+            break
+        time.sleep(0.01)
+    print("waiting", flush=True)
+    os.kill(os.getpid(), signal.SIGINT)
+
+WAIT_LINE = sys._getframe().f_lineno + 4  # the line of agent.wait() below
+threading.Thread(target=interrupt_when_waiting, daemon=True).start()
 t = time.monotonic()
 try:
     agent.wait()
@@ -289,9 +304,7 @@ except KeyboardInterrupt:
     print("interrupted", round(time.monotonic() - t, 3), flush=True)
 """
     )
-    wait_line(child, "waiting", timeout=60)
-    child.send_signal(signal.SIGINT)
-    out, err = child.communicate(timeout=30)
+    out, err = child.communicate(timeout=60)
     assert child.returncode == 0, err
     assert out.split()[-2] == "interrupted", out + err
 

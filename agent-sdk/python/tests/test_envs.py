@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import vrsync
 from gymnasium.utils.env_checker import check_env
 from pettingzoo.test import parallel_api_test
 from vrsync.compat import Annar4Interface
@@ -107,6 +106,27 @@ def test_pettingzoo_agents_act_in_the_same_cycle(tmp_path: Path, start_host) -> 
     env.close()
     summary = host.finish()
     assert summary["stop_timeouts"] == 0
+
+
+def test_pettingzoo_over_mixed_transports_matches_the_all_shm_world(
+    tmp_path: Path, start_host
+) -> None:
+    hashes = []
+    for tag, per_agent in (("pzshm", None), ("pzmixed", {1: "tcp"})):
+        config, _ = write_config(tmp_path, tag, agents=2, agent_transports=per_agent)
+        host = start_host(config, 41)
+        env = VrsyncParallelEnv(config, connect_timeout=20)
+        assert [e.agent.transport for e in env._envs.values()] == (
+            ["shm", "shm"] if per_agent is None else ["shm", "tcp"]
+        )
+        env.reset(seed=0)
+        for step in range(39):
+            env.step({a: (step + k) % 4 for k, a in enumerate(env.agents)})
+        env.close()
+        summary = host.finish()
+        assert summary["stop_timeouts"] == 0
+        hashes.append(summary["trajectory_hash"])
+    assert hashes[0] == hashes[1]
 
 
 def test_compat_drives_the_original_loop_for_100_cycles(tmp_path: Path, start_host) -> None:
