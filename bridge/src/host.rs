@@ -65,16 +65,16 @@ impl<'a> Iterator for ImagesMut<'a> {
 /// A sensor frame loaned for one agent: write the header and the images, then hand it to
 /// [`Host::publish`]. Dropping it instead returns the memory unpublished.
 #[derive(Debug)]
-pub struct SensorFrameMut {
+pub struct SensorFrameMut<L = AnyLoan> {
     slot: usize,
     agent_id: u32,
     cycle: u64,
-    loan: AnyLoan,
+    loan: L,
     descs: [ImageDesc; MAX_CAMERAS],
     image_count: usize,
 }
 
-impl SensorFrameMut {
+impl<L: FrameLoanMut> SensorFrameMut<L> {
     /// The agent this frame is for.
     pub fn agent_id(&self) -> u32 {
         self.agent_id
@@ -305,11 +305,18 @@ impl<'c> HostBuilder<'c> {
     /// # Errors
     /// [`HostCreateError`].
     pub fn create(self) -> Result<Host, HostCreateError> {
-        let config = self.config.clone();
-        let backend = Transports::create(&config, self.signals).map_err(|e| match e {
+        let backend = Transports::create(self.config, self.signals).map_err(|e| match e {
             TransportsCreateError::Shm(e) => HostCreateError::Shm(e),
             TransportsCreateError::Tcp(e) => HostCreateError::Tcp(e),
         })?;
+        Ok(Host::over(self.config, backend))
+    }
+}
+
+impl<T: HostTransport> Host<T> {
+    /// A host of `config` over `backend` (the builder's transports, or a test's fake).
+    pub(crate) fn over(config: &Config, backend: T) -> Self {
+        let config = config.clone();
         let n = config.agents.len();
         let cap = config.transport.max_commands_per_cycle as usize * 2;
         let slots = config
@@ -345,7 +352,7 @@ impl<'c> HostBuilder<'c> {
             transport = config.transport.kind.as_str(),
             "host created"
         );
-        Ok(Host {
+        Host {
             backend,
             slots,
             barrier: CycleBarrier::new(n),
@@ -364,7 +371,7 @@ impl<'c> HostBuilder<'c> {
             lost_this_cycle: Vec::with_capacity(n),
             evicted_hook: None,
             config,
-        })
+        }
     }
 }
 
@@ -384,10 +391,11 @@ struct SlotState {
 /// How often the host looks for dead agent processes while it waits.
 pub const REAP_PERIOD: Duration = Duration::from_millis(100);
 
-/// The host side of a vrsync session.
-pub struct Host {
+/// The host side of a vrsync session, over the transports its agents use (`T` is only
+/// replaced in the crate's own tests, by a fake transport).
+pub struct Host<T: HostTransport = Transports> {
     config: Config,
-    backend: Transports,
+    backend: T,
     slots: Vec<SlotState>,
     barrier: CycleBarrier,
     cycle: u64,
@@ -400,7 +408,7 @@ pub struct Host {
     evicted_hook: Option<Box<dyn FnMut(u32, u64)>>,
 }
 
-impl core::fmt::Debug for Host {
+impl<T: HostTransport> core::fmt::Debug for Host<T> {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.debug_struct("Host")
             .field("session", &self.config.session)
@@ -415,7 +423,9 @@ impl Host {
     pub fn builder(config: &Config) -> HostBuilder<'_> {
         HostBuilder::new(config)
     }
+}
 
+impl<T: HostTransport> Host<T> {
     /// The configuration the host runs with.
     pub fn config(&self) -> &Config {
         &self.config
@@ -538,7 +548,7 @@ impl Host {
     ///
     /// # Errors
     /// [`HostCycleError`].
-    pub fn loan_frame(&mut self, id: u32) -> Result<SensorFrameMut, HostCycleError> {
+    pub fn loan_frame(&mut self, id: u32) -> Result<SensorFrameMut<T::Loan>, HostCycleError> {
         let slot = self.slot_of(id).ok_or(HostCycleError::UnknownAgent(id))?;
         let mut loan = self.backend.loan(slot)?;
         let s = &self.slots[slot];
@@ -571,7 +581,7 @@ impl Host {
     ///
     /// # Errors
     /// [`HostCycleError`].
-    pub fn publish(&mut self, frame: SensorFrameMut) -> Result<(), HostCycleError> {
+    pub fn publish(&mut self, frame: SensorFrameMut<T::Loan>) -> Result<(), HostCycleError> {
         if frame.cycle != self.cycle {
             return Err(HostCycleError::StaleFrame {
                 agent: frame.agent_id,
@@ -831,5 +841,328 @@ impl Host {
             a.outcome = AgentOutcome::Async;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! The host's logic over a fake transport: no processes, no shared memory, no sockets.
+    //! The fake's "agents" answer at the host's waits, as real ones would while it blocks.
+
+    use std::cell::RefCell;
+    use std::path::Path;
+    use std::rc::Rc;
+
+    use super::*;
+    use crate::transport::BatchSink;
+    use crate::wire::{Command, MOTOR_FLAG_STOP, MotorHeader};
+
+    /// What the fake's agents do; shared between the test and the host's transport.
+    #[derive(Default)]
+    struct Agents {
+        connected: Vec<bool>,
+        /// Slots whose process "died" (reported by `reap_dead_agents`).
+        dead: Vec<usize>,
+        /// Whether a slot answers each frame it gets with one command and a stop.
+        answers: Vec<bool>,
+        /// Slots that reconnect at the next wait.
+        reconnect: Vec<usize>,
+        /// Frames delivered and not answered yet: (slot, cycle).
+        delivered: Vec<(usize, u64)>,
+        /// Batches waiting for the host's next drain.
+        inbox: Vec<(usize, MotorHeader, Vec<MotorCommand>)>,
+    }
+
+    impl Agents {
+        fn batch(&mut self, slot: usize, cycle: u64, stop: bool, commands: Vec<MotorCommand>) {
+            let header = MotorHeader {
+                protocol_version: PROTOCOL_VERSION,
+                agent_id: 0,
+                cycle,
+                flags: if stop { MOTOR_FLAG_STOP } else { 0 },
+                command_count: commands.len() as u32,
+            };
+            self.inbox.push((slot, header, commands));
+        }
+    }
+
+    #[derive(Debug)]
+    struct FakeLoan {
+        header: SensorHeader,
+        payload: Vec<u8>,
+    }
+
+    impl FrameLoanMut for FakeLoan {
+        fn parts_mut(&mut self) -> (&mut SensorHeader, &mut [u8]) {
+            (&mut self.header, &mut self.payload)
+        }
+        fn header(&self) -> &SensorHeader {
+            &self.header
+        }
+    }
+
+    struct Fake(Rc<RefCell<Agents>>);
+
+    impl HostTransport for Fake {
+        type Loan = FakeLoan;
+
+        fn is_connected(&self, slot: usize) -> bool {
+            self.0
+                .borrow()
+                .connected
+                .get(slot)
+                .copied()
+                .unwrap_or(false)
+        }
+        fn loan(&mut self, _slot: usize) -> Result<FakeLoan, HostTransportError> {
+            Ok(FakeLoan {
+                header: SensorHeader::default(),
+                payload: vec![0; 64],
+            })
+        }
+        fn publish(&mut self, slot: usize, frame: FakeLoan) -> Result<bool, HostTransportError> {
+            let mut a = self.0.borrow_mut();
+            if !a.connected[slot] {
+                return Ok(false);
+            }
+            a.delivered.push((slot, frame.header.cycle));
+            Ok(true)
+        }
+        fn signal_start(&mut self) -> Result<(), HostTransportError> {
+            Ok(())
+        }
+        fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError> {
+            let inbox = std::mem::take(&mut self.0.borrow_mut().inbox);
+            for (slot, header, commands) in &inbox {
+                sink(*slot, header, commands);
+            }
+            Ok(())
+        }
+        fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
+            let mut a = self.0.borrow_mut();
+            for slot in std::mem::take(&mut a.reconnect) {
+                a.connected[slot] = true;
+            }
+            let delivered = std::mem::take(&mut a.delivered);
+            for (slot, cycle) in delivered {
+                if a.answers[slot] && a.connected[slot] {
+                    let command = Command::Turn { angle_deg: 1.0 }.encode(cycle as u32);
+                    a.batch(slot, cycle, true, vec![command]);
+                }
+            }
+            if a.inbox.is_empty() {
+                // Nothing will answer: let the time the host waits for pass (briefly).
+                drop(a);
+                std::thread::sleep(timeout.min(Duration::from_millis(2)));
+            }
+            Ok(())
+        }
+        fn update_connections(&mut self) {}
+        fn termination_requested(&self) -> bool {
+            false
+        }
+        fn reap_dead_agents(&mut self, dead: &mut Vec<usize>) {
+            dead.extend(std::mem::take(&mut self.0.borrow_mut().dead));
+        }
+    }
+
+    /// A host of agents 3 and 7 (ids are not slots) over the fake, both connected and
+    /// answering.
+    fn host(policy: &str) -> (Host<Fake>, Rc<RefCell<Agents>>) {
+        let text = format!(
+            "session = \"fake\"\n[sync]\nstop_timeout = 0.2\nconnect_timeout = 0.2\n\
+             on_agent_lost = {policy:?}\n[[agent]]\nid = 3\n[[agent]]\nid = 7\n"
+        );
+        let config = Config::from_toml_str(&text, Path::new("fake.toml")).unwrap();
+        let agents = Rc::new(RefCell::new(Agents {
+            connected: vec![true, true],
+            answers: vec![true, true],
+            ..Agents::default()
+        }));
+        let mut host = Host::over(&config, Fake(agents.clone()));
+        host.wait_for_agents(Duration::from_secs(1)).unwrap();
+        (host, agents)
+    }
+
+    fn publish_all(host: &mut Host<Fake>) {
+        for id in [3, 7] {
+            let frame = host.loan_frame(id).unwrap();
+            assert_eq!(frame.header().cycle, host.cycle());
+            assert_eq!(frame.header().agent_id, id);
+            host.publish(frame).unwrap();
+        }
+        host.start().unwrap();
+    }
+
+    fn outcomes(report: &CycleReport) -> Vec<(u32, AgentOutcome)> {
+        report
+            .agents()
+            .iter()
+            .map(|a| (a.agent_id, a.outcome))
+            .collect()
+    }
+
+    #[test]
+    fn a_cycle_ends_when_every_awaited_agent_stopped_with_its_commands() {
+        let (mut host, _agents) = host("evict");
+        publish_all(&mut host);
+        let report = host.collect().unwrap();
+        assert_eq!(report.cycle, 0);
+        assert!(!report.timed_out);
+        assert_eq!(
+            outcomes(report),
+            [(3, AgentOutcome::Stopped), (7, AgentOutcome::Stopped)]
+        );
+        assert!(report.agents().iter().all(|a| a.commands().len() == 1));
+        assert_eq!(host.cycle(), 1);
+    }
+
+    #[test]
+    fn a_late_stop_never_completes_the_next_cycle_and_the_timeout_names_the_agent() {
+        let (mut host, agents) = host("evict");
+        publish_all(&mut host);
+        host.collect().unwrap();
+        // Cycle 1: agent 3 is silent; its stop for cycle 0 arrives again (late), and
+        // agent 7 sends a batch for cycle 5 (future) besides its stop.
+        {
+            let mut a = agents.borrow_mut();
+            a.answers[0] = false;
+            a.batch(0, 0, true, Vec::new());
+            a.batch(1, 5, true, Vec::new());
+        }
+        publish_all(&mut host);
+        let report = host.collect().unwrap();
+        assert_eq!(report.cycle, 1);
+        assert!(report.timed_out);
+        assert_eq!(report.timed_out_agents().collect::<Vec<_>>(), [3]);
+        assert_eq!(
+            outcomes(report),
+            [(3, AgentOutcome::TimedOut), (7, AgentOutcome::Stopped)]
+        );
+        assert_eq!(report.late_batches, 1);
+        let stats = host.stats();
+        assert_eq!((stats.late_batches, stats.future_batches), (1, 1));
+        assert_eq!((stats.stop_timeouts, stats.agent_timeouts), (1, 1));
+    }
+
+    #[test]
+    fn a_disconnected_agent_is_evicted_then_rejoins() {
+        let (mut host, agents) = host("evict");
+        let evicted = Rc::new(RefCell::new(Vec::new()));
+        let seen = evicted.clone();
+        host.on_evicted(move |id, cycle| seen.borrow_mut().push((id, cycle)));
+        publish_all(&mut host);
+        host.collect().unwrap();
+        // Cycle 1: agent 7's frame reaches it, then it disconnects without a stop.
+        agents.borrow_mut().answers[1] = false;
+        publish_all(&mut host);
+        agents.borrow_mut().connected[1] = false;
+        let report = host.collect().unwrap();
+        assert!(!report.timed_out, "a lost agent is evicted, not waited for");
+        assert_eq!(
+            outcomes(report),
+            [(3, AgentOutcome::Stopped), (7, AgentOutcome::Evicted)]
+        );
+        assert_eq!(*evicted.borrow(), [(7, 1)]);
+        assert!(host.is_evicted(7));
+        // Cycle 2: its frame is not delivered; cycle 3: it is back.
+        publish_all(&mut host);
+        assert_eq!(
+            outcomes(host.collect().unwrap()),
+            [(3, AgentOutcome::Stopped), (7, AgentOutcome::NotAwaited)]
+        );
+        {
+            let mut a = agents.borrow_mut();
+            a.connected[1] = true;
+            a.answers[1] = true;
+        }
+        publish_all(&mut host);
+        assert_eq!(
+            outcomes(host.collect().unwrap()),
+            [(3, AgentOutcome::Stopped), (7, AgentOutcome::Stopped)]
+        );
+        assert!(!host.is_evicted(7));
+        let stats = host.stats();
+        assert_eq!(stats.evicted_agents, [7]);
+        assert_eq!(stats.rejoins, 1);
+        assert_eq!(stats.frames_undelivered, 1);
+    }
+
+    #[test]
+    fn a_dead_agent_process_is_evicted() {
+        let (mut host, agents) = host("evict");
+        agents.borrow_mut().answers[0] = false;
+        publish_all(&mut host);
+        agents.borrow_mut().dead.push(0);
+        let report = host.collect().unwrap();
+        assert_eq!(
+            outcomes(report),
+            [(3, AgentOutcome::Evicted), (7, AgentOutcome::Stopped)]
+        );
+        assert_eq!(host.stats().evicted_agents, [3]);
+    }
+
+    fn lose_agent_7(host: &mut Host<Fake>, agents: &Rc<RefCell<Agents>>) {
+        agents.borrow_mut().answers[1] = false;
+        publish_all(host);
+        agents.borrow_mut().connected[1] = false;
+    }
+
+    #[test]
+    fn on_agent_lost_abort_names_the_agent_and_cycle() {
+        let (mut host, agents) = host("abort");
+        lose_agent_7(&mut host, &agents);
+        let err = host.collect().unwrap_err();
+        assert!(
+            matches!(err, HostCycleError::AgentLost { agent: 7, cycle: 0 }),
+            "{err:?}"
+        );
+    }
+
+    #[test]
+    fn on_agent_lost_wait_pauses_until_the_agent_is_back() {
+        let (mut host, agents) = host("wait");
+        lose_agent_7(&mut host, &agents);
+        agents.borrow_mut().reconnect.push(1);
+        let report = host.collect().unwrap();
+        assert_eq!(
+            outcomes(report),
+            [(3, AgentOutcome::Stopped), (7, AgentOutcome::Evicted)]
+        );
+        assert!(host.is_connected(7));
+    }
+
+    #[test]
+    fn on_agent_lost_wait_gives_up_after_the_connect_timeout() {
+        let (mut host, agents) = host("wait");
+        lose_agent_7(&mut host, &agents);
+        let err = host.collect().unwrap_err();
+        assert!(
+            matches!(err, HostCycleError::AgentNotBack { agent: 7, .. }),
+            "{err:?}"
+        );
+    }
+
+    #[test]
+    fn waiting_for_agents_names_the_missing_ones_and_the_session() {
+        let text = "session = \"fake\"\n[[agent]]\nid = 3\n[[agent]]\nid = 7\n";
+        let config = Config::from_toml_str(text, Path::new("fake.toml")).unwrap();
+        let agents = Rc::new(RefCell::new(Agents {
+            connected: vec![true, false],
+            answers: vec![true, true],
+            ..Agents::default()
+        }));
+        let mut host = Host::over(&config, Fake(agents));
+        let err = host.wait_for_agents(Duration::from_millis(20)).unwrap_err();
+        match &err {
+            HostWaitError::AgentsMissing {
+                session, missing, ..
+            } => {
+                assert_eq!(session, "fake");
+                assert_eq!(missing, &[7]);
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(!err.to_string().contains("vr-agent"), "{err}");
     }
 }
