@@ -12,6 +12,9 @@
 //! unit-tested over a fake transport in `bridge/src/host.rs`; the frame-holding limit and
 //! the connect errors in `agent-sdk/src/agent.rs`; signals in a child process there.
 
+// Helpers outside `#[test]` functions panic on failure too: this is a test binary.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use std::path::Path;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::mpsc::{Receiver, Sender, channel};
