@@ -9,6 +9,7 @@ mod util;
 
 mod config;
 mod cpp;
+mod examples;
 mod faults;
 mod hostile;
 mod sync;

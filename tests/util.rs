@@ -48,9 +48,23 @@ pub fn lib_dir() -> PathBuf {
 /// Path of a workspace binary; panics with the command to run when it is missing or
 /// older than one of its sources (a `cargo test -p vrsync-tests` does not rebuild it).
 pub fn bin(name: &str) -> PathBuf {
-    let path = bin_dir().join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
-    let hint = "build the binaries with `cargo test --workspace --no-run` (or run the \
-                whole `cargo test --workspace`)";
+    built(bin_dir().join(format!("{name}{}", std::env::consts::EXE_SUFFIX)))
+}
+
+/// Path of a workspace example (`target/<profile>/examples/NAME`), checked like [`bin`]:
+/// `cargo test --workspace` builds every member's examples.
+pub fn example(name: &str) -> PathBuf {
+    built(
+        profile_dir()
+            .join("examples")
+            .join(format!("{name}{}", std::env::consts::EXE_SUFFIX)),
+    )
+}
+
+/// `path`, after checking that it exists and is newer than its sources.
+fn built(path: PathBuf) -> PathBuf {
+    let hint = "build the binaries and examples with `cargo test --workspace --no-run` (or \
+                run the whole `cargo test --workspace`)";
     let built = std::fs::metadata(&path)
         .and_then(|m| m.modified())
         .unwrap_or_else(|e| panic!("{}: {e}; {hint}", path.display()));

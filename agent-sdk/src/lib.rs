@@ -5,15 +5,13 @@
 //! motor commands, *stop*. The loop mirrors the original system's agents:
 //!
 //! ```no_run
-//! use std::time::Duration;
-//! use vrsync_agent::{Agent, Command};
-//! use vrsync_bridge::Config;
+//! use vrsync_agent::{Agent, Command, Config};
 //!
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! let config = Config::load("config/default.toml")?;
 //! let mut agent = Agent::connect(&config, 0)?;
 //! loop {
-//!     let frame = match agent.wait_start(Some(Duration::from_secs(10))) {
+//!     let frame = match agent.wait_start(None) {
 //!         Ok(frame) => frame,
 //!         Err(vrsync_agent::WaitStartError::HostClosed) => break,
 //!         Err(e) => return Err(e.into()),
@@ -38,4 +36,8 @@ pub use agent::{
     Agent, AgentBuilder, AgentConnectError, Frame, HOST_LIVENESS_PERIOD, Image, SendError,
     SignalHandling, StopError, WaitStartError,
 };
+/// The [glam](https://docs.rs/glam) this SDK uses for poses and targets ([`Pose::position`],
+/// [`Command::MoveTo`]): use `vrsync_agent::glam` instead of pinning the same version.
+pub use glam;
+pub use vrsync_bridge::Config;
 pub use vrsync_bridge::wire::{ActionState, Command, PixelFormat, Pose, SensorHeader};
