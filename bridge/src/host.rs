@@ -509,7 +509,7 @@ impl<T: HostTransport> Host<T> {
                 .map(|s| self.slots[s].id)
                 .collect();
             if missing.is_empty() {
-                self.backend.update_connections();
+                self.backend.update_connections()?;
                 info!(
                     agents = self.slots.len(),
                     waited_ms = started.elapsed().as_millis() as u64,
@@ -820,7 +820,7 @@ impl<T: HostTransport> Host<T> {
                             .wait_activity(left.min(Duration::from_secs(1)))?;
                     }
                 }
-                self.backend.update_connections();
+                self.backend.update_connections()?;
                 Ok(())
             }
         }
@@ -957,7 +957,9 @@ mod tests {
             }
             Ok(())
         }
-        fn update_connections(&mut self) {}
+        fn update_connections(&mut self) -> Result<(), HostTransportError> {
+            Ok(())
+        }
         fn termination_requested(&self) -> bool {
             false
         }

@@ -129,10 +129,7 @@ impl Transports {
         self.routes
             .get(slot)
             .copied()
-            .ok_or_else(|| HostTransportError::Loan {
-                agent: u32::MAX,
-                reason: format!("no agent slot {slot}"),
-            })
+            .ok_or(HostTransportError::NoSuchSlot { slot })
     }
 
     fn missing(kind: TransportKind) -> HostTransportError {
@@ -231,13 +228,14 @@ impl HostTransport for Transports {
         }
     }
 
-    fn update_connections(&mut self) {
+    fn update_connections(&mut self) -> Result<(), HostTransportError> {
         if let Some(t) = &mut self.shm {
-            t.update_connections();
+            t.update_connections()?;
         }
         if let Some(t) = &mut self.tcp {
-            t.update_connections();
+            t.update_connections()?;
         }
+        Ok(())
     }
 
     fn termination_requested(&self) -> bool {

@@ -95,6 +95,26 @@ pub enum HostTransportError {
         /// Transport detail.
         reason: String,
     },
+    /// The host asked for a slot the transport does not have (a bug in the caller).
+    #[error("the transport has no agent slot {slot}")]
+    NoSuchSlot {
+        /// The slot asked for.
+        slot: usize,
+    },
+    /// Waiting for agents' batches failed.
+    #[error("cannot wait for the agents' batches: {reason}")]
+    Wait {
+        /// Transport detail.
+        reason: String,
+    },
+    /// Connecting the host's ports to an agent's failed.
+    #[error("cannot connect the host's ports to agent {agent}: {reason}")]
+    Connect {
+        /// Agent id.
+        agent: u32,
+        /// Transport detail.
+        reason: String,
+    },
     /// SIGINT / SIGTERM arrived.
     #[error("termination requested")]
     Terminated,
@@ -220,7 +240,10 @@ pub trait HostTransport {
     /// [`HostTransportError::Terminated`] on SIGINT/SIGTERM.
     fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError>;
     /// Re-establishes connections after agents joined.
-    fn update_connections(&mut self);
+    ///
+    /// # Errors
+    /// [`HostTransportError::Connect`] naming the agent.
+    fn update_connections(&mut self) -> Result<(), HostTransportError>;
     /// Whether SIGINT/SIGTERM was received.
     fn termination_requested(&self) -> bool;
     /// Finds agents whose process died (iceoryx2 reports their node dead), removes their

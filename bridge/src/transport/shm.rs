@@ -237,12 +237,29 @@ pub fn host_alive(session: &str) -> bool {
     host_state(session) == HostState::Alive
 }
 
-/// Removes the stale resources of every dead iceoryx2 node on this machine (crashed runs).
-/// Returns how many nodes were cleaned.
-pub fn cleanup_dead_nodes() -> u64 {
+/// Whether iceoryx2 node `name` is the host or an agent of `session` (a session name may
+/// contain dots: an agent's node name is `vrsync-agent.<session>.<id>`, digits only after).
+fn node_of_session(name: &str, session: &str) -> bool {
+    name == host_node_name(session)
+        || name
+            .strip_prefix("vrsync-agent.")
+            .and_then(|rest| rest.strip_prefix(session))
+            .and_then(|rest| rest.strip_prefix('.'))
+            .is_some_and(|id| !id.is_empty() && id.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// Removes the stale resources of the dead iceoryx2 nodes of `session` (its crashed host
+/// or agents); other sessions' nodes, dead or alive, are left to their owners. Returns how
+/// many nodes were cleaned.
+pub fn cleanup_dead_nodes(session: &str) -> u64 {
+    use iceoryx2::node::NodeView;
     let mut cleaned = 0;
     let _ = Node::<Svc>::list(Config2::global_config(), |state| {
         if let NodeState::Dead(view) = state
+            && view
+                .details()
+                .as_ref()
+                .is_some_and(|d| node_of_session(d.name().as_str(), session))
             && view.try_remove_stale_resources().is_ok()
         {
             cleaned += 1;
@@ -359,7 +376,7 @@ impl ShmHost {
         let ice = ShmHostCreateError::Iceoryx;
         let session = &config.session;
         check_shm_budget(config)?;
-        cleanup_dead_nodes();
+        cleanup_dead_nodes(session);
         if host_alive(session) {
             return Err(ShmHostCreateError::SessionInUse {
                 session: session.clone(),
@@ -504,10 +521,7 @@ impl ShmHost {
     fn agent(&self, slot: usize) -> Result<&HostAgentPorts, HostTransportError> {
         self.agents
             .get(slot)
-            .ok_or_else(|| HostTransportError::Loan {
-                agent: slot as u32,
-                reason: "no such agent slot".into(),
-            })
+            .ok_or(HostTransportError::NoSuchSlot { slot })
     }
 }
 
@@ -639,8 +653,7 @@ impl HostTransport for ShmHost {
             Ok(_) => {}
             Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => {}
             Err(e) => {
-                return Err(HostTransportError::Receive {
-                    agent: u32::MAX,
+                return Err(HostTransportError::Wait {
                     reason: format!("stop listener: {e:?}"),
                 });
             }
@@ -675,11 +688,20 @@ impl HostTransport for ShmHost {
         });
     }
 
-    fn update_connections(&mut self) {
+    fn update_connections(&mut self) -> Result<(), HostTransportError> {
         for p in &self.agents {
-            let _ = p.sensor_pub.update_connections();
-            let _ = p.motor_sub.update_connections();
+            let connect = |what: &str, e: &dyn core::fmt::Debug| HostTransportError::Connect {
+                agent: p.id,
+                reason: format!("{what}: {e:?}"),
+            };
+            p.sensor_pub
+                .update_connections()
+                .map_err(|e| connect("sensor publisher", &e))?;
+            p.motor_sub
+                .update_connections()
+                .map_err(|e| connect("motor subscriber", &e))?;
         }
+        Ok(())
     }
 
     fn termination_requested(&self) -> bool {
@@ -1175,5 +1197,80 @@ impl AgentTransport for ShmAgent {
 
     fn termination_requested(&self) -> bool {
         self.signals.termination_requested()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_the_sessions_own_nodes_belong_to_it() {
+        assert!(node_of_session("vrsync-host.a", "a"));
+        assert!(node_of_session("vrsync-agent.a.3", "a"));
+        assert!(node_of_session("vrsync-agent.a.b.3", "a.b"));
+        assert!(!node_of_session("vrsync-agent.a.b.3", "a"));
+        assert!(!node_of_session("vrsync-host.ab", "a"));
+        assert!(!node_of_session("vrsync-agent.ab.3", "a"));
+        assert!(!node_of_session("vrsync-agent.a.", "a"));
+        assert!(!node_of_session("floor-node", "a"));
+    }
+
+    const CHILD_ENV: &str = "VRSYNC_TEST_DEAD_NODE_SESSION";
+
+    fn dead_nodes_of(session: &str) -> usize {
+        use iceoryx2::node::NodeView;
+        let mut n = 0;
+        let _ = Node::<Svc>::list(Config2::global_config(), |state| {
+            if let NodeState::Dead(view) = state
+                && view
+                    .details()
+                    .as_ref()
+                    .is_some_and(|d| node_of_session(d.name().as_str(), session))
+            {
+                n += 1;
+            }
+            CallbackProgression::Continue
+        });
+        n
+    }
+
+    /// A host process of one session is SIGKILLed; cleaning up for another session leaves
+    /// its dead node alone, cleaning up for its own session removes it.
+    #[test]
+    fn cleanup_touches_only_the_dead_nodes_of_its_own_session() {
+        if let Ok(session) = std::env::var(CHILD_ENV) {
+            // The child: be a host of `session`, then die without cleaning up.
+            let _node = node(&host_node_name(&session)).unwrap();
+            // SAFETY: kills this (child) process on purpose.
+            unsafe { libc::raise(libc::SIGKILL) };
+            return;
+        }
+        let pid = std::process::id();
+        let (dead, other) = (format!("deadnode{pid}"), format!("othernode{pid}"));
+        let status = std::process::Command::new(std::env::current_exe().unwrap())
+            .args([
+                "--exact",
+                "transport::shm::tests::cleanup_touches_only_the_dead_nodes_of_its_own_session",
+                "--test-threads=1",
+            ])
+            .env(CHILD_ENV, &dead)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .status()
+            .unwrap();
+        assert_eq!(
+            std::os::unix::process::ExitStatusExt::signal(&status),
+            Some(libc::SIGKILL)
+        );
+        assert_eq!(dead_nodes_of(&dead), 1);
+        assert_eq!(cleanup_dead_nodes(&other), 0);
+        assert_eq!(
+            dead_nodes_of(&dead),
+            1,
+            "another session's dead node was removed"
+        );
+        assert_eq!(cleanup_dead_nodes(&dead), 1);
+        assert_eq!(dead_nodes_of(&dead), 0);
     }
 }

@@ -718,8 +718,7 @@ impl TcpHost {
         let result = poll_readable(&self.fds, timeout, &mut pfds, &mut ready);
         self.ready = ready;
         self.pfds = pfds;
-        result.map_err(|e| HostTransportError::Receive {
-            agent: u32::MAX,
+        result.map_err(|e| HostTransportError::Wait {
             reason: format!("poll: {e}"),
         })?;
         // An incomplete record past its deadline on a socket with nothing more to read is
@@ -1115,10 +1114,7 @@ impl HostTransport for TcpHost {
         let s = self
             .slots
             .get_mut(slot)
-            .ok_or_else(|| HostTransportError::Loan {
-                agent: slot as u32,
-                reason: "no such agent slot".into(),
-            })?;
+            .ok_or(HostTransportError::NoSuchSlot { slot })?;
         // A loan dropped without publishing took its buffer with it: make a new one (rare;
         // steady state reuses the buffer every cycle).
         let mut buf = s
@@ -1182,7 +1178,9 @@ impl HostTransport for TcpHost {
         self.wait_activity_with(timeout, None).map(|_| ())
     }
 
-    fn update_connections(&mut self) {}
+    fn update_connections(&mut self) -> Result<(), HostTransportError> {
+        Ok(())
+    }
 
     fn termination_requested(&self) -> bool {
         self.signals.termination_requested()
