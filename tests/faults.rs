@@ -75,7 +75,7 @@ fn a_killed_agent_is_evicted_and_can_rejoin(t: Transport) {
             "9",
         ],
     );
-    // --late-stop-at 9 makes it sleep 2 × stop_timeout before its 10th stop, after it
+    // --late-stop-at 9 makes it sleep 1.5 × stop_timeout before its 10th stop, after it
     // logged cycle 9: kill it then.
     wait_for_cycle_line(&log1, 9, EVENT_DEADLINE);
     victim.signal(libc::SIGKILL);

@@ -55,8 +55,9 @@ struct Args {
     /// action id 4294967295; the host must reject them and leave the world untouched.
     #[arg(long, hide = true)]
     bad_commands: bool,
-    /// Testing aid: in this cycle, compute for twice the config's stop_timeout before
-    /// stopping, so the host times out and the stop arrives late.
+    /// Testing aid: in this cycle, compute for 1.5 × the config's stop_timeout before
+    /// stopping, so the host times out and the stop arrives late, with half a timeout left
+    /// to answer the next cycle in time.
     #[arg(long, value_name = "CYCLE", hide = true)]
     late_stop_at: Option<u64>,
 }
@@ -209,7 +210,9 @@ fn run(args: &Args) -> anyhow::Result<ExitCode> {
                 id = args.id,
                 cycle, "stopping late on purpose (--late-stop-at)"
             );
-            std::thread::sleep(config.sync.stop_timeout * 2);
+            // 1.5 ×, not 2 ×: after 2 × the agent would wake just as the next cycle's
+            // timeout ends, and that cycle would time out too, depending on scheduling.
+            std::thread::sleep(config.sync.stop_timeout * 3 / 2);
         }
         match agent.stop() {
             Ok(()) => {}
