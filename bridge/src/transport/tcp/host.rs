@@ -1,0 +1,694 @@
+//! The TCP transport's host side: listening, hellos, one record buffer per agent, one
+//! `poll(2)` over every socket.
+
+use super::*;
+// ---------------------------------------------------------------------------------------
+// Host side
+// ---------------------------------------------------------------------------------------
+
+/// A loaned TCP frame: the agent's record buffer, images written in place.
+#[derive(Debug)]
+pub struct TcpFrameLoan {
+    // Boxed (and reused across cycles) to keep `FrameLoan` small.
+    header: Box<SensorHeader>,
+    buf: RecordBuf,
+}
+
+impl FrameLoanMut for TcpFrameLoan {
+    /// Header and image bytes, both writable. The header is copied into the record when
+    /// the frame is published (592 bytes); the images are written where they are sent from.
+    fn parts_mut(&mut self) -> (&mut SensorHeader, &mut [u8]) {
+        let payload = &mut self.buf.bytes_mut()[PREFIX + HEADER..];
+        (&mut self.header, payload)
+    }
+
+    fn header(&self) -> &SensorHeader {
+        &self.header
+    }
+}
+
+/// REJECT reason codes.
+pub mod reject {
+    /// Protocol version or layout differ.
+    pub const VERSION: u32 = 1;
+    /// The agent id is not part of the session.
+    pub const UNKNOWN_AGENT: u32 = 2;
+    /// Another connection is this agent already.
+    pub const ID_IN_USE: u32 = 3;
+    /// The token does not match `tcp_token`.
+    pub const TOKEN: u32 = 4;
+    /// The hello could not be decoded.
+    pub const MALFORMED: u32 = 5;
+}
+
+/// Encodes a REJECT body: code, host protocol, host layout, message.
+pub fn encode_reject(code: u32, message: &str) -> Vec<u8> {
+    let mut b = Vec::with_capacity(16 + message.len());
+    b.extend_from_slice(&code.to_le_bytes());
+    b.extend_from_slice(&PROTOCOL_VERSION.to_le_bytes());
+    b.extend_from_slice(&LAYOUT_HASH.to_le_bytes());
+    b.extend_from_slice(message.as_bytes());
+    b
+}
+
+/// Decodes a REJECT body into `(code, host protocol, host layout, message)`.
+pub fn decode_reject(body: &[u8]) -> Option<(u32, u32, u64, String)> {
+    Some((
+        le_u32(body, 0)?,
+        le_u32(body, 4)?,
+        le_u64(body, 8)?,
+        String::from_utf8_lossy(body.get(16..)?).into_owned(),
+    ))
+}
+
+#[derive(Debug)]
+pub(super) struct Conn {
+    pub(super) stream: TcpStream,
+    pub(super) peer: SocketAddr,
+    pub(super) reader: RecordReader,
+    /// When the host first saw the current record incomplete.
+    pub(super) partial_since: Option<Instant>,
+}
+
+#[derive(Debug)]
+pub(super) struct Pending {
+    pub(super) stream: TcpStream,
+    pub(super) peer: SocketAddr,
+    pub(super) since: Instant,
+    pub(super) reader: RecordReader,
+}
+
+#[derive(Debug)]
+pub(super) struct TcpSlot {
+    pub(super) id: u32,
+    pub(super) conn: Option<Conn>,
+    pub(super) buf: Option<RecordBuf>,
+    pub(super) header: Option<Box<SensorHeader>>,
+    pub(super) body_len: usize,
+}
+
+/// The host side of the TCP transport.
+#[derive(Debug)]
+pub struct TcpHost {
+    pub(super) listener: TcpListener,
+    pub(super) local_addr: SocketAddr,
+    pub(super) sync_mode: bool,
+    pub(super) write_timeout: Duration,
+    pub(super) slots: Vec<TcpSlot>,
+    pub(super) pending: Vec<Pending>,
+    pub(super) max_motor_body: usize,
+    pub(super) max_frame_body: usize,
+    pub(super) stall_timeout: Duration,
+    pub(super) token: Option<Vec<u8>>,
+    /// An agent socket was readable at the last wait and no drain has read it since.
+    pub(super) unread: bool,
+    pub(super) fds: Vec<(i32, i16)>,
+    pub(super) pfds: Vec<libc::pollfd>,
+    pub(super) ready: Vec<bool>,
+    pub(super) signals: SignalHandling,
+}
+
+/// Why the TCP host could not be created.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum TcpHostCreateError {
+    /// Binding the listen address failed.
+    #[error("cannot listen on {addr}: {source} (set [transport] tcp_listen to a free address)")]
+    Bind {
+        /// The address.
+        addr: SocketAddr,
+        /// The error.
+        source: io::Error,
+    },
+}
+
+impl TcpHost {
+    /// Binds `transport.tcp_listen` and prepares one record buffer per agent; `signals`
+    /// says whether SIGINT/SIGTERM handlers are installed (see [`SignalHandling`]).
+    ///
+    /// # Errors
+    /// [`TcpHostCreateError`].
+    pub fn create(config: &Config, signals: SignalHandling) -> Result<Self, TcpHostCreateError> {
+        signals.apply();
+        let addr = config.transport.tcp_listen;
+        let bind = |source| TcpHostCreateError::Bind { addr, source };
+        let listener = TcpListener::bind(addr).map_err(bind)?;
+        listener.set_nonblocking(true).map_err(bind)?;
+        let local_addr = listener.local_addr().map_err(bind)?;
+        if !local_addr.ip().is_loopback() {
+            warn!(%local_addr, "TCP transport listens beyond loopback: any host that can reach it may connect");
+        }
+        let mut max_frame_body = 0;
+        let slots = config
+            .agents
+            .iter()
+            .map(|a| {
+                let body_len = HEADER + a.frame_bytes();
+                max_frame_body = max_frame_body.max(body_len);
+                TcpSlot {
+                    id: a.id,
+                    conn: None,
+                    buf: Some(RecordBuf::with_capacity(body_len)),
+                    header: Some(Box::default()),
+                    body_len,
+                }
+            })
+            .collect();
+        let max_motor_body = core::mem::size_of::<MotorHeader>()
+            + config.transport.max_commands_per_cycle as usize
+                * core::mem::size_of::<MotorCommand>();
+        info!(%local_addr, "TCP host listening");
+        Ok(Self {
+            listener,
+            local_addr,
+            sync_mode: config.sync.sync_mode,
+            write_timeout: config.sync.stop_timeout.max(Duration::from_secs(1)),
+            slots,
+            pending: Vec::new(),
+            max_motor_body,
+            max_frame_body,
+            stall_timeout: config.sync.stop_timeout.min(STALL_TIMEOUT),
+            token: config.transport.tcp_token.clone().map(String::into_bytes),
+            unread: false,
+            fds: Vec::new(),
+            pfds: Vec::new(),
+            ready: Vec::new(),
+            signals,
+        })
+    }
+
+    /// [`HostTransport::wait_activity`] that also wakes when `extra` (another transport's
+    /// [`HostTransport::activity_fd`]) becomes readable: one wait for a host that serves
+    /// agents over several transports. Returns whether `extra` was readable.
+    ///
+    /// # Errors
+    /// As [`HostTransport::wait_activity`].
+    pub fn wait_activity_with(
+        &mut self,
+        timeout: Duration,
+        extra: Option<std::os::fd::RawFd>,
+    ) -> Result<bool, HostTransportError> {
+        // Agent sockets whose data the caller has not drained since the last wait stay
+        // readable: waiting on them again would return at once, and a caller that waits
+        // without draining (for agents to connect, for a lost one to come back) would
+        // spin. Until the next drain they are only watched for errors and hang-ups.
+        let agent_events = if self.unread { 0 } else { libc::POLLIN };
+        self.fds.clear();
+        self.fds.push((self.listener.as_raw_fd(), libc::POLLIN));
+        self.fds.extend(
+            self.pending
+                .iter()
+                .map(|p| (p.stream.as_raw_fd(), libc::POLLIN)),
+        );
+        self.fds.extend(self.slots.iter().filter_map(|s| {
+            s.conn
+                .as_ref()
+                .map(|c| (c.stream.as_raw_fd(), agent_events))
+        }));
+        let extra_index = self.fds.len();
+        if let Some(fd) = extra {
+            self.fds.push((fd, libc::POLLIN));
+        }
+        // Pending hellos and incomplete records have their own deadlines: wake for them
+        // (the host's next drain drops a stalled agent).
+        let timeout = match self.next_deadline() {
+            Some(d) => timeout.min(d.saturating_duration_since(Instant::now())),
+            None => timeout,
+        };
+        let mut ready = std::mem::take(&mut self.ready);
+        let mut pfds = std::mem::take(&mut self.pfds);
+        let result = poll_readable(&self.fds, timeout, &mut pfds, &mut ready);
+        self.ready = ready;
+        self.pfds = pfds;
+        result.map_err(|e| HostTransportError::Wait {
+            reason: format!("poll: {e}"),
+        })?;
+        // An incomplete record past its deadline on a socket with nothing more to read is
+        // a stall: drop it here too, so a caller that only waits makes progress as well.
+        // (Not when readability was not asked for: unread bytes may complete it.)
+        let now = Instant::now();
+        let watched_reads = agent_events != 0;
+        let mut fd_index = 1 + self.pending.len();
+        for slot in 0..self.slots.len() {
+            let Some(c) = &self.slots[slot].conn else {
+                continue;
+            };
+            let readable = self.ready.get(fd_index).copied().unwrap_or(true);
+            fd_index += 1;
+            self.unread |= readable;
+            if let Some(since) = c.partial_since
+                && watched_reads
+                && !readable
+                && now.duration_since(since) >= self.stall_timeout
+            {
+                let why = stall_reason(&c.reader, self.stall_timeout);
+                self.drop_conn(slot, &why);
+            }
+        }
+        if self.ready.first().copied().unwrap_or(false) {
+            self.accept_new();
+        }
+        if !self.pending.is_empty() {
+            self.handle_pending();
+        }
+        if self.signals.termination_requested() {
+            return Err(HostTransportError::Terminated);
+        }
+        Ok(extra.is_some() && self.ready.get(extra_index).copied().unwrap_or(false))
+    }
+
+    /// The address actually bound (resolves port 0).
+    pub fn local_addr(&self) -> SocketAddr {
+        self.local_addr
+    }
+
+    fn drop_conn(&mut self, slot: usize, why: &str) {
+        if let Some(c) = self.slots[slot].conn.take() {
+            warn!(agent = self.slots[slot].id, peer = %c.peer, "TCP agent dropped: {why}");
+        }
+    }
+
+    fn accept_new(&mut self) {
+        let mut turned_away = 0usize;
+        loop {
+            match self.listener.accept() {
+                Ok((stream, peer)) => {
+                    if self.pending.len() >= MAX_PENDING {
+                        // Closed at once: a flood of silent connections costs a bounded
+                        // number of descriptors and buffers.
+                        debug!(%peer, "TCP peer dropped: too many connections waiting for their hello");
+                        turned_away += 1;
+                        continue;
+                    }
+                    if stream.set_nonblocking(true).is_err() || set_nodelay(&stream).is_err() {
+                        continue;
+                    }
+                    debug!(%peer, "TCP connection");
+                    self.pending.push(Pending {
+                        stream,
+                        peer,
+                        since: Instant::now(),
+                        reader: RecordReader::new(MAX_HELLO),
+                    });
+                }
+                Err(e) if e.kind() == ErrorKind::WouldBlock => break,
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                Err(e) => {
+                    warn!("TCP accept failed: {e}");
+                    break;
+                }
+            }
+        }
+        if turned_away > 0 {
+            warn!(
+                "TCP peer dropped: {turned_away} connection(s) closed at once, {MAX_PENDING} are already waiting for their hello"
+            );
+        }
+    }
+
+    /// Reads pending hellos; admits, rejects or times out each connection.
+    fn handle_pending(&mut self) {
+        let mut i = 0;
+        while i < self.pending.len() {
+            match self.progress_hello(i) {
+                Ok(None) => {
+                    let p = &self.pending[i];
+                    if p.since.elapsed() >= HELLO_TIMEOUT {
+                        let why = if p.reader.buffered() == 0 {
+                            format!(
+                                "sent nothing within {HELLO_TIMEOUT:?} of connecting (no hello)"
+                            )
+                        } else {
+                            format!(
+                                "stalled mid-record: {} of its hello within {HELLO_TIMEOUT:?} of connecting",
+                                p.reader.progress()
+                            )
+                        };
+                        let p = self.pending.swap_remove(i);
+                        warn!(peer = %p.peer, "TCP peer dropped: {why}");
+                    } else {
+                        i += 1;
+                    }
+                }
+                Ok(Some(hello)) => {
+                    let p = self.pending.swap_remove(i);
+                    self.admit(p, hello);
+                }
+                Err((why, closed)) => {
+                    let mut p = self.pending.swap_remove(i);
+                    warn!(peer = %p.peer, "TCP peer dropped: {why}");
+                    if !closed {
+                        let _ = p.stream.set_nonblocking(false);
+                        let _ = p.stream.set_write_timeout(Some(Duration::from_millis(200)));
+                        let _ = write_record(
+                            &mut p.stream,
+                            kind::REJECT,
+                            &encode_reject(reject::MALFORMED, &why),
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    /// Reads what has arrived of connection `i`'s hello. `Err((why, closed))` drops it.
+    fn progress_hello(&mut self, i: usize) -> Result<Option<Hello>, (String, bool)> {
+        let p = &mut self.pending[i];
+        match p.reader.read_from(&mut p.stream) {
+            Ok(ReadProgress::Record(kind::HELLO)) => decode_hello(p.reader.body())
+                .map(Some)
+                .map_err(|e| (e.to_string(), false)),
+            Ok(ReadProgress::Record(k)) => {
+                Err((format!("expected a hello, got record kind {k}"), false))
+            }
+            Ok(ReadProgress::Pending) => match p.reader.head() {
+                // Refuse a wrong kind as soon as its prefix is in.
+                Some((_, k)) if k != kind::HELLO => {
+                    Err((format!("expected a hello, got record kind {k}"), false))
+                }
+                _ => Ok(None),
+            },
+            Ok(ReadProgress::Closed) if p.reader.buffered() == 0 => {
+                Err(("closed the connection without a hello".into(), true))
+            }
+            Ok(ReadProgress::Closed) => Err((
+                format!(
+                    "closed the connection mid-record after {} of its hello",
+                    p.reader.progress()
+                ),
+                true,
+            )),
+            Err(e) => Err((e.to_string(), false)),
+        }
+    }
+
+    fn admit(&mut self, p: Pending, hello: Hello) {
+        let mut stream = p.stream;
+        let refuse = |stream: &mut TcpStream, code: u32, why: String| {
+            warn!(peer = %p.peer, agent = hello.agent_id, "TCP agent refused: {why}");
+            let _ = stream.set_nonblocking(false);
+            let _ = stream.set_write_timeout(Some(Duration::from_millis(200)));
+            let _ = write_record(stream, kind::REJECT, &encode_reject(code, &why));
+        };
+        if hello.protocol_version != PROTOCOL_VERSION || hello.layout_hash != LAYOUT_HASH {
+            return refuse(
+                &mut stream,
+                reject::VERSION,
+                format!(
+                    "agent speaks protocol {} (layout {:016x}), host speaks protocol {PROTOCOL_VERSION} (layout {LAYOUT_HASH:016x})",
+                    hello.protocol_version, hello.layout_hash
+                ),
+            );
+        }
+        if let Some(token) = &self.token
+            && !constant_time_eq(token, &hello.token)
+        {
+            return refuse(&mut stream, reject::TOKEN, "wrong tcp_token".into());
+        }
+        let Some(slot) = self.slots.iter().position(|s| s.id == hello.agent_id) else {
+            return refuse(
+                &mut stream,
+                reject::UNKNOWN_AGENT,
+                format!(
+                    "agent {} is not part of this session (it serves agents {:?})",
+                    hello.agent_id,
+                    self.slots.iter().map(|s| s.id).collect::<Vec<_>>()
+                ),
+            );
+        };
+        if let Some(old) = &self.slots[slot].conn
+            && peer_closed(&old.stream)
+        {
+            // The agent died or reconnects; its old connection is gone already.
+            self.drop_conn(slot, "connection closed (a new connection takes its place)");
+        }
+        if self.slots[slot].conn.is_some() {
+            return refuse(
+                &mut stream,
+                reject::ID_IN_USE,
+                format!("agent {} is already connected", hello.agent_id),
+            );
+        }
+        let mut welcome = [0u8; 16];
+        welcome[..4].copy_from_slice(&PROTOCOL_VERSION.to_le_bytes());
+        welcome[4..12].copy_from_slice(&LAYOUT_HASH.to_le_bytes());
+        welcome[12..].copy_from_slice(&(self.slots[slot].body_len as u32).to_le_bytes());
+        let sent = stream
+            .set_nonblocking(false)
+            .and_then(|()| stream.set_write_timeout(Some(Duration::from_secs(1))))
+            .and_then(|()| write_record(&mut stream, kind::WELCOME, &welcome))
+            .and_then(|()| stream.set_nonblocking(true));
+        if let Err(e) = sent {
+            warn!(peer = %p.peer, "TCP agent lost during welcome: {e}");
+            return;
+        }
+        info!(agent = hello.agent_id, peer = %p.peer, "TCP agent connected");
+        self.slots[slot].conn = Some(Conn {
+            stream,
+            peer: p.peer,
+            reader: RecordReader::new(self.max_motor_body),
+            partial_since: None,
+        });
+    }
+
+    /// Writes a whole record to a non-blocking socket, waiting for writability with a
+    /// deadline (a stalled agent cannot hold the host forever).
+    fn send_all(stream: &mut TcpStream, mut data: &[u8], deadline: Instant) -> io::Result<()> {
+        while !data.is_empty() {
+            match stream.write(data) {
+                Ok(0) => return Err(io::Error::new(ErrorKind::WriteZero, "connection closed")),
+                Ok(n) => data = &data[n..],
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                Err(e) if e.kind() == ErrorKind::WouldBlock => {
+                    let left = deadline.saturating_duration_since(Instant::now());
+                    if left.is_zero() {
+                        return Err(io::Error::new(ErrorKind::TimedOut, "agent does not read"));
+                    }
+                    let mut pfd = libc::pollfd {
+                        fd: stream.as_raw_fd(),
+                        events: libc::POLLOUT,
+                        revents: 0,
+                    };
+                    let ms = left.as_millis().clamp(1, i32::MAX as u128) as i32;
+                    // SAFETY: one valid pollfd for the duration of the call.
+                    unsafe { libc::poll(&mut pfd, 1, ms) };
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+
+    /// Reads what has arrived from `c`, handing complete motor batches to `sink`.
+    /// `Err(why)` drops the connection.
+    fn drain_conn(
+        c: &mut Conn,
+        slot: usize,
+        stall_timeout: Duration,
+        sink: &mut BatchSink<'_>,
+    ) -> Result<(), String> {
+        for _ in 0..MAX_RECORDS_PER_DRAIN {
+            match c.reader.read_from(&mut c.stream) {
+                Ok(ReadProgress::Record(kind::MOTOR)) => {
+                    c.partial_since = None;
+                    let (header, commands) =
+                        decode_motor(c.reader.body()).map_err(|e| e.to_string())?;
+                    sink(slot, &header, commands);
+                }
+                Ok(ReadProgress::Record(k)) => {
+                    return Err(format!("sent record kind {k}, expected motor batches"));
+                }
+                Ok(ReadProgress::Pending) => {
+                    if let Some((_, k)) = c.reader.head()
+                        && k != kind::MOTOR
+                    {
+                        return Err(format!("sent record kind {k}, expected motor batches"));
+                    }
+                    if c.reader.buffered() == 0 {
+                        c.partial_since = None;
+                        return Ok(());
+                    }
+                    // Everything that has arrived is read and the record is still not
+                    // complete: a working agent's rest follows within a round trip.
+                    let now = Instant::now();
+                    let since = *c.partial_since.get_or_insert(now);
+                    if now.duration_since(since) >= stall_timeout {
+                        return Err(stall_reason(&c.reader, stall_timeout));
+                    }
+                    return Ok(());
+                }
+                Ok(ReadProgress::Closed) if c.reader.buffered() == 0 => {
+                    return Err("connection closed".into());
+                }
+                Ok(ReadProgress::Closed) => {
+                    return Err(format!(
+                        "connection closed mid-record after {} of a motor batch",
+                        c.reader.progress()
+                    ));
+                }
+                Err(e) => return Err(e.to_string()),
+            }
+        }
+        Ok(())
+    }
+
+    /// The earliest moment a pending hello or an incomplete record runs out of time.
+    fn next_deadline(&self) -> Option<Instant> {
+        let hellos = self.pending.iter().map(|p| p.since + HELLO_TIMEOUT);
+        let stalls = self
+            .slots
+            .iter()
+            .filter_map(|s| s.conn.as_ref()?.partial_since)
+            .map(|t| t + self.stall_timeout);
+        hellos.chain(stalls).min()
+    }
+
+    fn writable_now(stream: &TcpStream) -> bool {
+        let mut pfd = libc::pollfd {
+            fd: stream.as_raw_fd(),
+            events: libc::POLLOUT,
+            revents: 0,
+        };
+        // SAFETY: one valid pollfd for the duration of the call.
+        unsafe { libc::poll(&mut pfd, 1, 0) == 1 && pfd.revents & libc::POLLOUT != 0 }
+    }
+
+    /// Sets the shared secret agents must present.
+    pub fn set_token(&mut self, token: Option<Vec<u8>>) {
+        self.token = token;
+    }
+
+    /// Largest frame body any agent receives.
+    pub fn max_frame_body(&self) -> usize {
+        self.max_frame_body
+    }
+}
+
+fn stall_reason(reader: &RecordReader, stall_timeout: Duration) -> String {
+    format!(
+        "stalled mid-record: {} of a motor batch, not complete within {stall_timeout:?}",
+        reader.progress()
+    )
+}
+
+/// Whether the peer closed or reset the connection (without reading anything).
+fn peer_closed(stream: &TcpStream) -> bool {
+    let mut pfd = libc::pollfd {
+        fd: stream.as_raw_fd(),
+        events: libc::POLLRDHUP,
+        revents: 0,
+    };
+    // SAFETY: one valid pollfd for the duration of the call.
+    let n = unsafe { libc::poll(&mut pfd, 1, 0) };
+    n == 1 && pfd.revents & (libc::POLLRDHUP | libc::POLLHUP | libc::POLLERR) != 0
+}
+
+/// Compares two byte strings in time independent of where they differ.
+pub fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    let mut diff = (a.len() ^ b.len()) as u8 | u8::from(a.len() != b.len());
+    for i in 0..a.len().max(b.len()) {
+        diff |= a.get(i).copied().unwrap_or(0) ^ b.get(i).copied().unwrap_or(0);
+    }
+    diff == 0
+}
+
+impl Drop for TcpHost {
+    fn drop(&mut self) {
+        for s in &mut self.slots {
+            if let Some(c) = &mut s.conn {
+                let deadline = Instant::now() + Duration::from_millis(200);
+                let mut rec = [0u8; PREFIX];
+                rec[4..].copy_from_slice(&kind::SHUTDOWN.to_le_bytes());
+                let _ = Self::send_all(&mut c.stream, &rec, deadline);
+            }
+        }
+    }
+}
+
+impl HostTransport for TcpHost {
+    type Loan = TcpFrameLoan;
+
+    fn is_connected(&self, slot: usize) -> bool {
+        self.slots.get(slot).is_some_and(|s| s.conn.is_some())
+    }
+
+    fn loan(&mut self, slot: usize) -> Result<TcpFrameLoan, HostTransportError> {
+        let s = self
+            .slots
+            .get_mut(slot)
+            .ok_or(HostTransportError::NoSuchSlot { slot })?;
+        // A loan dropped without publishing took its buffer with it: make a new one (rare;
+        // steady state reuses the buffer every cycle).
+        let mut buf = s
+            .buf
+            .take()
+            .unwrap_or_else(|| RecordBuf::with_capacity(s.body_len));
+        buf.reserve_body(s.body_len);
+        let mut header = s.header.take().unwrap_or_default();
+        *header = SensorHeader::default();
+        Ok(TcpFrameLoan { header, buf })
+    }
+
+    fn publish(&mut self, slot: usize, frame: TcpFrameLoan) -> Result<bool, HostTransportError> {
+        let TcpFrameLoan { header, mut buf } = frame;
+        buf.bytes_mut()[PREFIX..PREFIX + HEADER].copy_from_slice(header.as_bytes());
+        buf.set_prefix(kind::FRAME);
+        let deadline = Instant::now() + self.write_timeout;
+        let sync = self.sync_mode;
+        let Some(s) = self.slots.get_mut(slot) else {
+            return Ok(false);
+        };
+        let result = match &mut s.conn {
+            None => Ok(false),
+            // Async mode: a slow agent whose socket is full misses this frame instead of
+            // stalling the host (it reads the newest when it catches up).
+            Some(c) if !sync && !Self::writable_now(&c.stream) => Ok(false),
+            Some(c) => Self::send_all(&mut c.stream, buf.record(), deadline).map(|()| true),
+        };
+        s.buf = Some(buf);
+        s.header = Some(header);
+        match result {
+            Ok(delivered) => Ok(delivered),
+            Err(e) => {
+                self.drop_conn(slot, &format!("cannot send its frame: {e}"));
+                Ok(false)
+            }
+        }
+    }
+
+    fn signal_start(&mut self) -> Result<(), HostTransportError> {
+        // On TCP the frame record is the start: each agent begins as soon as its frame is in.
+        Ok(())
+    }
+
+    fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError> {
+        self.unread = false;
+        let stall_timeout = self.stall_timeout;
+        for slot in 0..self.slots.len() {
+            let failure = match &mut self.slots[slot].conn {
+                Some(c) => Self::drain_conn(c, slot, stall_timeout, sink).err(),
+                None => None,
+            };
+            if let Some(why) = failure {
+                self.drop_conn(slot, &why);
+            }
+        }
+        Ok(())
+    }
+
+    fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
+        self.wait_activity_with(timeout, None).map(|_| ())
+    }
+
+    fn update_connections(&mut self) -> Result<(), HostTransportError> {
+        Ok(())
+    }
+
+    fn termination_requested(&self) -> bool {
+        self.signals.termination_requested()
+    }
+
+    fn local_addr(&self) -> Option<SocketAddr> {
+        Some(self.local_addr)
+    }
+}
