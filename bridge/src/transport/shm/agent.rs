@@ -1,0 +1,485 @@
+//! The shared-memory transport's agent side: opens the session's services, receives the
+//! newest sample, publishes batches and notifies stop.
+
+use super::*;
+// ---------------------------------------------------------------------------------------
+// Agent side
+// ---------------------------------------------------------------------------------------
+
+/// What [`ShmAgent::wait_start`] saw.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct StartSignal {
+    /// *start* was signalled.
+    pub start: bool,
+    /// The host closed the session.
+    pub shutdown: bool,
+}
+
+impl StartSignal {
+    fn record(&mut self, e: EventActivation) {
+        if e.id.as_value() == SHUTDOWN_EVENT {
+            self.shutdown = true;
+        } else {
+            self.start = true;
+        }
+    }
+}
+
+/// A received sensor frame in shared memory, owned by the agent until dropped.
+pub struct ShmFrame {
+    sample: Sample<Svc, [u8], SensorHeader>,
+}
+
+impl core::fmt::Debug for ShmFrame {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("ShmFrame")
+            .field("cycle", &self.sample.user_header().cycle)
+            .finish()
+    }
+}
+
+impl ShmFrame {
+    /// The header.
+    pub fn header(&self) -> &SensorHeader {
+        self.sample.user_header()
+    }
+    /// The image bytes, straight from shared memory.
+    pub fn payload(&self) -> &[u8] {
+        self.sample.payload()
+    }
+}
+
+/// The agent side of the shared-memory transport.
+pub struct ShmAgent {
+    id: u32,
+    session: String,
+    host_pid: Option<i32>,
+    _node: Node<Svc>,
+    signals: SignalHandling,
+    _start_service: event_factory::PortFactory<Svc>,
+    start: Listener<Svc>,
+    _stop_service: event_factory::PortFactory<Svc>,
+    stop: Notifier<Svc>,
+    _sensor_service: ps_factory::PortFactory<Svc, [u8], SensorHeader>,
+    sensor_sub: Subscriber<Svc, [u8], SensorHeader>,
+    _motor_service: ps_factory::PortFactory<Svc, [MotorCommand], MotorHeader>,
+    motor_pub: Publisher<Svc, [MotorCommand], MotorHeader>,
+    max_commands: usize,
+    spin: bool,
+    spin_before_block: Duration,
+    shutdown_seen: bool,
+}
+
+impl core::fmt::Debug for ShmAgent {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("ShmAgent")
+            .field("id", &self.id)
+            .field("session", &self.session)
+            .finish()
+    }
+}
+
+fn attr(attrs: &AttributeSet, key: &str) -> String {
+    AttributeKey::try_from(key)
+        .ok()
+        .and_then(|k| attrs.key_value(&k, 0).map(|v| v.to_string()))
+        .unwrap_or_else(|| "unknown".into())
+}
+
+/// The agent ids whose sensor service exists in `session` (the ids its host serves),
+/// ascending.
+fn served_agent_ids(session: &str) -> Vec<u32> {
+    let prefix = service_name(session, "agent/");
+    let mut ids = Vec::new();
+    let _ = Svc::list(Config2::global_config(), |info| {
+        let name = info.static_details.name().as_str();
+        if let Some(id) = name
+            .strip_prefix(prefix.as_str())
+            .and_then(|rest| rest.strip_suffix("/sensors"))
+            .and_then(|id| id.parse::<u32>().ok())
+        {
+            ids.push(id);
+        }
+        CallbackProgression::Continue
+    });
+    ids.sort_unstable();
+    ids.dedup();
+    ids
+}
+
+impl ShmAgent {
+    /// Opens the session's services as agent `id`, retrying until the host created them or
+    /// `timeout` passed. Checks the protocol version and layout first. `signals` says
+    /// whether SIGINT/SIGTERM handlers are installed (see [`SignalHandling`]).
+    ///
+    /// # Errors
+    /// [`AgentConnectError`].
+    pub fn connect(
+        config: &Config,
+        id: u32,
+        timeout: Duration,
+        signals: SignalHandling,
+    ) -> Result<Self, AgentConnectError> {
+        use iceoryx2::service::port_factory::PortFactory as _;
+        init_iceoryx2_logging();
+        signals.apply();
+        let session = &config.session;
+        let ice = |detail: String| AgentConnectError::Transport {
+            session: session.clone(),
+            agent: id,
+            detail: format!("iceoryx2: {detail}"),
+        };
+        let deadline = Instant::now() + timeout;
+        let started = Instant::now();
+        let node = node(&agent_node_name(session, id)).map_err(ice)?;
+        let not_found = |what: &str| AgentConnectError::HostNotFound {
+            session: session.clone(),
+            agent: id,
+            waited: started.elapsed(),
+            looked_for: format!(
+                "shared-memory service {} does not exist",
+                service_name(session, what)
+            ),
+        };
+
+        // Opening does not block in iceoryx2: retry until the host created the services.
+        let start_name = svc_name(session, "start").map_err(ice)?;
+        let start_service = retry_until(
+            deadline,
+            || signals.termination_requested(),
+            || {
+                use iceoryx2::service::builder::event::EventOpenError as E;
+                match node.service_builder(&start_name).event().open() {
+                    Ok(s) => Attempt::Done(s),
+                    Err(E::DoesNotExist | E::InsufficientPermissions | E::HangsInCreation) => {
+                        Attempt::NotYet(String::new())
+                    }
+                    Err(e) => Attempt::Failed(ice(format!("cannot open the start service: {e:?}"))),
+                }
+            },
+        )
+        .map_err(|e| match e {
+            Ok(_) => not_found("start"),
+            Err(e) => e,
+        })?;
+        let host_protocol = attr(start_service.attributes(), ATTR_PROTOCOL);
+        let host_layout = attr(start_service.attributes(), ATTR_LAYOUT);
+        let agent_layout = format!("{LAYOUT_HASH:016x}");
+        if host_protocol != PROTOCOL_VERSION.to_string() || host_layout != agent_layout {
+            return Err(AgentConnectError::VersionMismatch {
+                session: session.clone(),
+                host_protocol,
+                host_layout,
+                agent_protocol: PROTOCOL_VERSION,
+                agent_layout,
+            });
+        }
+
+        let sensors = format!("agent/{id}/sensors");
+        let motor = format!("agent/{id}/motor");
+        // `start` is created last by the host: once it exists, a missing service of this
+        // agent means the host does not serve this id.
+        let open_err = |what: &str, e: &dyn core::fmt::Debug| {
+            let s = format!("{e:?}");
+            if s.contains("DoesNotExist") {
+                if what == "stop" {
+                    not_found(what)
+                } else {
+                    AgentConnectError::IdNotServed {
+                        session: session.clone(),
+                        agent: id,
+                        served: served_agent_ids(session),
+                    }
+                }
+            } else {
+                ice(format!("cannot open {}: {s}", service_name(session, what)))
+            }
+        };
+        let sensor_service = node
+            .service_builder(&svc_name(session, &sensors).map_err(ice)?)
+            .publish_subscribe::<[u8]>()
+            .user_header::<SensorHeader>()
+            .open()
+            .map_err(|e| open_err(&sensors, &e))?;
+        let motor_service = node
+            .service_builder(&svc_name(session, &motor).map_err(ice)?)
+            .publish_subscribe::<[MotorCommand]>()
+            .user_header::<MotorHeader>()
+            .open()
+            .map_err(|e| open_err(&motor, &e))?;
+        let stop_service = node
+            .service_builder(&svc_name(session, "stop").map_err(ice)?)
+            .event()
+            .open()
+            .map_err(|e| open_err("stop", &e))?;
+
+        let in_use = |e: &dyn core::fmt::Debug| {
+            let s = format!("{e:?}");
+            if s.contains("ExceedsMax") {
+                AgentConnectError::IdInUse {
+                    session: session.clone(),
+                    agent: id,
+                }
+            } else {
+                ice(s)
+            }
+        };
+        let max_commands = config.transport.max_commands_per_cycle as usize;
+        // Order matters: the host treats the agent as connected once the sensor subscriber
+        // exists, so everything else (stop notifier, motor publisher, start listener) is
+        // created first.
+        let stop = stop_service
+            .notifier_builder()
+            .default_event_id(EventId::new(id as usize))
+            .create()
+            .map_err(|e| in_use(&e))?;
+        let motor_pub = motor_service
+            .publisher_builder()
+            .initial_max_slice_len(max_commands)
+            .allocation_strategy(AllocationStrategy::Static)
+            .max_loaned_samples(1)
+            .create()
+            .map_err(|e| in_use(&e))?;
+        let start = start_service
+            .listener_builder()
+            .create()
+            .map_err(|e| in_use(&e))?;
+        let sensor_sub = sensor_service
+            .subscriber_builder()
+            .buffer_size(SENSOR_QUEUE)
+            .create()
+            .map_err(|e| in_use(&e))?;
+        // Tell the host we are here (it waits on the stop event while agents join).
+        let _ = stop.notify();
+        Ok(Self {
+            id,
+            session: session.clone(),
+            host_pid: host_pid(session),
+            _node: node,
+            signals,
+            _start_service: start_service,
+            start,
+            _stop_service: stop_service,
+            stop,
+            _sensor_service: sensor_service,
+            sensor_sub,
+            _motor_service: motor_service,
+            motor_pub,
+            max_commands,
+            spin: config.sync.wait == crate::config::WaitMode::Spin,
+            spin_before_block: config.sync.effective_spin_before_block(config.agents.len()),
+            shutdown_seen: false,
+        })
+    }
+
+    /// The newest frame not yet received; older queued frames are dropped.
+    ///
+    /// # Errors
+    /// [`AgentReceiveError::TooManyFramesHeld`] when the caller still holds
+    /// [`AGENT_BORROWED_FRAMES`] frames.
+    pub fn receive_newest(&mut self) -> Result<Option<ShmFrame>, AgentReceiveError> {
+        let mut newest = None;
+        loop {
+            match self.sensor_sub.receive() {
+                Ok(Some(sample)) => newest = Some(ShmFrame { sample }),
+                Ok(None) => return Ok(newest),
+                Err(e) => {
+                    if newest.is_some() {
+                        return Ok(newest);
+                    }
+                    return Err(match e {
+                        iceoryx2::port::ReceiveError::ExceedsMaxBorrows => {
+                            AgentReceiveError::TooManyFramesHeld {
+                                max: AGENT_BORROWED_FRAMES,
+                            }
+                        }
+                        other => AgentReceiveError::Transport(format!("iceoryx2: {other:?}")),
+                    });
+                }
+            }
+        }
+    }
+
+    /// Blocks until *start* may have been signalled, or `timeout` passed. Polls for a
+    /// frame for up to `spin_before_block_us` first.
+    pub fn wait_start(&mut self, timeout: Duration) -> StartSignal {
+        if !self.spin_before_block.is_zero() {
+            let until = Instant::now() + self.spin_before_block.min(timeout);
+            while Instant::now() < until {
+                if self.has_frame() {
+                    return StartSignal {
+                        start: true,
+                        shutdown: false,
+                    };
+                }
+                std::hint::spin_loop();
+            }
+        }
+        let mut signal = StartSignal::default();
+        let mut record = |e: EventActivation| signal.record(e);
+        if let Ok(n) = self.start.timed_wait(&mut record, timeout)
+            && n > 0
+        {
+            let _ = self.start.try_wait(&mut record);
+        }
+        self.shutdown_seen |= signal.shutdown;
+        signal
+    }
+
+    /// Whether the host's "session closed" event was ever seen (sticky: a call that
+    /// returned a frame may have consumed it).
+    pub fn shutdown_seen(&self) -> bool {
+        self.shutdown_seen
+    }
+
+    /// Whether a frame is waiting (cheap, non-blocking).
+    pub fn has_frame(&self) -> bool {
+        self.sensor_sub.has_samples().unwrap_or(true)
+    }
+
+    /// Whether this agent busy-polls (`[sync] wait = "spin"`).
+    pub fn spins(&self) -> bool {
+        self.spin
+    }
+
+    /// Discards pending *start* notifications; reports a pending shutdown.
+    pub fn clear_start(&mut self) -> StartSignal {
+        let mut signal = StartSignal::default();
+        let _ = self.start.try_wait(|e: EventActivation| signal.record(e));
+        self.shutdown_seen |= signal.shutdown;
+        signal
+    }
+
+    /// The state of the host's node.
+    pub fn host_state(&self) -> HostState {
+        // Cheap and allocation-free: is the host's process still there? Only when it is
+        // gone, ask iceoryx2's registry (which lists every node of the machine) what
+        // became of it.
+        if let Some(pid) = self.host_pid {
+            // SAFETY: kill with signal 0 only checks that the process exists.
+            let rc = unsafe { libc::kill(pid, 0) };
+            let gone =
+                rc != 0 && std::io::Error::last_os_error().raw_os_error() == Some(libc::ESRCH);
+            if !gone {
+                return HostState::Alive;
+            }
+            return match host_state(&self.session) {
+                HostState::Alive => HostState::Dead, // another host took over the session
+                other => other,
+            };
+        }
+        host_state(&self.session)
+    }
+
+    /// Whether SIGINT/SIGTERM was received (never, with [`SignalHandling::Leave`]).
+    pub fn termination_requested(&self) -> bool {
+        self.signals.termination_requested()
+    }
+
+    /// Publishes a motor batch and, if it carries the stop flag, notifies *stop*.
+    ///
+    /// # Errors
+    /// A string describing the iceoryx2 failure.
+    pub fn send_batch(
+        &mut self,
+        header: &MotorHeader,
+        commands: &[MotorCommand],
+    ) -> Result<(), String> {
+        let n = commands.len().min(self.max_commands);
+        let mut sample = self
+            .motor_pub
+            .loan_slice_uninit(n)
+            .map_err(|e| format!("cannot loan a motor batch: {e:?}"))?;
+        *sample.user_header_mut() = MotorHeader {
+            command_count: n as u32,
+            ..*header
+        };
+        let sample = sample.write_from_slice(&commands[..n]);
+        sample
+            .send()
+            .map_err(|e| format!("cannot send the motor batch: {e:?}"))?;
+        if header.is_stop() {
+            self.stop
+                .notify()
+                .map_err(|e| format!("cannot notify stop: {e:?}"))?;
+        }
+        Ok(())
+    }
+}
+
+impl AgentFrame for ShmFrame {
+    fn header(&self) -> &SensorHeader {
+        self.sample.user_header()
+    }
+
+    fn payload(&self) -> &[u8] {
+        self.sample.payload()
+    }
+}
+
+impl AgentTransport for ShmAgent {
+    type Frame = ShmFrame;
+
+    fn try_receive_newest(&mut self) -> Result<Option<ShmFrame>, AgentReceiveError> {
+        self.receive_newest()
+    }
+
+    fn wait_readable(&mut self, timeout: Duration) {
+        if self.spin {
+            // Busy-poll the subscriber until the slice ends (`[sync] wait = "spin"`).
+            let until = Instant::now() + timeout;
+            while Instant::now() < until {
+                if self.has_frame() {
+                    break;
+                }
+                std::hint::spin_loop();
+            }
+            self.clear_start();
+            return;
+        }
+        self.wait_start(timeout);
+    }
+
+    fn discard_wakeups(&mut self) {
+        self.clear_start();
+    }
+
+    fn host_liveness(&mut self, check_process: bool) -> HostLiveness {
+        if self.shutdown_seen {
+            return HostLiveness::Closed;
+        }
+        if !check_process {
+            return HostLiveness::Alive;
+        }
+        match self.host_state() {
+            HostState::Alive => HostLiveness::Alive,
+            state => {
+                // The shutdown event may have raced with the node's removal: look once
+                // more before calling the host gone.
+                self.clear_start();
+                if self.shutdown_seen {
+                    HostLiveness::Closed
+                } else {
+                    HostLiveness::Gone {
+                        reason: match state {
+                            HostState::Dead => "its process died".into(),
+                            _ => "its node is gone".into(),
+                        },
+                    }
+                }
+            }
+        }
+    }
+
+    fn send_batch(
+        &mut self,
+        header: &MotorHeader,
+        commands: &[MotorCommand],
+    ) -> Result<(), AgentSendError> {
+        ShmAgent::send_batch(self, header, commands).map_err(AgentSendError::Transport)
+    }
+
+    fn termination_requested(&self) -> bool {
+        self.signals.termination_requested()
+    }
+}

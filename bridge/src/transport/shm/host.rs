@@ -1,0 +1,452 @@
+//! The shared-memory transport's host side: creates every service of the session, loans
+//! sensor samples, drains motor batches, waits on the stop event.
+
+use super::*;
+// ---------------------------------------------------------------------------------------
+// Host side
+// ---------------------------------------------------------------------------------------
+
+/// A loaned sensor sample, initialised (see [`ShmHost::loan`]).
+pub struct ShmFrameLoan {
+    sample: SampleMut<Svc, [u8], SensorHeader>,
+}
+
+impl core::fmt::Debug for ShmFrameLoan {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("ShmFrameLoan")
+            .field("header", self.sample.user_header())
+            .field("payload_len", &self.sample.payload().len())
+            .finish()
+    }
+}
+
+impl FrameLoanMut for ShmFrameLoan {
+    fn parts_mut(&mut self) -> (&mut SensorHeader, &mut [u8]) {
+        let payload = self.sample.payload_mut();
+        let (ptr, len) = (payload.as_mut_ptr(), payload.len());
+        let header = self.sample.user_header_mut();
+        // SAFETY: the user header and the payload are disjoint regions of the sample's chunk
+        // (iceoryx2 lays out header, user header and payload one after the other), so the two
+        // mutable borrows do not alias; both live as long as `&mut self`.
+        let payload = unsafe { core::slice::from_raw_parts_mut(ptr, len) };
+        (header, payload)
+    }
+
+    fn header(&self) -> &SensorHeader {
+        self.sample.user_header()
+    }
+}
+
+struct HostAgentPorts {
+    id: u32,
+    frame_bytes: usize,
+    sensor_pub: Publisher<Svc, [u8], SensorHeader>,
+    motor_service: ps_factory::PortFactory<Svc, [MotorCommand], MotorHeader>,
+    motor_sub: Subscriber<Svc, [MotorCommand], MotorHeader>,
+    sensor_service: ps_factory::PortFactory<Svc, [u8], SensorHeader>,
+    /// Addresses of pool chunks already written once: their bytes are initialised.
+    initialised: Vec<usize>,
+}
+
+/// The host side of the shared-memory transport.
+pub struct ShmHost {
+    _node: Node<Svc>,
+    spin_before_block: Duration,
+    signals: SignalHandling,
+    agent_node_names: Vec<String>,
+    spin: bool,
+    spins: u32,
+    _start_service: event_factory::PortFactory<Svc>,
+    start: Notifier<Svc>,
+    _stop_service: event_factory::PortFactory<Svc>,
+    stop: Listener<Svc>,
+    agents: Vec<HostAgentPorts>,
+}
+
+impl core::fmt::Debug for ShmHost {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("ShmHost")
+            .field(
+                "agents",
+                &self.agents.iter().map(|a| a.id).collect::<Vec<_>>(),
+            )
+            .finish()
+    }
+}
+
+/// Why the shared-memory host could not be created.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ShmHostCreateError {
+    /// Another live host owns this session.
+    #[error(
+        "session {session:?} is already hosted by a running process (service {service} exists); \
+         stop it or choose another `session`"
+    )]
+    SessionInUse {
+        /// The session.
+        session: String,
+        /// The service that exists.
+        service: String,
+    },
+    /// The services would not fit into `/dev/shm`.
+    #[error(transparent)]
+    ShmBudget(#[from] ShmBudgetError),
+    /// iceoryx2 refused to create a node, service or port.
+    #[error("iceoryx2: {0}")]
+    Iceoryx(String),
+}
+
+impl ShmHost {
+    /// Creates every service of the session and the host's ports; `signals` says whether
+    /// SIGINT/SIGTERM handlers are installed (see [`SignalHandling`]).
+    ///
+    /// # Errors
+    /// [`ShmHostCreateError`].
+    pub fn create(config: &Config, signals: SignalHandling) -> Result<Self, ShmHostCreateError> {
+        init_iceoryx2_logging();
+        signals.apply();
+        let ice = ShmHostCreateError::Iceoryx;
+        let session = &config.session;
+        check_shm_budget(config)?;
+        cleanup_dead_nodes(session);
+        if host_alive(session) {
+            return Err(ShmHostCreateError::SessionInUse {
+                session: session.clone(),
+                service: host_node_name(session),
+            });
+        }
+        let node = node(&host_node_name(session)).map_err(ice)?;
+        let attrs = attributes().map_err(ice)?;
+        let n = config.agents.len();
+        let max_ports = n + 4;
+        let exists = |name: &str, e: &dyn core::fmt::Debug| {
+            let s = format!("{e:?}");
+            if s.contains("AlreadyExists") {
+                ShmHostCreateError::SessionInUse {
+                    session: session.clone(),
+                    service: service_name(session, name),
+                }
+            } else {
+                ShmHostCreateError::Iceoryx(format!(
+                    "cannot create service {}: {s}",
+                    service_name(session, name)
+                ))
+            }
+        };
+
+        let stop_service = node
+            .service_builder(&svc_name(session, "stop").map_err(ice)?)
+            .event()
+            .max_listeners(2)
+            .max_notifiers(max_ports)
+            .max_nodes(max_ports)
+            .event_id_max_value(MAX_AGENT_ID as usize + 1)
+            .create_with_attributes(&attrs)
+            .map_err(|e| exists("stop", &e))?;
+        let stop = stop_service
+            .listener_builder()
+            .create()
+            .map_err(|e| ice(format!("cannot create the stop listener: {e:?}")))?;
+
+        let mut agents = Vec::with_capacity(n);
+        for a in &config.agents {
+            let frame_bytes = a.frame_bytes();
+            let sensors = format!("agent/{}/sensors", a.id);
+            let mut builder = node
+                .service_builder(&svc_name(session, &sensors).map_err(ice)?)
+                .publish_subscribe::<[u8]>()
+                .user_header::<SensorHeader>()
+                .max_publishers(1)
+                .max_subscribers(1)
+                .max_nodes(4)
+                .history_size(0)
+                .subscriber_max_buffer_size(SENSOR_QUEUE)
+                .subscriber_max_borrowed_samples(AGENT_BORROWED_FRAMES)
+                .enable_safe_overflow(true);
+            if let Some(align) = Alignment::new(crate::wire::IMAGE_ALIGN) {
+                builder = builder.payload_alignment(align);
+            }
+            let sensor_service = builder
+                .create_with_attributes(&attrs)
+                .map_err(|e| exists(&sensors, &e))?;
+            let sensor_pub = sensor_service
+                .publisher_builder()
+                .initial_max_slice_len(frame_bytes.max(1))
+                .allocation_strategy(AllocationStrategy::Static)
+                .max_loaned_samples(1)
+                .create()
+                .map_err(|e| {
+                    ice(format!(
+                        "cannot create the sensor publisher of agent {}: {e:?}",
+                        a.id
+                    ))
+                })?;
+            let motor = format!("agent/{}/motor", a.id);
+            let motor_service = node
+                .service_builder(&svc_name(session, &motor).map_err(ice)?)
+                .publish_subscribe::<[MotorCommand]>()
+                .user_header::<MotorHeader>()
+                .max_publishers(1)
+                .max_subscribers(1)
+                .max_nodes(4)
+                .history_size(0)
+                .subscriber_max_buffer_size(MOTOR_QUEUE)
+                .subscriber_max_borrowed_samples(1)
+                .enable_safe_overflow(true)
+                .create_with_attributes(&attrs)
+                .map_err(|e| exists(&motor, &e))?;
+            let motor_sub = motor_service
+                .subscriber_builder()
+                .buffer_size(MOTOR_QUEUE)
+                .create()
+                .map_err(|e| {
+                    ice(format!(
+                        "cannot create the motor subscriber of agent {}: {e:?}",
+                        a.id
+                    ))
+                })?;
+            agents.push(HostAgentPorts {
+                id: a.id,
+                frame_bytes,
+                sensor_service,
+                sensor_pub,
+                motor_service,
+                motor_sub,
+                initialised: Vec::with_capacity(SENSOR_POOL_SAMPLES * 2),
+            });
+        }
+        // `start` is created last: agents open it first, so once it exists every other
+        // service of the session does too.
+        let start_service = node
+            .service_builder(&svc_name(session, "start").map_err(ice)?)
+            .event()
+            .max_listeners(max_ports)
+            .max_notifiers(2)
+            .max_nodes(max_ports)
+            .event_id_max_value(SHUTDOWN_EVENT + 1)
+            .create_with_attributes(&attrs)
+            .map_err(|e| exists("start", &e))?;
+        let start = start_service
+            .notifier_builder()
+            .default_event_id(EventId::new(START_EVENT))
+            .create()
+            .map_err(|e| ice(format!("cannot create the start notifier: {e:?}")))?;
+        Ok(Self {
+            _node: node,
+            spin_before_block: config.sync.effective_spin_before_block(config.agents.len()),
+            signals,
+            agent_node_names: config
+                .agents
+                .iter()
+                .map(|a| agent_node_name(session, a.id))
+                .collect(),
+            spin: config.sync.wait == crate::config::WaitMode::Spin,
+            spins: 0,
+            _start_service: start_service,
+            start,
+            _stop_service: stop_service,
+            stop,
+            agents,
+        })
+    }
+
+    fn agent(&self, slot: usize) -> Result<&HostAgentPorts, HostTransportError> {
+        self.agents
+            .get(slot)
+            .ok_or(HostTransportError::NoSuchSlot { slot })
+    }
+}
+
+impl Drop for ShmHost {
+    fn drop(&mut self) {
+        // Wake every agent at once with "session closed" instead of letting each find out
+        // by its liveness check.
+        let _ = self
+            .start
+            .notify_with_custom_event_id(EventId::new(SHUTDOWN_EVENT));
+    }
+}
+
+fn is_dyn_connected(p: &HostAgentPorts) -> bool {
+    use iceoryx2::service::port_factory::PortFactory as _;
+    p.sensor_service.dynamic_config().number_of_subscribers() > 0
+        && p.motor_service.dynamic_config().number_of_publishers() > 0
+}
+
+impl HostTransport for ShmHost {
+    type Loan = ShmFrameLoan;
+
+    fn is_connected(&self, slot: usize) -> bool {
+        self.agents.get(slot).is_some_and(is_dyn_connected)
+    }
+
+    fn loan(&mut self, slot: usize) -> Result<ShmFrameLoan, HostTransportError> {
+        let id = self.agent(slot)?.id;
+        let Some(p) = self.agents.get_mut(slot) else {
+            return Err(HostTransportError::Loan {
+                agent: id,
+                reason: "no such agent slot".into(),
+            });
+        };
+        let mut sample = p.sensor_pub.loan_slice_uninit(p.frame_bytes).map_err(|e| {
+            HostTransportError::Loan {
+                agent: id,
+                reason: format!("{e:?}"),
+            }
+        })?;
+        let addr = sample.payload().as_ptr() as usize;
+        if !p.initialised.contains(&addr) {
+            // First use of this pool chunk: give every byte a defined value once. Later
+            // loans of the same chunk find the bytes of an earlier frame, so steady state
+            // costs no memset (zero copy, no per-cycle work proportional to image size).
+            sample.payload_mut().fill(MaybeUninit::new(0));
+            if p.initialised.len() < p.initialised.capacity() {
+                p.initialised.push(addr);
+            }
+        }
+        // SAFETY: every byte of this chunk was written (above, now or in an earlier loan of
+        // the same chunk); shared memory is never de-initialised by anyone afterwards.
+        let mut sample = unsafe { sample.assume_init() };
+        *sample.user_header_mut() = SensorHeader::default();
+        Ok(ShmFrameLoan { sample })
+    }
+
+    fn publish(&mut self, slot: usize, frame: ShmFrameLoan) -> Result<bool, HostTransportError> {
+        let id = self.agent(slot)?.id;
+        frame
+            .sample
+            .send()
+            .map(|receivers| receivers > 0)
+            .map_err(|e| HostTransportError::Send {
+                what: format!("the sensor frame of agent {id}"),
+                reason: format!("{e:?}"),
+            })
+    }
+
+    fn signal_start(&mut self) -> Result<(), HostTransportError> {
+        self.start
+            .notify()
+            .map(|_| ())
+            .map_err(|e| HostTransportError::Send {
+                what: "start".into(),
+                reason: format!("{e:?}"),
+            })
+    }
+
+    fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError> {
+        for (slot, p) in self.agents.iter().enumerate() {
+            loop {
+                match p.motor_sub.receive() {
+                    Ok(Some(sample)) => sink(slot, sample.user_header(), sample.payload()),
+                    Ok(None) => break,
+                    Err(e) => {
+                        return Err(HostTransportError::Receive {
+                            agent: p.id,
+                            reason: format!("{e:?}"),
+                        });
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
+        if self.spin {
+            // Busy-poll: the caller drains the subscribers again right away. Check for a
+            // termination request now and then only (it costs a syscall).
+            let _ = timeout;
+            std::hint::spin_loop();
+            self.spins = self.spins.wrapping_add(1);
+            if self.spins.is_multiple_of(4096) && self.termination_requested() {
+                return Err(HostTransportError::Terminated);
+            }
+            return Ok(());
+        }
+        // Poll the subscribers briefly first: a quick answer is then seen without paying
+        // for a sleep and a wake-up (see `spin_before_block_us`).
+        if !self.spin_before_block.is_zero() {
+            let until = Instant::now() + self.spin_before_block.min(timeout);
+            loop {
+                if self
+                    .agents
+                    .iter()
+                    .any(|p| p.motor_sub.has_samples().unwrap_or(true))
+                {
+                    return Ok(());
+                }
+                if Instant::now() >= until {
+                    break;
+                }
+                std::hint::spin_loop();
+            }
+        }
+        match self.stop.timed_wait(|_| {}, timeout) {
+            Ok(_) => {}
+            Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => {}
+            Err(e) => {
+                return Err(HostTransportError::Wait {
+                    reason: format!("stop listener: {e:?}"),
+                });
+            }
+        }
+        // Drain every id that is already pending: counts merge and carry no information
+        // we rely on, and a pending id would make the next wait return at once.
+        let _ = self.stop.try_wait(|_| {});
+        if self.termination_requested() {
+            return Err(HostTransportError::Terminated);
+        }
+        Ok(())
+    }
+
+    fn reap_dead_agents(&mut self, dead: &mut Vec<usize>) {
+        use iceoryx2::node::NodeView;
+        let names = &self.agent_node_names;
+        let _ = Node::<Svc>::list(Config2::global_config(), |state| {
+            if let NodeState::Dead(view) = state {
+                let slot = view
+                    .details()
+                    .as_ref()
+                    .and_then(|d| names.iter().position(|n| n == d.name().as_str()));
+                if let Some(slot) = slot {
+                    // Removes its ports from our services: its sample loans come back and
+                    // a restarted agent with the same id can attach.
+                    let cleaned = view.try_remove_stale_resources().is_ok();
+                    debug!(slot, cleaned, "dead agent node found");
+                    dead.push(slot);
+                }
+            }
+            CallbackProgression::Continue
+        });
+    }
+
+    fn update_connections(&mut self) -> Result<(), HostTransportError> {
+        for p in &self.agents {
+            let connect = |what: &str, e: &dyn core::fmt::Debug| HostTransportError::Connect {
+                agent: p.id,
+                reason: format!("{what}: {e:?}"),
+            };
+            p.sensor_pub
+                .update_connections()
+                .map_err(|e| connect("sensor publisher", &e))?;
+            p.motor_sub
+                .update_connections()
+                .map_err(|e| connect("motor subscriber", &e))?;
+        }
+        Ok(())
+    }
+
+    fn termination_requested(&self) -> bool {
+        self.signals.termination_requested()
+    }
+
+    fn activity_fd(&self) -> Option<std::os::fd::RawFd> {
+        // SAFETY: the descriptor stays owned by the listener; it is only polled.
+        Some(unsafe { self.stop.file_descriptor().native_handle() })
+    }
+
+    fn clear_activity(&mut self) {
+        let _ = self.stop.try_wait(|_| {});
+    }
+}

@@ -1,0 +1,351 @@
+//! The shared-memory transport over iceoryx2.
+//!
+//! Services (all under `vrsync/<session>/`, see DESIGN §4):
+//!
+//! | service              | pattern                                 | writer → reader |
+//! |----------------------|-----------------------------------------|-----------------|
+//! | `agent/<id>/sensors` | pub-sub `[u8]` + [`SensorHeader`]       | host → agent    |
+//! | `agent/<id>/motor`   | pub-sub `[MotorCommand]` + [`MotorHeader`] | agent → host |
+//! | `start`              | event, id [`START_EVENT`]               | host → agents   |
+//! | `stop`               | event, id = agent id                    | agents → host   |
+//!
+//! The host `create`s every service; agents `open` them. Buffers are sized explicitly: the
+//! sensor publisher of an agent holds at most [`SENSOR_POOL_SAMPLES`] frames (one loaned by
+//! the host, one queued, two borrowed by the agent), so a 3×1080p rgb8 stream reserves
+//! ~75 MB instead of the ~280 MB iceoryx2's defaults would.
+
+use std::mem::MaybeUninit;
+use std::time::{Duration, Instant};
+
+use tracing::debug;
+
+use iceoryx2::config::Config as Config2;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::prelude::*;
+use iceoryx2::sample::Sample;
+use iceoryx2::sample_mut::SampleMut;
+use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
+use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as ps_factory};
+
+use super::{
+    AGENT_MAX_HELD_FRAMES, AgentConnectError, AgentFrame, AgentReceiveError, AgentSendError,
+    AgentTransport, Attempt, BatchSink, FrameLoanMut, HostLiveness, HostTransport,
+    HostTransportError, retry_until,
+};
+use crate::config::{Config, MAX_AGENT_ID};
+use crate::signal::SignalHandling;
+use crate::wire::{LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, SensorHeader};
+
+type Svc = ipc::Service;
+
+/// Event id of *start* on the `start` service.
+pub const START_EVENT: usize = 0;
+/// Event id on the `start` service telling agents the host closed the session cleanly.
+pub const SHUTDOWN_EVENT: usize = 1;
+/// Frames an agent may hold at once (the current one and the one being received).
+pub const AGENT_BORROWED_FRAMES: usize = AGENT_MAX_HELD_FRAMES;
+/// Sensor frames queued per agent: only the newest is kept (safe overflow).
+pub const SENSOR_QUEUE: usize = 1;
+/// Size of each agent's sensor sample pool: queued + borrowed + one loaned by the host.
+pub const SENSOR_POOL_SAMPLES: usize = SENSOR_QUEUE + AGENT_BORROWED_FRAMES + 1;
+/// Motor batches queued per agent at the host.
+pub const MOTOR_QUEUE: usize = 16;
+
+/// Service attribute key holding [`PROTOCOL_VERSION`].
+pub const ATTR_PROTOCOL: &str = "vrsync.protocol_version";
+/// Service attribute key holding [`LAYOUT_HASH`] (hex).
+pub const ATTR_LAYOUT: &str = "vrsync.layout_hash";
+
+/// Name of service `suffix` of a session.
+pub fn service_name(session: &str, suffix: &str) -> String {
+    format!("vrsync/{session}/{suffix}")
+}
+
+/// iceoryx2 node name of the host of a session.
+pub fn host_node_name(session: &str) -> String {
+    format!("vrsync-host.{session}")
+}
+
+/// iceoryx2 node name of agent `id` of a session.
+pub fn agent_node_name(session: &str, id: u32) -> String {
+    format!("vrsync-agent.{session}.{id}")
+}
+
+/// Bytes of shared memory the host's services of `config` reserve for its agents on shared
+/// memory (sensor pools dominate).
+pub fn reserved_bytes(config: &Config) -> u64 {
+    let header = core::mem::size_of::<SensorHeader>() as u64 + 64;
+    config
+        .agents
+        .iter()
+        .filter(|a| a.transport == crate::config::TransportKind::Shm)
+        .map(|a| {
+            let frame = a.frame_bytes().max(1) as u64 + header;
+            let motor = (u64::from(config.transport.max_commands_per_cycle)
+                * core::mem::size_of::<MotorCommand>() as u64
+                + 64)
+                * (MOTOR_QUEUE as u64 + 2);
+            frame * SENSOR_POOL_SAMPLES as u64 + motor
+        })
+        .sum()
+}
+
+/// Free bytes of the tmpfs behind `/dev/shm` (where iceoryx2 keeps its segments), if known.
+pub fn shm_free_bytes() -> Option<u64> {
+    let path = c"/dev/shm";
+    let mut st = core::mem::MaybeUninit::<libc::statvfs>::uninit();
+    // SAFETY: `path` is NUL-terminated and `st` is valid for writes of one statvfs.
+    let rc = unsafe { libc::statvfs(path.as_ptr(), st.as_mut_ptr()) };
+    if rc != 0 {
+        return None;
+    }
+    // SAFETY: statvfs returned 0, so it initialised `st`.
+    let st = unsafe { st.assume_init() };
+    // The field types differ between platforms (u32 on some); the casts are for those.
+    #[allow(clippy::unnecessary_cast)]
+    Some(st.f_bavail as u64 * st.f_frsize as u64)
+}
+
+/// The shared memory a session needs does not fit into `/dev/shm`.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+#[error(
+    "{config}: agent.camera: the cameras of all agents need {needed_mb} MB of shared memory but \
+     /dev/shm has {available_mb} MB free: {fix}",
+    config = config.display(),
+    needed_mb = needed / 1_000_000,
+    available_mb = available / 1_000_000,
+    fix = SHM_BUDGET_FIX
+)]
+pub struct ShmBudgetError {
+    /// The config file whose cameras do not fit.
+    pub config: std::path::PathBuf,
+    /// Bytes the session's services reserve.
+    pub needed: u64,
+    /// Bytes free in `/dev/shm`.
+    pub available: u64,
+}
+
+/// Checks that the shared memory of `config`'s session fits into `/dev/shm`. tmpfs is
+/// filled lazily: an undersized one gives SIGBUS at write time, long after start, so the
+/// host refuses up front ([`ShmHost::create`] runs this check); a program can run it
+/// earlier as a pre-flight, e.g. to report it as a configuration error. A config is never
+/// checked when it is merely parsed (an agent or a tool may parse it on another machine).
+///
+/// # Errors
+/// [`ShmBudgetError`] with the bytes needed and free.
+pub fn check_shm_budget(config: &Config) -> Result<(), ShmBudgetError> {
+    let needed = reserved_bytes(config);
+    match shm_free_bytes() {
+        Some(available) if needed > available => Err(ShmBudgetError {
+            config: config.source.clone(),
+            needed,
+            available,
+        }),
+        _ => Ok(()),
+    }
+}
+
+/// The advice printed with a budget error.
+pub const SHM_BUDGET_FIX: &str = "use fewer or smaller cameras or fewer agents, or give /dev/shm more room (`mount -o remount,size=16G /dev/shm`; in Docker `--shm-size=16g` or `--ipc=host`)";
+
+fn svc_name(session: &str, suffix: &str) -> Result<ServiceName, String> {
+    let name = service_name(session, suffix);
+    ServiceName::new(&name).map_err(|e| format!("invalid service name {name:?}: {e:?}"))
+}
+
+fn attributes() -> Result<AttributeSpecifier, String> {
+    let key = |k: &str| AttributeKey::try_from(k).map_err(|e| format!("{e:?}"));
+    let val = |v: &str| AttributeValue::try_from(v).map_err(|e| format!("{e:?}"));
+    let (pk, pv) = (key(ATTR_PROTOCOL)?, val(&PROTOCOL_VERSION.to_string())?);
+    let (lk, lv) = (key(ATTR_LAYOUT)?, val(&format!("{LAYOUT_HASH:016x}"))?);
+    AttributeSpecifier::new()
+        .define(&pk, &pv)
+        .and_then(|s| s.define(&lk, &lv))
+        .map_err(|e| format!("{e:?}"))
+}
+
+/// Quiets iceoryx2's own logging unless `IOX2_LOG_LEVEL` asks for more. iceoryx2 logs
+/// through `tracing` (feature `tracing`), so what remains shows up in our logs.
+pub fn init_iceoryx2_logging() {
+    set_log_level_from_env_or(LogLevel::Error);
+}
+
+fn node(name: &str) -> Result<Node<Svc>, String> {
+    let node_name =
+        NodeName::new(name).map_err(|e| format!("invalid node name {name:?}: {e:?}"))?;
+    NodeBuilder::new()
+        .name(&node_name)
+        // Signals are handled by `crate::signal` (or left to the embedding process).
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<Svc>()
+        .map_err(|e| format!("cannot create iceoryx2 node {name:?}: {e:?}"))
+}
+
+/// What became of a session's host process, as iceoryx2's node registry tells.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HostState {
+    /// The host's node exists and its process is alive.
+    Alive,
+    /// The host's process died without removing its node (crash, SIGKILL).
+    Dead,
+    /// No host node: it never existed or it closed the session cleanly.
+    Absent,
+}
+
+/// What iceoryx2's node registry says of `session`'s host: its state, and its process id
+/// while it is alive. Lists every node of the machine.
+fn find_host(session: &str) -> (HostState, Option<i32>) {
+    use iceoryx2::node::NodeView;
+    let wanted = host_node_name(session);
+    let mut found = (HostState::Absent, None);
+    let _ = Node::<Svc>::list(Config2::global_config(), |node| {
+        let (state, details) = match &node {
+            NodeState::Alive(view) => (HostState::Alive, view.details()),
+            NodeState::Dead(view) => (HostState::Dead, view.details()),
+            _ => return CallbackProgression::Continue,
+        };
+        let Some(d) = details.as_ref().filter(|d| d.name().as_str() == wanted) else {
+            return CallbackProgression::Continue;
+        };
+        if state == HostState::Alive {
+            found = (state, Some(d.process_id().value()));
+            return CallbackProgression::Stop;
+        }
+        found = (state, None);
+        CallbackProgression::Continue
+    });
+    found
+}
+
+/// The state of `session`'s host node.
+pub fn host_state(session: &str) -> HostState {
+    find_host(session).0
+}
+
+/// The process id of `session`'s live host, if there is one.
+pub fn host_pid(session: &str) -> Option<i32> {
+    find_host(session).1
+}
+
+/// Whether a live host node exists for `session`.
+pub fn host_alive(session: &str) -> bool {
+    host_state(session) == HostState::Alive
+}
+
+/// Whether iceoryx2 node `name` is the host or an agent of `session` (a session name may
+/// contain dots: an agent's node name is `vrsync-agent.<session>.<id>`, digits only after).
+fn node_of_session(name: &str, session: &str) -> bool {
+    name == host_node_name(session)
+        || name
+            .strip_prefix("vrsync-agent.")
+            .and_then(|rest| rest.strip_prefix(session))
+            .and_then(|rest| rest.strip_prefix('.'))
+            .is_some_and(|id| !id.is_empty() && id.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// Removes the stale resources of the dead iceoryx2 nodes of `session` (its crashed host
+/// or agents); other sessions' nodes, dead or alive, are left to their owners. Returns how
+/// many nodes were cleaned.
+pub fn cleanup_dead_nodes(session: &str) -> u64 {
+    use iceoryx2::node::NodeView;
+    let mut cleaned = 0;
+    let _ = Node::<Svc>::list(Config2::global_config(), |state| {
+        if let NodeState::Dead(view) = state
+            && view
+                .details()
+                .as_ref()
+                .is_some_and(|d| node_of_session(d.name().as_str(), session))
+            && view.try_remove_stale_resources().is_ok()
+        {
+            cleaned += 1;
+        }
+        CallbackProgression::Continue
+    });
+    cleaned
+}
+
+mod agent;
+mod host;
+
+pub use agent::*;
+pub use host::*;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_the_sessions_own_nodes_belong_to_it() {
+        assert!(node_of_session("vrsync-host.a", "a"));
+        assert!(node_of_session("vrsync-agent.a.3", "a"));
+        assert!(node_of_session("vrsync-agent.a.b.3", "a.b"));
+        assert!(!node_of_session("vrsync-agent.a.b.3", "a"));
+        assert!(!node_of_session("vrsync-host.ab", "a"));
+        assert!(!node_of_session("vrsync-agent.ab.3", "a"));
+        assert!(!node_of_session("vrsync-agent.a.", "a"));
+        assert!(!node_of_session("floor-node", "a"));
+    }
+
+    const CHILD_ENV: &str = "VRSYNC_TEST_DEAD_NODE_SESSION";
+
+    fn dead_nodes_of(session: &str) -> usize {
+        use iceoryx2::node::NodeView;
+        let mut n = 0;
+        let _ = Node::<Svc>::list(Config2::global_config(), |state| {
+            if let NodeState::Dead(view) = state
+                && view
+                    .details()
+                    .as_ref()
+                    .is_some_and(|d| node_of_session(d.name().as_str(), session))
+            {
+                n += 1;
+            }
+            CallbackProgression::Continue
+        });
+        n
+    }
+
+    /// A host process of one session is SIGKILLed; cleaning up for another session leaves
+    /// its dead node alone, cleaning up for its own session removes it.
+    #[test]
+    fn cleanup_touches_only_the_dead_nodes_of_its_own_session() {
+        if let Ok(session) = std::env::var(CHILD_ENV) {
+            // The child: be a host of `session`, then die without cleaning up.
+            let _node = node(&host_node_name(&session)).unwrap();
+            // SAFETY: kills this (child) process on purpose.
+            unsafe { libc::raise(libc::SIGKILL) };
+            return;
+        }
+        let pid = std::process::id();
+        let (dead, other) = (format!("deadnode{pid}"), format!("othernode{pid}"));
+        let status = std::process::Command::new(std::env::current_exe().unwrap())
+            .args([
+                "--exact",
+                "transport::shm::tests::cleanup_touches_only_the_dead_nodes_of_its_own_session",
+                "--test-threads=1",
+            ])
+            .env(CHILD_ENV, &dead)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .status()
+            .unwrap();
+        assert_eq!(
+            std::os::unix::process::ExitStatusExt::signal(&status),
+            Some(libc::SIGKILL)
+        );
+        assert_eq!(dead_nodes_of(&dead), 1);
+        assert_eq!(cleanup_dead_nodes(&other), 0);
+        assert_eq!(
+            dead_nodes_of(&dead),
+            1,
+            "another session's dead node was removed"
+        );
+        assert_eq!(cleanup_dead_nodes(&dead), 1);
+        assert_eq!(dead_nodes_of(&dead), 0);
+    }
+}
