@@ -1,9 +1,15 @@
 //! Example policies of `vr-agent`. Deterministic: every decision depends only on the seed,
 //! the agent id and the frames received, never on time, so a run is reproducible.
+//!
+//! `wander` and `seek` run one action at a time: after a command they wait for its
+//! `Finished`/`Aborted` status (or a collision) in a later frame's header before they send
+//! the next. A host that reports no statuses gets the next command only once
+//! [`STATUS_WAIT_CYCLES`] cycles have passed without one (`seek`'s search turns give up after
+//! [`SEEK_SEARCH_WAIT_CYCLES`]). `circle` sends every cycle, `idle` never.
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use vrsync_bridge::wire::{ActionState, Command, PixelFormat};
+use vrsync_bridge::wire::{ActionState, Command, PixelFormat, SensorHeader};
 
 use crate::{Frame, Image};
 
@@ -30,7 +36,10 @@ pub struct Policy {
     kind: PolicyKind,
     rng: ChaCha8Rng,
     running: Option<u32>,
-    cycles_in_action: u32,
+    /// Cycle of the newest frame decided on.
+    cycle: u64,
+    /// Cycle of the frame on which the running action was decided.
+    action_cycle: u64,
     heading_deg: f32,
     seek: SeekState,
 }
@@ -127,8 +136,15 @@ mod heapless_pair {
     }
 }
 
-/// Moves that take longer than this many cycles are given up and re-decided.
-const MAX_CYCLES_PER_ACTION: u32 = 60;
+/// How many cycles `wander` waits for its action's `Finished`/`Aborted` status before it
+/// decides anew (the fallback for a host that reports no statuses, or whose status the agent
+/// missed). 30 cycles are 3 s of simulated time at the default 0.1 s per cycle: over 4 times
+/// the longest `wander` action in vr-sim's default world (a 2 m walk at 3 m/s, or a 90° turn
+/// at 180°/s), so with a host that reports statuses the fallback does not cut actions short.
+pub const STATUS_WAIT_CYCLES: u64 = 30;
+
+/// How many cycles a search turn of `seek` (45°) waits for its status before the next one.
+pub const SEEK_SEARCH_WAIT_CYCLES: u64 = 20;
 
 impl Policy {
     /// A policy seeded from `seed` and the agent id.
@@ -139,7 +155,8 @@ impl Policy {
                 seed ^ (u64::from(agent_id) + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15),
             ),
             running: None,
-            cycles_in_action: 0,
+            cycle: 0,
+            action_cycle: 0,
             heading_deg: 0.0,
             seek: SeekState {
                 search_sign: if agent_id.is_multiple_of(2) {
@@ -155,25 +172,30 @@ impl Policy {
     /// Tells the policy which action id its last command got.
     pub fn started(&mut self, action_id: u32) {
         self.running = Some(action_id);
-        self.cycles_in_action = 0;
+        self.action_cycle = self.cycle;
     }
 
     /// Decides on this frame.
     pub fn decide(&mut self, frame: &Frame) -> Decision {
+        self.decide_on(frame.header(), Some(frame))
+    }
+
+    /// Decides on a frame's header; `frame` gives `seek` its images (`None`: sees nothing).
+    fn decide_on(&mut self, h: &SensorHeader, frame: Option<&Frame>) -> Decision {
         let mut out = Decision::default();
+        self.cycle = h.cycle;
         match self.kind {
             PolicyKind::Idle => return out,
             PolicyKind::Circle => {
                 out.push(Command::Move {
-                    heading_deg: (frame.cycle() % 360 * 7 % 360) as f32,
+                    heading_deg: (h.cycle % 360 * 7 % 360) as f32,
                     distance: 0.05,
                 });
                 return out;
             }
             PolicyKind::Wander | PolicyKind::Seek => {}
         }
-        let h = frame.header();
-        let yaw = frame.pose().rotation().to_euler(glam::EulerRot::YXZ).0;
+        let yaw = h.pose.rotation().to_euler(glam::EulerRot::YXZ).0;
         self.heading_deg = yaw.to_degrees().rem_euclid(360.0);
         let collided = self
             .running
@@ -187,9 +209,10 @@ impl Policy {
                     )
             })
         });
-        self.cycles_in_action += 1;
+        // Frames skipped (a late or stalled agent) count: the wait is in cycles of the host.
+        let waited = h.cycle.saturating_sub(self.action_cycle);
         if self.kind == PolicyKind::Seek {
-            self.seek(frame, collided, finished, &mut out);
+            self.seek(frame, collided, finished, waited, &mut out);
             return out;
         }
         if collided {
@@ -198,7 +221,7 @@ impl Policy {
                 heading_deg: away.rem_euclid(360.0),
                 distance: self.rng.random_range(0.5f32..1.5),
             });
-        } else if finished || self.cycles_in_action > MAX_CYCLES_PER_ACTION {
+        } else if finished || waited >= STATUS_WAIT_CYCLES {
             if self.rng.random_bool(0.75) {
                 let heading = self.heading_deg + self.rng.random_range(-60.0f32..60.0);
                 out.push(Command::Move {
@@ -215,7 +238,14 @@ impl Policy {
     }
 
     /// One step of `seek`: a perception loop over the zero-copy left/right images.
-    fn seek(&mut self, frame: &Frame, collided: bool, finished: bool, out: &mut Decision) {
+    fn seek(
+        &mut self,
+        frame: Option<&Frame>,
+        collided: bool,
+        finished: bool,
+        waited: u64,
+        out: &mut Decision,
+    ) {
         if !self.seek.eyes_set {
             self.seek.eyes_set = true;
             out.push(Command::EyeMovement {
@@ -224,12 +254,10 @@ impl Policy {
                 tilt_deg: SEEK_TILT_DEG,
             });
         }
-        let mut blobs = [
-            red_in(frame.image_by_name("left")),
-            red_in(frame.image_by_name("right")),
-        ];
-        if blobs.iter().all(Option::is_none) && frame.image_by_name("left").is_none() {
-            blobs[0] = red_in(frame.image(0));
+        let image = |name: &str| frame.and_then(|f| f.image_by_name(name));
+        let mut blobs = [red_in(image("left")), red_in(image("right"))];
+        if blobs.iter().all(Option::is_none) && image("left").is_none() {
+            blobs[0] = red_in(frame.and_then(|f| f.image(0)));
         }
         let seen: Vec<RedBlob> = blobs.into_iter().flatten().collect();
         if self.seek.detour_cycles > 0 {
@@ -241,7 +269,7 @@ impl Policy {
         if seen.is_empty() {
             self.seek.arrived = false;
             // Search: turn on the spot, a bit less than the field of view at a time.
-            if finished || collided || self.cycles_in_action > 20 {
+            if finished || collided || waited >= SEEK_SEARCH_WAIT_CYCLES {
                 out.push(Command::Turn {
                     angle_deg: 45.0 * self.seek.search_sign,
                 });
@@ -317,6 +345,70 @@ mod tests {
         );
         assert!(find_red(&image(10, 4, &[]), 10, 4, 30, PixelFormat::Rgb8).is_none());
         assert!(find_red(&data, 10, 4, 30, PixelFormat::Gray8).is_none());
+    }
+
+    /// A header of `cycle` facing along +z.
+    fn header(cycle: u64) -> SensorHeader {
+        let mut h = SensorHeader {
+            cycle,
+            ..SensorHeader::default()
+        };
+        h.pose.rotation = [0.0, 0.0, 0.0, 1.0];
+        h
+    }
+
+    /// Runs `policy` over `cycles` frames from a host that reports no statuses, and returns
+    /// the cycles on which it sent a command.
+    fn commands_without_statuses(policy: &mut Policy, cycles: std::ops::Range<u64>) -> Vec<u64> {
+        let mut sent = Vec::new();
+        for (action_id, cycle) in (1..).zip(cycles) {
+            if policy
+                .decide_on(&header(cycle), None)
+                .iter()
+                .next()
+                .is_some()
+            {
+                policy.started(action_id);
+                sent.push(cycle);
+            }
+        }
+        sent
+    }
+
+    #[test]
+    fn wander_without_statuses_sends_its_next_command_after_the_bound() {
+        let mut wander = Policy::new(PolicyKind::Wander, 7, 0);
+        let sent = commands_without_statuses(&mut wander, 0..100);
+        let bound = STATUS_WAIT_CYCLES;
+        assert_eq!(sent, [0, bound, 2 * bound, 3 * bound], "{sent:?}");
+    }
+
+    #[test]
+    fn wander_bound_counts_cycles_the_agent_skipped() {
+        let mut wander = Policy::new(PolicyKind::Wander, 7, 0);
+        assert_eq!(commands_without_statuses(&mut wander, 0..1), [0]);
+        // A stalled agent sees cycle 1, then cycle 1 + STATUS_WAIT_CYCLES.
+        assert!(wander.decide_on(&header(1), None).iter().next().is_none());
+        let late = header(STATUS_WAIT_CYCLES);
+        assert!(wander.decide_on(&late, None).iter().next().is_some());
+    }
+
+    #[test]
+    fn wander_sends_its_next_command_on_the_finished_status() {
+        let mut wander = Policy::new(PolicyKind::Wander, 7, 0);
+        assert_eq!(commands_without_statuses(&mut wander, 0..1), [0]);
+        assert!(wander.decide_on(&header(1), None).iter().next().is_none());
+        let mut h = header(2);
+        h.push_status(1, ActionState::Finished);
+        assert!(wander.decide_on(&h, None).iter().next().is_some());
+    }
+
+    #[test]
+    fn seek_without_statuses_turns_again_after_its_search_bound() {
+        let mut seek = Policy::new(PolicyKind::Seek, 7, 0);
+        let sent = commands_without_statuses(&mut seek, 0..50);
+        let bound = SEEK_SEARCH_WAIT_CYCLES;
+        assert_eq!(sent, [0, bound, 2 * bound], "{sent:?}");
     }
 
     #[test]

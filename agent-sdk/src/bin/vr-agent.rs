@@ -29,6 +29,12 @@ struct Args {
     #[arg(long, value_name = "N")]
     id: u32,
     /// What the agent does.
+    ///
+    /// `wander` and `seek` run one action at a time: they send the next command when a frame
+    /// reports the running action `Finished` or `Aborted` (or a collision), or after 30
+    /// cycles without such a status (20 for a search turn of `seek`). A host that reports no
+    /// action statuses therefore gets one command per agent every 30 cycles. `circle` sends
+    /// a command every cycle, `idle` none.
     #[arg(long, value_enum, default_value = "wander")]
     policy: PolicyKind,
     /// Sleep a random 0..=MAX ms each cycle before stopping (simulated compute time, for
