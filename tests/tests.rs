@@ -12,5 +12,6 @@ mod cpp;
 mod examples;
 mod faults;
 mod hostile;
+mod logs;
 mod sync;
 mod world;

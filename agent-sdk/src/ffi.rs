@@ -929,6 +929,7 @@ fn init_logging_impl(filter: *const c_char) -> Result<(), FfiError> {
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(crate::log::ansi_on_stderr())
         .try_init()
         .map_err(|_| FfiError::LoggingAlreadySet)
 }
@@ -1013,7 +1014,8 @@ pub extern "C" fn vrs_status_name(status: i32) -> *const c_char {
 
 /// Sends the library's log (and iceoryx2's) to stderr. `filter` is a `RUST_LOG`-style
 /// filter such as `"info"` or `"vrsync_agent=debug"`; NULL uses the `RUST_LOG`
-/// environment variable, or `"warn"`. Without this call the library logs nothing.
+/// environment variable, or `"warn"`. Without this call the library logs nothing. Lines
+/// carry ANSI colours only when stderr is a terminal and `NO_COLOR` is unset or empty.
 ///
 /// # Errors
 /// `VRS_ERROR_INVALID_ARGUMENT` for a bad filter or when logging was already set up.

@@ -30,6 +30,7 @@
 
 mod agent;
 pub mod ffi;
+pub mod log;
 pub mod policy;
 
 pub use agent::{

@@ -75,7 +75,7 @@ fn main() -> ExitCode {
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
         )
         .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_ansi(vrsync_agent::log::ansi_on_stderr())
         .init();
     let args = match Args::try_parse() {
         Ok(a) => a,

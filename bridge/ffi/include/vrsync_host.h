@@ -513,7 +513,8 @@ const char *vrs_host_status_name(int32_t status);
 // Sends the library's log (and iceoryx2's) to stderr. `filter` is a `RUST_LOG`-style
 // filter such as `"info"` or `"vrsync_bridge=debug"`; NULL uses the `RUST_LOG`
 // environment variable, or `"warn"`. Without this call the library logs nothing (Unity:
-// stderr ends up in the player log / `Editor.log`).
+// stderr ends up in the player log / `Editor.log`). Lines carry ANSI colours only when
+// stderr is a terminal and `NO_COLOR` is unset or empty.
 //
 // # Errors
 // `VRS_HOST_ERROR_INVALID_ARGUMENT` for a bad filter or when logging was already set up

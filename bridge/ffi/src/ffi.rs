@@ -611,8 +611,17 @@ fn init_logging_impl(filter: *const c_char) -> Result<(), FfiError> {
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(ansi_on_stderr())
         .try_init()
         .map_err(|_| FfiError::LoggingAlreadySet)
+}
+
+/// Colour only when stderr is a terminal and `NO_COLOR` is unset or empty
+/// (<https://no-color.org>): a host's stderr is often a log file (Unity's `Editor.log`). The
+/// same rule as `vrsync_agent::log::ansi_on_stderr`, which this library does not link.
+fn ansi_on_stderr() -> bool {
+    std::io::IsTerminal::is_terminal(&std::io::stderr())
+        && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty())
 }
 
 // ---------------------------------------------------------------------------------------
@@ -698,7 +707,8 @@ pub extern "C" fn vrs_host_status_name(status: i32) -> *const c_char {
 /// Sends the library's log (and iceoryx2's) to stderr. `filter` is a `RUST_LOG`-style
 /// filter such as `"info"` or `"vrsync_bridge=debug"`; NULL uses the `RUST_LOG`
 /// environment variable, or `"warn"`. Without this call the library logs nothing (Unity:
-/// stderr ends up in the player log / `Editor.log`).
+/// stderr ends up in the player log / `Editor.log`). Lines carry ANSI colours only when
+/// stderr is a terminal and `NO_COLOR` is unset or empty.
 ///
 /// # Errors
 /// `VRS_HOST_ERROR_INVALID_ARGUMENT` for a bad filter or when logging was already set up
