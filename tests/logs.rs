@@ -141,3 +141,12 @@ fn vr_agent_colours_only_a_terminal_without_no_color() {
     assert!(!vr_agent_stderr(Some("1"), Stderr::Tty).contains(ESC));
     assert!(vr_agent_stderr(None, Stderr::Tty).contains(ESC));
 }
+
+#[test]
+fn vr_sim_prints_its_connect_timeout_rounded() {
+    let out = vr_sim_stderr(None, Stderr::Pipe);
+    assert!(
+        out.contains("agents [0] did not connect within 200 ms"),
+        "{out}"
+    );
+}

@@ -20,7 +20,10 @@ pub use vrsync_bridge::{AgentConnectError, SignalHandling};
 #[non_exhaustive]
 pub enum WaitStartError {
     /// No new frame before the timeout.
-    #[error("no start from the host within {waited:?} (last cycle seen: {last_cycle:?})")]
+    #[error(
+        "no start from the host within {} (last cycle seen: {last_cycle:?})",
+        crate::log::Rounded(*.waited)
+    )]
     Timeout {
         /// How long we waited.
         waited: Duration,
@@ -512,6 +515,18 @@ impl Agent {
 mod tests {
     use std::path::Path;
     use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+
+    #[test]
+    fn wait_timeout_message_rounds_the_wait() {
+        let e = WaitStartError::Timeout {
+            waited: Duration::new(10, 1),
+            last_cycle: Some(3),
+        };
+        assert_eq!(
+            e.to_string(),
+            "no start from the host within 10 s (last cycle seen: Some(3))"
+        );
+    }
 
     use vrsync_bridge::Host;
 

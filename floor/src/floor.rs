@@ -24,7 +24,7 @@ pub enum FloorError {
     #[error("tcp: {0}")]
     Io(#[from] std::io::Error),
     /// Agents did not answer in time.
-    #[error("floor agents did not answer within {0:?}")]
+    #[error("floor agents did not answer within {} s", .0.as_secs_f64())]
     Timeout(Duration),
 }
 

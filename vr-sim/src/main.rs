@@ -29,14 +29,6 @@ static ALLOC: vrsync_floor::alloc_count::CountingAlloc = vrsync_floor::alloc_cou
 /// Exit code of bad usage or bad config.
 const EXIT_USAGE: u8 = 2;
 
-/// Colour only when stderr is a terminal and `NO_COLOR` is unset or empty
-/// (<https://no-color.org>); the same rule as `vrsync_agent::log::ansi_on_stderr` (vr-sim
-/// does not link the agent SDK).
-fn ansi_on_stderr() -> bool {
-    std::io::IsTerminal::is_terminal(&std::io::stderr())
-        && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty())
-}
-
 fn main() -> ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(
@@ -44,7 +36,7 @@ fn main() -> ExitCode {
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
         )
         .with_writer(std::io::stderr)
-        .with_ansi(ansi_on_stderr())
+        .with_ansi(vrsync_agent::log::ansi_on_stderr())
         .init();
     let cli = match Cli::try_parse() {
         Ok(c) => c,

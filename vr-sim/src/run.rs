@@ -198,9 +198,9 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
                 }
                 if left.is_zero() {
                     bail!(
-                        "agents {missing:?} did not connect within {:?}; start them with \
+                        "agents {missing:?} did not connect within {}; start them with \
                          `vr-agent --config {} --id <id>`",
-                        config.sync.connect_timeout,
+                        vrsync_agent::log::Rounded(config.sync.connect_timeout),
                         opts.agent_config_path.display()
                     );
                 }

@@ -618,7 +618,8 @@ fn init_logging_impl(filter: *const c_char) -> Result<(), FfiError> {
 
 /// Colour only when stderr is a terminal and `NO_COLOR` is unset or empty
 /// (<https://no-color.org>): a host's stderr is often a log file (Unity's `Editor.log`). The
-/// same rule as `vrsync_agent::log::ansi_on_stderr`, which this library does not link.
+/// same rule as `vrsync_agent::log::ansi_on_stderr` (a host library does not link the agent
+/// SDK; the shared home would be `vrsync-bridge`).
 fn ansi_on_stderr() -> bool {
     std::io::IsTerminal::is_terminal(&std::io::stderr())
         && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty())
