@@ -154,7 +154,7 @@ agent run "$work/run.toml" 1
 run_agent1=$agent_pid
 status=0
 timeout 90 mono --debug "$work/VrsyncConsoleHost.exe" --config "$work/run.toml" --cycles 100 \
-    --connect-timeout-ms 20000 >"$work/summary.txt" 2>"$work/run-host.log" || status=$?
+    --connect-timeout 20 >"$work/summary.txt" 2>"$work/run-host.log" || status=$?
 cat "$work/summary.txt"
 ((status == 0)) || fail "VrsyncConsoleHost.exe exited with $status"
 expect_exit "$run_agent0" "vr-agent 0 (console host run)"
@@ -179,7 +179,7 @@ sed -e "s/^session = .*/session = \"$session_base-tcp\"/" -e 's/^kind = "shm"/ki
     -e 's/^tcp_listen = .*/tcp_listen = "127.0.0.1:0"/' config/default.toml >"$work/tcp-host.toml"
 grep -q '^kind = "tcp"' "$work/tcp-host.toml" || fail "config/default.toml: no kind = \"shm\" line to switch"
 timeout 90 mono --debug "$work/VrsyncConsoleHost.exe" --config "$work/tcp-host.toml" --cycles 50 \
-    --connect-timeout-ms 20000 >"$work/tcp-summary.txt" 2>"$work/tcp-host.log" &
+    --connect-timeout 20 >"$work/tcp-summary.txt" 2>"$work/tcp-host.log" &
 tcp_host=$!
 pids+=("$tcp_host")
 port=""

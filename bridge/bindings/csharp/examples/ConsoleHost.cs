@@ -270,12 +270,13 @@ namespace Vrsync.Examples
     public static class ConsoleHost
     {
         const string Usage =
-            "usage: VrsyncConsoleHost.exe --config FILE [--cycles N] [--connect-timeout-ms MS] [--log FILTER]";
+            "usage: VrsyncConsoleHost.exe --config FILE [--cycles N] [--connect-timeout SECONDS] [--log FILTER]";
 
         public static int Main(string[] args)
         {
             string config = null, logFilter = null;
-            int cycles = 100, connectTimeoutMs = -1;
+            int cycles = 100;
+            double connectTimeoutS = -1;
             try
             {
                 for (int i = 0; i < args.Length; i++)
@@ -284,7 +285,7 @@ namespace Vrsync.Examples
                     {
                         case "--config": config = args[++i]; break;
                         case "--cycles": cycles = int.Parse(args[++i]); break;
-                        case "--connect-timeout-ms": connectTimeoutMs = int.Parse(args[++i]); break;
+                        case "--connect-timeout": connectTimeoutS = double.Parse(args[++i], System.Globalization.CultureInfo.InvariantCulture); break;
                         case "--log": logFilter = args[++i]; break;
                         default: throw new ArgumentException("unknown argument " + args[i]);
                     }
@@ -299,7 +300,7 @@ namespace Vrsync.Examples
             }
             try
             {
-                return Run(config, cycles, connectTimeoutMs, logFilter);
+                return Run(config, cycles, connectTimeoutS, logFilter);
             }
             catch (VrsyncException e)
             {
@@ -308,7 +309,7 @@ namespace Vrsync.Examples
             }
         }
 
-        static int Run(string configPath, int cycles, int connectTimeoutMs, string logFilter)
+        static int Run(string configPath, int cycles, double connectTimeoutS, string logFilter)
         {
             if (logFilter != null)
                 Host.InitLogging(logFilter);
@@ -320,7 +321,7 @@ namespace Vrsync.Examples
                     Host.LibraryVersion, info.AgentCount, info.SyncMode != 0 ? "sync" : "async"));
                 if (info.Transport == Transport.Tcp)
                     Console.Error.WriteLine("tcp_port=" + info.TcpPort); // agents connect here
-                host.WaitForAgents(connectTimeoutMs);
+                host.WaitForAgents(connectTimeoutS);
 
                 var bodies = new List<KinematicBody>();
                 foreach (var a in host.Agents)

@@ -93,7 +93,7 @@ namespace Vrsync.Examples
             foreach (var a in host.Agents)
                 if (!byId.ContainsKey(a.Id))
                     throw new ArgumentException("no body for agent " + a.Id + " of the config");
-            dt = host.Info.SimulationTimePerFrame;
+            dt = (float)host.Info.SimulationTimePerFrame;
             State = FrameState.FirstFrame;
         }
 

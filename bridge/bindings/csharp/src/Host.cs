@@ -82,6 +82,23 @@ namespace Vrsync
         /// <summary>Index in the agent's camera list (<see cref="Host.GetCamera"/>).</summary>
         public readonly int Camera;
 
+        /// <summary>Bytes of one pixel of <see cref="Format"/>: 3 (Rgb8), 4 (Rgba8),
+        /// 1 (Gray8), 4 (Depth32f).</summary>
+        public int BytesPerPixel
+        {
+            get
+            {
+                switch (Format)
+                {
+                    case PixelFormat.Rgb8: return 3;
+                    case PixelFormat.Rgba8: return 4;
+                    case PixelFormat.Gray8: return 1;
+                    case PixelFormat.Depth32f: return 4;
+                    default: throw new InvalidOperationException("unknown pixel format " + Format);
+                }
+            }
+        }
+
         internal Image(NativeStructs.Image n)
         {
             data = n.Data;
@@ -153,8 +170,16 @@ namespace Vrsync
         readonly Host host;
         public readonly uint AgentId;
         public readonly ulong Cycle;
+        /// <summary>Simulated time of the cycle in nanoseconds (as the C API gives it);
+        /// <see cref="SimTime"/> in seconds.</summary>
         public readonly ulong SimTimeNs;
         public readonly int ImageCount;
+
+        /// <summary>Simulated time of the cycle, seconds.</summary>
+        public double SimTime
+        {
+            get { return SimTimeNs / 1e9; }
+        }
 
         internal SensorFrame(Host host, NativeStructs.Frame f)
         {
@@ -377,12 +402,17 @@ namespace Vrsync
         }
 
         /// <summary>
-        /// Waits up to <paramref name="timeoutMs"/> (negative: the config's connect_timeout)
-        /// until every agent is connected. False with the missing ids otherwise; wait
-        /// again or run without them. Call before the first cycle.
+        /// Waits up to <paramref name="timeoutSeconds"/> (negative: the config's
+        /// connect_timeout; 0: just checks) until every agent is connected. False with the
+        /// missing ids otherwise; wait again or run without them. Call before the first cycle.
         /// </summary>
-        public bool TryWaitForAgents(int timeoutMs, out uint[] missing)
+        public bool TryWaitForAgents(double timeoutSeconds, out uint[] missing)
         {
+            if (double.IsNaN(timeoutSeconds))
+                throw new ArgumentOutOfRangeException("timeoutSeconds", "NaN is not a timeout");
+            // The C API counts milliseconds: round up, so a positive wait is never 0.
+            long timeoutMs = timeoutSeconds < 0 ? -1
+                : (long)Math.Min(Math.Ceiling(timeoutSeconds * 1000.0), long.MaxValue / 2);
             uint[] ids = new uint[Math.Max(agents.Length, 1)];
             uint count;
             Status st = Native.vrs_host_wait_for_agents(Handle, timeoutMs, ids, (uint)ids.Length, out count);
@@ -402,10 +432,10 @@ namespace Vrsync
 
         /// <summary>Like <see cref="TryWaitForAgents"/>, throwing
         /// <see cref="AgentsMissingException"/> when agents are missing.</summary>
-        public void WaitForAgents(int timeoutMs)
+        public void WaitForAgents(double timeoutSeconds)
         {
             uint[] missing;
-            if (!TryWaitForAgents(timeoutMs, out missing))
+            if (!TryWaitForAgents(timeoutSeconds, out missing))
                 throw new AgentsMissingException(missing, Native.LastError());
         }
 

@@ -396,9 +396,13 @@ namespace Vrsync
     {
         /// <summary>Current cycle (the next frame's).</summary>
         public ulong Cycle;
+        /// <summary>Raw nanoseconds of the C struct; <see cref="SimTime"/> in seconds.</summary>
         public ulong SimTimeNs;
+        /// <summary>Raw nanoseconds; <see cref="SimulationTimePerFrame"/> in seconds.</summary>
         public ulong SimulationTimePerFrameNs;
+        /// <summary>Raw nanoseconds; <see cref="StopTimeout"/> in seconds.</summary>
         public ulong StopTimeoutNs;
+        /// <summary>Raw nanoseconds; <see cref="ConnectTimeout"/> in seconds.</summary>
         public ulong ConnectTimeoutNs;
         public uint AgentCount;
         /// <summary>1 in sync (lock-step) mode.</summary>
@@ -408,10 +412,28 @@ namespace Vrsync
         public uint MaxCommandsPerCycle;
         public uint ProtocolVersion;
 
-        /// <summary>Simulated seconds per cycle.</summary>
-        public float SimulationTimePerFrame
+        /// <summary>Simulated time at the current cycle, seconds.</summary>
+        public double SimTime
         {
-            get { return SimulationTimePerFrameNs / 1e9f; }
+            get { return SimTimeNs / 1e9; }
+        }
+
+        /// <summary>Simulated time per cycle (<c>simulation_time_per_frame</c>), seconds.</summary>
+        public double SimulationTimePerFrame
+        {
+            get { return SimulationTimePerFrameNs / 1e9; }
+        }
+
+        /// <summary>How long a cycle waits for the agents' stops (<c>stop_timeout</c>), seconds.</summary>
+        public double StopTimeout
+        {
+            get { return StopTimeoutNs / 1e9; }
+        }
+
+        /// <summary>How long the host waits for agents (<c>connect_timeout</c>), seconds.</summary>
+        public double ConnectTimeout
+        {
+            get { return ConnectTimeoutNs / 1e9; }
         }
     }
 
@@ -448,6 +470,7 @@ namespace Vrsync
     {
         /// <summary>The cycle that ended.</summary>
         public ulong Cycle;
+        /// <summary>Raw nanoseconds of the C struct; <see cref="SimTime"/> in seconds.</summary>
         public ulong SimTimeNs;
         /// <summary>Number of agent reports (<see cref="Host.GetReport"/> indices).</summary>
         public uint AgentCount;
@@ -455,6 +478,12 @@ namespace Vrsync
         public uint TimedOutAgents;
         public uint LateBatches;
         public uint CommandCount;
+
+        /// <summary>Simulated time of the cycle that ended, seconds.</summary>
+        public double SimTime
+        {
+            get { return SimTimeNs / 1e9; }
+        }
     }
 
     /// <summary>Counters since the host was created (<c>vrs_host_stats_t</c>).</summary>

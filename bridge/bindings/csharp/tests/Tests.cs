@@ -198,7 +198,7 @@ static class Tests
         var deadline = DateTime.UtcNow.AddSeconds(20);
         while (true)
         {
-            Expect(!host.TryWaitForAgents(200, out missing), "agent 1 cannot be connected");
+            Expect(!host.TryWaitForAgents(0.2, out missing), "agent 1 cannot be connected");
             if (missing.Length == 1)
                 break;
             Expect(DateTime.UtcNow < deadline, "agent 0 did not connect within 20 s");
@@ -207,7 +207,7 @@ static class Tests
         Expect(host.IsConnected(0) && !host.IsConnected(1), "IsConnected");
         try
         {
-            host.WaitForAgents(50);
+            host.WaitForAgents(0.05);
             throw new Exception("WaitForAgents did not throw");
         }
         catch (AgentsMissingException e)
@@ -236,11 +236,14 @@ static class Tests
                 Equal(2, frame.ImageCount, "image count");
                 Image image = frame.GetImage("left");
                 Equal(32 * 3, image.Stride, "stride");
+                Equal(3, image.BytesPerPixel, "rgb8 bytes per pixel");
+                Equal(image.Width * image.BytesPerPixel, image.Stride, "stride = width * bytes per pixel");
                 Equal(image.Stride * image.Height, image.Pixels.Length, "span length");
                 image.Pixels.Fill((byte)(10 + n));
                 image.CopyFromBottomUp(new byte[image.Length], image.Stride);
                 Image depth = frame.GetImage(1);
                 Equal(PixelFormat.Gray8, depth.Format, "depth format");
+                Equal(1, depth.BytesPerPixel, "gray8 bytes per pixel");
                 depth.Row(depth.Height - 1).Fill(255);
                 Throws(Status.InvalidArgument, () => frame.GetImage("nope"), "unknown camera");
                 Throws(Status.OutOfRange, () => frame.GetImage(2), "image index");
@@ -281,6 +284,12 @@ static class Tests
             host.EndCycle();
         }
         Equal(3ul, host.Info.Cycle, "cycle after 3");
+        HostInfo seconds = host.Info;
+        Expect(seconds.SimulationTimePerFrame > 0 && seconds.SimulationTimePerFrame == seconds.SimulationTimePerFrameNs / 1e9,
+            "SimulationTimePerFrame in seconds");
+        Expect(seconds.SimTime == seconds.SimTimeNs / 1e9, "SimTime in seconds");
+        Expect(seconds.StopTimeout == seconds.StopTimeoutNs / 1e9 && seconds.ConnectTimeout == seconds.ConnectTimeoutNs / 1e9,
+            "timeouts in seconds");
         HostStats stats = host.Stats;
         Equal(3ul, stats.Cycles, "stats cycles");
         Equal(0ul, stats.StopTimeouts, "stats stop timeouts");
@@ -330,8 +339,8 @@ static class Tests
     {
         using (var host = new Host(config))
         {
-            host.WaitForAgents(20000);
-            double timeoutS = host.Info.StopTimeoutNs / 1e9;
+            host.WaitForAgents(20);
+            double timeoutS = host.Info.StopTimeout;
             var outcomes = new List<AgentOutcome[]>();
             var timedOut = new List<uint>();
             const int cycles = 8;
