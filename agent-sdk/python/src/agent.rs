@@ -135,45 +135,34 @@ fn secs(name: &str, v: Option<f64>) -> PyResult<Option<Duration>> {
 
 fn connect_error(py: Python<'_>, e: AgentConnectError, session: &str, id: u32) -> PyErr {
     let msg = e.to_string();
-    let base = [("session", obj(py, session)), ("agent_id", obj(py, id))];
+    // Every connect error names the session and the agent; some add more.
+    let raise = |class: &str, extra: Vec<(&'static str, Py<PyAny>)>| {
+        let mut attrs = vec![("session", obj(py, session)), ("agent_id", obj(py, id))];
+        attrs.extend(extra);
+        error(py, class, msg.clone(), &attrs)
+    };
     match e {
-        AgentConnectError::HostNotFound { waited, .. } => error(
-            py,
+        AgentConnectError::HostNotFound { waited, .. } => raise(
             "HostNotFoundError",
-            msg,
-            &[
-                ("session", obj(py, session)),
-                ("agent_id", obj(py, id)),
-                ("waited", obj(py, waited.as_secs_f64())),
-            ],
+            vec![("waited", obj(py, waited.as_secs_f64()))],
         ),
-        AgentConnectError::IdNotServed { served, .. } => error(
-            py,
-            "AgentIdNotServedError",
-            msg,
-            &[
-                ("session", obj(py, session)),
-                ("agent_id", obj(py, id)),
-                ("served", obj(py, served)),
-            ],
-        ),
+        AgentConnectError::IdNotServed { served, .. } => {
+            raise("AgentIdNotServedError", vec![("served", obj(py, served))])
+        }
         AgentConnectError::VersionMismatch {
             host_protocol,
             agent_protocol,
             ..
-        } => error(
-            py,
+        } => raise(
             "VersionMismatchError",
-            msg,
-            &[
-                ("session", obj(py, session)),
+            vec![
                 ("host_version", obj(py, host_protocol)),
                 ("agent_version", obj(py, agent_protocol.to_string())),
             ],
         ),
-        AgentConnectError::IdInUse { .. } => error(py, "AgentIdInUseError", msg, &base),
-        AgentConnectError::Refused { .. } => error(py, "ConnectionRefusedByHostError", msg, &base),
-        _ => error(py, "TransportError", msg, &base),
+        AgentConnectError::IdInUse { .. } => raise("AgentIdInUseError", vec![]),
+        AgentConnectError::Refused { .. } => raise("ConnectionRefusedByHostError", vec![]),
+        _ => raise("TransportError", vec![]),
     }
 }
 

@@ -175,56 +175,34 @@ fn point(x: f64, y: f64, z: f64) -> PyResult<Vec3> {
     Ok(Vec3::new(finite("x", x)?, finite("y", y)?, finite("z", z)?))
 }
 
-/// Walk in a straight line to the world position (`x`, `y`, `z`) in metres.
-#[pyclass(module = "vrsync._vrsync", extends = PyCommand, frozen, get_all)]
-pub(crate) struct MoveTo {
-    x: f32,
-    y: f32,
-    z: f32,
+/// Commands on a world point (`x`, `y`, `z`) in metres.
+macro_rules! point_command {
+    ($($(#[$doc:meta])* $cls:ident => $variant:ident;)*) => {$(
+        $(#[$doc])*
+        #[pyclass(module = "vrsync._vrsync", extends = PyCommand, frozen, get_all)]
+        pub(crate) struct $cls {
+            x: f32,
+            y: f32,
+            z: f32,
+        }
+
+        #[pymethods]
+        impl $cls {
+            #[new]
+            fn new(x: f64, y: f64, z: f64) -> PyResult<PyClassInitializer<Self>> {
+                let target = point(x, y, z)?;
+                let (x, y, z) = (target.x, target.y, target.z);
+                Ok(sub(Self { x, y, z }, PyCommand { command: Command::$variant { target } }))
+            }
+        }
+    )*};
 }
 
-#[pymethods]
-impl MoveTo {
-    #[new]
-    fn new(x: f64, y: f64, z: f64) -> PyResult<PyClassInitializer<Self>> {
-        let target = point(x, y, z)?;
-        Ok(sub(
-            Self {
-                x: target.x,
-                y: target.y,
-                z: target.z,
-            },
-            PyCommand {
-                command: Command::MoveTo { target },
-            },
-        ))
-    }
-}
-
-/// Fixate the world point (`x`, `y`, `z`) in metres with both eyes.
-#[pyclass(module = "vrsync._vrsync", extends = PyCommand, frozen, get_all)]
-pub(crate) struct EyeFixation {
-    x: f32,
-    y: f32,
-    z: f32,
-}
-
-#[pymethods]
-impl EyeFixation {
-    #[new]
-    fn new(x: f64, y: f64, z: f64) -> PyResult<PyClassInitializer<Self>> {
-        let target = point(x, y, z)?;
-        Ok(sub(
-            Self {
-                x: target.x,
-                y: target.y,
-                z: target.z,
-            },
-            PyCommand {
-                command: Command::EyeFixation { target },
-            },
-        ))
-    }
+point_command! {
+    /// Walk in a straight line to the world position (`x`, `y`, `z`) in metres.
+    MoveTo => MoveTo;
+    /// Fixate the world point (`x`, `y`, `z`) in metres with both eyes.
+    EyeFixation => EyeFixation;
 }
 
 /// Move the eyes: pan of each eye and tilt of both, in degrees.

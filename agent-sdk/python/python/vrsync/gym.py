@@ -35,7 +35,7 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from . import Agent, Command, Frame, Move, Turn
+from . import Agent, Command, EnvironmentReset, Frame, Move, TrialReset, Turn
 
 __all__ = ["VrsyncEnv", "DEFAULT_ACTIONS", "LateLearnerWarning"]
 
@@ -208,8 +208,6 @@ class VrsyncEnv(gymnasium.Env[dict[str, Any], Any]):
 
     def _start_episode(self, kind: str) -> None:
         """Sends the reset of `kind` ("trial" or "environment") with this cycle's stop."""
-        from . import EnvironmentReset, TrialReset
-
         if kind not in ("trial", "environment"):
             raise ValueError(f'options["reset"] must be "trial" or "environment", got {kind!r}')
         if self.frame is None:
