@@ -1,6 +1,6 @@
 //! `vrsync.Agent`: connect, wait for frames, send commands, stop.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::thread::{self, ThreadId};
 use std::time::{Duration, Instant};
@@ -284,14 +284,7 @@ impl PyAgent {
     ) -> PyResult<Self> {
         let id = u32::try_from(agent_id)
             .map_err(|_| PyValueError::new_err(format!("agent_id must be ≥ 0, got {agent_id}")))?;
-        let mut cfg = Config::load(&config).map_err(|e| {
-            error(
-                py,
-                "ConfigError",
-                e.to_string(),
-                &[("path", obj(py, config.clone()))],
-            )
-        })?;
+        let mut cfg = load_config(py, &config)?;
         if let Some(s) = session {
             cfg.session = s;
         }
@@ -582,19 +575,24 @@ impl FrameIter {
     }
 }
 
+/// Loads `config`; a failure is a `ConfigError` carrying the path.
+fn load_config(py: Python<'_>, config: &Path) -> PyResult<Config> {
+    Config::load(config).map_err(|e| {
+        error(
+            py,
+            "ConfigError",
+            e.to_string(),
+            &[("path", obj(py, config))],
+        )
+    })
+}
+
 /// The agent ids of the config file `config` (its `[[agent]]` entries), sorted.
 ///
 /// Raises `ConfigError` for a file that does not load.
 #[pyfunction]
 fn config_agent_ids(py: Python<'_>, config: PathBuf) -> PyResult<Vec<u32>> {
-    let cfg = Config::load(&config).map_err(|e| {
-        error(
-            py,
-            "ConfigError",
-            e.to_string(),
-            &[("path", obj(py, config.clone()))],
-        )
-    })?;
+    let cfg = load_config(py, &config)?;
     Ok(cfg.agents.iter().map(|a| a.id).collect())
 }
 
