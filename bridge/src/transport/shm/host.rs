@@ -401,23 +401,15 @@ impl HostTransport for ShmHost {
     }
 
     fn reap_dead_agents(&mut self, dead: &mut Vec<usize>) {
-        use iceoryx2::node::NodeView;
         let names = &self.agent_node_names;
-        let _ = Node::<Svc>::list(Config2::global_config(), |state| {
-            if let NodeState::Dead(view) = state {
-                let slot = view
-                    .details()
-                    .as_ref()
-                    .and_then(|d| names.iter().position(|n| n == d.name().as_str()));
-                if let Some(slot) = slot {
-                    // Removes its ports from our services: its sample loans come back and
-                    // a restarted agent with the same id can attach.
-                    let cleaned = view.try_remove_stale_resources().is_ok();
-                    debug!(slot, cleaned, "dead agent node found");
-                    dead.push(slot);
-                }
+        for_each_dead_node(|view, name| {
+            if let Some(slot) = names.iter().position(|n| n == name) {
+                // Removes its ports from our services: its sample loans come back and a
+                // restarted agent with the same id can attach.
+                let cleaned = view.try_remove_stale_resources().is_ok();
+                debug!(slot, cleaned, "dead agent node found");
+                dead.push(slot);
             }
-            CallbackProgression::Continue
         });
     }
 

@@ -252,21 +252,32 @@ fn node_of_session(name: &str, session: &str) -> bool {
 /// or agents); other sessions' nodes, dead or alive, are left to their owners. Returns how
 /// many nodes were cleaned.
 pub fn cleanup_dead_nodes(session: &str) -> u64 {
-    use iceoryx2::node::NodeView;
     let mut cleaned = 0;
+    for_each_dead_node(|view, name| {
+        if node_of_session(name, session) && view.try_remove_stale_resources().is_ok() {
+            cleaned += 1;
+        }
+    });
+    cleaned
+}
+
+/// Calls `f` with every dead iceoryx2 node of the machine that has a name (its view, to
+/// clean it, and its name): the one registry walk behind session clean-up and the host's
+/// reaping of dead agents.
+fn for_each_dead_node(mut f: impl FnMut(iceoryx2::node::DeadNodeView<Svc>, &str)) {
+    use iceoryx2::node::NodeView;
     let _ = Node::<Svc>::list(Config2::global_config(), |state| {
         if let NodeState::Dead(view) = state
-            && view
+            && let Some(name) = view
                 .details()
                 .as_ref()
-                .is_some_and(|d| node_of_session(d.name().as_str(), session))
-            && view.try_remove_stale_resources().is_ok()
+                .map(|d| d.name().as_str().to_owned())
         {
-            cleaned += 1;
+            // Owned name: cleaning consumes the view.
+            f(view, &name);
         }
         CallbackProgression::Continue
     });
-    cleaned
 }
 
 mod agent;
@@ -294,18 +305,11 @@ mod tests {
     const CHILD_ENV: &str = "VRSYNC_TEST_DEAD_NODE_SESSION";
 
     fn dead_nodes_of(session: &str) -> usize {
-        use iceoryx2::node::NodeView;
         let mut n = 0;
-        let _ = Node::<Svc>::list(Config2::global_config(), |state| {
-            if let NodeState::Dead(view) = state
-                && view
-                    .details()
-                    .as_ref()
-                    .is_some_and(|d| node_of_session(d.name().as_str(), session))
-            {
+        for_each_dead_node(|_, name| {
+            if node_of_session(name, session) {
                 n += 1;
             }
-            CallbackProgression::Continue
         });
         n
     }
