@@ -232,7 +232,12 @@ impl PyAgent {
 
     /// Waits for the next frame, releasing the GIL in short slices so that Ctrl-C (and
     /// any other signal handler) runs at once.
-    fn wait_frame(&mut self, py: Python<'_>, timeout: Option<Duration>) -> PyResult<PyFrame> {
+    /// `Ok(None)`: the host closed the session (a clean end, for `frames()` to stop on).
+    fn wait_frame(
+        &mut self,
+        py: Python<'_>,
+        timeout: Option<Duration>,
+    ) -> PyResult<Option<PyFrame>> {
         let started = Instant::now();
         let deadline = timeout.map(|t| started + t);
         loop {
@@ -247,7 +252,7 @@ impl PyAgent {
             match result.0 {
                 Ok(frame) => {
                     let skipped = self.agent.as_ref().map_or(0, |a| a.0.frames_skipped());
-                    return Ok(PyFrame::new(frame, self.graveyard.clone(), skipped));
+                    return Ok(Some(PyFrame::new(frame, self.graveyard.clone(), skipped)));
                 }
                 Err(WaitStartError::Timeout { .. }) => {
                     py.check_signals()?;
@@ -259,6 +264,7 @@ impl PyAgent {
                         return Err(self.wait_error(py, e, started.elapsed()));
                     }
                 }
+                Err(WaitStartError::HostClosed) => return Ok(None),
                 Err(e) => return Err(self.wait_error(py, e, started.elapsed())),
             }
         }
@@ -369,7 +375,8 @@ impl PyAgent {
     #[pyo3(signature = (timeout = None))]
     fn wait(&mut self, py: Python<'_>, timeout: Option<f64>) -> PyResult<PyFrame> {
         let timeout = secs("timeout", timeout)?;
-        self.wait_frame(py, timeout)
+        self.wait_frame(py, timeout)?
+            .ok_or_else(|| self.wait_error(py, WaitStartError::HostClosed, Duration::ZERO))
     }
 
     /// Iterates over frames until the host closes the session (the loop then ends
@@ -562,16 +569,7 @@ impl FrameIter {
 
     fn __next__(&self, py: Python<'_>) -> PyResult<Option<PyFrame>> {
         let mut agent = self.agent.bind(py).try_borrow_mut()?;
-        match agent.wait_frame(py, self.timeout) {
-            Ok(f) => Ok(Some(f)),
-            Err(e) => {
-                let closed = py
-                    .import("vrsync.errors")
-                    .and_then(|m| m.getattr("HostClosedError"))
-                    .is_ok_and(|cls| e.is_instance(py, &cls));
-                if closed { Ok(None) } else { Err(e) }
-            }
-        }
+        agent.wait_frame(py, self.timeout)
     }
 }
 

@@ -16,15 +16,15 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::{self, ThreadId};
 
 use pyo3::exceptions::{PyBufferError, PyKeyError};
+use pyo3::ffi;
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
 use pyo3::types::PyDict;
-use pyo3::{ffi, intern};
 use vrsync_agent::{Frame, PixelFormat};
-use vrsync_bridge::wire::WireOutcome;
+use vrsync_bridge::wire::{ActionState, WireOutcome};
 
 use crate::sensors::{
-    PyActionStatus, PyCollision, PyEyePosition, PyGridPosition, PyHeadMotion, PyPose,
+    PyActionState, PyActionStatus, PyCollision, PyEyePosition, PyGridPosition, PyHeadMotion, PyPose,
 };
 
 /// A frame moved to another thread only to be dropped later on its owner's thread.
@@ -220,12 +220,10 @@ impl PyFrame {
     #[getter]
     fn action_states<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
-        for s in self.statuses() {
-            let s = Bound::new(py, s)?;
-            d.set_item(
-                s.getattr(intern!(py, "action_id"))?,
-                s.getattr(intern!(py, "state"))?,
-            )?;
+        for s in self.header().statuses() {
+            if let Some(state) = ActionState::from_u32(s.state) {
+                d.set_item(s.action_id, PyActionState::from(state))?;
+            }
         }
         Ok(d)
     }

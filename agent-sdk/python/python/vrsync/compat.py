@@ -123,7 +123,6 @@ class Annar4Interface:
         except HostClosedError:
             self.closed = True
             return False
-        self._frame = None
         self._frame = frame
         self._fresh = {"images", "grid", "head", "eye", "reward", "collision"}
         for s in frame.statuses:
