@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use proptest::prelude::*;
 use vrsync_bridge::Config;
-use vrsync_bridge::config::{ConfigLoadError, DEFAULT_CONFIG_TOML};
+use vrsync_bridge::{ConfigLoadError, DEFAULT_CONFIG_TOML};
 
 use crate::hostile::allocations_in;
 use crate::util::{self, TestConfig, workspace};

@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 
 use proptest::prelude::*;
 use serde_json::json;
-use vrsync_bridge::transport::tcp::{
+use vrsync_bridge::tcp::{
     Hello, MAX_HELLO, MAX_PENDING, MAX_TOKEN, PREFIX, ReadProgress, RecordReader, decode_hello,
     decode_motor, decode_reject, encode_hello, kind, reject,
 };
@@ -440,7 +440,7 @@ impl Scripted {
         body.extend_from_slice(&PROTOCOL_VERSION.to_le_bytes());
         body.extend_from_slice(&self.id.to_le_bytes());
         body.extend_from_slice(&cycle.to_le_bytes());
-        body.extend_from_slice(&vrsync_bridge::wire::MOTOR_FLAG_STOP.to_le_bytes());
+        body.extend_from_slice(&vrsync_bridge::MOTOR_FLAG_STOP.to_le_bytes());
         body.extend_from_slice(&0u32.to_le_bytes());
         record(kind::MOTOR, &body)
     }

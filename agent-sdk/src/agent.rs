@@ -2,18 +2,18 @@
 
 use std::time::{Duration, Instant};
 
-use vrsync_bridge::config::{Config, TransportKind};
-pub use vrsync_bridge::transport::HOST_LIVENESS_PERIOD;
-use vrsync_bridge::transport::shm::{ShmAgent, ShmFrame};
-use vrsync_bridge::transport::tcp::{TcpAgent, TcpFrame};
-use vrsync_bridge::transport::{
+pub use vrsync_bridge::HOST_LIVENESS_PERIOD;
+use vrsync_bridge::shm::{ShmAgent, ShmFrame};
+use vrsync_bridge::tcp::{TcpAgent, TcpFrame};
+pub use vrsync_bridge::{AgentConnectError, SignalHandling};
+use vrsync_bridge::{
     AgentReceiveError, AgentSendError, AgentTransport, AgentWaitError, wait_for_newer_frame,
 };
-use vrsync_bridge::wire::{
+use vrsync_bridge::{
     Command, ImageDesc, MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION, PixelFormat,
     Pose, SensorHeader,
 };
-pub use vrsync_bridge::{AgentConnectError, SignalHandling};
+use vrsync_bridge::{Config, TransportKind};
 
 /// Why [`Agent::wait_start`] returned without a frame.
 #[derive(Debug, thiserror::Error)]

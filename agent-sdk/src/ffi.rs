@@ -43,8 +43,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::thread::ThreadId;
 use std::time::Duration;
 
-use vrsync_bridge::config::{Config, ConfigLoadError};
-use vrsync_bridge::wire::{self, Command, PixelFormat};
+use vrsync_bridge::{Command, PixelFormat};
+use vrsync_bridge::{Config, ConfigLoadError};
 
 use crate::agent::{
     Agent, AgentBuilder, AgentConnectError, Frame, SendError, SignalHandling, StopError,
@@ -65,10 +65,10 @@ pub const VRS_MAX_COLLISIONS: usize = 8;
 pub const VRS_CAMERA_NAME_SIZE: usize = 17;
 
 const _: () = {
-    assert!(VRS_MAX_IMAGES == wire::MAX_CAMERAS);
-    assert!(VRS_MAX_STATUSES == wire::MAX_STATUSES);
-    assert!(VRS_MAX_COLLISIONS == wire::MAX_COLLISIONS);
-    assert!(VRS_CAMERA_NAME_SIZE == wire::CAMERA_NAME_LEN + 1);
+    assert!(VRS_MAX_IMAGES == vrsync_bridge::MAX_CAMERAS);
+    assert!(VRS_MAX_STATUSES == vrsync_bridge::MAX_STATUSES);
+    assert!(VRS_MAX_COLLISIONS == vrsync_bridge::MAX_COLLISIONS);
+    assert!(VRS_CAMERA_NAME_SIZE == vrsync_bridge::CAMERA_NAME_LEN + 1);
 };
 
 /// Result of a call: 0 is success, positive values are outcomes that are not errors,
@@ -206,8 +206,11 @@ pub enum vrs_command_kind_t {
 }
 
 const _: () = {
-    assert!(vrs_command_kind_t::VRS_COMMAND_MOVE as u32 == wire::kind::MOVE);
-    assert!(vrs_command_kind_t::VRS_COMMAND_TRIAL_RESET as u32 == wire::kind::TRIAL_RESET);
+    assert!(vrs_command_kind_t::VRS_COMMAND_MOVE as u32 == vrsync_bridge::command_kind::MOVE);
+    assert!(
+        vrs_command_kind_t::VRS_COMMAND_TRIAL_RESET as u32
+            == vrsync_bridge::command_kind::TRIAL_RESET
+    );
     assert!(vrs_pixel_format_t::VRS_PIXEL_FORMAT_DEPTH32F as u32 == PixelFormat::Depth32f as u32);
 };
 
@@ -701,7 +704,7 @@ fn current_frame(state: &AgentState) -> Result<&Frame, FfiError> {
 }
 
 fn command_from(c: &vrs_command_t) -> Result<Command, FfiError> {
-    let wire = wire::MotorCommand {
+    let wire = vrsync_bridge::MotorCommand {
         kind: c.kind,
         object_id: c.object_id,
         args: c.args,
@@ -958,7 +961,7 @@ pub extern "C" fn vrs_version() -> *const c_char {
 /// Always safe to call.
 #[unsafe(no_mangle)]
 pub extern "C" fn vrs_protocol_version() -> u32 {
-    wire::PROTOCOL_VERSION
+    vrsync_bridge::PROTOCOL_VERSION
 }
 
 /// The message of the last call made on this thread: why it failed or timed out, or an
@@ -1660,7 +1663,7 @@ mod tests {
         frame.header_mut().reward = 0.5;
         frame
             .header_mut()
-            .push_status(7, wire::ActionState::Walking);
+            .push_status(7, vrsync_bridge::ActionState::Walking);
         frame.header_mut().push_collision(7, 99);
         host.publish(frame).unwrap();
         host.start().unwrap();
@@ -1696,7 +1699,7 @@ mod tests {
         // SAFETY: static strings.
         let v = unsafe { CStr::from_ptr(vrs_version()) }.to_str().unwrap();
         assert_eq!(v, env!("CARGO_PKG_VERSION"));
-        assert_eq!(vrs_protocol_version(), wire::PROTOCOL_VERSION);
+        assert_eq!(vrs_protocol_version(), vrsync_bridge::PROTOCOL_VERSION);
         // SAFETY: static strings.
         let name = |s: i32| {
             unsafe { CStr::from_ptr(vrs_status_name(s)) }

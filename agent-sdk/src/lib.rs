@@ -41,4 +41,4 @@ pub use agent::{
 /// [`Command::MoveTo`]): use `vrsync_agent::glam` instead of pinning the same version.
 pub use glam;
 pub use vrsync_bridge::Config;
-pub use vrsync_bridge::wire::{ActionState, Command, PixelFormat, Pose, SensorHeader};
+pub use vrsync_bridge::{ActionState, Command, PixelFormat, Pose, SensorHeader};

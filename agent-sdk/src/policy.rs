@@ -9,7 +9,7 @@
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use vrsync_bridge::wire::{ActionState, Command, PixelFormat, SensorHeader};
+use vrsync_bridge::{ActionState, Command, PixelFormat, SensorHeader};
 
 use crate::{Frame, Image};
 
@@ -115,7 +115,7 @@ fn red_in(image: Option<Image<'_>>) -> Option<RedBlob> {
 pub type Decision = heapless_pair::Pair;
 
 mod heapless_pair {
-    use vrsync_bridge::wire::Command;
+    use vrsync_bridge::Command;
 
     /// Up to two commands, without allocating.
     #[derive(Debug, Clone, Copy, Default, PartialEq)]

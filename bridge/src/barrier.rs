@@ -83,11 +83,6 @@ impl CycleBarrier {
         self.pending = 0;
     }
 
-    /// The current cycle.
-    pub fn cycle(&self) -> u64 {
-        self.cycle
-    }
-
     /// Marks `slot` as awaited (its frame was published this cycle).
     pub fn await_slot(&mut self, slot: usize) {
         if let Some(a) = self.awaited.get_mut(slot)
@@ -143,11 +138,13 @@ impl CycleBarrier {
     }
 
     /// Number of awaited agents that have not stopped.
+    #[cfg(test)]
     pub fn pending(&self) -> usize {
         self.pending
     }
 
     /// Slots still awaited.
+    #[cfg(test)]
     pub fn pending_slots(&self) -> impl Iterator<Item = usize> + '_ {
         (0..self.awaited.len()).filter(|&s| self.awaited[s] && !self.stopped[s])
     }

@@ -8,14 +8,17 @@
 //!   and signals *start* once for everyone. In *frame 2* the host blocks until every agent
 //!   sent its motor batch with the *stop* flag for that cycle, or `stop_timeout` passes,
 //!   then advances the world by exactly `simulation_time_per_frame`.
-//! - The **barrier** ([`barrier::CycleBarrier`]) counts a stop only for the cycle it names:
-//!   a late stop never completes the next cycle.
-//! - A **transport** ([`transport::HostTransport`]) moves frames, batches and signals:
-//!   shared memory ([`transport::shm`]) for agents on this machine.
+//! - The **barrier** (inside [`Host`]) counts a stop only for the cycle it names: a late
+//!   stop never completes the next cycle ([`AgentOutcome`] says how each agent ended one).
+//! - A **transport** moves frames, batches and signals; the contract every transport keeps
+//!   is [`HostTransport`] (host side) and [`AgentTransport`] (agent side): shared memory
+//!   ([`shm`]) for agents on this machine, TCP ([`tcp`]) as the measured baseline. A host
+//!   serves each agent over its own transport ([`Transports`]).
 //! - The **host API** ([`Host`]) is what a simulator calls; agents use the `vrsync-agent`
 //!   crate.
 //!
-//! Inside the crate, modules import one way: `wire` (the `#[repr(C)]` types, the image
+//! The modules are private; everything public is re-exported here. Inside the crate,
+//! modules import one way: `wire` (the `#[repr(C)]` types, the image
 //! layout) ← `config` ← `transport` (with `signal`) ← `barrier` ← `host`; no module
 //! imports one that imports it back.
 //!
@@ -48,23 +51,46 @@
 //! # }
 //! ```
 
-pub mod barrier;
-pub mod config;
-pub mod host;
+mod barrier;
+mod config;
+mod host;
 mod signal;
-pub mod transport;
-pub mod wire;
+mod transport;
+mod wire;
 
 pub use barrier::AgentOutcome;
-pub use config::{Config, ConfigLoadError, TransportKind};
+pub use config::{
+    AgentConfig, AgentLostPolicy, CameraConfig, Config, ConfigLoadError, DEFAULT_CONFIG_TOML,
+    DEFAULT_SPIN_BEFORE_BLOCK_US, MAX_AGENT_ID, MAX_CONFIG_BYTES, MAX_IMAGE_SIDE_PX, SyncConfig,
+    TransportConfig, TransportKind, WaitMode, derived_height,
+};
 pub use host::{
     AgentReport, CycleReport, Host, HostBuilder, HostCreateError, HostCycleError, HostStats,
-    HostWaitError, ImageMut, SensorFrameMut,
+    HostWaitError, ImageMut, ImagesMut, REAP_PERIOD, SensorFrameMut,
 };
+pub use shm::{ShmBudgetError, check_shm_budget};
 pub use signal::SignalHandling;
-pub use transport::AgentConnectError;
-pub use transport::shm::{ShmBudgetError, check_shm_budget};
-pub use wire::{
-    ActionState, Command, CommandDecodeError, ImageDesc, LAYOUT_HASH, MotorCommand, MotorHeader,
-    PROTOCOL_VERSION, PixelFormat, Pose, SensorHeader,
+pub use transport::mixed::{AnyLoan, Transports, TransportsCreateError};
+pub use transport::{
+    AGENT_MAX_HELD_FRAMES, AgentConnectError, AgentFrame, AgentReceiveError, AgentSendError,
+    AgentTransport, AgentWaitError, Attempt, BatchSink, FrameLoanMut, HOST_LIVENESS_PERIOD,
+    HostLiveness, HostTransport, HostTransportError, retry_until, wait_for_newer_frame,
 };
+pub use wire::{
+    ActionState, ActionStatus, CAMERA_NAME_LEN, Collision, Command, CommandDecodeError,
+    EyePosition, GridPosition, HeadMotion, IMAGE_ALIGN, ImageDesc, LAYOUT_HASH, MAX_CAMERAS,
+    MAX_COLLISIONS, MAX_STATUSES, MAX_TOKEN, MOTOR_FLAG_STOP, MotorCommand, MotorHeader,
+    PROTOCOL_VERSION, PixelFormat, Pose, SENSOR_FLAG_SYNC_MODE, SensorHeader, WireOutcome,
+    image_layout, kind as command_kind, kind_name,
+};
+
+/// The shared-memory transport (iceoryx2): agents on this machine, zero copy.
+pub mod shm {
+    pub use crate::transport::shm::*;
+}
+
+/// The TCP transport (the measured baseline), with its record codec (what the fuzz target
+/// and the hostile-peer tests drive).
+pub mod tcp {
+    pub use crate::transport::tcp::*;
+}

@@ -87,7 +87,7 @@ impl ShmFloorHost {
         spin: bool,
         spin_before_block: Duration,
     ) -> Result<Self, FloorError> {
-        vrsync_bridge::transport::shm::init_iceoryx2_logging();
+        vrsync_bridge::shm::init_iceoryx2_logging();
         let node = NodeBuilder::new()
             .create::<Svc>()
             .map_err(|e| ice("node", e))?;
@@ -269,7 +269,7 @@ pub fn shm_floor_agent(
         spin_before_block,
         timeout,
     } = *options;
-    vrsync_bridge::transport::shm::init_iceoryx2_logging();
+    vrsync_bridge::shm::init_iceoryx2_logging();
     let node = NodeBuilder::new()
         .create::<Svc>()
         .map_err(|e| ice("node", e))?;

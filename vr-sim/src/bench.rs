@@ -409,7 +409,7 @@ fn bench_floor_shm(case: &Case, session: &str, spin: bool) -> anyhow::Result<Mea
     let spin_before_block = if case.agents as usize + 1 > cores {
         Duration::ZERO
     } else {
-        Duration::from_micros(vrsync_bridge::config::DEFAULT_SPIN_BEFORE_BLOCK_US)
+        Duration::from_micros(vrsync_bridge::DEFAULT_SPIN_BEFORE_BLOCK_US)
     };
     let mut host = ShmFloorHost::create(session, case.agents, bytes, spin, spin_before_block)?;
     let total = case.warmup + case.cycles;

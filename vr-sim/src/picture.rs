@@ -6,8 +6,8 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use glam::{Vec2, Vec3};
-use vrsync_bridge::host::ImageMut;
-use vrsync_bridge::wire::PixelFormat;
+use vrsync_bridge::ImageMut;
+use vrsync_bridge::PixelFormat;
 
 use crate::geometry;
 use crate::render::AGENT_COLORS;

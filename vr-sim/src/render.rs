@@ -14,8 +14,8 @@
 
 use glam::Vec3;
 use rayon::prelude::*;
-use vrsync_bridge::host::{ImageMut, ImagesMut};
-use vrsync_bridge::wire::{ImageDesc, PixelFormat};
+use vrsync_bridge::{ImageDesc, PixelFormat};
+use vrsync_bridge::{ImageMut, ImagesMut};
 
 use crate::geometry::{Camera, NEAR_M, enter_box, exit_box, hit_cylinder, hit_sphere, recip};
 use crate::world::{Body, CameraSpec, World};
@@ -424,8 +424,8 @@ mod tests {
 
     use glam::Vec3;
     use vrsync_bridge::Config;
-    use vrsync_bridge::host::ImageMut;
-    use vrsync_bridge::wire::{CAMERA_NAME_LEN, Command, ImageDesc, PixelFormat};
+    use vrsync_bridge::ImageMut;
+    use vrsync_bridge::{CAMERA_NAME_LEN, Command, ImageDesc, PixelFormat};
 
     use super::Renderer;
     use crate::world::World;

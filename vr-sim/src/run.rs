@@ -322,7 +322,7 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
                     }
                     Err(e) => {
                         rejected += 1;
-                        let kind = vrsync_bridge::wire::kind_name(wire.kind);
+                        let kind = vrsync_bridge::kind_name(wire.kind);
                         if logged_rejections.insert((a.agent_id, kind)) {
                             events.emit(Event::CommandRejected {
                                 agent: a.agent_id,
@@ -415,7 +415,7 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
         }
         if let Some((id, status)) = agents.failed()
             && !host.stats().evicted_agents.contains(&id)
-            && config.sync.on_agent_lost != vrsync_bridge::config::AgentLostPolicy::Evict
+            && config.sync.on_agent_lost != vrsync_bridge::AgentLostPolicy::Evict
         {
             bail!("agent {id} exited during cycle {cycle} ({status})");
         }

@@ -20,8 +20,8 @@
 //! of the body and is no obstacle until it is released (put down on the floor there).
 
 use glam::{Quat, Vec2, Vec3};
-use vrsync_bridge::config::AgentConfig;
-use vrsync_bridge::wire::{
+use vrsync_bridge::AgentConfig;
+use vrsync_bridge::{
     ActionState, Command, EyePosition, GridPosition, HeadMotion, Pose, SensorHeader,
 };
 

@@ -723,7 +723,7 @@ mod tests {
 
     #[test]
     fn default_toml_documents_every_world_key() {
-        let doc = vrsync_bridge::config::DEFAULT_CONFIG_TOML;
+        let doc = vrsync_bridge::DEFAULT_CONFIG_TOML;
         let mut n = 0;
         for table in [
             "",

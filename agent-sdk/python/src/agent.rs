@@ -10,7 +10,7 @@ use pyo3::prelude::*;
 use vrsync_agent::{
     Agent, AgentBuilder, AgentConnectError, SendError, SignalHandling, StopError, WaitStartError,
 };
-use vrsync_bridge::config::{Config, TransportKind};
+use vrsync_bridge::{Config, TransportKind};
 
 use crate::commands::PyCommand;
 use crate::errors::{error, obj};

@@ -8,7 +8,7 @@ use glam::Vec3;
 use pyo3::PyClass;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use vrsync_bridge::wire::Command;
+use vrsync_bridge::Command;
 
 /// Largest magnitude accepted for an angle in degrees (ten turns), as the host checks.
 const MAX_ANGLE_DEG: f64 = 3600.0;

@@ -21,7 +21,7 @@ use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
 use pyo3::types::PyDict;
 use vrsync_agent::{Frame, PixelFormat};
-use vrsync_bridge::wire::{ActionState, WireOutcome};
+use vrsync_bridge::{ActionState, WireOutcome};
 
 use crate::sensors::{
     PyActionState, PyActionStatus, PyCollision, PyEyePosition, PyGridPosition, PyHeadMotion, PyPose,

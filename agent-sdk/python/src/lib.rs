@@ -31,7 +31,7 @@ fn _vrsync(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<frame::ImageBuffer>()?;
     sensors::register(m)?;
     commands::register(m)?;
-    m.add("PROTOCOL_VERSION", vrsync_bridge::wire::PROTOCOL_VERSION)?;
+    m.add("PROTOCOL_VERSION", vrsync_bridge::PROTOCOL_VERSION)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

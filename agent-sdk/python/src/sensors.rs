@@ -1,7 +1,7 @@
 //! The scalar sensors of a frame as small immutable Python classes.
 
 use pyo3::prelude::*;
-use vrsync_bridge::wire::{self, ActionState};
+use vrsync_bridge::ActionState;
 
 type V3 = (f32, f32, f32);
 
@@ -36,8 +36,8 @@ impl PyPose {
     }
 }
 
-impl From<wire::Pose> for PyPose {
-    fn from(p: wire::Pose) -> Self {
+impl From<vrsync_bridge::Pose> for PyPose {
+    fn from(p: vrsync_bridge::Pose) -> Self {
         let r = p.rotation;
         Self {
             position: v3(p.position),
@@ -65,8 +65,8 @@ impl PyGridPosition {
     }
 }
 
-impl From<wire::GridPosition> for PyGridPosition {
-    fn from(g: wire::GridPosition) -> Self {
+impl From<vrsync_bridge::GridPosition> for PyGridPosition {
+    fn from(g: vrsync_bridge::GridPosition) -> Self {
         Self {
             position: v3(g.position),
             rotation_deg: v3(g.rotation_deg),
@@ -99,8 +99,8 @@ impl PyHeadMotion {
     }
 }
 
-impl From<wire::HeadMotion> for PyHeadMotion {
-    fn from(h: wire::HeadMotion) -> Self {
+impl From<vrsync_bridge::HeadMotion> for PyHeadMotion {
+    fn from(h: vrsync_bridge::HeadMotion) -> Self {
         Self {
             velocity: v3(h.velocity),
             acceleration: v3(h.acceleration),
@@ -129,8 +129,8 @@ impl PyEyePosition {
     }
 }
 
-impl From<wire::EyePosition> for PyEyePosition {
-    fn from(e: wire::EyePosition) -> Self {
+impl From<vrsync_bridge::EyePosition> for PyEyePosition {
+    fn from(e: vrsync_bridge::EyePosition) -> Self {
         Self {
             rotation_deg: v3(e.rotation_deg),
             rotation_velocity_deg: v3(e.rotation_velocity_deg),
@@ -205,7 +205,7 @@ impl PyActionStatus {
 
 impl PyActionStatus {
     /// `None` for a state value this SDK does not know (a newer host).
-    pub(crate) fn from_wire(s: &wire::ActionStatus) -> Option<Self> {
+    pub(crate) fn from_wire(s: &vrsync_bridge::ActionStatus) -> Option<Self> {
         Some(Self {
             action_id: s.action_id,
             state: ActionState::from_u32(s.state)?.into(),
@@ -231,8 +231,8 @@ impl PyCollision {
     }
 }
 
-impl From<&wire::Collision> for PyCollision {
-    fn from(c: &wire::Collision) -> Self {
+impl From<&vrsync_bridge::Collision> for PyCollision {
+    fn from(c: &vrsync_bridge::Collision) -> Self {
         Self {
             action_id: c.action_id,
             collider_id: c.collider_id,

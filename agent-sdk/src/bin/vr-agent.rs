@@ -166,7 +166,7 @@ fn run(args: &Args) -> anyhow::Result<ExitCode> {
         drop(frame);
         sent.clear();
         if args.bad_commands {
-            use vrsync_bridge::wire::{Command, MotorCommand};
+            use vrsync_bridge::{Command, MotorCommand};
             let bad_id = u32::MAX;
             let mut nan = Command::Move {
                 heading_deg: 0.0,

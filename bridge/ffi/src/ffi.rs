@@ -4,10 +4,10 @@
 use std::ffi::{CStr, c_char};
 use std::time::Duration;
 
-use vrsync_bridge::config::{Config, TransportKind};
-use vrsync_bridge::wire::{
+use vrsync_bridge::{
     self, ActionState, ActionStatus, Collision, EyePosition, GridPosition, HeadMotion, Pose,
 };
+use vrsync_bridge::{Config, TransportKind};
 use vrsync_bridge::{Host, HostWaitError, SignalHandling};
 
 use crate::state::{
@@ -105,7 +105,7 @@ fn check_sensors(s: &vrs_host_sensors_t) -> Result<(), FfiError> {
     Ok(())
 }
 
-fn write_header(h: &mut wire::SensorHeader, s: &vrs_host_sensors_t) {
+fn write_header(h: &mut vrsync_bridge::SensorHeader, s: &vrs_host_sensors_t) {
     // A zero-initialised struct (C `{0}`, C# `default`) has no valid rotation; the
     // agents would compute NaN headings from it.
     let rotation = if s.pose.rotation == [0.0; 4] {
@@ -198,7 +198,7 @@ fn info_impl(host: *mut vrs_host_t, out_info: *mut vrs_host_info_t) -> Result<()
             },
             tcp_port: h.tcp_local_addr().map_or(0, |a| u32::from(a.port())),
             max_commands_per_cycle: c.transport.max_commands_per_cycle,
-            protocol_version: wire::PROTOCOL_VERSION,
+            protocol_version: vrsync_bridge::PROTOCOL_VERSION,
         };
         // SAFETY: null or writable by the caller's contract.
         unsafe { write_required(out_info, "out_info", info) }
@@ -323,7 +323,7 @@ fn loan_frame_impl(
             });
         }
         let mut frame = st.host.loan_frame(agent_id)?;
-        let mut images = [None; wire::MAX_CAMERAS];
+        let mut images = [None; vrsync_bridge::MAX_CAMERAS];
         for (dst, image) in images.iter_mut().zip(frame.images_mut()) {
             // The pointer stays valid while the loan lives in the slot: shared memory (or
             // the TCP record buffer) does not move with the `SensorFrameMut`.
@@ -431,7 +431,7 @@ fn publish_impl(
             call: CALL,
             agent: agent_id,
         })?;
-        s.images = [None; wire::MAX_CAMERAS];
+        s.images = [None; vrsync_bridge::MAX_CAMERAS];
         write_header(frame.header_mut(), &sensors);
         st.host.publish(frame)?;
         st.slots[slot].published = true;
@@ -443,7 +443,7 @@ fn discard_frame_impl(host: *mut vrs_host_t, agent_id: u32) -> Result<(), FfiErr
     with_host(host, |st| {
         let slot = st.slot_of(agent_id)?;
         let s = &mut st.slots[slot];
-        s.images = [None; wire::MAX_CAMERAS];
+        s.images = [None; vrsync_bridge::MAX_CAMERAS];
         // Dropping the loan returns the memory unpublished.
         s.frame.take().map(drop).ok_or(FfiError::NoFrame {
             call: "vrs_host_discard_frame",
@@ -649,7 +649,7 @@ pub extern "C" fn vrs_host_version() -> *const c_char {
 /// Always safe to call.
 #[unsafe(no_mangle)]
 pub extern "C" fn vrs_host_protocol_version() -> u32 {
-    wire::PROTOCOL_VERSION
+    vrsync_bridge::PROTOCOL_VERSION
 }
 
 /// The message of the last `vrs_host_` call made on this thread: why it failed or timed

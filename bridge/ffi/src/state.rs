@@ -9,11 +9,11 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::thread::ThreadId;
 
-use vrsync_bridge::config::ConfigLoadError;
-use vrsync_bridge::wire::{self, ImageDesc, MAX_CAMERAS, MotorCommand};
+use vrsync_bridge::ConfigLoadError;
 use vrsync_bridge::{
     AgentOutcome, Host, HostCreateError, HostCycleError, HostWaitError, SensorFrameMut,
 };
+use vrsync_bridge::{ImageDesc, MAX_CAMERAS, MotorCommand};
 
 use crate::types::{
     VRS_HOST_CAMERA_NAME_SIZE, vrs_host_cycle_t, vrs_host_outcome_t, vrs_host_status_t, vrs_host_t,
@@ -377,7 +377,7 @@ pub(crate) fn c_name(name: &str) -> [c_char; VRS_HOST_CAMERA_NAME_SIZE] {
     let mut out = [0 as c_char; VRS_HOST_CAMERA_NAME_SIZE];
     for (dst, &src) in out
         .iter_mut()
-        .zip(name.as_bytes().iter().take(wire::CAMERA_NAME_LEN))
+        .zip(name.as_bytes().iter().take(vrsync_bridge::CAMERA_NAME_LEN))
     {
         *dst = src as c_char;
     }

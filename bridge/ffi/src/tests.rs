@@ -110,10 +110,7 @@ fn version_status_names_and_sizes() {
         .to_str()
         .unwrap();
     assert_eq!(v, env!("CARGO_PKG_VERSION"));
-    assert_eq!(
-        vrs_host_protocol_version(),
-        vrsync_bridge::wire::PROTOCOL_VERSION
-    );
+    assert_eq!(vrs_host_protocol_version(), vrsync_bridge::PROTOCOL_VERSION);
     // SAFETY: static strings.
     let name = |s: i32| {
         unsafe { CStr::from_ptr(vrs_host_status_name(s)) }

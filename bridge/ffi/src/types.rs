@@ -12,7 +12,7 @@
 use core::mem::{align_of, offset_of, size_of};
 use std::ffi::c_char;
 
-use vrsync_bridge::wire::{self, MotorCommand, PixelFormat};
+use vrsync_bridge::{MotorCommand, PixelFormat};
 
 /// Most images (cameras) per agent and frame.
 pub const VRS_HOST_MAX_IMAGES: u32 = 4;
@@ -24,10 +24,10 @@ pub const VRS_HOST_MAX_COLLISIONS: u32 = 8;
 pub const VRS_HOST_CAMERA_NAME_SIZE: usize = 17;
 
 const _: () = {
-    assert!(VRS_HOST_MAX_IMAGES as usize == wire::MAX_CAMERAS);
-    assert!(VRS_HOST_MAX_STATUSES as usize == wire::MAX_STATUSES);
-    assert!(VRS_HOST_MAX_COLLISIONS as usize == wire::MAX_COLLISIONS);
-    assert!(VRS_HOST_CAMERA_NAME_SIZE == wire::CAMERA_NAME_LEN + 1);
+    assert!(VRS_HOST_MAX_IMAGES as usize == vrsync_bridge::MAX_CAMERAS);
+    assert!(VRS_HOST_MAX_STATUSES as usize == vrsync_bridge::MAX_STATUSES);
+    assert!(VRS_HOST_MAX_COLLISIONS as usize == vrsync_bridge::MAX_COLLISIONS);
+    assert!(VRS_HOST_CAMERA_NAME_SIZE == vrsync_bridge::CAMERA_NAME_LEN + 1);
 };
 
 /// Result of a call: 0 is success, positive values are outcomes that are not errors,
@@ -189,18 +189,18 @@ pub enum vrs_host_transport_t {
 
 const _: () = {
     use vrs_host_command_kind_t::*;
-    assert!(VRS_HOST_COMMAND_MOVE as u32 == wire::kind::MOVE);
-    assert!(VRS_HOST_COMMAND_TURN as u32 == wire::kind::TURN);
-    assert!(VRS_HOST_COMMAND_EYE_FIXATION as u32 == wire::kind::EYE_FIXATION);
-    assert!(VRS_HOST_COMMAND_GRASP_RELEASE as u32 == wire::kind::GRASP_RELEASE);
-    assert!(VRS_HOST_COMMAND_TRIAL_RESET as u32 == wire::kind::TRIAL_RESET);
+    assert!(VRS_HOST_COMMAND_MOVE as u32 == vrsync_bridge::command_kind::MOVE);
+    assert!(VRS_HOST_COMMAND_TURN as u32 == vrsync_bridge::command_kind::TURN);
+    assert!(VRS_HOST_COMMAND_EYE_FIXATION as u32 == vrsync_bridge::command_kind::EYE_FIXATION);
+    assert!(VRS_HOST_COMMAND_GRASP_RELEASE as u32 == vrsync_bridge::command_kind::GRASP_RELEASE);
+    assert!(VRS_HOST_COMMAND_TRIAL_RESET as u32 == vrsync_bridge::command_kind::TRIAL_RESET);
     assert!(
         vrs_host_pixel_format_t::VRS_HOST_PIXEL_FORMAT_DEPTH32F as u32
             == PixelFormat::Depth32f as u32
     );
     assert!(
         vrs_host_action_state_t::VRS_HOST_ACTION_WALKING_ROTATING as u32
-            == wire::ActionState::WalkingRotating as u32
+            == vrsync_bridge::ActionState::WalkingRotating as u32
     );
 };
 

@@ -12,7 +12,7 @@
 use std::io::{self, ErrorKind, Read};
 
 use libfuzzer_sys::fuzz_target;
-use vrsync_bridge::transport::tcp::{
+use vrsync_bridge::tcp::{
     MAX_HELLO, MAX_TOKEN, PREFIX, ReadProgress, RecordReader, decode_hello, decode_motor,
     decode_prefix, decode_reject, kind,
 };

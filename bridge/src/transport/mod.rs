@@ -3,45 +3,10 @@
 //!
 //! # The contract every transport keeps
 //!
-//! Host side ([`HostTransport`]):
-//! - [`HostTransport::loan`] hands out writable memory for one agent's sensor frame
-//!   (header + images). On shared memory this *is* the memory the agent will read: the
-//!   simulator renders straight into it. [`HostTransport::publish`] makes it visible to that
-//!   agent; a published frame is never modified again.
-//! - [`HostTransport::signal_start`] wakes every agent at once. It is called after every
-//!   frame of the cycle has been published, so an agent woken by *start* finds its frame.
-//!   (On TCP the frame record itself is the start.)
-//! - [`HostTransport::drain`] hands every motor batch that arrived since the last call to
-//!   the sink, per agent in the order the agent sent them, without blocking.
-//! - [`HostTransport::wait_activity`] blocks until a batch may have arrived or the timeout
-//!   passed. It may wake spuriously; it never spins (unless the transport is asked to) and
-//!   never loses a wake-up: a batch published before or during the call ends the wait.
-//!   Notifications merge, so callers never count wake-ups — they read cycle numbers from
-//!   the batches.
-//! - [`HostTransport::is_connected`] tells whether an agent's receiving side is attached, so
-//!   the host can refuse to start cycle 0 before every agent can see it.
-//! - Each transport has its own loan type ([`HostTransport::Loan`]); a host serving agents
-//!   over several transports routes each agent's slot to its transport and waits for all
-//!   of them at once ([`HostTransport::activity_fd`]): one wait, whoever answers.
-//!
-//! Agent side ([`AgentTransport`]):
-//! - [`AgentTransport::try_receive_newest`] returns, without blocking, the newest sensor
-//!   frame that arrived since the last call and drops older ones (a slow agent never works
-//!   through a backlog). The frame keeps its memory until dropped (on shared memory it *is*
-//!   the host's sample); an agent holds at most [`AGENT_MAX_HELD_FRAMES`] frames at once,
-//!   beyond that the call fails with [`AgentReceiveError::TooManyFramesHeld`].
-//! - [`AgentTransport::wait_readable`] blocks until a frame may have arrived, the host's
-//!   state may have changed, or the timeout passed. It may wake spuriously and never loses
-//!   a wake-up: a frame published before or during the call (after the last
-//!   [`AgentTransport::discard_wakeups`]) ends the wait.
-//! - [`AgentTransport::host_liveness`]: [`HostLiveness::Closed`] once the host closed the
-//!   session cleanly (after the frames it sent before), [`HostLiveness::Gone`] when its
-//!   process died or the connection broke without a close. A cheap check every call; the
-//!   expensive one (the host's process) only when asked.
-//! - [`AgentTransport::send_batch`] publishes a motor batch; with the stop flag it also
-//!   signals *stop*, which becomes visible to the host only after its batch.
-//! - [`AgentTransport::termination_requested`]: SIGINT/SIGTERM arrived (see
-//!   [`crate::SignalHandling`]).
+//! Host side: [`HostTransport`]; agent side: [`AgentTransport`]. Each trait's documentation
+//! is its half of the contract (what every implementation guarantees, what callers may rely
+//! on); the conformance suite (`agent-sdk/tests/conformance.rs`) checks it for every
+//! transport, and a fake transport in `host.rs`'s tests drives the host's logic over it.
 //!
 //! What is written once, over the contract, for every transport: [`wait_for_newer_frame`]
 //! (the newest frame newer than cycle *f* until a deadline, the host's liveness every
@@ -206,6 +171,27 @@ pub type BatchSink<'a> = dyn FnMut(usize, &MotorHeader, &[MotorCommand]) + 'a;
 
 /// Host side of a transport. Agents are addressed by *slot*: their index in the config's
 /// agent list.
+///
+/// The contract:
+/// - [`HostTransport::loan`] hands out writable memory for one agent's sensor frame
+///   (header + images). On shared memory this *is* the memory the agent will read: the
+///   simulator renders straight into it. [`HostTransport::publish`] makes it visible to that
+///   agent; a published frame is never modified again.
+/// - [`HostTransport::signal_start`] wakes every agent at once. It is called after every
+///   frame of the cycle has been published, so an agent woken by *start* finds its frame.
+///   (On TCP the frame record itself is the start.)
+/// - [`HostTransport::drain`] hands every motor batch that arrived since the last call to
+///   the sink, per agent in the order the agent sent them, without blocking.
+/// - [`HostTransport::wait_activity`] blocks until a batch may have arrived or the timeout
+///   passed. It may wake spuriously; it never spins (unless the transport is asked to) and
+///   never loses a wake-up: a batch published before or during the call ends the wait.
+///   Notifications merge, so callers never count wake-ups — they read cycle numbers from
+///   the batches.
+/// - [`HostTransport::is_connected`] tells whether an agent's receiving side is attached, so
+///   the host can refuse to start cycle 0 before every agent can see it.
+/// - Each transport has its own loan type ([`HostTransport::Loan`]); a host serving agents
+///   over several transports routes each agent's slot to its transport and waits for all
+///   of them at once ([`HostTransport::activity_fd`]): one wait, whoever answers.
 pub trait HostTransport {
     /// A loaned sensor frame of this transport: only this transport's own loans come back
     /// to [`HostTransport::publish`], so no backend checks at run time what it got.
@@ -333,7 +319,26 @@ pub enum AgentSendError {
     Transport(String),
 }
 
-/// Agent side of a transport (the contract is in the module docs).
+/// Agent side of a transport.
+///
+/// The contract:
+/// - [`AgentTransport::try_receive_newest`] returns, without blocking, the newest sensor
+///   frame that arrived since the last call and drops older ones (a slow agent never works
+///   through a backlog). The frame keeps its memory until dropped (on shared memory it *is*
+///   the host's sample); an agent holds at most [`AGENT_MAX_HELD_FRAMES`] frames at once,
+///   beyond that the call fails with [`AgentReceiveError::TooManyFramesHeld`].
+/// - [`AgentTransport::wait_readable`] blocks until a frame may have arrived, the host's
+///   state may have changed, or the timeout passed. It may wake spuriously and never loses
+///   a wake-up: a frame published before or during the call (after the last
+///   [`AgentTransport::discard_wakeups`]) ends the wait.
+/// - [`AgentTransport::host_liveness`]: [`HostLiveness::Closed`] once the host closed the
+///   session cleanly (after the frames it sent before), [`HostLiveness::Gone`] when its
+///   process died or the connection broke without a close. A cheap check every call; the
+///   expensive one (the host's process) only when asked.
+/// - [`AgentTransport::send_batch`] publishes a motor batch; with the stop flag it also
+///   signals *stop*, which becomes visible to the host only after its batch.
+/// - [`AgentTransport::termination_requested`]: SIGINT/SIGTERM arrived (see
+///   [`crate::SignalHandling`]).
 pub trait AgentTransport {
     /// A received frame.
     type Frame: AgentFrame;
