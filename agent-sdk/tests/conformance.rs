@@ -1,32 +1,53 @@
 //! The transport conformance suite: what every transport must do, written once and run
 //! against each (`conformance!` below instantiates it per transport; a new transport adds
-//! one line). Host and agent run in one process, the host on its own thread (neither may
-//! cross threads); every wait has a deadline.
+//! one line). The host runs on its own thread of this process (neither host nor agent may
+//! cross threads), or in a child process where the test kills it or signals it; every wait
+//! has a deadline and every child is killed and reaped.
 //!
-//! Checked here, over the public host and agent APIs: every cycle arrives once and in
-//! order, with no lost wake-up, and each stop brings its whole batch (a stop is visible
-//! only after its batch); a slow agent gets the newest frame and the older ones are
-//! dropped; an agent that goes away is evicted without waiting for the stop timeout; an
-//! agent sees the host close the session. The barrier's rules (a late stop never completes
-//! the next cycle, future batches dropped and counted, each `on_agent_lost` policy) are
-//! unit-tested over a fake transport in `bridge/src/host.rs`; the frame-holding limit and
-//! the connect errors in `agent-sdk/src/agent.rs`; signals in a child process there.
+//! Checked here, over the public host and agent APIs and, where the SDK cannot misbehave on
+//! purpose, over the transport's own agent side ([`AgentTransport`]):
+//! - every cycle arrives once and in order, with no lost wake-up, and each stop brings its
+//!   whole batch (a stop is visible only after its batch);
+//! - a slow agent gets the newest frame and the older ones are dropped;
+//! - a late stop never completes the next cycle (it is dropped and counted);
+//! - a batch naming a future cycle is dropped and counted, and nothing of it is applied;
+//! - a flood of batches leaves the host's memory bounded (commands beyond
+//!   `max_commands_per_cycle` dropped and counted) and the cycle still ends by its stop;
+//! - a dead peer is detected both ways: an agent that goes away is evicted without waiting
+//!   for the stop timeout; an agent sees a killed host as gone (not closed) and a host that
+//!   closed the session as closed;
+//! - termination: with `SignalHandling::Install`, SIGTERM ends the agent's wait.
+//!
+//! Each `on_agent_lost` policy and the timeout naming the late agents are unit-tested over a
+//! fake transport in `bridge/src/host.rs`; the frame-holding limit and the connect errors in
+//! `agent-sdk/src/agent.rs`; `SignalHandling::Leave` in a child process there.
 
 // Helpers outside `#[test]` functions panic on failure too: this is a test binary.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+use std::io::BufRead;
 use std::path::Path;
+use std::process::{Child, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::mpsc::{Receiver, Sender, channel};
 use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
-use vrsync_agent::{AgentBuilder, Command, WaitStartError};
-use vrsync_bridge::{AgentOutcome, Config, Host};
+use vrsync_agent::{AgentBuilder, Command, SignalHandling, WaitStartError};
+use vrsync_bridge::shm::ShmAgent;
+use vrsync_bridge::tcp::TcpAgent;
+use vrsync_bridge::{
+    AgentFrame, AgentOutcome, AgentTransport, Config, Host, MOTOR_FLAG_STOP, MotorCommand,
+    MotorHeader, PROTOCOL_VERSION, wait_for_newer_frame,
+};
 
 const WAIT: Duration = Duration::from_secs(20);
 
 fn config(kind: &str, sync_mode: bool) -> Config {
+    config_with(kind, sync_mode, 20.0, 256)
+}
+
+fn config_with(kind: &str, sync_mode: bool, stop_timeout: f64, max_commands: u32) -> Config {
     static N: AtomicU32 = AtomicU32::new(0);
     let session = format!(
         "conf{}-{}-{kind}",
@@ -35,8 +56,9 @@ fn config(kind: &str, sync_mode: bool) -> Config {
     );
     let text = format!(
         "session = {session:?}\n[sync]\nsync_mode = {sync_mode}\n\
-         simulation_time_per_frame = 0.005\nstop_timeout = 20.0\nconnect_timeout = 20.0\n\
-         [transport]\nkind = {kind:?}\ntcp_listen = \"127.0.0.1:0\"\n\
+         simulation_time_per_frame = 0.005\nstop_timeout = {stop_timeout:?}\n\
+         connect_timeout = 20.0\n[transport]\nkind = {kind:?}\ntcp_listen = \"127.0.0.1:0\"\n\
+         max_commands_per_cycle = {max_commands}\n\
          [[agent]]\nid = 4\n[[agent.camera]]\nname = \"left\"\nwidth = 16\nheight = 8\n"
     );
     Config::from_toml_str(&text, Path::new("<conformance>")).unwrap()
@@ -153,8 +175,306 @@ fn an_agent_that_goes_away_is_evicted_without_a_timeout(kind: &str) {
     host.join().unwrap();
 }
 
+fn a_late_stop_never_completes_the_next_cycle(kind: &'static str) {
+    let (published_tx, published_rx): (Sender<()>, Receiver<()>) = channel();
+    let (sent_tx, sent_rx): (Sender<()>, Receiver<()>) = channel();
+    let (config, host) = with_host(config_with(kind, true, 2.0, 256), move |host| {
+        publish(host);
+        let report = host.collect().unwrap();
+        assert_eq!(report.agents()[0].outcome, AgentOutcome::TimedOut);
+        publish(host); // cycle 1
+        published_tx.send(()).unwrap();
+        // The agent's stop for cycle 0 is on its way before this cycle's wait begins.
+        sent_rx.recv_timeout(WAIT).unwrap();
+        let report = host.collect().unwrap();
+        assert_eq!(report.cycle, 1);
+        let a = &report.agents()[0];
+        assert_eq!(
+            a.outcome,
+            AgentOutcome::TimedOut,
+            "{kind}: cycle 0's late stop completed cycle 1"
+        );
+        assert!(a.commands().is_empty(), "{kind}: a late batch was applied");
+        assert_eq!(host.stats().late_batches, 1, "{kind}");
+    });
+    let mut agent = AgentBuilder::new(&config, 4).connect().unwrap();
+    drop(agent.wait_start(Some(WAIT)).unwrap());
+    published_rx.recv_timeout(WAIT).unwrap();
+    // Cycle 0 has timed out and cycle 1 has started: this stop names cycle 0.
+    agent
+        .send_with_id(7, Command::Turn { angle_deg: 1.0 })
+        .unwrap();
+    agent.stop().unwrap();
+    sent_tx.send(()).unwrap();
+    host.join().unwrap();
+}
+
+fn turn(action_id: u32) -> MotorCommand {
+    Command::Turn { angle_deg: 1.0 }.encode(action_id)
+}
+
+fn send_batch<T: AgentTransport>(agent: &mut T, cycle: u64, stop: bool, commands: &[MotorCommand]) {
+    let header = MotorHeader {
+        protocol_version: PROTOCOL_VERSION,
+        agent_id: 4,
+        cycle,
+        flags: if stop { MOTOR_FLAG_STOP } else { 0 },
+        command_count: commands.len() as u32,
+    };
+    agent.send_batch(&header, commands).unwrap();
+}
+
+/// The cycle of the first frame the transport's agent side receives.
+fn first_cycle<T: AgentTransport>(agent: &mut T) -> u64 {
+    let mut next_liveness = Instant::now();
+    let deadline = Instant::now() + WAIT;
+    let frame = wait_for_newer_frame(agent, None, Some(deadline), &mut next_liveness).unwrap();
+    frame.header().cycle
+}
+
+fn connect_shm(config: &Config) -> ShmAgent {
+    ShmAgent::connect(config, 4, WAIT, SignalHandling::Leave).unwrap()
+}
+
+fn connect_tcp(config: &Config) -> TcpAgent {
+    TcpAgent::connect(config, 4, WAIT, None, SignalHandling::Leave).unwrap()
+}
+
+fn a_future_batch_is_dropped_and_counted<T: AgentTransport>(
+    kind: &'static str,
+    connect: fn(&Config) -> T,
+) {
+    let (config, host) = with_host(config(kind, true), move |host| {
+        publish(host);
+        let report = host.collect().unwrap();
+        let a = &report.agents()[0];
+        assert_eq!(a.outcome, AgentOutcome::Stopped, "{kind}");
+        let ids: Vec<u32> = a.commands().iter().map(|c| c.action_id).collect();
+        assert_eq!(ids, [1], "{kind}: the future batch was applied");
+        assert_eq!(host.stats().future_batches, 1, "{kind}");
+    });
+    let mut agent = connect(&config);
+    let cycle = first_cycle(&mut agent);
+    // A batch (with a stop) for a cycle that has not started, then the real one.
+    send_batch(&mut agent, cycle + 1, true, &[turn(2)]);
+    send_batch(&mut agent, cycle, true, &[turn(1)]);
+    host.join().unwrap();
+}
+
+/// The resident set of this process, in bytes.
+fn rss_bytes() -> u64 {
+    let statm = std::fs::read_to_string("/proc/self/statm").unwrap();
+    let pages: u64 = statm.split_whitespace().nth(1).unwrap().parse().unwrap();
+    // SAFETY: sysconf has no preconditions.
+    pages * unsafe { libc::sysconf(libc::_SC_PAGESIZE) } as u64
+}
+
+fn a_flood_of_batches_leaves_memory_bounded<T: AgentTransport>(
+    kind: &'static str,
+    connect: fn(&Config) -> T,
+) {
+    // 40,000 batches of 16 commands: 20 MB of commands in one cycle. A host that kept
+    // them all would grow by that much; it keeps at most 2 x max_commands_per_cycle.
+    const BATCHES: u32 = 40_000;
+    const MAX_COMMANDS: u32 = 64;
+    const BOUND: u64 = 8 << 20;
+    let (config, host) = with_host(config_with(kind, true, 60.0, MAX_COMMANDS), move |host| {
+        let before = rss_bytes();
+        publish(host);
+        let report = host.collect().unwrap();
+        let grown = rss_bytes().saturating_sub(before);
+        let a = &report.agents()[0];
+        assert_eq!(a.outcome, AgentOutcome::Stopped, "{kind}");
+        assert!(
+            a.commands().len() <= 2 * MAX_COMMANDS as usize,
+            "{kind}: {} commands kept",
+            a.commands().len()
+        );
+        let stats = host.stats();
+        assert!(
+            stats.commands_received <= 2 * u64::from(MAX_COMMANDS),
+            "{kind}: {stats:?}"
+        );
+        assert!(grown < BOUND, "{kind}: the host grew by {grown} bytes");
+    });
+    let mut agent = connect(&config);
+    let cycle = first_cycle(&mut agent);
+    let commands: Vec<MotorCommand> = (0..16).map(turn).collect();
+    for _ in 0..BATCHES {
+        send_batch(&mut agent, cycle, false, &commands);
+    }
+    send_batch(&mut agent, cycle, true, &[]);
+    host.join().unwrap();
+}
+
+// --- Roles in a child process: the test re-runs itself with these set.
+
+const ROLE_CONFIG_ENV: &str = "VRSYNC_CONFORMANCE_CONFIG";
+const READY: &str = "vrsync-conformance-ready ";
+const TERMINATED: &str = "vrsync-conformance-terminated";
+
+/// The config a child role runs with, if this process is one.
+fn child_role_config() -> Option<Config> {
+    let path = std::env::var_os(ROLE_CONFIG_ENV)?;
+    Some(Config::load(Path::new(&path)).unwrap())
+}
+
+/// A test re-run in a child process for one role; killed and reaped when dropped.
+struct ChildRole {
+    pid: u32,
+    lines: Receiver<String>,
+    exit: Receiver<std::process::ExitStatus>,
+    exited: Option<std::process::ExitStatus>,
+}
+
+impl ChildRole {
+    fn spawn(test: &str, config: &Config, dir: &Path) -> Self {
+        let path = dir.join("config.toml");
+        std::fs::write(&path, config.to_toml_string()).unwrap();
+        let mut child: Child = std::process::Command::new(std::env::current_exe().unwrap())
+            .args(["--exact", test, "--test-threads=1", "--nocapture"])
+            .env(ROLE_CONFIG_ENV, &path)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .unwrap();
+        let stdout = child.stdout.take().unwrap();
+        let (line_tx, lines) = channel();
+        std::thread::spawn(move || {
+            for line in std::io::BufReader::new(stdout).lines() {
+                let Ok(line) = line else { break };
+                if line_tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        let pid = child.id();
+        let (exit_tx, exit) = channel();
+        std::thread::spawn(move || {
+            if let Ok(status) = child.wait() {
+                let _ = exit_tx.send(status);
+            }
+        });
+        Self {
+            pid,
+            lines,
+            exit,
+            exited: None,
+        }
+    }
+
+    /// What follows `prefix` on the first line of the child's output that has it.
+    fn line(&self, prefix: &str) -> String {
+        let deadline = Instant::now() + WAIT;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.lines.recv_timeout(left) {
+                // libtest may print "test <name> ... " before the test's own output.
+                Ok(line) => match line.find(prefix) {
+                    Some(at) => return line[at + prefix.len()..].trim().to_owned(),
+                    None => eprintln!("child: {line}"),
+                },
+                Err(e) => panic!("no {prefix:?} line from the child: {e}"),
+            }
+        }
+    }
+
+    fn wait(&mut self, timeout: Duration) -> std::process::ExitStatus {
+        if let Some(status) = self.exited {
+            return status;
+        }
+        let status = self.exit.recv_timeout(timeout).unwrap();
+        self.exited = Some(status);
+        status
+    }
+
+    fn kill(&mut self) {
+        if self.exited.is_none() {
+            // SAFETY: our own child, unreaped until the waiter thread sees it exit.
+            unsafe { libc::kill(self.pid as i32, libc::SIGKILL) };
+            self.wait(WAIT);
+        }
+    }
+}
+
+impl Drop for ChildRole {
+    fn drop(&mut self) {
+        if self.exited.is_none() {
+            // SAFETY: as in `kill`.
+            unsafe { libc::kill(self.pid as i32, libc::SIGKILL) };
+            let _ = self.exit.recv_timeout(WAIT);
+        }
+    }
+}
+
+fn a_killed_host_is_seen_as_gone(kind: &str, test: &str) {
+    if let Some(config) = child_role_config() {
+        // The host's role: serve cycle 0, then wait for a stop that never comes.
+        let mut host = Host::builder(&config).create().unwrap();
+        let addr = host
+            .tcp_local_addr()
+            .map_or("-".to_owned(), |a| a.to_string());
+        println!("{READY}{addr}");
+        host.wait_for_agents(WAIT).unwrap();
+        publish(&mut host);
+        let _ = host.collect();
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let mut config = config(kind, true);
+    let mut child = ChildRole::spawn(test, &config, dir.path());
+    let addr = child.line(READY);
+    if kind == "tcp" {
+        config.transport.tcp_listen = addr.parse().unwrap();
+    }
+    let mut agent = AgentBuilder::new(&config, 4).connect().unwrap();
+    assert_eq!(agent.wait_start(Some(WAIT)).unwrap().cycle(), 0);
+    child.kill();
+    let err = agent.wait_start(Some(WAIT)).unwrap_err();
+    assert!(
+        matches!(err, WaitStartError::HostGone { .. }),
+        "{kind}: a killed host must be gone, not closed or silent: {err:?}"
+    );
+    vrsync_bridge::shm::cleanup_dead_nodes(&config.session);
+}
+
+fn sigterm_ends_an_agents_wait(kind: &str, test: &str) {
+    if let Some(config) = child_role_config() {
+        // The agent's role, with our signal handling installed.
+        let mut agent = AgentBuilder::new(&config, 4)
+            .signal_handling(SignalHandling::Install)
+            .connect()
+            .unwrap();
+        drop(agent.wait_start(Some(WAIT)).unwrap());
+        agent.stop().unwrap();
+        // SAFETY: raising a signal at ourselves; our handler only sets a flag.
+        assert_eq!(unsafe { libc::raise(libc::SIGTERM) }, 0);
+        let err = agent.wait_start(Some(WAIT)).unwrap_err();
+        assert!(matches!(err, WaitStartError::Terminated), "{kind}: {err:?}");
+        println!("{TERMINATED}");
+        return;
+    }
+    let (done_tx, done_rx): (Sender<()>, Receiver<()>) = channel();
+    let (config, host) = with_host(config(kind, true), move |host| {
+        publish(host);
+        let report = host.collect().unwrap();
+        assert_eq!(report.agents()[0].outcome, AgentOutcome::Stopped);
+        done_rx.recv_timeout(WAIT).unwrap();
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let mut child = ChildRole::spawn(test, &config, dir.path());
+    child.line(TERMINATED);
+    let status = child.wait(WAIT);
+    assert!(
+        status.success(),
+        "{kind}: the agent's role failed: {status:?}"
+    );
+    done_tx.send(()).unwrap();
+    host.join().unwrap();
+}
+
 macro_rules! conformance {
-    ($($kind:ident),* $(,)?) => {$(
+    ($($kind:ident => $connect:ident),* $(,)?) => {$(
         mod $kind {
             #[test]
             fn every_cycle_arrives_once_in_order_with_its_whole_batch() {
@@ -168,8 +488,34 @@ macro_rules! conformance {
             fn an_agent_that_goes_away_is_evicted_without_a_timeout() {
                 super::an_agent_that_goes_away_is_evicted_without_a_timeout(stringify!($kind));
             }
+            #[test]
+            fn a_late_stop_never_completes_the_next_cycle() {
+                super::a_late_stop_never_completes_the_next_cycle(stringify!($kind));
+            }
+            #[test]
+            fn a_future_batch_is_dropped_and_counted() {
+                super::a_future_batch_is_dropped_and_counted(stringify!($kind), super::$connect);
+            }
+            #[test]
+            fn a_flood_of_batches_leaves_memory_bounded() {
+                super::a_flood_of_batches_leaves_memory_bounded(stringify!($kind), super::$connect);
+            }
+            #[test]
+            fn a_killed_host_is_seen_as_gone() {
+                super::a_killed_host_is_seen_as_gone(
+                    stringify!($kind),
+                    concat!(stringify!($kind), "::a_killed_host_is_seen_as_gone"),
+                );
+            }
+            #[test]
+            fn sigterm_ends_an_agents_wait() {
+                super::sigterm_ends_an_agents_wait(
+                    stringify!($kind),
+                    concat!(stringify!($kind), "::sigterm_ends_an_agents_wait"),
+                );
+            }
         }
     )*};
 }
 
-conformance!(shm, tcp);
+conformance!(shm => connect_shm, tcp => connect_tcp);
