@@ -7,10 +7,9 @@
 //! misbehaves, or agent 1 itself does. The test checks what the peer sees (the host's
 //! REJECT with its reason, the connection closed) and, when agent 1 is dropped, the host's
 //! `agent_evicted` event (`vr-sim run --events`), then lets the run finish and checks the
-//! host and agent 0 were unaffected: exit 0, every cycle, no stop timeout. (How many
-//! connections are turned away at once is checked by the TCP transport's unit tests; the
-//! reason the host gives for dropping a stranger that gets no REJECT is only logged, and
-//! no test reads logs.)
+//! host and agent 0 were unaffected: exit 0, every cycle, no stop timeout, and that the
+//! host refused exactly the expected strangers for the expected reasons (its
+//! `peer_refused` events and the summary's `peers_refused` count).
 //!
 //! No sleeps: a peer that "stalls" keeps its socket open while the test waits for the host
 //! to close it; every wait has a deadline.
@@ -289,8 +288,14 @@ impl Session {
 
     /// Waits for the run to end and checks that the host and agent 0 were unaffected;
     /// `evicted` lists the agents the host must have evicted (checked in the summary and
-    /// in the events).
-    fn finish(self, evicted: &[u32]) {
+    /// in the events), `refused` the kinds of the peers it refused (`peer_refused` events,
+    /// and the summary's count).
+    fn finish(self, evicted: &[u32], refused: &[&str]) {
+        self.finish_counting(evicted, refused, 0);
+    }
+
+    /// [`Session::finish`], where `uncounted` more refusals are only counted (a flood).
+    fn finish_counting(self, evicted: &[u32], refused: &[&str], uncounted: u64) {
         let out = self.host.wait(RUN_DEADLINE);
         assert_eq!(out.code(), Some(0), "host stderr:\n{}", out.stderr);
         let a0 = self.agent0.wait(LINE);
@@ -313,6 +318,21 @@ impl Session {
             .collect();
         let evicted: Vec<u64> = evicted.iter().map(|&a| u64::from(a)).collect();
         assert_eq!(evicted_events, evicted);
+        let mut refused_events: Vec<String> = self
+            .events
+            .of("peer_refused")
+            .iter()
+            .map(|e| e["kind"].as_str().unwrap().to_owned())
+            .collect();
+        refused_events.sort();
+        let mut refused: Vec<&str> = refused.to_vec();
+        refused.sort_unstable();
+        assert_eq!(refused_events, refused, "peers refused");
+        assert_eq!(
+            sum["peers_refused"],
+            refused.len() as u64 + uncounted,
+            "{sum}"
+        );
         assert_eq!(self.events.of("finished").len(), 1);
     }
 
@@ -488,7 +508,7 @@ fn garbage_bytes_from_a_stranger_are_dropped() {
     peer.write_all(garbage).unwrap();
     assert_closed_by_host(&mut peer);
     a1.play_to_the_end();
-    s.finish(&[]);
+    s.finish(&[], &["malformed"]);
 }
 
 #[test]
@@ -500,7 +520,7 @@ fn a_truncated_hello_then_close_is_dropped() {
     peer.write_all(&rec[..PREFIX + 10]).unwrap();
     drop(peer);
     a1.play_to_the_end();
-    s.finish(&[]);
+    s.finish(&[], &["silent"]);
 }
 
 #[test]
@@ -524,7 +544,7 @@ fn a_length_beyond_the_maximum_is_refused_before_any_body_byte() {
     assert!(message.contains(&why), "{message}");
     assert_closed_by_host(&mut peer);
     a1.play_to_the_end();
-    s.finish(&[]);
+    s.finish(&[], &["malformed"]);
 }
 
 #[test]
@@ -556,7 +576,7 @@ fn a_wrong_protocol_version_gets_a_reject_naming_both_versions() {
         "{message}"
     );
     a1.play_to_the_end();
-    s.finish(&[]);
+    s.finish(&[], &["version", "version"]);
 }
 
 #[test]
@@ -570,7 +590,7 @@ fn an_agent_id_not_in_the_session_is_refused() {
         "{message}"
     );
     a1.play_to_the_end();
-    s.finish(&[]);
+    s.finish(&[], &["unknown_agent"]);
 }
 
 #[test]
@@ -586,7 +606,7 @@ fn an_agent_id_already_connected_is_refused_and_the_owner_keeps_its_place() {
         );
     }
     a1.play_to_the_end();
-    s.finish(&[]);
+    s.finish(&[], &["id_in_use", "id_in_use"]);
 }
 
 #[test]
@@ -599,7 +619,7 @@ fn a_stranger_stalling_mid_hello_is_dropped_after_the_hello_timeout() {
     // The peer now says nothing more and keeps its socket open.
     assert_closed_by_host(&mut peer);
     a1.play_to_the_end();
-    s.finish(&[]);
+    s.finish(&[], &["silent"]);
 }
 
 #[test]
@@ -609,7 +629,7 @@ fn a_peer_that_connects_and_never_speaks_is_dropped_after_the_hello_timeout() {
     let mut peer = s.stranger();
     assert_closed_by_host(&mut peer);
     a1.play_to_the_end();
-    s.finish(&[]);
+    s.finish(&[], &["silent"]);
 }
 
 #[test]
@@ -624,7 +644,8 @@ fn a_flood_of_silent_connections_costs_a_bounded_number_of_slots() {
         assert_closed_by_host(p);
     }
     a1.play_to_the_end();
-    s.finish(&[]);
+    // The ones that waited are itemised; the ones turned away at once only counted.
+    s.finish_counting(&[], &["silent"; MAX_PENDING], extra as u64);
 }
 
 // --- agent 1 itself misbehaves after its welcome -----------------------------------------
@@ -636,7 +657,7 @@ fn garbage_from_an_admitted_agent_drops_only_that_agent() {
     a1.s.write_all(&record(99, b"junk")).unwrap();
     assert_closed_by_host(&mut a1.s);
     s.host_evicts(1);
-    s.finish(&[1]);
+    s.finish(&[1], &[]);
 }
 
 #[test]
@@ -647,7 +668,7 @@ fn a_truncated_batch_then_close_drops_the_agent() {
     a1.s.write_all(&batch[..PREFIX + 10]).unwrap();
     drop(a1);
     s.host_evicts(1);
-    s.finish(&[1]);
+    s.finish(&[1], &[]);
 }
 
 #[test]
@@ -660,7 +681,7 @@ fn a_batch_longer_than_the_maximum_drops_the_agent() {
     a1.s.write_all(&prefix).unwrap();
     assert_closed_by_host(&mut a1.s);
     s.host_evicts(1);
-    s.finish(&[1]);
+    s.finish(&[1], &[]);
 }
 
 #[test]
@@ -674,7 +695,7 @@ fn an_agent_stalling_mid_batch_is_dropped_and_not_waited_for() {
     // cycle ends without a stop timeout.
     s.host_evicts(1);
     assert_closed_by_host(&mut a1.s);
-    s.finish(&[1]);
+    s.finish(&[1], &[]);
 }
 
 // --- tcp_token -----------------------------------------------------------------------
@@ -691,7 +712,7 @@ fn tcp_token_wrong_or_missing_is_refused_and_the_right_one_admitted() {
         assert!(message.contains("wrong tcp_token"), "{message}");
     }
     a1.play_to_the_end();
-    s.finish(&[]);
+    s.finish(&[], &["token"; 4]);
 }
 
 #[test]
@@ -710,5 +731,5 @@ fn vr_agent_without_the_token_exits_with_a_clear_error() {
     assert_eq!(out.code(), Some(1), "{}", out.stderr);
     assert!(out.stderr.contains("wrong tcp_token"), "{}", out.stderr);
     a1.play_to_the_end();
-    s.finish(&[]);
+    s.finish(&[], &["token"]);
 }

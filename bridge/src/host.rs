@@ -20,7 +20,7 @@ use crate::signal::SignalHandling;
 use crate::transport::mixed::{AnyLoan, Transports, TransportsCreateError};
 use crate::transport::shm::ShmHostCreateError;
 use crate::transport::tcp::TcpHostCreateError;
-use crate::transport::{FrameLoanMut, HostTransport, HostTransportError};
+use crate::transport::{FrameLoanMut, HostTransport, HostTransportError, PeerRefusal};
 use crate::wire::{
     ImageDesc, MAX_CAMERAS, MotorCommand, PROTOCOL_VERSION, SENSOR_FLAG_SYNC_MODE, SensorHeader,
     WireOutcome,
@@ -179,6 +179,9 @@ pub struct HostStats {
     pub evicted_agents: Vec<u32>,
     /// Times an evicted agent came back.
     pub rejoins: u64,
+    /// Peers refused or dropped before they were admitted as agents (see
+    /// [`Host::on_peer_refused`]).
+    pub peers_refused: u64,
 }
 
 /// Why the host could not be created.
@@ -370,6 +373,7 @@ impl<T: HostTransport> Host<T> {
             dead: Vec::with_capacity(n),
             lost_this_cycle: Vec::with_capacity(n),
             evicted_hook: None,
+            refused_hook: None,
             config,
         }
     }
@@ -406,7 +410,11 @@ pub struct Host<T: HostTransport = Transports> {
     dead: Vec<usize>,
     lost_this_cycle: Vec<usize>,
     evicted_hook: Option<Box<dyn FnMut(u32, u64)>>,
+    refused_hook: Option<RefusedHook>,
 }
+
+/// What [`Host::on_peer_refused`] installs.
+type RefusedHook = Box<dyn FnMut(&PeerRefusal)>;
 
 impl<T: HostTransport> core::fmt::Debug for Host<T> {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
@@ -473,6 +481,28 @@ impl<T: HostTransport> Host<T> {
         self.evicted_hook = Some(Box::new(hook));
     }
 
+    /// Calls `hook(refusal)` for each peer a transport refused or dropped before admitting
+    /// it as an agent (garbage, a wrong token or version, an unknown or taken id, a silent
+    /// connection), as the host notices it: while it waits for agents and for stops.
+    /// [`HostStats::peers_refused`] counts them all, also the ones a flood left without
+    /// details.
+    pub fn on_peer_refused(&mut self, hook: impl FnMut(&PeerRefusal) + 'static) {
+        self.refused_hook = Some(Box::new(hook));
+    }
+
+    /// Takes the transports' refusals into the stats and the hook.
+    fn take_refusals(&mut self) {
+        let stats = &mut self.stats;
+        let hook = &mut self.refused_hook;
+        let unkept = self.backend.take_refusals(&mut |r| {
+            stats.peers_refused += 1;
+            if let Some(hook) = hook {
+                hook(r);
+            }
+        });
+        stats.peers_refused += unkept;
+    }
+
     /// The address TCP agents connect to (the bound port when `tcp_listen` has port 0);
     /// `None` on shared memory.
     pub fn tcp_local_addr(&self) -> Option<std::net::SocketAddr> {
@@ -536,7 +566,7 @@ impl<T: HostTransport> Host<T> {
                 .backend
                 .wait_activity((deadline - now).min(Duration::from_secs(1)))
             {
-                Ok(()) => {}
+                Ok(()) => self.take_refusals(),
                 Err(HostTransportError::Terminated) => return Err(HostWaitError::Terminated),
                 Err(e) => return Err(e.into()),
             }
@@ -700,6 +730,7 @@ impl<T: HostTransport> Host<T> {
 
     /// Evicts awaited agents that disconnected or whose process died.
     fn check_lost(&mut self, reap: bool) {
+        self.take_refusals();
         self.dead.clear();
         if reap {
             self.backend.reap_dead_agents(&mut self.dead);

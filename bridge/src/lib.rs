@@ -74,7 +74,8 @@ pub use transport::mixed::{AnyLoan, Transports, TransportsCreateError};
 pub use transport::{
     AGENT_MAX_HELD_FRAMES, AgentConnectError, AgentFrame, AgentReceiveError, AgentSendError,
     AgentTransport, AgentWaitError, Attempt, BatchSink, FrameLoanMut, HOST_LIVENESS_PERIOD,
-    HostLiveness, HostTransport, HostTransportError, retry_until, wait_for_newer_frame,
+    HostLiveness, HostTransport, HostTransportError, MAX_KEPT_REFUSALS, PeerRefusal, RefusalKind,
+    Refusals, retry_until, wait_for_newer_frame,
 };
 pub use wire::{
     ActionState, ActionStatus, CAMERA_NAME_LEN, Collision, Command, CommandDecodeError,

@@ -115,7 +115,8 @@ pub struct RunArgs {
     /// start); events: listening (session, transport, address: the bound TCP address, so
     /// tcp_listen port 0 works), waiting_for_agents (agents), agent_connected (agent,
     /// cycle), all_agents_connected (agents), agent_left, agent_rejoined (agent, cycle),
-    /// agent_evicted (agent, cycle, reason), command_rejected (agent, cycle, kind, reason;
+    /// agent_evicted (agent, cycle, reason), peer_refused (kind, agent, peer, reason: a
+    /// connection refused before it was admitted), command_rejected (agent, cycle, kind, reason;
     /// first per agent and kind), cycle (cycle, timed_out_agents, late_batches; only cycle
     /// 0, every 1000th and those where something happened), finished (frames,
     /// interrupted, trajectory_hash, summary) or error (message).

@@ -13,6 +13,7 @@
 //! | `agent_left` | `agent`, `cycle`: its connection is gone (seen at a cycle boundary) |
 //! | `agent_evicted` | `agent`, `cycle`, `reason`: written as the host evicts it (also while a cycle waits for it) |
 //! | `agent_rejoined` | `agent`, `cycle` (the first cycle it takes part in again) |
+//! | `peer_refused` | `kind` (`malformed`, `version`, `token`, `unknown_agent`, `id_in_use`, `silent`, `too_many`), `agent` (the id it claimed, or `null`), `peer` (its address), `reason`: a connection the host refused or dropped before admitting it as an agent (at most 256 per wait are itemised; the summary counts all) |
 //! | `command_rejected` | `agent`, `cycle`, `kind`, `reason`: the first rejection per agent and command kind (later ones are only counted in the summary) |
 //! | `cycle` | `cycle`, `timed_out_agents`, `late_batches`: sampled, see below |
 //! | `finished` | `frames`, `interrupted`, `trajectory_hash`, `summary` (the `--summary-json` path or `null`) |
@@ -87,6 +88,17 @@ pub enum Event<'a> {
         agent: u32,
         /// The first cycle it takes part in again.
         cycle: u64,
+    },
+    /// The host refused or dropped a peer before admitting it as an agent.
+    PeerRefused {
+        /// Why, as a category (`RefusalKind::as_str`).
+        kind: &'static str,
+        /// The agent id it claimed, if it got that far.
+        agent: Option<u32>,
+        /// Its address.
+        peer: String,
+        /// Why, for a person.
+        reason: String,
     },
     /// A command was rejected (first of its agent and kind).
     CommandRejected {

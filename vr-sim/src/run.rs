@@ -67,6 +67,8 @@ pub struct Summary {
     pub late_stops: u64,
     /// Agents evicted (dead).
     pub evicted_agents: Vec<u32>,
+    /// Connections refused or dropped before they were admitted as agents.
+    pub peers_refused: u64,
     /// Commands applied to the world.
     pub commands_applied: u64,
     /// Commands rejected (undecodable, out of range, unsupported).
@@ -128,6 +130,20 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
                 agent,
                 cycle,
                 reason: "lost: process died or disconnected".into(),
+            };
+            if let Err(e) = hook_events.emit(event) {
+                warn!("{e:#}");
+            }
+        });
+    }
+    if events.enabled() {
+        let mut hook_events = events.clone();
+        host.on_peer_refused(move |r| {
+            let event = Event::PeerRefused {
+                kind: r.kind.as_str(),
+                agent: r.agent,
+                peer: r.peer.clone(),
+                reason: r.reason.clone(),
             };
             if let Err(e) = hook_events.emit(event) {
                 warn!("{e:#}");
@@ -467,6 +483,7 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
         agent_timeouts: stats.agent_timeouts,
         late_stops: stats.late_batches,
         evicted_agents: stats.evicted_agents.clone(),
+        peers_refused: stats.peers_refused,
         commands_applied: applied,
         commands_rejected: rejected_total,
         trajectory_hash: hasher.finalize().to_hex().to_string(),
@@ -484,7 +501,7 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
 
 /// Prints the summary as a table.
 pub fn print_summary(s: &Summary) {
-    let rows: [(&str, String); 14] = [
+    let rows: [(&str, String); 15] = [
         ("mode", s.mode.clone()),
         ("transport", s.transport.clone()),
         ("agents", s.agents.to_string()),
@@ -495,6 +512,7 @@ pub fn print_summary(s: &Summary) {
         ("stop timeouts", s.stop_timeouts.to_string()),
         ("late stops dropped", s.late_stops.to_string()),
         ("evicted agents", format!("{:?}", s.evicted_agents)),
+        ("peers refused", s.peers_refused.to_string()),
         ("commands applied", s.commands_applied.to_string()),
         ("commands rejected", s.commands_rejected.to_string()),
         (

@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use super::shm::{ShmFrameLoan, ShmHost, ShmHostCreateError};
 use super::tcp::{TcpFrameLoan, TcpHost, TcpHostCreateError};
-use super::{BatchSink, FrameLoanMut, HostTransport, HostTransportError};
+use super::{BatchSink, FrameLoanMut, HostTransport, HostTransportError, PeerRefusal};
 use crate::config::{Config, TransportKind};
 use crate::signal::SignalHandling;
 use crate::wire::SensorHeader;
@@ -240,6 +240,17 @@ impl HostTransport for Transports {
 
     fn termination_requested(&self) -> bool {
         self.signals.termination_requested()
+    }
+
+    fn take_refusals(&mut self, sink: &mut dyn FnMut(&PeerRefusal)) -> u64 {
+        let mut unkept = 0;
+        if let Some(t) = &mut self.shm {
+            unkept += t.take_refusals(sink);
+        }
+        if let Some(t) = &mut self.tcp {
+            unkept += t.take_refusals(sink);
+        }
+        unkept
     }
 
     fn reap_dead_agents(&mut self, dead: &mut Vec<usize>) {

@@ -166,6 +166,94 @@ pub enum AgentConnectError {
     },
 }
 
+/// Why a transport refused a peer that was not (yet) an admitted agent.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum RefusalKind {
+    /// Bytes that are not this protocol: garbage, a malformed or oversized record.
+    Malformed,
+    /// Another protocol version or memory layout.
+    Version,
+    /// A wrong or missing session token.
+    Token,
+    /// An agent id the host does not serve.
+    UnknownAgent,
+    /// An agent id that is already connected.
+    IdInUse,
+    /// Connected, then sent no complete hello in time (or closed without one).
+    Silent,
+    /// Turned away at once: too many connections are waiting for their hello.
+    TooMany,
+}
+
+impl RefusalKind {
+    /// Lowercase name for events and summaries.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Malformed => "malformed",
+            Self::Version => "version",
+            Self::Token => "token",
+            Self::UnknownAgent => "unknown_agent",
+            Self::IdInUse => "id_in_use",
+            Self::Silent => "silent",
+            Self::TooMany => "too_many",
+        }
+    }
+}
+
+/// A peer a transport refused or dropped before admitting it as an agent (hostile,
+/// misconfigured or merely confused); the host counts them and hands them to
+/// [`crate::Host::on_peer_refused`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub struct PeerRefusal {
+    /// Why, as a category.
+    pub kind: RefusalKind,
+    /// The agent id the peer claimed, if it got that far.
+    pub agent: Option<u32>,
+    /// Where the peer is (an address, or the transport's name for it).
+    pub peer: String,
+    /// Why, for a person.
+    pub reason: String,
+}
+
+/// Refusals a transport keeps between two [`HostTransport::take_refusals`] calls with
+/// their details; beyond that only their number.
+pub const MAX_KEPT_REFUSALS: usize = 256;
+
+/// Refusals recorded by a transport until the host takes them (bounded: a flood of
+/// strangers costs [`MAX_KEPT_REFUSALS`] entries and a counter).
+#[derive(Debug, Default)]
+pub struct Refusals {
+    kept: Vec<PeerRefusal>,
+    unkept: u64,
+}
+
+impl Refusals {
+    /// Records one refusal (the caller logs it).
+    pub fn push(&mut self, refusal: PeerRefusal) {
+        if self.kept.len() < MAX_KEPT_REFUSALS {
+            self.kept.push(refusal);
+        } else {
+            self.unkept += 1;
+        }
+    }
+
+    /// Records `n` refusals of `kind` without details.
+    pub fn count(&mut self, n: u64) {
+        self.unkept += n;
+    }
+
+    /// Hands every kept refusal to `sink`; returns how many more were refused without
+    /// details. Leaves the record empty.
+    pub fn take(&mut self, sink: &mut dyn FnMut(&PeerRefusal)) -> u64 {
+        for r in self.kept.drain(..) {
+            sink(&r);
+        }
+        std::mem::take(&mut self.unkept)
+    }
+}
+
 /// A sink for received motor batches: `(slot, header, commands)`.
 pub type BatchSink<'a> = dyn FnMut(usize, &MotorHeader, &[MotorCommand]) + 'a;
 
@@ -232,6 +320,13 @@ pub trait HostTransport {
     fn update_connections(&mut self) -> Result<(), HostTransportError>;
     /// Whether SIGINT/SIGTERM was received.
     fn termination_requested(&self) -> bool;
+    /// Hands the peers refused since the last call to `sink`; returns how many more were
+    /// refused without details (see [`Refusals`]). Transports without strangers (shared
+    /// memory) keep the default: none.
+    fn take_refusals(&mut self, sink: &mut dyn FnMut(&PeerRefusal)) -> u64 {
+        let _ = sink;
+        0
+    }
     /// Finds agents whose process died (iceoryx2 reports their node dead), removes their
     /// stale resources, and appends their slots to `dead`. Called a few times per second
     /// while the host waits; transports that see disconnects directly (TCP) need nothing.
@@ -482,5 +577,35 @@ pub fn retry_until<T, E>(
                 backoff = (backoff * 2).min(Duration::from_millis(100));
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn refusal(i: usize) -> PeerRefusal {
+        PeerRefusal {
+            kind: RefusalKind::Silent,
+            agent: None,
+            peer: format!("127.0.0.1:{i}"),
+            reason: "sent nothing".into(),
+        }
+    }
+
+    #[test]
+    fn refusals_keep_a_bounded_number_of_details_and_count_the_rest() {
+        let mut r = Refusals::default();
+        for i in 0..MAX_KEPT_REFUSALS + 5 {
+            r.push(refusal(i));
+        }
+        r.count(3);
+        let mut seen = Vec::new();
+        let unkept = r.take(&mut |p| seen.push(p.peer.clone()));
+        assert_eq!(seen.len(), MAX_KEPT_REFUSALS);
+        assert_eq!(seen[0], "127.0.0.1:0");
+        assert_eq!(unkept, 5 + 3);
+        // Taken: nothing is handed out twice.
+        assert_eq!(r.take(&mut |_| panic!("handed out twice")), 0);
     }
 }

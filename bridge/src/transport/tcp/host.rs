@@ -2,6 +2,8 @@
 //! `poll(2)` over every socket.
 
 use super::*;
+use crate::transport::{PeerRefusal, RefusalKind, Refusals};
+
 // ---------------------------------------------------------------------------------------
 // Host side
 // ---------------------------------------------------------------------------------------
@@ -106,6 +108,8 @@ pub struct TcpHost {
     pub(super) pfds: Vec<libc::pollfd>,
     pub(super) ready: Vec<bool>,
     pub(super) signals: SignalHandling,
+    /// Peers refused since the host last took them.
+    pub(super) refusals: Refusals,
 }
 
 /// Why the TCP host could not be created.
@@ -174,6 +178,7 @@ impl TcpHost {
             pfds: Vec::new(),
             ready: Vec::new(),
             signals,
+            refusals: Refusals::default(),
         })
     }
 
@@ -300,6 +305,7 @@ impl TcpHost {
             }
         }
         if turned_away > 0 {
+            self.refusals.count(turned_away as u64);
             warn!(
                 "TCP peer dropped: {turned_away} connection(s) closed at once, {MAX_PENDING} are already waiting for their hello"
             );
@@ -325,7 +331,7 @@ impl TcpHost {
                             )
                         };
                         let p = self.pending.swap_remove(i);
-                        warn!(peer = %p.peer, "TCP peer dropped: {why}");
+                        self.refuse(RefusalKind::Silent, None, p.peer, why);
                     } else {
                         i += 1;
                     }
@@ -336,7 +342,12 @@ impl TcpHost {
                 }
                 Err((why, closed)) => {
                     let mut p = self.pending.swap_remove(i);
-                    warn!(peer = %p.peer, "TCP peer dropped: {why}");
+                    let kind = if closed {
+                        RefusalKind::Silent
+                    } else {
+                        RefusalKind::Malformed
+                    };
+                    self.refuse(kind, None, p.peer, why.clone());
                     if !closed {
                         let _ = p.stream.set_nonblocking(false);
                         let _ = p.stream.set_write_timeout(Some(Duration::from_millis(200)));
@@ -382,17 +393,51 @@ impl TcpHost {
         }
     }
 
+    /// Logs and records a refused peer.
+    fn refuse(&mut self, kind: RefusalKind, agent: Option<u32>, peer: SocketAddr, why: String) {
+        match agent {
+            Some(agent) => warn!(%peer, agent, "TCP agent refused: {why}"),
+            None => warn!(%peer, "TCP peer dropped: {why}"),
+        }
+        self.refusals.push(PeerRefusal {
+            kind,
+            agent,
+            peer: peer.to_string(),
+            reason: why,
+        });
+    }
+
+    /// Tells a peer why its hello is refused (best effort), then logs and records it.
+    fn refuse_hello(
+        &mut self,
+        stream: &mut TcpStream,
+        peer: SocketAddr,
+        agent: u32,
+        code: u32,
+        why: String,
+    ) {
+        let kind = match code {
+            reject::VERSION => RefusalKind::Version,
+            reject::TOKEN => RefusalKind::Token,
+            reject::UNKNOWN_AGENT => RefusalKind::UnknownAgent,
+            reject::ID_IN_USE => RefusalKind::IdInUse,
+            _ => RefusalKind::Malformed,
+        };
+        let _ = stream.set_nonblocking(false);
+        let _ = stream.set_write_timeout(Some(Duration::from_millis(200)));
+        let _ = write_record(stream, kind::REJECT, &encode_reject(code, &why));
+        self.refuse(kind, Some(agent), peer, why);
+    }
+
     fn admit(&mut self, p: Pending, hello: Hello) {
         let mut stream = p.stream;
-        let refuse = |stream: &mut TcpStream, code: u32, why: String| {
-            warn!(peer = %p.peer, agent = hello.agent_id, "TCP agent refused: {why}");
-            let _ = stream.set_nonblocking(false);
-            let _ = stream.set_write_timeout(Some(Duration::from_millis(200)));
-            let _ = write_record(stream, kind::REJECT, &encode_reject(code, &why));
-        };
+        let peer = p.peer;
+        let agent = hello.agent_id;
         if hello.protocol_version != PROTOCOL_VERSION || hello.layout_hash != LAYOUT_HASH {
-            return refuse(
+            return self.refuse_hello(
                 &mut stream,
+                peer,
+                agent,
                 reject::VERSION,
                 format!(
                     "agent speaks protocol {} (layout {:016x}), host speaks protocol {PROTOCOL_VERSION} (layout {LAYOUT_HASH:016x})",
@@ -403,11 +448,19 @@ impl TcpHost {
         if let Some(token) = &self.token
             && !constant_time_eq(token, &hello.token)
         {
-            return refuse(&mut stream, reject::TOKEN, "wrong tcp_token".into());
+            return self.refuse_hello(
+                &mut stream,
+                peer,
+                agent,
+                reject::TOKEN,
+                "wrong tcp_token".into(),
+            );
         }
         let Some(slot) = self.slots.iter().position(|s| s.id == hello.agent_id) else {
-            return refuse(
+            return self.refuse_hello(
                 &mut stream,
+                peer,
+                agent,
                 reject::UNKNOWN_AGENT,
                 format!(
                     "agent {} is not part of this session (it serves agents {:?})",
@@ -423,8 +476,10 @@ impl TcpHost {
             self.drop_conn(slot, "connection closed (a new connection takes its place)");
         }
         if self.slots[slot].conn.is_some() {
-            return refuse(
+            return self.refuse_hello(
                 &mut stream,
+                peer,
+                agent,
                 reject::ID_IN_USE,
                 format!("agent {} is already connected", hello.agent_id),
             );
@@ -607,6 +662,10 @@ impl Drop for TcpHost {
 
 impl HostTransport for TcpHost {
     type Loan = TcpFrameLoan;
+
+    fn take_refusals(&mut self, sink: &mut dyn FnMut(&PeerRefusal)) -> u64 {
+        self.refusals.take(sink)
+    }
 
     fn is_connected(&self, slot: usize) -> bool {
         self.slots.get(slot).is_some_and(|s| s.conn.is_some())
