@@ -332,6 +332,17 @@ impl<'c> AgentBuilder<'c> {
                     .map(str::as_bytes),
                 self.signals,
             )?),
+            // Served to programs written for the original system, not to this SDK.
+            TransportKind::Legacy => {
+                return Err(AgentConnectError::Transport {
+                    session: self.config.session.clone(),
+                    agent: self.id,
+                    detail: "its [[agent]] transport is \"legacy\": the host serves it the \
+                             original system's protocol for agents written for that system; \
+                             use \"shm\" or \"tcp\" for a vrsync agent"
+                        .into(),
+                });
+            }
         };
         let max = self.config.transport.max_commands_per_cycle as usize;
         Ok(Agent {

@@ -35,6 +35,9 @@ pub enum TransportKind {
     Shm,
     /// TCP, for remote agents and as a baseline.
     Tcp,
+    /// The original system's protobuf/TCP protocol, for agents written for it
+    /// (`[transport.legacy]`; see [`crate::transport::legacy`]).
+    Legacy,
 }
 
 impl TransportKind {
@@ -43,6 +46,7 @@ impl TransportKind {
         match self {
             Self::Shm => "shm",
             Self::Tcp => "tcp",
+            Self::Legacy => "legacy",
         }
     }
 }
@@ -173,6 +177,92 @@ pub struct TransportConfig {
     pub max_commands_per_cycle: u32,
     /// Shared secret TCP agents must present in their hello (`tcp_token`); `None`: none.
     pub tcp_token: Option<String>,
+    /// `[transport.legacy]`: the original system's protocol.
+    pub legacy: LegacyConfig,
+}
+
+/// Which generation of the original protocol a legacy agent speaks
+/// (`[transport.legacy] dialect`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum LegacyDialect {
+    /// Told from each connection's version check (default).
+    #[default]
+    Auto,
+    /// The older (Python 2) clients: version check in field 28.
+    Vrnew,
+    /// The later (Python 3) client: version check in field 29, a third "main" image.
+    Burkhardt,
+}
+
+impl LegacyDialect {
+    /// The config spelling.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::Vrnew => "vrnew",
+            Self::Burkhardt => "burkhardt",
+        }
+    }
+}
+
+/// PNG compression of the legacy transport's images (`[transport.legacy] png_compression`),
+/// the `png` crate's levels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum PngCompression {
+    /// The fastest (default): the images are encoded every cycle.
+    #[default]
+    Fastest,
+    /// Fast, a better ratio.
+    Fast,
+    /// Balanced.
+    Balanced,
+    /// Smallest, slowest.
+    High,
+}
+
+impl PngCompression {
+    /// The config spelling.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Fastest => "fastest",
+            Self::Fast => "fast",
+            Self::Balanced => "balanced",
+            Self::High => "high",
+        }
+    }
+}
+
+/// `[transport.legacy]` section: the original system's protobuf/TCP protocol.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LegacyConfig {
+    /// The environment socket's port (`local_port`, alias `LocalPort`); agent `id` listens
+    /// on `local_port + 1 + id`. Default 1337.
+    pub local_port: u16,
+    /// The address the sockets bind to (`bind`). Default loopback.
+    pub bind: std::net::IpAddr,
+    /// The dialect (`dialect`). Default auto.
+    pub dialect: LegacyDialect,
+    /// PNG compression (`png_compression`). Default fastest.
+    pub png_compression: PngCompression,
+    /// Send EyePosition every cycle (`send_eye_position`). Default false, as the original.
+    pub send_eye_position: bool,
+    /// Send HeadMotion every cycle (`send_head_motion`). Default false, as the original.
+    pub send_head_motion: bool,
+}
+
+impl Default for LegacyConfig {
+    fn default() -> Self {
+        Self {
+            local_port: 1337,
+            bind: std::net::IpAddr::from([127, 0, 0, 1]),
+            dialect: LegacyDialect::Auto,
+            png_compression: PngCompression::Fastest,
+            send_eye_position: false,
+            send_head_motion: false,
+        }
+    }
 }
 
 /// The validated configuration.
@@ -272,6 +362,19 @@ struct RawTransport {
     tcp_listen: Option<Spanned<String>>,
     max_commands_per_cycle: Option<Spanned<i64>>,
     tcp_token: Option<Spanned<String>>,
+    legacy: Option<RawLegacy>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLegacy {
+    #[serde(alias = "LocalPort")]
+    local_port: Option<Spanned<i64>>,
+    bind: Option<Spanned<String>>,
+    dialect: Option<LegacyDialect>,
+    png_compression: Option<PngCompression>,
+    send_eye_position: Option<bool>,
+    send_head_motion: Option<bool>,
 }
 
 #[derive(Deserialize)]
@@ -352,6 +455,49 @@ impl Ctx<'_> {
             return Err(self.invalid(span, key, format!("{secs} s is more than a day")));
         }
         Ok(Duration::from_secs_f64(secs))
+    }
+}
+
+impl Ctx<'_> {
+    fn legacy(&self, l: RawLegacy) -> Result<LegacyConfig, ConfigLoadError> {
+        let d = LegacyConfig::default();
+        let local_port = match l.local_port {
+            None => d.local_port,
+            Some(v) => {
+                let p = *v.get_ref();
+                // The highest agent port must exist too: local_port + 1 + MAX_AGENT_ID.
+                let max = i64::from(u16::MAX) - 1 - i64::from(MAX_AGENT_ID);
+                if !(1..=max).contains(&p) {
+                    return Err(self.invalid(
+                        v.span(),
+                        "transport.legacy.local_port",
+                        format!("must be 1..={max} (agent ports follow it), found {p}"),
+                    ));
+                }
+                p as u16
+            }
+        };
+        let bind = match l.bind {
+            None => d.bind,
+            Some(s) => s.get_ref().parse().map_err(|e| {
+                self.invalid(
+                    s.span(),
+                    "transport.legacy.bind",
+                    format!(
+                        "{:?} is not an IP address like 127.0.0.1 ({e})",
+                        s.get_ref()
+                    ),
+                )
+            })?,
+        };
+        Ok(LegacyConfig {
+            local_port,
+            bind,
+            dialect: l.dialect.unwrap_or(d.dialect),
+            png_compression: l.png_compression.unwrap_or(d.png_compression),
+            send_eye_position: l.send_eye_position.unwrap_or(d.send_eye_position),
+            send_head_motion: l.send_head_motion.unwrap_or(d.send_head_motion),
+        })
     }
 }
 
@@ -476,6 +622,7 @@ impl Config {
             tcp_listen: None,
             max_commands_per_cycle: None,
             tcp_token: None,
+            legacy: None,
         });
         let tcp_listen = match rt.tcp_listen {
             None => SocketAddr::from(([127, 0, 0, 1], 7400)),
@@ -518,11 +665,16 @@ impl Config {
                 Some(t.into_inner())
             }
         };
+        let legacy = match rt.legacy {
+            None => LegacyConfig::default(),
+            Some(l) => ctx.legacy(l)?,
+        };
         let transport = TransportConfig {
             kind: rt.kind.unwrap_or_default(),
             tcp_listen,
             max_commands_per_cycle,
             tcp_token,
+            legacy,
         };
 
         if raw.agent.is_empty() {
@@ -690,6 +842,17 @@ impl Config {
         if let Some(token) = &self.transport.tcp_token {
             let _ = writeln!(s, "tcp_token = {}", toml_string(token));
         }
+        let l = &self.transport.legacy;
+        let _ = writeln!(
+            s,
+            "\n[transport.legacy]\nlocal_port = {}\nbind = \"{}\"\ndialect = {:?}\npng_compression = {:?}\nsend_eye_position = {}\nsend_head_motion = {}",
+            l.local_port,
+            l.bind,
+            l.dialect.as_str(),
+            l.png_compression.as_str(),
+            l.send_eye_position,
+            l.send_head_motion
+        );
         for a in &self.agents {
             let _ = writeln!(
                 s,
@@ -871,6 +1034,36 @@ mod tests {
                 assert_eq!(cam.format, PixelFormat::Rgb8);
             }
         }
+    }
+
+    #[test]
+    fn the_legacy_section_takes_the_original_key_and_round_trips() {
+        let c = parse(MINIMAL).unwrap();
+        assert_eq!(c.transport.legacy, LegacyConfig::default());
+        assert_eq!(c.transport.legacy.local_port, 1337);
+        assert!(c.transport.legacy.bind.is_loopback());
+        let c = parse(
+            "[transport.legacy]\nLocalPort = 2000\ndialect = \"burkhardt\"\npng_compression = \"fast\"\nbind = \"0.0.0.0\"\n[[agent]]\nid = 3\ntransport = \"legacy\"\n",
+        )
+        .unwrap();
+        let l = &c.transport.legacy;
+        assert_eq!(l.local_port, 2000);
+        assert_eq!(l.dialect, LegacyDialect::Burkhardt);
+        assert_eq!(l.png_compression, PngCompression::Fast);
+        assert_eq!(c.agents[0].transport, TransportKind::Legacy);
+        let back = parse(&c.to_toml_string()).unwrap();
+        assert_eq!(back.transport, c.transport);
+        assert_eq!(back.agents, c.agents);
+        // The agent ports must fit: local_port + 1 + 250 <= 65535.
+        let err = parse("[transport.legacy]\nlocal_port = 65300\n[[agent]]\nid = 0\n").unwrap_err();
+        assert!(
+            err.to_string().contains("transport.legacy.local_port"),
+            "{err}"
+        );
+        let err =
+            parse("[transport.legacy]\nbind = \"localhost:1\"\n[[agent]]\nid = 0\n").unwrap_err();
+        assert!(err.to_string().contains("transport.legacy.bind"), "{err}");
+        assert!(parse("[transport.legacy]\nport = 1\n[[agent]]\nid = 0\n").is_err());
     }
 
     #[test]

@@ -194,6 +194,9 @@ pub enum HostCreateError {
     /// The TCP transport failed.
     #[error(transparent)]
     Tcp(#[from] TcpHostCreateError),
+    /// The legacy transport (the original protocol) failed.
+    #[error(transparent)]
+    Legacy(#[from] crate::transport::legacy::LegacyHostCreateError),
 }
 
 /// Why waiting for agents failed.
@@ -311,6 +314,7 @@ impl<'c> HostBuilder<'c> {
         let backend = Transports::create(self.config, self.signals).map_err(|e| match e {
             TransportsCreateError::Shm(e) => HostCreateError::Shm(e),
             TransportsCreateError::Tcp(e) => HostCreateError::Tcp(e),
+            TransportsCreateError::Legacy(e) => HostCreateError::Legacy(e),
         })?;
         Ok(Host::over(self.config, backend))
     }

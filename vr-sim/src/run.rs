@@ -169,7 +169,15 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
         _bound_config = Some(private);
     }
     let mut agents = if opts.spawn {
-        Agents::spawn(&agent_config_path, &ids, &opts.agent_args)?
+        // Legacy agents are programs written for the original system: started by the
+        // user, never by vr-sim.
+        let spawn_ids: Vec<u32> = config
+            .agents
+            .iter()
+            .filter(|a| a.transport != vrsync_bridge::config::TransportKind::Legacy)
+            .map(|a| a.id)
+            .collect();
+        Agents::spawn(&agent_config_path, &spawn_ids, &opts.agent_args)?
     } else {
         Agents::default()
     };

@@ -10,7 +10,7 @@ use pyo3::prelude::*;
 use vrsync_agent::{
     Agent, AgentBuilder, AgentConnectError, SendError, SignalHandling, StopError, WaitStartError,
 };
-use vrsync_bridge::{Config, TransportKind};
+use vrsync_bridge::Config;
 
 use crate::commands::PyCommand;
 use crate::errors::{error, obj};
@@ -353,10 +353,7 @@ impl PyAgent {
             id,
             session: cfg.session.clone(),
             config_path: config,
-            transport: match agent_transport {
-                TransportKind::Shm => "shm",
-                TransportKind::Tcp => "tcp",
-            },
+            transport: agent_transport.as_str(),
             sync_mode: cfg.sync.sync_mode,
             stop_timeout: cfg.sync.stop_timeout,
             simulation_time_per_frame: cfg.sync.simulation_time_per_frame,

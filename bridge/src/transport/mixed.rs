@@ -4,10 +4,13 @@
 //! Each transport is created for its own agents only (a sub-config with those agents);
 //! slots inside a transport are its own, this module maps them to the host's. The shm
 //! transport's wake-up descriptor joins the TCP transport's `poll(2)`, so a stop over
-//! shared memory and a batch over TCP end the same wait.
+//! shared memory and a batch over TCP end the same wait. The legacy transport waits on an
+//! `epoll` set: the shm descriptor joins that set, and the set's descriptor joins the TCP
+//! poll.
 
 use std::time::Duration;
 
+use super::legacy::{LegacyFrameLoan, LegacyHost, LegacyHostCreateError};
 use super::shm::{ShmFrameLoan, ShmHost, ShmHostCreateError};
 use super::tcp::{TcpFrameLoan, TcpHost, TcpHostCreateError};
 use super::{BatchSink, FrameLoanMut, HostTransport, HostTransportError, PeerRefusal};
@@ -25,6 +28,9 @@ pub enum TransportsCreateError {
     /// The TCP transport failed.
     #[error(transparent)]
     Tcp(#[from] TcpHostCreateError),
+    /// The legacy transport failed.
+    #[error(transparent)]
+    Legacy(#[from] LegacyHostCreateError),
 }
 
 /// A loan of whichever transport serves the agent.
@@ -34,6 +40,8 @@ pub enum AnyLoan {
     Shm(ShmFrameLoan),
     /// TCP.
     Tcp(TcpFrameLoan),
+    /// The original protocol.
+    Legacy(LegacyFrameLoan),
 }
 
 impl FrameLoanMut for AnyLoan {
@@ -41,6 +49,7 @@ impl FrameLoanMut for AnyLoan {
         match self {
             Self::Shm(l) => l.parts_mut(),
             Self::Tcp(l) => l.parts_mut(),
+            Self::Legacy(l) => l.parts_mut(),
         }
     }
 
@@ -48,6 +57,7 @@ impl FrameLoanMut for AnyLoan {
         match self {
             Self::Shm(l) => l.header(),
             Self::Tcp(l) => l.header(),
+            Self::Legacy(l) => l.header(),
         }
     }
 }
@@ -63,10 +73,12 @@ struct Route {
 pub struct Transports {
     shm: Option<ShmHost>,
     tcp: Option<TcpHost>,
+    legacy: Option<LegacyHost>,
     routes: Vec<Route>,
     /// Host slot of each shm slot / tcp slot.
     shm_slots: Vec<usize>,
     tcp_slots: Vec<usize>,
+    legacy_slots: Vec<usize>,
     scratch: Vec<usize>,
     signals: SignalHandling,
 }
@@ -76,6 +88,7 @@ impl core::fmt::Debug for Transports {
         f.debug_struct("Transports")
             .field("shm_slots", &self.shm_slots)
             .field("tcp_slots", &self.tcp_slots)
+            .field("legacy_slots", &self.legacy_slots)
             .finish()
     }
 }
@@ -87,11 +100,12 @@ impl Transports {
     /// [`TransportsCreateError`].
     pub fn create(config: &Config, signals: SignalHandling) -> Result<Self, TransportsCreateError> {
         let mut routes = Vec::with_capacity(config.agents.len());
-        let (mut shm_slots, mut tcp_slots) = (Vec::new(), Vec::new());
+        let (mut shm_slots, mut tcp_slots, mut legacy_slots) = (Vec::new(), Vec::new(), Vec::new());
         for (slot, a) in config.agents.iter().enumerate() {
             let list = match a.transport {
                 TransportKind::Shm => &mut shm_slots,
                 TransportKind::Tcp => &mut tcp_slots,
+                TransportKind::Legacy => &mut legacy_slots,
             };
             routes.push(Route {
                 kind: a.transport,
@@ -114,13 +128,25 @@ impl Transports {
         } else {
             Some(TcpHost::create(&only(TransportKind::Tcp), signals)?)
         };
+        let mut legacy = if legacy_slots.is_empty() {
+            None
+        } else {
+            Some(LegacyHost::create(&only(TransportKind::Legacy), signals)?)
+        };
+        // One wait for all: the shm wake-up joins the legacy epoll set.
+        if let (Some(l), Some(fd)) = (&mut legacy, shm.as_ref().and_then(|s| s.activity_fd())) {
+            l.watch_extra(fd)
+                .map_err(|e| TransportsCreateError::Legacy(LegacyHostCreateError::Epoll(e)))?;
+        }
         Ok(Self {
             shm,
             tcp,
+            legacy,
             routes,
             scratch: Vec::with_capacity(shm_slots.len().max(tcp_slots.len())),
             shm_slots,
             tcp_slots,
+            legacy_slots,
             signals,
         })
     }
@@ -150,6 +176,10 @@ impl HostTransport for Transports {
         match r.kind {
             TransportKind::Shm => self.shm.as_ref().is_some_and(|t| t.is_connected(r.local)),
             TransportKind::Tcp => self.tcp.as_ref().is_some_and(|t| t.is_connected(r.local)),
+            TransportKind::Legacy => self
+                .legacy
+                .as_ref()
+                .is_some_and(|t| t.is_connected(r.local)),
         }
     }
 
@@ -164,15 +194,26 @@ impl HostTransport for Transports {
                 Some(t) => t.loan(r.local).map(AnyLoan::Tcp),
                 None => Err(Self::missing(r.kind)),
             },
+            TransportKind::Legacy => match &mut self.legacy {
+                Some(t) => t.loan(r.local).map(AnyLoan::Legacy),
+                None => Err(Self::missing(r.kind)),
+            },
         }
     }
 
     fn publish(&mut self, slot: usize, frame: AnyLoan) -> Result<bool, HostTransportError> {
         let r = self.route(slot)?;
         // A loan comes from `loan` of the same slot, so its kind is the route's.
-        match (frame, &mut self.shm, &mut self.tcp) {
-            (AnyLoan::Shm(l), Some(t), _) if r.kind == TransportKind::Shm => t.publish(r.local, l),
-            (AnyLoan::Tcp(l), _, Some(t)) if r.kind == TransportKind::Tcp => t.publish(r.local, l),
+        match (frame, &mut self.shm, &mut self.tcp, &mut self.legacy) {
+            (AnyLoan::Shm(l), Some(t), _, _) if r.kind == TransportKind::Shm => {
+                t.publish(r.local, l)
+            }
+            (AnyLoan::Tcp(l), _, Some(t), _) if r.kind == TransportKind::Tcp => {
+                t.publish(r.local, l)
+            }
+            (AnyLoan::Legacy(l), _, _, Some(t)) if r.kind == TransportKind::Legacy => {
+                t.publish(r.local, l)
+            }
             _ => Err(HostTransportError::Send {
                 what: format!("the sensor frame of slot {slot}"),
                 reason: "the frame was loaned for another agent".into(),
@@ -185,6 +226,9 @@ impl HostTransport for Transports {
             t.signal_start()?;
         }
         if let Some(t) = &mut self.tcp {
+            t.signal_start()?;
+        }
+        if let Some(t) = &mut self.legacy {
             t.signal_start()?;
         }
         Ok(())
@@ -207,14 +251,47 @@ impl HostTransport for Transports {
                 }
             })?;
         }
+        if let Some(t) = &mut self.legacy {
+            let map = &self.legacy_slots;
+            t.drain(&mut |local, header, commands| {
+                if let Some(&slot) = map.get(local) {
+                    sink(slot, header, commands);
+                }
+            })?;
+        }
         Ok(())
     }
 
     fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
-        match (&mut self.shm, &mut self.tcp) {
-            (Some(shm), None) => shm.wait_activity(timeout),
-            (None, Some(tcp)) => tcp.wait_activity(timeout),
-            (Some(shm), Some(tcp)) => {
+        match (&mut self.shm, &mut self.tcp, &mut self.legacy) {
+            (Some(shm), None, None) => shm.wait_activity(timeout),
+            (None, Some(tcp), None) => tcp.wait_activity(timeout),
+            (shm, None, Some(legacy)) => {
+                // The shm wake-up is in the legacy epoll set.
+                legacy.wait_activity(timeout)?;
+                if let Some(shm) = shm {
+                    shm.clear_activity();
+                }
+                Ok(())
+            }
+            (shm, Some(tcp), Some(legacy)) => {
+                // One poll(2) over the TCP sockets and the legacy epoll set (which holds
+                // the shm wake-up); the legacy transport's own deadlines bound it.
+                let timeout = match legacy.next_deadline() {
+                    Some(d) => timeout.min(d.saturating_duration_since(std::time::Instant::now())),
+                    None => timeout,
+                };
+                tcp.wait_activity_with(timeout, legacy.activity_fd())?;
+                legacy.clear_activity();
+                if let Some(shm) = shm {
+                    shm.clear_activity();
+                }
+                if self.signals.termination_requested() {
+                    return Err(HostTransportError::Terminated);
+                }
+                Ok(())
+            }
+            (Some(shm), Some(tcp), None) => {
                 // One poll(2) over the TCP sockets and the shm stop listener.
                 if tcp.wait_activity_with(timeout, shm.activity_fd())? {
                     shm.clear_activity();
@@ -224,7 +301,7 @@ impl HostTransport for Transports {
                 }
                 Ok(())
             }
-            (None, None) => Ok(()),
+            (None, None, None) => Ok(()),
         }
     }
 
@@ -233,6 +310,9 @@ impl HostTransport for Transports {
             t.update_connections()?;
         }
         if let Some(t) = &mut self.tcp {
+            t.update_connections()?;
+        }
+        if let Some(t) = &mut self.legacy {
             t.update_connections()?;
         }
         Ok(())
@@ -263,6 +343,15 @@ impl HostTransport for Transports {
             self.scratch.clear();
             t.reap_dead_agents(&mut self.scratch);
             dead.extend(self.scratch.iter().filter_map(|&l| self.tcp_slots.get(l)));
+        }
+        if let Some(t) = &mut self.legacy {
+            self.scratch.clear();
+            t.reap_dead_agents(&mut self.scratch);
+            dead.extend(
+                self.scratch
+                    .iter()
+                    .filter_map(|&l| self.legacy_slots.get(l)),
+            );
         }
     }
 

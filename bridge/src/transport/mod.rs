@@ -13,6 +13,7 @@
 //! [`HOST_LIVENESS_PERIOD`]), and [`retry_until`] (connect-retry with back-off while the
 //! host is not there yet).
 
+pub mod legacy;
 pub(crate) mod mixed;
 pub mod shm;
 pub mod tcp;

@@ -114,6 +114,8 @@ namespace Vrsync
     {
         Shm = 0,
         Tcp = 1,
+        /// <summary>The original system's protobuf/TCP protocol.</summary>
+        Legacy = 3,
     }
 
     /// <summary>Three floats (C <c>float[3]</c>); same layout as Unity's <c>Vector3</c>.</summary>

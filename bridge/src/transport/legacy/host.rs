@@ -1,0 +1,1564 @@
+//! The legacy transport's host side: listeners, version checks, one state machine per
+//! agent that turns the original client's messages into motor batches, and the
+//! per-cycle messages written at publish.
+
+use std::io::{self, ErrorKind, Write};
+use std::net::{IpAddr, SocketAddr, TcpListener, TcpStream};
+use std::os::fd::{AsRawFd, FromRawFd, OwnedFd, RawFd};
+use std::time::{Duration, Instant};
+
+use tracing::{debug, info, warn};
+
+use super::codec::{
+    self, ActionStatus, Dialect, EyePosition, FrameProgress, FrameReader, GridPosition, HeadMotion,
+    Incoming, MAX_INCOMING_FRAME, Reward, VERSION, VersionCheck, field,
+};
+use crate::config::{Config, LegacyDialect, PngCompression, TransportKind};
+use crate::signal::SignalHandling;
+use crate::transport::{BatchSink, FrameLoanMut, HostTransport, HostTransportError};
+use crate::wire::{
+    ActionState, Command, ImageDesc, MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION,
+    PixelFormat, SensorHeader,
+};
+
+/// How long a new connection may take to send its version check.
+pub const HELLO_TIMEOUT: Duration = Duration::from_secs(5);
+/// After this long without a write, a connected agent gets a Debug keep-alive.
+pub const KEEPALIVE_PERIOD: Duration = Duration::from_secs(1);
+/// Connections per port waiting for their version check; more are closed at once.
+const MAX_PENDING_PER_PORT: usize = 4;
+/// Connections on the environment socket; more are closed at once.
+const MAX_ENV_CONNS: usize = 16;
+/// Frames read from one connection per pass; the rest waits for the next (the socket
+/// stays readable), so one flooding client cannot hold the host.
+const MAX_FRAMES_PER_PASS: usize = 256;
+/// How long a frame may stay incomplete on a connection.
+const STALL_TIMEOUT: Duration = Duration::from_secs(5);
+/// Action id of resets that arrived on the environment socket (their status is not sent:
+/// the clients expect none).
+pub const RESET_ACTION_ID: u32 = u32::MAX;
+
+/// A loaned legacy frame: header and raw images, encoded to PNG at publish.
+#[derive(Debug)]
+pub struct LegacyFrameLoan {
+    header: Box<SensorHeader>,
+    payload: Vec<u8>,
+}
+
+impl FrameLoanMut for LegacyFrameLoan {
+    fn parts_mut(&mut self) -> (&mut SensorHeader, &mut [u8]) {
+        (&mut self.header, &mut self.payload)
+    }
+
+    fn header(&self) -> &SensorHeader {
+        &self.header
+    }
+}
+
+/// Why the legacy host could not be created.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum LegacyHostCreateError {
+    /// A port could not be bound.
+    #[error(
+        "cannot listen on {addr} for {what}: {source} (set [transport.legacy] local_port to a \
+         free range: the environment socket and local_port + 1 + id for each legacy agent)"
+    )]
+    Bind {
+        /// The address.
+        addr: SocketAddr,
+        /// Which socket.
+        what: String,
+        /// The error.
+        source: io::Error,
+    },
+    /// An agent's port would be beyond 65535.
+    #[error("agent {agent}'s legacy port local_port + 1 + {agent} is beyond 65535")]
+    PortRange {
+        /// The agent.
+        agent: u32,
+    },
+    /// A camera format the original protocol cannot carry.
+    #[error(
+        "agent {agent}'s camera {camera:?} is {format}: the original protocol carries PNG \
+         images (rgb8, rgba8 or gray8)"
+    )]
+    Camera {
+        /// The agent.
+        agent: u32,
+        /// The camera.
+        camera: String,
+        /// Its format.
+        format: &'static str,
+    },
+    /// The epoll set could not be created.
+    #[error("cannot create the legacy transport's epoll set: {0}")]
+    Epoll(io::Error),
+}
+
+/// Counters of the legacy transport.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct LegacyStats {
+    /// Stops that arrived while no cycle of their agent was open: each ended the next.
+    pub stops_without_cycle: u64,
+    /// Stops beyond one while no cycle was open: ignored.
+    pub stops_ignored: u64,
+    /// Frames refused (undecodable, unknown or several fields, oversize).
+    pub frames_refused: u64,
+    /// Commands answered Aborted at once (non-finite, over the per-cycle limit).
+    pub commands_refused: u64,
+    /// Commands the simulator rejected, answered Aborted.
+    pub commands_rejected: u64,
+    /// Images encoded to PNG.
+    pub png_images: u64,
+    /// Time spent encoding them.
+    pub png_time: Duration,
+}
+
+#[derive(Debug)]
+struct Conn {
+    stream: TcpStream,
+    peer: SocketAddr,
+    reader: FrameReader,
+    dialect: Dialect,
+    partial_since: Option<Instant>,
+    last_write: Instant,
+}
+
+#[derive(Debug)]
+struct Pending {
+    stream: TcpStream,
+    peer: SocketAddr,
+    since: Instant,
+    reader: FrameReader,
+}
+
+#[derive(Debug)]
+struct Slot {
+    id: u32,
+    listener: TcpListener,
+    conn: Option<Conn>,
+    pending: Vec<Pending>,
+    /// The last published cycle.
+    cycle: Option<u64>,
+    /// A published cycle waits for its stop.
+    open: bool,
+    /// Commands (and the stop) for `cycle`, handed over at the next drain.
+    batch: Vec<MotorCommand>,
+    batch_stop: bool,
+    /// Commands taken for the open cycle so far (the per-cycle limit).
+    in_cycle: usize,
+    /// Commands received while no cycle was open, for the next one; `queued_stop` splits
+    /// them: the first `n` end the next cycle with a stop.
+    queued: Vec<MotorCommand>,
+    queued_stop: Option<usize>,
+    /// Action ids handed over for `applied_cycle` (to answer rejected ones Aborted).
+    applied: Vec<u32>,
+    applied_cycle: Option<u64>,
+    /// Reused buffers.
+    header: Option<Box<SensorHeader>>,
+    payload: Option<Vec<u8>>,
+    payload_len: usize,
+    out: Vec<u8>,
+    png: [Vec<u8>; 3],
+}
+
+#[derive(Debug)]
+struct EnvConn {
+    stream: TcpStream,
+    peer: SocketAddr,
+    reader: FrameReader,
+}
+
+/// The host side of the legacy transport.
+#[derive(Debug)]
+pub struct LegacyHost {
+    epoll: OwnedFd,
+    env_listener: TcpListener,
+    env_conns: Vec<EnvConn>,
+    slots: Vec<Slot>,
+    sync_mode: bool,
+    dialect: LegacyDialect,
+    png: PngCompression,
+    send_eye: bool,
+    send_head: bool,
+    max_commands: usize,
+    write_timeout: Duration,
+    stats: LegacyStats,
+    signals: SignalHandling,
+    events: Vec<libc::epoll_event>,
+    /// Resets from the environment socket waiting for an agent to carry them.
+    resets: Vec<MotorCommand>,
+    /// How long a new connection may take to send its version check.
+    hello_timeout: Duration,
+}
+
+fn bind(addr: SocketAddr, what: String) -> Result<TcpListener, LegacyHostCreateError> {
+    let err = |source| LegacyHostCreateError::Bind {
+        addr,
+        what: what.clone(),
+        source,
+    };
+    let l = TcpListener::bind(addr).map_err(err)?;
+    l.set_nonblocking(true).map_err(err)?;
+    Ok(l)
+}
+
+impl LegacyHost {
+    /// Binds the environment socket and one socket per legacy agent of `config`
+    /// (`[transport.legacy]`); `signals` says whether SIGINT/SIGTERM handlers are installed.
+    ///
+    /// # Errors
+    /// [`LegacyHostCreateError`].
+    pub fn create(config: &Config, signals: SignalHandling) -> Result<Self, LegacyHostCreateError> {
+        signals.apply();
+        let lc = &config.transport.legacy;
+        // SAFETY: plain syscall; the result is checked.
+        let fd = unsafe { libc::epoll_create1(libc::EPOLL_CLOEXEC) };
+        if fd < 0 {
+            return Err(LegacyHostCreateError::Epoll(io::Error::last_os_error()));
+        }
+        // SAFETY: `fd` is a new descriptor owned by nobody else.
+        let epoll = unsafe { OwnedFd::from_raw_fd(fd) };
+        let ip: IpAddr = lc.bind;
+        if !ip.is_loopback() {
+            warn!(%ip, "legacy transport listens beyond loopback: any host that can reach it may connect");
+        }
+        let env_listener = bind(
+            SocketAddr::new(ip, lc.local_port),
+            "the environment socket".into(),
+        )?;
+        let mut slots = Vec::new();
+        for a in config
+            .agents
+            .iter()
+            .filter(|a| a.transport == TransportKind::Legacy)
+        {
+            for c in &a.cameras {
+                if c.format == PixelFormat::Depth32f {
+                    return Err(LegacyHostCreateError::Camera {
+                        agent: a.id,
+                        camera: c.name.clone(),
+                        format: c.format.as_str(),
+                    });
+                }
+            }
+            let port = u32::from(lc.local_port) + 1 + a.id;
+            let port = u16::try_from(port)
+                .map_err(|_| LegacyHostCreateError::PortRange { agent: a.id })?;
+            let listener = bind(SocketAddr::new(ip, port), format!("agent {}", a.id))?;
+            let payload_len = a.frame_bytes();
+            slots.push(Slot {
+                id: a.id,
+                listener,
+                conn: None,
+                pending: Vec::new(),
+                cycle: None,
+                open: false,
+                batch: Vec::new(),
+                batch_stop: false,
+                in_cycle: 0,
+                queued: Vec::new(),
+                queued_stop: None,
+                applied: Vec::new(),
+                applied_cycle: None,
+                header: Some(Box::default()),
+                payload: Some(vec![0; payload_len]),
+                payload_len,
+                out: Vec::new(),
+                png: Default::default(),
+            });
+        }
+        let host = Self {
+            epoll,
+            env_listener,
+            env_conns: Vec::new(),
+            slots,
+            sync_mode: config.sync.sync_mode,
+            dialect: lc.dialect,
+            png: lc.png_compression,
+            send_eye: lc.send_eye_position,
+            send_head: lc.send_head_motion,
+            max_commands: config.transport.max_commands_per_cycle as usize,
+            write_timeout: config.sync.stop_timeout.max(Duration::from_secs(1)),
+            stats: LegacyStats::default(),
+            signals,
+            events: vec![libc::epoll_event { events: 0, u64: 0 }; 64],
+            resets: Vec::new(),
+            hello_timeout: HELLO_TIMEOUT,
+        };
+        host.watch(host.env_listener.as_raw_fd())
+            .map_err(LegacyHostCreateError::Epoll)?;
+        for i in 0..host.slots.len() {
+            host.watch(host.slots[i].listener.as_raw_fd())
+                .map_err(LegacyHostCreateError::Epoll)?;
+        }
+        info!(
+            port = lc.local_port,
+            %ip,
+            agents = ?host.slots.iter().map(|s| (s.id, u32::from(lc.local_port) + 1 + s.id)).collect::<Vec<_>>(),
+            "legacy host listening (environment socket, agent sockets)"
+        );
+        Ok(host)
+    }
+
+    /// Adds `fd` to the epoll set (level-triggered, readable). Closing the descriptor
+    /// removes it again.
+    fn watch(&self, fd: RawFd) -> io::Result<()> {
+        let mut ev = libc::epoll_event {
+            events: libc::EPOLLIN as u32,
+            u64: fd as u64,
+        };
+        // SAFETY: valid epoll descriptor and event struct for the call.
+        let r =
+            unsafe { libc::epoll_ctl(self.epoll.as_raw_fd(), libc::EPOLL_CTL_ADD, fd, &mut ev) };
+        if r < 0 {
+            return Err(io::Error::last_os_error());
+        }
+        Ok(())
+    }
+
+    /// Also wakes [`HostTransport::wait_activity`] (and makes [`HostTransport::activity_fd`]
+    /// readable) when `fd` (another transport's activity descriptor) is readable.
+    ///
+    /// # Errors
+    /// The `epoll_ctl` error.
+    pub fn watch_extra(&mut self, fd: RawFd) -> io::Result<()> {
+        self.watch(fd)
+    }
+
+    /// The transport's counters.
+    pub fn stats(&self) -> &LegacyStats {
+        &self.stats
+    }
+
+    /// The environment socket's address (resolves the port actually bound).
+    pub fn env_addr(&self) -> Option<SocketAddr> {
+        self.env_listener.local_addr().ok()
+    }
+
+    /// The earliest moment something must be done without input: a version check or a
+    /// stalled frame running out of time, a keep-alive due.
+    pub fn next_deadline(&self) -> Option<Instant> {
+        let mut next: Option<Instant> = None;
+        let mut at = |t: Instant| next = Some(next.map_or(t, |n| n.min(t)));
+        for s in &self.slots {
+            for p in &s.pending {
+                at(p.since + self.hello_timeout);
+            }
+            if let Some(c) = &s.conn {
+                at(c.last_write + KEEPALIVE_PERIOD);
+                if let Some(t) = c.partial_since {
+                    at(t + STALL_TIMEOUT);
+                }
+            }
+        }
+        next
+    }
+
+    /// Does everything that needs no host: accepts connections, answers version checks,
+    /// reads every socket (commands are acknowledged and queued for the next drain),
+    /// writes keep-alives, drops stalled or broken connections. Never blocks for input.
+    pub fn service(&mut self) {
+        self.accept_env();
+        self.read_env();
+        for i in 0..self.slots.len() {
+            self.accept_agent(i);
+            self.progress_pending(i);
+            self.read_agent(i);
+            self.keepalive(i);
+        }
+        self.route_resets();
+    }
+
+    fn accept_env(&mut self) {
+        loop {
+            match self.env_listener.accept() {
+                Ok((stream, peer)) => {
+                    if self.env_conns.len() >= MAX_ENV_CONNS {
+                        warn!(%peer, "legacy environment connection closed at once: {MAX_ENV_CONNS} are open already");
+                        continue;
+                    }
+                    if stream.set_nonblocking(true).is_err()
+                        || self.watch(stream.as_raw_fd()).is_err()
+                    {
+                        continue;
+                    }
+                    debug!(%peer, "legacy environment connection");
+                    self.env_conns.push(EnvConn {
+                        stream,
+                        peer,
+                        reader: FrameReader::new(MAX_INCOMING_FRAME),
+                    });
+                }
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                Err(e) => {
+                    if e.kind() != ErrorKind::WouldBlock {
+                        warn!("legacy accept on the environment socket failed: {e}");
+                    }
+                    break;
+                }
+            }
+        }
+    }
+
+    fn read_env(&mut self) {
+        let mut i = 0;
+        while i < self.env_conns.len() {
+            let c = &mut self.env_conns[i];
+            let mut drop_why = None;
+            for _ in 0..MAX_FRAMES_PER_PASS {
+                match c.reader.read_from(&mut c.stream) {
+                    Ok(FrameProgress::Frame) => {
+                        // Fields 11 and 12 are the same in both dialects.
+                        match codec::decode_frame(c.reader.body(), Dialect::Burkhardt) {
+                            Ok(Incoming::Reset(cmd)) => {
+                                if self.resets.len() < self.max_commands {
+                                    self.resets.push(cmd.encode(RESET_ACTION_ID));
+                                } else {
+                                    warn!(peer = %c.peer, "legacy reset dropped: {} are waiting already", self.resets.len());
+                                }
+                            }
+                            Ok(other) => {
+                                debug!(peer = %c.peer, ?other, "legacy environment socket: message ignored (only resets are read there)");
+                            }
+                            Err(e) => {
+                                self.stats.frames_refused += 1;
+                                warn!(peer = %c.peer, "legacy environment frame refused: {e}");
+                            }
+                        }
+                    }
+                    Ok(FrameProgress::Skipped(n)) => {
+                        self.stats.frames_refused += 1;
+                        warn!(peer = %c.peer, "legacy environment frame of {n} bytes skipped: longer than {MAX_INCOMING_FRAME}");
+                    }
+                    Ok(FrameProgress::Pending) => break,
+                    Ok(FrameProgress::Closed) => {
+                        drop_why = Some("connection closed".to_string());
+                        break;
+                    }
+                    Err(e) => {
+                        drop_why = Some(e.to_string());
+                        break;
+                    }
+                }
+            }
+            if let Some(why) = drop_why {
+                let c = self.env_conns.swap_remove(i);
+                debug!(peer = %c.peer, "legacy environment connection dropped: {why}");
+            } else {
+                i += 1;
+            }
+        }
+    }
+
+    /// Hands resets from the environment socket to the lowest connected legacy agent, in
+    /// whose batch they are applied.
+    fn route_resets(&mut self) {
+        if self.resets.is_empty() {
+            return;
+        }
+        let Some(i) = self.slots.iter().position(|s| s.conn.is_some()) else {
+            return;
+        };
+        let resets = std::mem::take(&mut self.resets);
+        for cmd in &resets {
+            Self::queue_command(&mut self.slots[i], *cmd, self.sync_mode);
+        }
+        self.resets = resets;
+        self.resets.clear();
+    }
+
+    fn accept_agent(&mut self, i: usize) {
+        loop {
+            let s = &mut self.slots[i];
+            match s.listener.accept() {
+                Ok((stream, peer)) => {
+                    if s.pending.len() >= MAX_PENDING_PER_PORT {
+                        warn!(agent = s.id, %peer, "legacy connection closed at once: {MAX_PENDING_PER_PORT} are waiting for their version check");
+                        continue;
+                    }
+                    if stream.set_nonblocking(true).is_err() || stream.set_nodelay(true).is_err() {
+                        continue;
+                    }
+                    let fd = stream.as_raw_fd();
+                    s.pending.push(Pending {
+                        stream,
+                        peer,
+                        since: Instant::now(),
+                        reader: FrameReader::new(MAX_INCOMING_FRAME),
+                    });
+                    if let Err(e) = self.watch(fd) {
+                        warn!("legacy connection dropped: epoll: {e}");
+                        self.slots[i].pending.pop();
+                    }
+                }
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                Err(e) => {
+                    if e.kind() != ErrorKind::WouldBlock {
+                        warn!(agent = s.id, "legacy accept failed: {e}");
+                    }
+                    break;
+                }
+            }
+        }
+    }
+
+    fn progress_pending(&mut self, i: usize) {
+        let mut k = 0;
+        while k < self.slots[i].pending.len() {
+            let s = &mut self.slots[i];
+            let p = &mut s.pending[k];
+            let result = match p.reader.read_from(&mut p.stream) {
+                Ok(FrameProgress::Frame) => match codec::version_check_dialect(p.reader.body()) {
+                    Some((d, v)) => match (self.dialect, d) {
+                        (LegacyDialect::Vrnew, Dialect::Burkhardt)
+                        | (LegacyDialect::Burkhardt, Dialect::Vrnew) => Err(format!(
+                            "its version check is {} but dialect = {:?} is configured",
+                            d.as_str(),
+                            self.dialect.as_str()
+                        )),
+                        _ => Ok(Some((d, v))),
+                    },
+                    None => Err("its first frame is not a version check".into()),
+                },
+                Ok(FrameProgress::Pending) => {
+                    if p.since.elapsed() >= self.hello_timeout {
+                        Err(format!(
+                            "sent no version check within {:?} of connecting",
+                            self.hello_timeout
+                        ))
+                    } else {
+                        Ok(None)
+                    }
+                }
+                Ok(FrameProgress::Skipped(n)) => Err(format!("sent a {n}-byte frame first")),
+                Ok(FrameProgress::Closed) => Err("closed before its version check".into()),
+                Err(e) => Err(e.to_string()),
+            };
+            match result {
+                Ok(None) => k += 1,
+                Err(why) => {
+                    let p = s.pending.swap_remove(k);
+                    warn!(agent = s.id, peer = %p.peer, "legacy connection dropped: {why}");
+                }
+                Ok(Some((dialect, version))) => {
+                    let p = s.pending.swap_remove(k);
+                    if version != VERSION {
+                        warn!(agent = s.id, peer = %p.peer, "legacy client speaks version {version:?}, this host {VERSION:?}: it will end itself");
+                    }
+                    let mut out = Vec::new();
+                    codec::push_message(
+                        &mut out,
+                        dialect.version_check_field(),
+                        &VersionCheck {
+                            version: Some(VERSION.into()),
+                        },
+                    );
+                    let mut stream = p.stream;
+                    let deadline = Instant::now() + Duration::from_secs(1);
+                    if let Err(e) = send_all(&mut stream, &out, deadline) {
+                        warn!(agent = s.id, peer = %p.peer, "legacy connection lost while answering its version check: {e}");
+                        continue;
+                    }
+                    if let Some(old) = s.conn.take() {
+                        warn!(agent = s.id, old = %old.peer, new = %p.peer, "legacy agent connection replaced by a new one");
+                    }
+                    // Commands of a replaced connection are not the new client's.
+                    s.batch.clear();
+                    s.queued.clear();
+                    s.queued_stop = None;
+                    info!(agent = s.id, peer = %p.peer, dialect = dialect.as_str(), "legacy agent connected");
+                    s.conn = Some(Conn {
+                        stream,
+                        peer: p.peer,
+                        reader: p.reader,
+                        dialect,
+                        partial_since: None,
+                        last_write: Instant::now(),
+                    });
+                }
+            }
+        }
+    }
+
+    fn drop_conn(s: &mut Slot, why: &str) {
+        if let Some(c) = s.conn.take() {
+            warn!(agent = s.id, peer = %c.peer, "legacy agent dropped: {why}");
+        }
+        s.open = false;
+        s.batch.clear();
+        s.batch_stop = false;
+        s.queued.clear();
+        s.queued_stop = None;
+    }
+
+    /// Queues a command for the agent's open cycle, or the next one.
+    fn queue_command(s: &mut Slot, cmd: MotorCommand, sync: bool) {
+        if s.open || !sync {
+            s.batch.push(cmd);
+            s.in_cycle += 1;
+        } else {
+            s.queued.push(cmd);
+        }
+    }
+
+    fn read_agent(&mut self, i: usize) {
+        let sync = self.sync_mode;
+        let max_commands = self.max_commands;
+        let s = &mut self.slots[i];
+        // Taken out while its frames are applied to the slot; put back unless dropped.
+        let Some(mut conn) = s.conn.take() else {
+            return;
+        };
+        let c = &mut conn;
+        let mut acks = std::mem::take(&mut s.out);
+        acks.clear();
+        let mut drop_why = None;
+        for _ in 0..MAX_FRAMES_PER_PASS {
+            match c.reader.read_from(&mut c.stream) {
+                Ok(FrameProgress::Frame) => {
+                    c.partial_since = None;
+                    match codec::decode_frame(c.reader.body(), c.dialect) {
+                        Ok(Incoming::Stop) => {
+                            if !sync {
+                                // Async mode: stops are accepted and ignored.
+                            } else if s.open {
+                                s.batch_stop = true;
+                                s.open = false;
+                            } else if s.queued_stop.is_none() {
+                                s.queued_stop = Some(s.queued.len());
+                                self.stats.stops_without_cycle += 1;
+                                debug!(
+                                    agent = s.id,
+                                    "legacy stop while no cycle is open: it ends the next one"
+                                );
+                            } else {
+                                self.stats.stops_ignored += 1;
+                                debug!(
+                                    agent = s.id,
+                                    "legacy stop ignored: one is waiting for the next cycle already"
+                                );
+                            }
+                        }
+                        Ok(Incoming::Command { action_id, command }) => {
+                            let ack = match command {
+                                Command::Turn { .. } => ActionState::Rotating,
+                                Command::Move { .. } | Command::MoveTo { .. } => {
+                                    ActionState::Walking
+                                }
+                                _ => ActionState::InExecution,
+                            };
+                            let wire = command.encode(action_id);
+                            let in_cycle = if s.open || !sync {
+                                s.in_cycle
+                            } else {
+                                s.queued.len() - s.queued_stop.unwrap_or(0)
+                            };
+                            let refused = if let Err(e) = wire.decode() {
+                                Some(e.to_string())
+                            } else if in_cycle >= max_commands {
+                                Some(format!(
+                                    "more than max_commands_per_cycle = {max_commands} in one cycle"
+                                ))
+                            } else {
+                                None
+                            };
+                            if let Some(why) = refused {
+                                self.stats.commands_refused += 1;
+                                if self.stats.commands_refused.is_power_of_two() {
+                                    warn!(
+                                        agent = s.id,
+                                        action_id,
+                                        total = self.stats.commands_refused,
+                                        "legacy command answered Aborted: {why}"
+                                    );
+                                }
+                                push_status(&mut acks, action_id, ActionState::Aborted);
+                            } else {
+                                push_status(&mut acks, action_id, ack);
+                                Self::queue_command(s, wire, sync);
+                            }
+                        }
+                        Ok(Incoming::Reset(cmd)) => {
+                            Self::queue_command(s, cmd.encode(RESET_ACTION_ID), sync);
+                        }
+                        Ok(Incoming::VersionCheck(_)) => {
+                            codec::push_message(
+                                &mut acks,
+                                c.dialect.version_check_field(),
+                                &VersionCheck {
+                                    version: Some(VERSION.into()),
+                                },
+                            );
+                        }
+                        Ok(Incoming::Ignored(what)) => {
+                            debug!(agent = s.id, "legacy {what} ignored");
+                        }
+                        Err(e) => {
+                            self.stats.frames_refused += 1;
+                            warn!(agent = s.id, peer = %c.peer, "legacy frame refused, nothing of it applied: {e}");
+                        }
+                    }
+                }
+                Ok(FrameProgress::Skipped(n)) => {
+                    self.stats.frames_refused += 1;
+                    warn!(agent = s.id, peer = %c.peer, "legacy frame of {n} bytes skipped unread: longer than {MAX_INCOMING_FRAME}");
+                }
+                Ok(FrameProgress::Pending) => {
+                    if c.reader.mid_frame() {
+                        let now = Instant::now();
+                        let since = *c.partial_since.get_or_insert(now);
+                        if now.duration_since(since) >= STALL_TIMEOUT {
+                            drop_why = Some(format!(
+                                "stalled mid-frame: {} within {STALL_TIMEOUT:?}",
+                                c.reader.progress()
+                            ));
+                        }
+                    }
+                    break;
+                }
+                Ok(FrameProgress::Closed) if c.reader.mid_frame() => {
+                    drop_why = Some(format!(
+                        "connection closed mid-frame after {} (truncated frame not applied)",
+                        c.reader.progress()
+                    ));
+                    break;
+                }
+                Ok(FrameProgress::Closed) => {
+                    drop_why = Some("connection closed".into());
+                    break;
+                }
+                Err(e) => {
+                    drop_why = Some(e.to_string());
+                    break;
+                }
+            }
+        }
+        if drop_why.is_none() && !acks.is_empty() {
+            let deadline = Instant::now() + self.write_timeout;
+            match send_all(&mut c.stream, &acks, deadline) {
+                Ok(()) => c.last_write = Instant::now(),
+                Err(e) => drop_why = Some(format!("cannot send statuses: {e}")),
+            }
+        }
+        s.out = acks;
+        s.conn = Some(conn);
+        if let Some(why) = drop_why {
+            Self::drop_conn(s, &why);
+        }
+    }
+
+    fn keepalive(&mut self, i: usize) {
+        let s = &mut self.slots[i];
+        let Some(c) = &mut s.conn else {
+            return;
+        };
+        if c.last_write.elapsed() < KEEPALIVE_PERIOD {
+            return;
+        }
+        let mut out = std::mem::take(&mut s.out);
+        out.clear();
+        codec::push_debug(&mut out, "vrsync keep-alive");
+        let r = send_all(&mut c.stream, &out, Instant::now() + self.write_timeout);
+        s.out = out;
+        match r {
+            Ok(()) => c.last_write = Instant::now(),
+            Err(e) => Self::drop_conn(s, &format!("cannot send a keep-alive: {e}")),
+        }
+    }
+
+    /// Waits on the epoll set (and so on any extra descriptor watched) for at most
+    /// `timeout`, bounded by [`LegacyHost::next_deadline`]; returns whether something is
+    /// ready. Does not service.
+    fn epoll_wait(&mut self, timeout: Duration) -> Result<bool, HostTransportError> {
+        let timeout = match self.next_deadline() {
+            Some(d) => timeout.min(d.saturating_duration_since(Instant::now())),
+            None => timeout,
+        };
+        let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
+        let ms = if ms == 0 && !timeout.is_zero() { 1 } else { ms };
+        // SAFETY: `events` is a valid buffer of `events.len()` entries for the call.
+        let n = unsafe {
+            libc::epoll_wait(
+                self.epoll.as_raw_fd(),
+                self.events.as_mut_ptr(),
+                self.events.len() as i32,
+                ms,
+            )
+        };
+        if n < 0 {
+            let e = io::Error::last_os_error();
+            if e.kind() == ErrorKind::Interrupted {
+                return Ok(false);
+            }
+            return Err(HostTransportError::Wait {
+                reason: format!("epoll_wait: {e}"),
+            });
+        }
+        Ok(n > 0)
+    }
+
+    fn encode_png(&mut self, slot: usize, which: usize, desc: &ImageDesc, payload: &[u8]) {
+        let started = Instant::now();
+        let out = &mut self.slots[slot].png[which];
+        out.clear();
+        let start = desc.offset as usize;
+        let data = payload.get(start..start + desc.len as usize).unwrap_or(&[]);
+        let color = match desc.pixel_format() {
+            Some(PixelFormat::Rgba8) => png::ColorType::Rgba,
+            Some(PixelFormat::Gray8) => png::ColorType::Grayscale,
+            _ => png::ColorType::Rgb,
+        };
+        let mut enc = png::Encoder::new(&mut *out, desc.width_px, desc.height_px);
+        enc.set_color(color);
+        enc.set_depth(png::BitDepth::Eight);
+        enc.set_compression(match self.png {
+            PngCompression::Fastest => png::Compression::Fastest,
+            PngCompression::Fast => png::Compression::Fast,
+            PngCompression::Balanced => png::Compression::Balanced,
+            PngCompression::High => png::Compression::High,
+        });
+        let r = enc
+            .write_header()
+            .and_then(|mut w| w.write_image_data(data).and_then(|()| w.finish()));
+        if let Err(e) = r {
+            // Only a table/size mismatch can get here, a bug: an empty image tells the
+            // client nothing is there rather than nothing at all.
+            warn!(agent = self.slots[slot].id, "PNG encoding failed: {e}");
+            self.slots[slot].png[which].clear();
+        }
+        self.stats.png_images += 1;
+        self.stats.png_time += started.elapsed();
+    }
+
+    /// Writes one cycle's messages for slot `slot` into its `out` buffer.
+    fn build_cycle(&mut self, slot: usize, header: &SensorHeader, payload: &[u8]) {
+        let dialect = match &self.slots[slot].conn {
+            Some(c) => c.dialect,
+            None => return,
+        };
+        let mut out = std::mem::take(&mut self.slots[slot].out);
+        out.clear();
+        // 1. Statuses and collisions of the last cycle's commands.
+        let s = &mut self.slots[slot];
+        if header.previous_rejected > 0 && s.applied_cycle.is_some_and(|c| c + 1 == header.cycle) {
+            // The simulator rejected some of the commands handed over last cycle and
+            // reports no status for them: those without one end Aborted.
+            for &id in &s.applied {
+                if !header.statuses().iter().any(|st| st.action_id == id) {
+                    push_status(&mut out, id, ActionState::Aborted);
+                    self.stats.commands_rejected += 1;
+                }
+            }
+        }
+        for c in header.collisions() {
+            codec::push_message(
+                &mut out,
+                field::COLLISION,
+                &codec::Collision {
+                    action_id: Some(c.action_id as i32),
+                    collider_id: Some(c.collider_id as i32),
+                },
+            );
+        }
+        for st in header.statuses() {
+            if st.action_id != RESET_ACTION_ID {
+                codec::push_message(
+                    &mut out,
+                    field::ACTION_STATUS,
+                    &ActionStatus {
+                        action_id: Some(st.action_id as i32),
+                        status: Some(st.state as i32),
+                    },
+                );
+            }
+        }
+        // 2. Images.
+        let descs = header.image_descs();
+        let pick = |name: &str, index: usize| {
+            descs
+                .iter()
+                .position(|d| d.name() == name)
+                .or_else(|| (index < descs.len()).then_some(index))
+        };
+        let left = pick("left", 0);
+        let right = pick("right", 1).or(left);
+        let main = match dialect {
+            Dialect::Burkhardt => pick("main", 2).or(left),
+            Dialect::Vrnew => None,
+        };
+        let mut which_of = [usize::MAX; 3];
+        for (k, cam) in [left, right, main].into_iter().enumerate() {
+            let Some(cam) = cam else { continue };
+            // An image used twice is encoded once.
+            if let Some(j) = (0..k).find(|&j| [left, right, main][j] == Some(cam)) {
+                which_of[k] = which_of[j];
+                continue;
+            }
+            which_of[k] = k;
+            let desc = descs[cam];
+            self.encode_png(slot, k, &desc, payload);
+        }
+        let s = &mut self.slots[slot];
+        let png = |k: usize| -> &[u8] { s.png.get(which_of[k]).map_or(&[], Vec::as_slice) };
+        codec::push_images(&mut out, png(0), png(1), main.is_some().then(|| png(2)));
+        // 3. Grid position; 4. optional sensors.
+        let g = &header.grid;
+        codec::push_message(
+            &mut out,
+            field::GRID_POSITION,
+            &GridPosition {
+                x: Some(g.position[0]),
+                y: Some(g.position[1]),
+                z: Some(g.position[2]),
+                rotation_x: Some(g.rotation_deg[0]),
+                rotation_y: Some(g.rotation_deg[1]),
+                rotation_z: Some(g.rotation_deg[2]),
+            },
+        );
+        if header.reward != 0.0 {
+            codec::push_message(
+                &mut out,
+                field::REWARD,
+                &Reward {
+                    reward: Some(header.reward),
+                },
+            );
+        }
+        if self.send_eye {
+            let e = &header.eye;
+            codec::push_message(
+                &mut out,
+                field::EYE_POSITION,
+                &EyePosition {
+                    x: Some(e.rotation_deg[0]),
+                    y: Some(e.rotation_deg[1]),
+                    z: Some(e.rotation_deg[2]),
+                    vx: Some(e.rotation_velocity_deg[0]),
+                    vy: Some(e.rotation_velocity_deg[1]),
+                    vz: Some(e.rotation_velocity_deg[2]),
+                },
+            );
+        }
+        if self.send_head {
+            let h = &header.head_motion;
+            codec::push_message(
+                &mut out,
+                dialect.head_motion_field(),
+                &HeadMotion {
+                    vx: Some(h.velocity[0]),
+                    vy: Some(h.velocity[1]),
+                    vz: Some(h.velocity[2]),
+                    ax: Some(h.acceleration[0]),
+                    ay: Some(h.acceleration[1]),
+                    az: Some(h.acceleration[2]),
+                    rvx: Some(h.angular_velocity_deg[0]),
+                    rvy: Some(h.angular_velocity_deg[1]),
+                    rvz: Some(h.angular_velocity_deg[2]),
+                    rax: Some(h.angular_acceleration_deg[0]),
+                    ray: Some(h.angular_acceleration_deg[1]),
+                    raz: Some(h.angular_acceleration_deg[2]),
+                },
+            );
+        }
+        // 5. StartSync (sync mode); 6. a Debug trailer naming the cycle.
+        if self.sync_mode {
+            codec::push_message(&mut out, field::START_SYNC, &codec::Empty {});
+        }
+        codec::push_debug(&mut out, &format!("vrsync cycle {}", header.cycle));
+        self.slots[slot].out = out;
+    }
+}
+
+/// Appends an ActionExecutationStatus frame.
+fn push_status(out: &mut Vec<u8>, action_id: u32, state: ActionState) {
+    codec::push_message(
+        out,
+        field::ACTION_STATUS,
+        &ActionStatus {
+            action_id: Some(action_id as i32),
+            status: Some(state as i32),
+        },
+    );
+}
+
+/// Writes all of `data` to a non-blocking socket, waiting for writability until
+/// `deadline` (whole frames only: the clients desynchronise on a partial one).
+fn send_all(stream: &mut TcpStream, mut data: &[u8], deadline: Instant) -> io::Result<()> {
+    while !data.is_empty() {
+        match stream.write(data) {
+            Ok(0) => return Err(io::Error::new(ErrorKind::WriteZero, "connection closed")),
+            Ok(n) => data = &data[n..],
+            Err(e) if e.kind() == ErrorKind::Interrupted => {}
+            Err(e) if e.kind() == ErrorKind::WouldBlock => {
+                let left = deadline.saturating_duration_since(Instant::now());
+                if left.is_zero() {
+                    return Err(io::Error::new(
+                        ErrorKind::TimedOut,
+                        "the client does not read",
+                    ));
+                }
+                let mut pfd = libc::pollfd {
+                    fd: stream.as_raw_fd(),
+                    events: libc::POLLOUT,
+                    revents: 0,
+                };
+                let ms = left.as_millis().clamp(1, i32::MAX as u128) as i32;
+                // SAFETY: one valid pollfd for the duration of the call.
+                unsafe { libc::poll(&mut pfd, 1, ms) };
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(())
+}
+
+impl HostTransport for LegacyHost {
+    type Loan = LegacyFrameLoan;
+
+    fn is_connected(&self, slot: usize) -> bool {
+        self.slots.get(slot).is_some_and(|s| s.conn.is_some())
+    }
+
+    fn loan(&mut self, slot: usize) -> Result<LegacyFrameLoan, HostTransportError> {
+        let s = self
+            .slots
+            .get_mut(slot)
+            .ok_or(HostTransportError::NoSuchSlot { slot })?;
+        let mut header = s.header.take().unwrap_or_default();
+        *header = SensorHeader::default();
+        let payload = s.payload.take().unwrap_or_else(|| vec![0; s.payload_len]);
+        Ok(LegacyFrameLoan { header, payload })
+    }
+
+    fn publish(&mut self, slot: usize, frame: LegacyFrameLoan) -> Result<bool, HostTransportError> {
+        if slot >= self.slots.len() {
+            return Err(HostTransportError::NoSuchSlot { slot });
+        }
+        let LegacyFrameLoan { header, payload } = frame;
+        // Read what arrived first: a stop sent before this frame belongs to the last one.
+        self.service();
+        let delivered = if self.slots[slot].conn.is_some() {
+            self.build_cycle(slot, &header, &payload);
+            let deadline = Instant::now() + self.write_timeout;
+            let s = &mut self.slots[slot];
+            let r = match &mut s.conn {
+                Some(c) => send_all(&mut c.stream, &s.out, deadline).map(|()| {
+                    c.last_write = Instant::now();
+                }),
+                None => Ok(()),
+            };
+            match r {
+                Ok(()) => true,
+                Err(e) => {
+                    Self::drop_conn(s, &format!("cannot send its frame: {e}"));
+                    false
+                }
+            }
+        } else {
+            false
+        };
+        let s = &mut self.slots[slot];
+        s.header = Some(header);
+        s.payload = Some(payload);
+        if !delivered {
+            return Ok(false);
+        }
+        let cycle = s.header.as_ref().map_or(0, |h| h.cycle);
+        s.cycle = Some(cycle);
+        if self.sync_mode {
+            // Commands that arrived while no cycle was open are this cycle's; a stop
+            // among them ends it at once (the wire has no cycle number).
+            match s.queued_stop.take() {
+                Some(n) => {
+                    s.in_cycle = n;
+                    s.batch.extend(s.queued.drain(..n));
+                    s.batch_stop = true;
+                    s.open = false;
+                }
+                None => {
+                    s.in_cycle = s.queued.len();
+                    s.batch.append(&mut s.queued);
+                    s.open = true;
+                }
+            }
+        } else {
+            s.in_cycle = 0;
+            s.open = true;
+        }
+        Ok(true)
+    }
+
+    fn signal_start(&mut self) -> Result<(), HostTransportError> {
+        // StartSync is part of each agent's frame.
+        Ok(())
+    }
+
+    fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError> {
+        self.service();
+        for (slot, s) in self.slots.iter_mut().enumerate() {
+            let Some(cycle) = s.cycle else { continue };
+            if s.batch.is_empty() && !s.batch_stop {
+                continue;
+            }
+            let header = MotorHeader {
+                protocol_version: PROTOCOL_VERSION,
+                agent_id: s.id,
+                cycle,
+                flags: if s.batch_stop { MOTOR_FLAG_STOP } else { 0 },
+                command_count: s.batch.len() as u32,
+            };
+            if s.applied_cycle != Some(cycle) {
+                s.applied.clear();
+                s.applied_cycle = Some(cycle);
+            }
+            s.applied.extend(
+                s.batch
+                    .iter()
+                    .map(|c| c.action_id)
+                    .filter(|&id| id != RESET_ACTION_ID),
+            );
+            sink(slot, &header, &s.batch);
+            s.batch.clear();
+            s.batch_stop = false;
+        }
+        Ok(())
+    }
+
+    fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
+        // Batches already read (at publish, or by a service of another transport's wait)
+        // are activity too.
+        let ready = self
+            .slots
+            .iter()
+            .any(|s| s.cycle.is_some() && (!s.batch.is_empty() || s.batch_stop));
+        if !ready {
+            self.epoll_wait(timeout)?;
+        }
+        self.service();
+        if self.signals.termination_requested() {
+            return Err(HostTransportError::Terminated);
+        }
+        Ok(())
+    }
+
+    fn update_connections(&mut self) -> Result<(), HostTransportError> {
+        Ok(())
+    }
+
+    fn termination_requested(&self) -> bool {
+        self.signals.termination_requested()
+    }
+
+    fn activity_fd(&self) -> Option<RawFd> {
+        Some(self.epoll.as_raw_fd())
+    }
+
+    fn clear_activity(&mut self) {
+        // Level-triggered: the set is readable while a socket has unread input. Reading
+        // it is the clearing.
+        self.service();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! The legacy host over real loopback sockets, driven through the host contract; the
+    //! "clients" are raw byte streams. Bad input of every kind (issue 14 item 5).
+
+    use std::io::Read;
+    use std::path::Path;
+    use std::sync::atomic::{AtomicU32, Ordering};
+
+    use prost::Message;
+
+    use super::*;
+    use crate::transport::legacy::codec::{AgentMovement, Images, Reset, single_field};
+
+    /// Creates a host for legacy agents `ids`, on a port range found by trying: a base
+    /// port derived from the process id and a counter, and on any bind conflict (another
+    /// test or program holds one of the ports) the next candidate. The host binds the
+    /// ports itself, so there is no window between choosing and binding.
+    fn host(ids: &[u32], extra: &str) -> (LegacyHost, u16) {
+        static N: AtomicU32 = AtomicU32::new(0);
+        for _ in 0..50 {
+            let n = N.fetch_add(1, Ordering::Relaxed);
+            let base =
+                20_000 + (std::process::id().wrapping_mul(7919).wrapping_add(n * 263)) % 40_000;
+            let base = base as u16;
+            let mut text = format!(
+                "session = \"legacy-unit\"\n[sync]\nstop_timeout = 5\n[transport]\nmax_commands_per_cycle = 8\n[transport.legacy]\nlocal_port = {base}\n{extra}\n"
+            );
+            for id in ids {
+                text += &format!(
+                    "[[agent]]\nid = {id}\ntransport = \"legacy\"\n[[agent.camera]]\nname = \"left\"\nwidth = 4\nheight = 3\n[[agent.camera]]\nname = \"right\"\nwidth = 4\nheight = 3\n"
+                );
+            }
+            let config = Config::from_toml_str(&text, Path::new("unit.toml")).unwrap();
+            match LegacyHost::create(&config, SignalHandling::Leave) {
+                Ok(h) => return (h, base),
+                Err(LegacyHostCreateError::Bind { .. }) => continue,
+                Err(e) => panic!("{e}"),
+            }
+        }
+        panic!("no free legacy port range found in 50 attempts");
+    }
+
+    struct Client {
+        s: TcpStream,
+    }
+
+    impl Client {
+        fn connect(port: u16) -> Self {
+            let s = TcpStream::connect(("127.0.0.1", port)).unwrap();
+            s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+            Self { s }
+        }
+
+        fn raw(&mut self, bytes: &[u8]) {
+            self.s.write_all(bytes).unwrap();
+        }
+
+        fn frame(&mut self, body: &[u8]) {
+            self.raw(&(body.len() as i32).to_le_bytes());
+            self.raw(body);
+        }
+
+        fn message(&mut self, field: u32, msg: &impl Message) {
+            let mut out = Vec::new();
+            codec::push_message(&mut out, field, msg);
+            self.raw(&out);
+        }
+
+        fn version(&mut self, dialect: Dialect) {
+            self.message(
+                dialect.version_check_field(),
+                &VersionCheck {
+                    version: Some("1.0".into()),
+                },
+            );
+        }
+
+        fn movement(&mut self, id: i32) {
+            self.message(
+                field::AGENT_MOVEMENT,
+                &AgentMovement {
+                    action_id: Some(id),
+                    degree: Some(0.0),
+                    distance: Some(1.0),
+                },
+            );
+        }
+
+        /// Reads one frame body (blocking, with the read timeout).
+        fn read(&mut self) -> Vec<u8> {
+            let mut len = [0u8; 4];
+            self.s.read_exact(&mut len).unwrap();
+            let mut body = vec![0; i32::from_le_bytes(len) as usize];
+            self.s.read_exact(&mut body).unwrap();
+            body
+        }
+
+        /// Reads frames up to and including the Debug trailer of a cycle; returns the
+        /// field numbers in order and the statuses seen.
+        fn cycle(&mut self) -> (Vec<u32>, Vec<(i32, i32)>) {
+            let (mut fields, mut statuses) = (Vec::new(), Vec::new());
+            loop {
+                let body = self.read();
+                let (f, p) = single_field(&body, Dialect::Burkhardt).unwrap();
+                if f == field::ACTION_STATUS {
+                    let st = ActionStatus::decode(p).unwrap();
+                    statuses.push((st.action_id.unwrap(), st.status.unwrap()));
+                }
+                if f == field::IMAGES {
+                    let im = Images::decode(p).unwrap();
+                    let png = im.left.unwrap();
+                    assert_eq!(&png[1..4], b"PNG");
+                }
+                fields.push(f);
+                if f == field::DEBUG && fields.contains(&field::START_SYNC) {
+                    return (fields, statuses);
+                }
+            }
+        }
+
+        /// Reads one ActionExecutationStatus.
+        fn status(&mut self) -> (i32, i32) {
+            let body = self.read();
+            let (f, p) = single_field(&body, Dialect::Burkhardt).unwrap();
+            assert_eq!(f, field::ACTION_STATUS);
+            let st = ActionStatus::decode(p).unwrap();
+            (st.action_id.unwrap(), st.status.unwrap())
+        }
+
+        /// Whether the host closed the connection (reads until EOF or an error).
+        fn closed(&mut self) -> bool {
+            let mut buf = [0u8; 4096];
+            loop {
+                match self.s.read(&mut buf) {
+                    Ok(0) => return true,
+                    Ok(_) => {}
+                    Err(e) if e.kind() == ErrorKind::ConnectionReset => return true,
+                    Err(_) => return false,
+                }
+            }
+        }
+    }
+
+    /// Services the host until `done` holds (deadline 10 s).
+    fn pump(h: &mut LegacyHost, mut done: impl FnMut(&mut LegacyHost) -> bool) {
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while !done(h) {
+            assert!(
+                Instant::now() < deadline,
+                "condition not reached within 10 s"
+            );
+            h.wait_activity(Duration::from_millis(20)).unwrap();
+        }
+    }
+
+    fn publish(h: &mut LegacyHost, slot: usize, cycle: u64, previous_rejected: u32) -> bool {
+        let mut loan = h.loan(slot).unwrap();
+        let (header, payload) = loan.parts_mut();
+        let (descs, _) = crate::wire::image_layout([
+            ("left", 4, 3, PixelFormat::Rgb8),
+            ("right", 4, 3, PixelFormat::Rgb8),
+        ]);
+        header.cycle = cycle;
+        header.images = descs;
+        header.image_count = 2;
+        header.previous_rejected = previous_rejected;
+        payload.fill(7);
+        h.publish(slot, loan).unwrap()
+    }
+
+    type Batch = (usize, u64, bool, Vec<MotorCommand>);
+
+    fn drain(h: &mut LegacyHost) -> Vec<Batch> {
+        let mut got = Vec::new();
+        h.drain(&mut |slot, header, commands| {
+            got.push((slot, header.cycle, header.is_stop(), commands.to_vec()));
+        })
+        .unwrap();
+        got
+    }
+
+    /// Connects agent `slot` (port base + 1 + id) and passes the version check.
+    fn join(h: &mut LegacyHost, base: u16, id: u32, slot: usize, dialect: Dialect) -> Client {
+        let mut c = Client::connect(base + 1 + id as u16);
+        c.version(dialect);
+        let me = c.s.local_addr().unwrap();
+        pump(h, |h| {
+            h.slots[slot].conn.as_ref().is_some_and(|x| x.peer == me)
+        });
+        let reply = c.read();
+        assert_eq!(
+            codec::version_check_dialect(&reply),
+            Some((dialect, "1.0".into()))
+        );
+        c
+    }
+
+    #[test]
+    fn a_cycle_in_order_with_commands_acknowledged_and_the_zero_length_stop() {
+        for dialect in [Dialect::Vrnew, Dialect::Burkhardt] {
+            let (mut h, base) = host(&[0], "");
+            let mut c = join(&mut h, base, 0, 0, dialect);
+            assert!(publish(&mut h, 0, 0, 0));
+            let (fields, _) = c.cycle();
+            let images = fields.iter().position(|&f| f == field::IMAGES).unwrap();
+            let grid = fields
+                .iter()
+                .position(|&f| f == field::GRID_POSITION)
+                .unwrap();
+            let start = fields.iter().position(|&f| f == field::START_SYNC).unwrap();
+            assert!(images < grid && grid < start, "{fields:?}");
+            c.movement(41);
+            c.frame(&[]);
+            let mut got = Vec::new();
+            pump(&mut h, |h| {
+                got.extend(drain(h));
+                got.iter().any(|b| b.2)
+            });
+            let commands: Vec<_> = got
+                .iter()
+                .flat_map(|b| b.3.iter().map(|c| c.action_id))
+                .collect();
+            assert_eq!(commands, [41]);
+            assert!(got.iter().all(|b| b.1 == 0));
+            // Acknowledged on receipt: Walking for a movement.
+            assert_eq!(c.status(), (41, ActionState::Walking as i32));
+        }
+    }
+
+    #[test]
+    fn a_stop_while_no_cycle_is_open_ends_the_next_and_is_counted() {
+        let (mut h, base) = host(&[0], "");
+        let mut c = join(&mut h, base, 0, 0, Dialect::Vrnew);
+        assert!(publish(&mut h, 0, 0, 0));
+        c.cycle();
+        c.frame(&[0xAA, 0x01, 0x00]); // a real StopSync
+        pump(&mut h, |h| drain(h).iter().any(|b| b.2 && b.1 == 0));
+        c.frame(&[]); // no cycle open
+        pump(&mut h, |h| h.stats().stops_without_cycle == 1);
+        assert!(publish(&mut h, 0, 1, 0));
+        let got = drain(&mut h);
+        assert_eq!(got.len(), 1);
+        assert_eq!((got[0].1, got[0].2), (1, true));
+    }
+
+    #[test]
+    fn bad_frames_are_refused_and_the_connection_and_other_agents_go_on() {
+        let (mut h, base) = host(&[0, 1], "");
+        let mut a = join(&mut h, base, 0, 0, Dialect::Burkhardt);
+        let mut b = join(&mut h, base, 1, 1, Dialect::Vrnew);
+        assert!(publish(&mut h, 0, 0, 0));
+        assert!(publish(&mut h, 1, 0, 0));
+        a.cycle();
+        b.cycle();
+        // Garbage, an unknown field, two messages, an oversize frame: each refused.
+        a.frame(&[0xFF; 9]);
+        a.frame(&[0x8A, 0x02, 0x00]);
+        a.frame(&[0x0A, 0x00, 0xAA, 0x01, 0x00]);
+        a.raw(&(MAX_INCOMING_FRAME as i32 + 1).to_le_bytes());
+        a.raw(&vec![0x0A; MAX_INCOMING_FRAME + 1]);
+        // A command with a non-finite argument: answered Aborted, not applied.
+        a.message(
+            field::AGENT_MOVEMENT,
+            &AgentMovement {
+                action_id: Some(5),
+                degree: Some(f32::NAN),
+                distance: Some(1.0),
+            },
+        );
+        a.frame(&[]);
+        let mut got = Vec::new();
+        pump(&mut h, |h| {
+            got.extend(drain(h));
+            got.iter().any(|b| b.0 == 0 && b.2)
+        });
+        assert!(
+            got.iter().all(|b| b.3.is_empty()),
+            "nothing applied: {got:?}"
+        );
+        assert_eq!(h.stats().frames_refused, 4);
+        assert_eq!(a.status(), (5, ActionState::Aborted as i32));
+        // A negative length ends that connection, not the other agent's.
+        a.raw(&(-1i32).to_le_bytes());
+        pump(&mut h, |h| !h.is_connected(0));
+        assert!(a.closed());
+        b.frame(&[]);
+        pump(&mut h, |h| drain(h).iter().any(|x| x.0 == 1 && x.2));
+        assert!(h.is_connected(1));
+    }
+
+    #[test]
+    fn a_truncated_frame_is_not_applied() {
+        let (mut h, base) = host(&[0], "");
+        let mut c = join(&mut h, base, 0, 0, Dialect::Vrnew);
+        assert!(publish(&mut h, 0, 0, 0));
+        c.cycle();
+        let mut out = Vec::new();
+        codec::push_message(
+            &mut out,
+            field::AGENT_MOVEMENT,
+            &AgentMovement {
+                action_id: Some(9),
+                degree: Some(1.0),
+                distance: Some(1.0),
+            },
+        );
+        c.raw(&out[..out.len() - 2]);
+        drop(c);
+        pump(&mut h, |h| !h.is_connected(0));
+        assert!(drain(&mut h).is_empty());
+    }
+
+    #[test]
+    fn a_second_connection_replaces_the_first_and_a_silent_one_replaces_nothing() {
+        let (mut h, base) = host(&[0], "");
+        h.hello_timeout = Duration::from_millis(200);
+        let mut first = join(&mut h, base, 0, 0, Dialect::Vrnew);
+        // Connects and says nothing: dropped after the version-check timeout; the first
+        // connection stays.
+        let mut silent = Client::connect(base + 1);
+        pump(&mut h, |h| h.slots[0].pending.len() == 1);
+        pump(&mut h, |h| h.slots[0].pending.is_empty());
+        assert!(silent.closed());
+        assert!(h.is_connected(0));
+        // A real second client replaces the first.
+        let mut second = join(&mut h, base, 0, 0, Dialect::Burkhardt);
+        assert!(first.closed());
+        assert!(publish(&mut h, 0, 0, 0));
+        second.cycle();
+    }
+
+    #[test]
+    fn a_flood_of_commands_is_bounded_per_cycle_and_the_rest_aborted() {
+        let (mut h, base) = host(&[0], "");
+        let mut c = join(&mut h, base, 0, 0, Dialect::Vrnew);
+        assert!(publish(&mut h, 0, 0, 0));
+        c.cycle();
+        for id in 0..20 {
+            c.movement(id);
+        }
+        c.frame(&[]);
+        let mut got = Vec::new();
+        pump(&mut h, |h| {
+            got.extend(drain(h));
+            got.iter().any(|b| b.2)
+        });
+        let applied: Vec<u32> = got
+            .iter()
+            .flat_map(|b| b.3.iter().map(|c| c.action_id))
+            .collect();
+        assert_eq!(applied, (0..8).collect::<Vec<_>>());
+        let statuses: Vec<_> = (0..20).map(|_| c.status()).collect();
+        for (id, st) in statuses {
+            let want = if id < 8 {
+                ActionState::Walking
+            } else {
+                ActionState::Aborted
+            };
+            assert_eq!(st, want as i32, "action {id}");
+        }
+        assert_eq!(h.stats().commands_refused, 12);
+    }
+
+    #[test]
+    fn environment_resets_ride_with_the_lowest_agent_and_rejected_commands_end_aborted() {
+        let (mut h, base) = host(&[2, 5], "");
+        let mut env = Client::connect(base);
+        let mut a = join(&mut h, base, 2, 0, Dialect::Vrnew);
+        let _b = join(&mut h, base, 5, 1, Dialect::Vrnew);
+        assert!(publish(&mut h, 0, 0, 0));
+        a.cycle();
+        env.message(
+            field::TRIAL_RESET,
+            &Reset {
+                reset_type: Some(3),
+            },
+        );
+        a.movement(77);
+        a.frame(&[]);
+        let mut got = Vec::new();
+        pump(&mut h, |h| {
+            got.extend(drain(h));
+            got.iter().any(|b| b.2) && got.iter().map(|b| b.3.len()).sum::<usize>() == 2
+        });
+        let reset = got
+            .iter()
+            .flat_map(|b| b.3.iter())
+            .find(|c| c.action_id == RESET_ACTION_ID)
+            .unwrap();
+        assert_eq!(reset.decode(), Ok(Command::TrialReset { reset_type: 3 }));
+        assert!(got.iter().all(|b| b.0 == 0));
+        assert_eq!(a.status(), (77, ActionState::Walking as i32));
+        // The simulator rejected one command of cycle 0 and reported no status for it.
+        assert!(publish(&mut h, 0, 1, 1));
+        let (_, statuses) = a.cycle();
+        assert_eq!(statuses, [(77, ActionState::Aborted as i32)]);
+        assert_eq!(h.stats().commands_rejected, 1);
+    }
+}
