@@ -12,6 +12,7 @@ mod cpp;
 mod examples;
 mod faults;
 mod hostile;
+mod legacy;
 mod logs;
 mod sync;
 mod world;

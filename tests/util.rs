@@ -426,6 +426,14 @@ impl Proc {
         }
     }
 
+    /// Whether the process has exited (without reaping its output: [`Proc::wait`] still
+    /// returns it).
+    pub fn try_exited(&mut self) -> bool {
+        self.child
+            .as_mut()
+            .is_some_and(|c| matches!(c.try_wait(), Ok(Some(_))))
+    }
+
     pub fn pid(&self) -> u32 {
         self.child.as_ref().expect("child").id()
     }

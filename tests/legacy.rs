@@ -1,0 +1,718 @@
+//! Agents written for the original system, against `vr-sim run` over the legacy transport.
+//!
+//! The client here is written from the specification (`shared/reference/legacy-protocol.md`),
+//! not from the host's code: its own `MsgObject` structs (both dialects) from the field
+//! tables, its own framing, PNG decoding with the `png` crate.
+//!
+//! **Ports.** The legacy transport cannot bind port 0: agent ports are derived from
+//! `local_port` (`local_port + 1 + id`), as the original clients expect. So each test picks
+//! a base port from its process id and a counter, checks that the base and every agent
+//! port can be bound right now, and starts the host; if the host still fails to bind (a
+//! port was taken in between), the run is retried with the next candidate. The host
+//! reports which it bound through its `listening` event, so nothing waits on log wording.
+
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::{Duration, Instant};
+
+use prost::Message;
+
+use crate::util::{self, Events, Proc};
+
+// ----------------------------------------------------------------------------------------
+// The protocol, from the specification's field tables
+// ----------------------------------------------------------------------------------------
+
+#[derive(Clone, PartialEq, Message)]
+struct AgentMovement {
+    #[prost(int32, optional, tag = "1")]
+    action_id: Option<i32>,
+    #[prost(float, optional, tag = "2")]
+    degree: Option<f32>,
+    #[prost(float, optional, tag = "3")]
+    distance: Option<f32>,
+}
+
+#[derive(Clone, PartialEq, Message)]
+struct AgentTurn {
+    #[prost(int32, optional, tag = "1")]
+    action_id: Option<i32>,
+    #[prost(float, optional, tag = "2")]
+    degree: Option<f32>,
+}
+
+#[derive(Clone, PartialEq, Message)]
+struct GridPosition {
+    #[prost(float, optional, tag = "1")]
+    x: Option<f32>,
+    #[prost(float, optional, tag = "2")]
+    y: Option<f32>,
+    #[prost(float, optional, tag = "3")]
+    z: Option<f32>,
+    #[prost(float, optional, tag = "4")]
+    rx: Option<f32>,
+    #[prost(float, optional, tag = "5")]
+    ry: Option<f32>,
+    #[prost(float, optional, tag = "6")]
+    rz: Option<f32>,
+}
+
+#[derive(Clone, PartialEq, Message)]
+struct ActionStatus {
+    #[prost(int32, optional, tag = "1")]
+    action_id: Option<i32>,
+    #[prost(int32, optional, tag = "2")]
+    status: Option<i32>,
+}
+
+#[derive(Clone, PartialEq, Message)]
+struct Images {
+    #[prost(bytes = "vec", optional, tag = "1")]
+    left: Option<Vec<u8>>,
+    #[prost(bytes = "vec", optional, tag = "2")]
+    right: Option<Vec<u8>>,
+    #[prost(bytes = "vec", optional, tag = "3")]
+    main: Option<Vec<u8>>,
+}
+
+#[derive(Clone, PartialEq, Message)]
+struct ResetMsg {
+    #[prost(int32, optional, tag = "1")]
+    reset_type: Option<i32>,
+}
+
+#[derive(Clone, PartialEq, Message)]
+struct Empty {}
+
+#[derive(Clone, PartialEq, Message)]
+struct VersionCheck {
+    #[prost(string, optional, tag = "1")]
+    version: Option<String>,
+}
+
+/// `MsgObject` of the older clients (fields 25–28: HeadMotion, MoveTo, Cancel, Version).
+#[derive(Clone, PartialEq, Message)]
+struct MsgVrnew {
+    #[prost(message, optional, tag = "1")]
+    agent_movement: Option<AgentMovement>,
+    #[prost(message, optional, tag = "5")]
+    grid: Option<GridPosition>,
+    #[prost(message, optional, tag = "6")]
+    status: Option<ActionStatus>,
+    #[prost(message, optional, tag = "8")]
+    images: Option<Images>,
+    #[prost(string, optional, tag = "10")]
+    debug: Option<String>,
+    #[prost(message, optional, tag = "11")]
+    environment_reset: Option<ResetMsg>,
+    #[prost(message, optional, tag = "12")]
+    trial_reset: Option<ResetMsg>,
+    #[prost(message, optional, tag = "20")]
+    start_sync: Option<Empty>,
+    #[prost(message, optional, tag = "21")]
+    stop_sync: Option<Empty>,
+    #[prost(message, optional, tag = "23")]
+    turn: Option<AgentTurn>,
+    #[prost(message, optional, tag = "28")]
+    version: Option<VersionCheck>,
+}
+
+/// `MsgObject` of the later client (fields 25–31 renumbered; Images has `mainImage`).
+#[derive(Clone, PartialEq, Message)]
+struct MsgBurkhardt {
+    #[prost(message, optional, tag = "1")]
+    agent_movement: Option<AgentMovement>,
+    #[prost(message, optional, tag = "5")]
+    grid: Option<GridPosition>,
+    #[prost(message, optional, tag = "6")]
+    status: Option<ActionStatus>,
+    #[prost(message, optional, tag = "8")]
+    images: Option<Images>,
+    #[prost(string, optional, tag = "10")]
+    debug: Option<String>,
+    #[prost(message, optional, tag = "11")]
+    environment_reset: Option<ResetMsg>,
+    #[prost(message, optional, tag = "12")]
+    trial_reset: Option<ResetMsg>,
+    #[prost(message, optional, tag = "20")]
+    start_sync: Option<Empty>,
+    #[prost(message, optional, tag = "21")]
+    stop_sync: Option<Empty>,
+    #[prost(message, optional, tag = "23")]
+    turn: Option<AgentTurn>,
+    #[prost(message, optional, tag = "29")]
+    version: Option<VersionCheck>,
+}
+
+/// One message, whichever dialect carried it.
+#[derive(Debug, Default)]
+struct Msg {
+    grid: Option<GridPosition>,
+    status: Option<ActionStatus>,
+    images: Option<Images>,
+    debug: Option<String>,
+    start_sync: bool,
+    version: Option<String>,
+}
+
+macro_rules! to_msg {
+    ($m:expr) => {{
+        let m = $m;
+        Msg {
+            grid: m.grid,
+            status: m.status,
+            images: m.images,
+            debug: m.debug,
+            start_sync: m.start_sync.is_some(),
+            version: m.version.and_then(|v| v.version),
+        }
+    }};
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Dialect {
+    Vrnew,
+    Burkhardt,
+}
+
+/// A client of the original protocol: an agent socket (and an environment socket).
+struct Client {
+    agent: TcpStream,
+    env: Option<TcpStream>,
+    dialect: Dialect,
+}
+
+const FINISHED: i32 = 1;
+const ABORTED: i32 = 2;
+
+/// What one cycle brought.
+#[derive(Debug, Default)]
+struct Cycle {
+    /// From the Debug trailer ("vrsync cycle N").
+    number: u64,
+    statuses: Vec<(i32, i32)>,
+    images: Option<Images>,
+    grid: Option<GridPosition>,
+}
+
+fn connect(port: u16, deadline: Instant) -> TcpStream {
+    loop {
+        match TcpStream::connect(("127.0.0.1", port)) {
+            Ok(s) => {
+                s.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
+                return s;
+            }
+            Err(e) => {
+                assert!(
+                    Instant::now() < deadline,
+                    "cannot connect to port {port}: {e}"
+                );
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        }
+    }
+}
+
+impl Client {
+    /// Connects the environment socket (unless `agent_only`), then agent `id`'s socket,
+    /// and passes the version check.
+    fn start(base: u16, id: u16, dialect: Dialect, agent_only: bool) -> Self {
+        let deadline = Instant::now() + Duration::from_secs(30);
+        let env = (!agent_only).then(|| connect(base, deadline));
+        let agent = connect(base + 1 + id, deadline);
+        let mut c = Self {
+            agent,
+            env,
+            dialect,
+        };
+        let v = VersionCheck {
+            version: Some("1.0".into()),
+        };
+        match dialect {
+            Dialect::Vrnew => c.send(&MsgVrnew {
+                version: Some(v),
+                ..Default::default()
+            }),
+            Dialect::Burkhardt => c.send(&MsgBurkhardt {
+                version: Some(v),
+                ..Default::default()
+            }),
+        }
+        let reply = c.next();
+        assert_eq!(reply.version.as_deref(), Some("1.0"), "{reply:?}");
+        c
+    }
+
+    fn frame(stream: &mut TcpStream, body: &[u8]) {
+        let mut out = (body.len() as i32).to_le_bytes().to_vec();
+        out.extend_from_slice(body);
+        stream.write_all(&out).unwrap();
+    }
+
+    fn send(&mut self, msg: &impl Message) {
+        Self::frame(&mut self.agent, &msg.encode_to_vec());
+    }
+
+    fn send_env(&mut self, msg: &MsgVrnew) {
+        let env = self.env.as_mut().expect("environment socket");
+        Self::frame(env, &msg.encode_to_vec());
+    }
+
+    /// The unmodified clients' stop: an empty MsgObject, the frame `00 00 00 00`.
+    fn stop_zero_length(&mut self) {
+        Self::frame(&mut self.agent, &[]);
+    }
+
+    /// A real StopSync.
+    fn stop_sync(&mut self) {
+        match self.dialect {
+            Dialect::Vrnew => self.send(&MsgVrnew {
+                stop_sync: Some(Empty {}),
+                ..Default::default()
+            }),
+            Dialect::Burkhardt => self.send(&MsgBurkhardt {
+                stop_sync: Some(Empty {}),
+                ..Default::default()
+            }),
+        }
+    }
+
+    fn movement(&mut self, id: i32, degree: f32, distance: f32) {
+        let m = Some(AgentMovement {
+            action_id: Some(id),
+            degree: Some(degree),
+            distance: Some(distance),
+        });
+        match self.dialect {
+            Dialect::Vrnew => self.send(&MsgVrnew {
+                agent_movement: m,
+                ..Default::default()
+            }),
+            Dialect::Burkhardt => self.send(&MsgBurkhardt {
+                agent_movement: m,
+                ..Default::default()
+            }),
+        }
+    }
+
+    fn turn(&mut self, id: i32, degree: f32) {
+        let t = Some(AgentTurn {
+            action_id: Some(id),
+            degree: Some(degree),
+        });
+        match self.dialect {
+            Dialect::Vrnew => self.send(&MsgVrnew {
+                turn: t,
+                ..Default::default()
+            }),
+            Dialect::Burkhardt => self.send(&MsgBurkhardt {
+                turn: t,
+                ..Default::default()
+            }),
+        }
+    }
+
+    /// The next message, or `None` when the host closed the connection.
+    fn try_next(&mut self) -> Option<Msg> {
+        let mut len = [0u8; 4];
+        if self.agent.read_exact(&mut len).is_err() {
+            return None;
+        }
+        let len = i32::from_le_bytes(len);
+        assert!(len > 0, "the host sent a frame of length {len}");
+        let mut body = vec![0; len as usize];
+        self.agent.read_exact(&mut body).unwrap();
+        Some(match self.dialect {
+            Dialect::Vrnew => to_msg!(MsgVrnew::decode(&body[..]).unwrap()),
+            Dialect::Burkhardt => to_msg!(MsgBurkhardt::decode(&body[..]).unwrap()),
+        })
+    }
+
+    fn next(&mut self) -> Msg {
+        self.try_next().expect("the host closed the connection")
+    }
+
+    /// Reads one cycle: everything up to StartSync and the Debug trailer after it.
+    /// Statuses that arrive between cycles (acknowledgements) are collected too.
+    fn cycle(&mut self) -> Option<Cycle> {
+        let mut c = Cycle::default();
+        let mut started = false;
+        loop {
+            let m = self.try_next()?;
+            if let Some(s) = m.status {
+                c.statuses.push((s.action_id.unwrap(), s.status.unwrap()));
+            }
+            if m.images.is_some() {
+                c.images = m.images;
+            }
+            if m.grid.is_some() {
+                c.grid = m.grid;
+            }
+            started |= m.start_sync;
+            if let Some(d) = m.debug
+                && started
+            {
+                c.number = d
+                    .strip_prefix("vrsync cycle ")
+                    .and_then(|n| n.parse().ok())
+                    .unwrap_or_else(|| panic!("unexpected trailer {d:?}"));
+                return Some(c);
+            }
+        }
+    }
+}
+
+/// Decodes a PNG into `(width, height, colour type, pixels)`.
+fn decode_png(bytes: &[u8]) -> (u32, u32, png::ColorType, Vec<u8>) {
+    let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    buf.truncate(info.buffer_size());
+    (info.width, info.height, info.color_type, buf)
+}
+
+// ----------------------------------------------------------------------------------------
+// Host fixture
+// ----------------------------------------------------------------------------------------
+
+/// A candidate base port whose environment port and the agent ports `ids` can be bound
+/// right now.
+fn candidate_base(ids: &[u32]) -> u16 {
+    static N: AtomicU32 = AtomicU32::new(0);
+    for _ in 0..200 {
+        let n = N.fetch_add(1, Ordering::Relaxed);
+        let base = (21_000 + (std::process::id().wrapping_mul(7919).wrapping_add(n * 509)) % 38_000)
+            as u16;
+        let ports = std::iter::once(base).chain(ids.iter().map(|&id| base + 1 + id as u16));
+        let held: Result<Vec<_>, _> = ports
+            .map(|p| std::net::TcpListener::bind(("127.0.0.1", p)))
+            .collect();
+        if held.is_ok() {
+            return base;
+        }
+    }
+    panic!("no free legacy port range found");
+}
+
+/// A running `vr-sim run` serving legacy agents.
+struct LegacyRun {
+    host: Proc,
+    base: u16,
+    dir: tempfile::TempDir,
+}
+
+/// Starts `vr-sim run` with the config `make(base)` and `args` (`{dir}` in an argument
+/// stands for the run's directory), retrying with another base port while the host cannot
+/// bind its ports (see the module docs).
+fn start_host(ids: &[u32], make: impl Fn(u16) -> String, args: &[&str]) -> LegacyRun {
+    for _ in 0..5 {
+        let dir = tempfile::tempdir().unwrap();
+        let base = candidate_base(ids);
+        let config = dir.path().join("legacy.toml");
+        std::fs::write(&config, make(base)).unwrap();
+        let events = Events::in_dir(dir.path());
+        let d = dir.path().to_str().unwrap();
+        let args: Vec<String> = args.iter().map(|a| a.replace("{dir}", d)).collect();
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let mut host = util::spawn_host(&config, &events, &args);
+        let deadline = Instant::now() + util::EVENT_DEADLINE;
+        loop {
+            if !events.of("listening").is_empty() {
+                return LegacyRun { host, base, dir };
+            }
+            if host.try_exited() {
+                let out = host.wait(Duration::from_secs(10));
+                assert!(
+                    out.stderr.contains("cannot listen"),
+                    "the host failed otherwise:\n{}",
+                    out.stderr
+                );
+                break;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "the host did not start listening"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+    panic!("the host could not bind a legacy port range in 5 attempts");
+}
+
+fn config(session: &str, base: u16, legacy: &[u32], shm: &[u32], extra_sync: &str) -> String {
+    let mut s = format!(
+        "session = {session:?}\nseed = 7\n[sync]\nsync_mode = true\nstop_timeout = 5\n\
+         connect_timeout = 60\n{extra_sync}\n[transport]\nkind = \"shm\"\n\
+         [transport.legacy]\nlocal_port = {base}\n"
+    );
+    let mut ids: Vec<(u32, &str)> = legacy.iter().map(|&i| (i, "legacy")).collect();
+    ids.extend(shm.iter().map(|&i| (i, "shm")));
+    ids.sort();
+    for (id, kind) in ids {
+        s += &format!(
+            "\n[[agent]]\nid = {id}\ntransport = \"{kind}\"\n[[agent.camera]]\nname = \"left\"\n\
+             width = 64\n[[agent.camera]]\nname = \"right\"\nwidth = 64\n"
+        );
+        if kind == "legacy" {
+            s += "[[agent.camera]]\nname = \"main\"\nwidth = 48\n";
+        }
+    }
+    s
+}
+
+const RUN_DEADLINE: Duration = Duration::from_secs(240);
+
+// ----------------------------------------------------------------------------------------
+// Tests
+// ----------------------------------------------------------------------------------------
+
+/// 200 cycles in one dialect: version check, images equal to the frames the host
+/// rendered (dumped by `--dump-frames`, the bytes an shm agent reads), the grid position
+/// equal to the recorded pose, statuses to a final state for every command, resets over
+/// the environment socket, and no stop timeout.
+fn two_hundred_cycles(dialect: Dialect) {
+    let session = util::session("legacy-200");
+    let run = start_host(
+        &[0],
+        |base| config(&session, base, &[0], &[], ""),
+        &[
+            "--frames",
+            "200",
+            "--record",
+            "{dir}/record.jsonl",
+            "--dump-frames",
+            "{dir}/frames",
+            "--every",
+            "50",
+            "--summary-json",
+            "{dir}/summary.json",
+        ],
+    );
+    let dir = run.dir.path().to_path_buf();
+    let (frames_dir, record, summary) = (
+        dir.join("frames"),
+        dir.join("record.jsonl"),
+        dir.join("summary.json"),
+    );
+    let host = run.host;
+    let mut c = Client::start(run.base, 0, dialect, false);
+    let mut kept = Vec::new();
+    let mut grids = Vec::new();
+    let mut statuses: Vec<(i32, i32)> = Vec::new();
+    for n in 0..200u64 {
+        let cycle = c.cycle().expect("the host closed before 200 cycles");
+        assert_eq!(cycle.number, n, "cycles arrive once and in order");
+        statuses.extend(&cycle.statuses);
+        let images = cycle.images.expect("images every cycle, before StartSync");
+        assert_eq!(images.main.is_some(), dialect == Dialect::Burkhardt);
+        if n % 50 == 0 {
+            kept.push((n, images));
+        }
+        grids.push(cycle.grid.expect("a grid position every cycle"));
+        match n {
+            10 => c.turn(100, 45.0),
+            30 => c.movement(101, 90.0, 0.5),
+            60 => c.send_env(&MsgVrnew {
+                trial_reset: Some(ResetMsg {
+                    reset_type: Some(0),
+                }),
+                ..Default::default()
+            }),
+            _ => {}
+        }
+        // vrnew: the unmodified clients' zero-length stop; burkhardt: alternately a real
+        // StopSync.
+        if dialect == Dialect::Burkhardt && n % 2 == 1 {
+            c.stop_sync();
+        } else {
+            c.stop_zero_length();
+        }
+    }
+    let out = host.wait(RUN_DEADLINE);
+    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    // Statuses that arrived after the last cycle.
+    while let Some(m) = c.try_next() {
+        if let Some(s) = m.status {
+            statuses.push((s.action_id.unwrap(), s.status.unwrap()));
+        }
+    }
+    let sum = util::summary(&summary);
+    assert_eq!(sum["frames"], 200);
+    assert_eq!(sum["stop_timeouts"], 0, "{sum}");
+
+    // Every command acknowledged, then ended Finished or Aborted.
+    for id in [100, 101] {
+        let mine: Vec<i32> = statuses.iter().filter(|s| s.0 == id).map(|s| s.1).collect();
+        assert!(!mine.is_empty(), "no status for action {id}");
+        assert!(
+            matches!(mine.last(), Some(&FINISHED) | Some(&ABORTED)),
+            "action {id}: {mine:?}"
+        );
+    }
+    assert_eq!(statuses.iter().find(|s| s.0 == 100).map(|s| s.1), Some(4)); // Rotating
+    assert_eq!(statuses.iter().find(|s| s.0 == 101).map(|s| s.1), Some(3)); // Walking
+
+    // Same pixels as the rendered frame.
+    for (n, images) in &kept {
+        let mut cams = vec![
+            ("left", images.left.as_ref()),
+            ("right", images.right.as_ref()),
+        ];
+        if dialect == Dialect::Burkhardt {
+            cams.push(("main", images.main.as_ref()));
+        }
+        for (cam, png) in cams {
+            let got = decode_png(png.expect("image present"));
+            let dumped = std::fs::read(frames_dir.join(format!("c{n:06}_a0_{cam}.png"))).unwrap();
+            let want = decode_png(&dumped);
+            assert_eq!(got.2, png::ColorType::Rgb, "{cam}: 8-bit RGB");
+            assert_eq!((got.0, got.1), (want.0, want.1), "cycle {n} {cam} size");
+            assert!(got.3 == want.3, "cycle {n} {cam}: pixels differ");
+        }
+    }
+
+    // The grid position of cycle n is the pose recorded at the end of cycle n - 1.
+    let rec = util::record(&record);
+    let mut commands = Vec::new();
+    for line in &rec {
+        let n = line["cycle"].as_u64().unwrap() as usize;
+        commands.extend(
+            line["commands"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|c| c[0].as_str().unwrap().to_string()),
+        );
+        let Some(g) = grids.get(n + 1) else { continue };
+        let p = &line["position"];
+        for (i, v) in [g.x, g.y, g.z].into_iter().enumerate() {
+            let want = p[i].as_f64().unwrap() as f32;
+            assert_eq!(v.unwrap(), want, "cycle {} grid axis {i}", n + 1);
+        }
+        let heading = line["heading_deg"].as_f64().unwrap() as f32;
+        assert_eq!(g.ry.unwrap(), heading, "cycle {} heading", n + 1);
+        assert_eq!((g.rx.unwrap(), g.rz.unwrap()), (0.0, 0.0));
+    }
+    for name in ["turn", "move", "trial_reset"] {
+        assert!(
+            commands.iter().any(|c| c == name),
+            "{name} not applied: {commands:?}"
+        );
+    }
+}
+
+#[test]
+fn a_vrnew_client_runs_200_cycles_with_zero_length_stops() {
+    two_hundred_cycles(Dialect::Vrnew);
+}
+
+#[test]
+fn a_burkhardt_client_runs_200_cycles_with_real_stop_syncs() {
+    two_hundred_cycles(Dialect::Burkhardt);
+}
+
+/// A client whose send blocks until Finished/Aborted before it stops (as the original
+/// clients' senders do): each cycle it waits through costs one stop timeout, and the send
+/// completes.
+#[test]
+fn a_client_that_blocks_on_finished_before_stopping_completes() {
+    let session = util::session("legacy-block");
+    let run = start_host(
+        &[0],
+        |base| {
+            config(&session, base, &[0], &[], "").replace("stop_timeout = 5", "stop_timeout = 0.3")
+        },
+        &["--frames", "40", "--summary-json", "{dir}/summary.json"],
+    );
+    let summary = run.dir.path().join("summary.json");
+    let mut c = Client::start(run.base, 0, Dialect::Burkhardt, true);
+    let first = c.cycle().unwrap();
+    assert_eq!(first.number, 0);
+    c.movement(7, 0.0, 0.5);
+    // Block: no stop until the movement ends.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let mut cycles_waited = 0;
+    let end = loop {
+        assert!(Instant::now() < deadline, "the movement never ended");
+        let m = c.next();
+        if let Some(s) = m.status
+            && s.action_id == Some(7)
+            && matches!(s.status, Some(FINISHED) | Some(ABORTED))
+        {
+            break s.status.unwrap();
+        }
+        cycles_waited += usize::from(m.start_sync);
+    };
+    assert_eq!(end, FINISHED);
+    assert!(cycles_waited >= 1, "a 0.5 m walk takes cycles");
+    // The rest of the cycle that brought Finished, then the stop, and on with stops.
+    while let Some(cycle) = c.cycle() {
+        c.stop_zero_length();
+        if cycle.number >= 39 {
+            break;
+        }
+    }
+    let out = run.host.wait(RUN_DEADLINE);
+    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    let sum = util::summary(&summary);
+    assert_eq!(sum["frames"], 40);
+    // Each cycle the client blocked through ended by the stop timeout.
+    let timeouts = sum["stop_timeouts"].as_u64().unwrap();
+    assert!(timeouts >= 1, "{sum}");
+}
+
+/// One legacy agent beside an shm agent gives the trajectory of the same world with both
+/// agents on shm (agent 0 idle on either transport, agent 1 `seek`, which decides from
+/// its images, where agent 0 is seen).
+#[test]
+fn legacy_and_shm_agents_in_one_world_give_the_all_shm_trajectory() {
+    let frames = "120";
+    let run_with = |legacy: bool| -> serde_json::Value {
+        let session = util::session(if legacy {
+            "legacy-mixed"
+        } else {
+            "legacy-allshm"
+        });
+        let legacy_ids: &[u32] = if legacy { &[0] } else { &[] };
+        let shm_ids: &[u32] = if legacy { &[1] } else { &[0, 1] };
+        let run = start_host(
+            &[0],
+            |base| config(&session, base, legacy_ids, shm_ids, ""),
+            &["--frames", frames, "--summary-json", "{dir}/s.json"],
+        );
+        let summary = run.dir.path().join("s.json");
+        let config_path = run.dir.path().join("legacy.toml");
+        let agent = |id: &str, policy: &str| {
+            Proc::spawn(
+                &util::bin("vr-agent"),
+                &[
+                    "--config",
+                    config_path.to_str().unwrap(),
+                    "--id",
+                    id,
+                    "--policy",
+                    policy,
+                ],
+            )
+        };
+        let seek = agent("1", "seek");
+        let idle = (!legacy).then(|| agent("0", "idle"));
+        if legacy {
+            let mut c = Client::start(run.base, 0, Dialect::Vrnew, false);
+            while c.cycle().is_some() {
+                c.stop_zero_length();
+            }
+        }
+        let out = run.host.wait(RUN_DEADLINE);
+        assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+        drop((seek, idle));
+        util::summary(&summary)
+    };
+    let mixed = run_with(true);
+    let all_shm = run_with(false);
+    assert_eq!(mixed["frames"], 120);
+    assert_eq!(mixed["stop_timeouts"], 0, "{mixed}");
+    assert_eq!(mixed["trajectory_hash"], all_shm["trajectory_hash"]);
+}
