@@ -36,7 +36,7 @@ pub enum TransportKind {
     /// TCP, for remote agents and as a baseline.
     Tcp,
     /// The original system's protobuf/TCP protocol, for agents written for it
-    /// (`[transport.legacy]`; see [`crate::transport::legacy`]).
+    /// (`[transport.legacy]`; see [`crate::legacy`]).
     Legacy,
 }
 

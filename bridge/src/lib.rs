@@ -12,8 +12,9 @@
 //!   stop never completes the next cycle ([`AgentOutcome`] says how each agent ended one).
 //! - A **transport** moves frames, batches and signals; the contract every transport keeps
 //!   is [`HostTransport`] (host side) and [`AgentTransport`] (agent side): shared memory
-//!   ([`shm`]) for agents on this machine, TCP ([`tcp`]) as the measured baseline. A host
-//!   serves each agent over its own transport ([`Transports`]).
+//!   ([`shm`]) for agents on this machine, TCP ([`tcp`]) as the measured baseline, and the
+//!   original system's protocol ([`legacy`]) for agents written for it. A host serves each
+//!   agent over its own transport ([`Transports`]).
 //! - The **host API** ([`Host`]) is what a simulator calls; agents use the `vrsync-agent`
 //!   crate.
 //!
@@ -61,8 +62,9 @@ mod wire;
 pub use barrier::AgentOutcome;
 pub use config::{
     AgentConfig, AgentLostPolicy, CameraConfig, Config, ConfigLoadError, DEFAULT_CONFIG_TOML,
-    DEFAULT_SPIN_BEFORE_BLOCK_US, MAX_AGENT_ID, MAX_CONFIG_BYTES, MAX_IMAGE_SIDE_PX, SyncConfig,
-    TransportConfig, TransportKind, WaitMode, derived_height,
+    DEFAULT_SPIN_BEFORE_BLOCK_US, LegacyConfig, LegacyDialect, MAX_AGENT_ID, MAX_CONFIG_BYTES,
+    MAX_IMAGE_SIDE_PX, PngCompression, SyncConfig, TransportConfig, TransportKind, WaitMode,
+    derived_height,
 };
 pub use host::{
     AgentReport, CycleReport, Host, HostBuilder, HostCreateError, HostCycleError, HostStats,
@@ -94,4 +96,10 @@ pub mod shm {
 /// and the hostile-peer tests drive).
 pub mod tcp {
     pub use crate::transport::tcp::*;
+}
+
+/// The original system's protobuf/TCP protocol, served to agents written for it, with its
+/// codec (what the fuzz target and the legacy bench client use).
+pub mod legacy {
+    pub use crate::transport::legacy::*;
 }

@@ -174,7 +174,7 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
         let spawn_ids: Vec<u32> = config
             .agents
             .iter()
-            .filter(|a| a.transport != vrsync_bridge::config::TransportKind::Legacy)
+            .filter(|a| a.transport != vrsync_bridge::TransportKind::Legacy)
             .map(|a| a.id)
             .collect();
         Agents::spawn(&agent_config_path, &spawn_ids, &opts.agent_args)?

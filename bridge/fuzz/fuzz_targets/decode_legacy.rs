@@ -11,7 +11,7 @@
 use std::io::{self, ErrorKind, Read};
 
 use libfuzzer_sys::fuzz_target;
-use vrsync_bridge::transport::legacy::codec::{
+use vrsync_bridge::legacy::codec::{
     Dialect, FrameProgress, FrameReader, Incoming, MAX_INCOMING_FRAME, decode_frame,
     version_check_dialect,
 };

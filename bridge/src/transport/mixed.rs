@@ -330,6 +330,9 @@ impl HostTransport for Transports {
         if let Some(t) = &mut self.tcp {
             unkept += t.take_refusals(sink);
         }
+        if let Some(t) = &mut self.legacy {
+            unkept += t.take_refusals(sink);
+        }
         unkept
     }
 

@@ -86,7 +86,7 @@ pub mod field {
     pub const COLLISION: u32 = 7;
     /// Images (H→A).
     pub const IMAGES: u32 = 8;
-    /// Menu (H→A).
+    /// Menu (H→A; not sent by this host).
     pub const MENU: u32 = 9;
     /// Debug (both): a plain string.
     pub const DEBUG: u32 = 10;

@@ -15,7 +15,9 @@ use super::codec::{
 };
 use crate::config::{Config, LegacyDialect, PngCompression, TransportKind};
 use crate::signal::SignalHandling;
-use crate::transport::{BatchSink, FrameLoanMut, HostTransport, HostTransportError};
+use crate::transport::{
+    BatchSink, FrameLoanMut, HostTransport, HostTransportError, PeerRefusal, RefusalKind, Refusals,
+};
 use crate::wire::{
     ActionState, Command, ImageDesc, MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION,
     PixelFormat, SensorHeader,
@@ -191,6 +193,8 @@ pub struct LegacyHost {
     resets: Vec<MotorCommand>,
     /// How long a new connection may take to send its version check.
     hello_timeout: Duration,
+    /// Peers refused before their version check passed.
+    refusals: Refusals,
 }
 
 fn bind(addr: SocketAddr, what: String) -> Result<TcpListener, LegacyHostCreateError> {
@@ -286,6 +290,7 @@ impl LegacyHost {
             events: vec![libc::epoll_event { events: 0, u64: 0 }; 64],
             resets: Vec::new(),
             hello_timeout: HELLO_TIMEOUT,
+            refusals: Refusals::default(),
         };
         host.watch(host.env_listener.as_raw_fd())
             .map_err(LegacyHostCreateError::Epoll)?;
@@ -475,7 +480,16 @@ impl LegacyHost {
             match s.listener.accept() {
                 Ok((stream, peer)) => {
                     if s.pending.len() >= MAX_PENDING_PER_PORT {
-                        warn!(agent = s.id, %peer, "legacy connection closed at once: {MAX_PENDING_PER_PORT} are waiting for their version check");
+                        let reason = format!(
+                            "closed at once: {MAX_PENDING_PER_PORT} connections are waiting for their version check"
+                        );
+                        warn!(agent = s.id, %peer, "legacy connection {reason}");
+                        self.refusals.push(PeerRefusal {
+                            kind: RefusalKind::TooMany,
+                            agent: Some(s.id),
+                            peer: peer.to_string(),
+                            reason,
+                        });
                         continue;
                     }
                     if stream.set_nonblocking(true).is_err() || stream.set_nodelay(true).is_err() {
@@ -513,34 +527,55 @@ impl LegacyHost {
                 Ok(FrameProgress::Frame) => match codec::version_check_dialect(p.reader.body()) {
                     Some((d, v)) => match (self.dialect, d) {
                         (LegacyDialect::Vrnew, Dialect::Burkhardt)
-                        | (LegacyDialect::Burkhardt, Dialect::Vrnew) => Err(format!(
-                            "its version check is {} but dialect = {:?} is configured",
-                            d.as_str(),
-                            self.dialect.as_str()
+                        | (LegacyDialect::Burkhardt, Dialect::Vrnew) => Err((
+                            RefusalKind::Version,
+                            format!(
+                                "its version check is {} but dialect = {:?} is configured",
+                                d.as_str(),
+                                self.dialect.as_str()
+                            ),
                         )),
                         _ => Ok(Some((d, v))),
                     },
-                    None => Err("its first frame is not a version check".into()),
+                    None => Err((
+                        RefusalKind::Malformed,
+                        "its first frame is not a version check".into(),
+                    )),
                 },
                 Ok(FrameProgress::Pending) => {
                     if p.since.elapsed() >= self.hello_timeout {
-                        Err(format!(
-                            "sent no version check within {:?} of connecting",
-                            self.hello_timeout
+                        Err((
+                            RefusalKind::Silent,
+                            format!(
+                                "sent no version check within {:?} of connecting",
+                                self.hello_timeout
+                            ),
                         ))
                     } else {
                         Ok(None)
                     }
                 }
-                Ok(FrameProgress::Skipped(n)) => Err(format!("sent a {n}-byte frame first")),
-                Ok(FrameProgress::Closed) => Err("closed before its version check".into()),
-                Err(e) => Err(e.to_string()),
+                Ok(FrameProgress::Skipped(n)) => Err((
+                    RefusalKind::Malformed,
+                    format!("sent a {n}-byte frame first"),
+                )),
+                Ok(FrameProgress::Closed) => Err((
+                    RefusalKind::Silent,
+                    "closed before its version check".into(),
+                )),
+                Err(e) => Err((RefusalKind::Malformed, e.to_string())),
             };
             match result {
                 Ok(None) => k += 1,
-                Err(why) => {
+                Err((kind, reason)) => {
                     let p = s.pending.swap_remove(k);
-                    warn!(agent = s.id, peer = %p.peer, "legacy connection dropped: {why}");
+                    warn!(agent = s.id, peer = %p.peer, "legacy connection dropped: {reason}");
+                    self.refusals.push(PeerRefusal {
+                        kind,
+                        agent: Some(s.id),
+                        peer: p.peer.to_string(),
+                        reason,
+                    });
                 }
                 Ok(Some((dialect, version))) => {
                     let p = s.pending.swap_remove(k);
@@ -1155,6 +1190,10 @@ impl HostTransport for LegacyHost {
         Some(self.epoll.as_raw_fd())
     }
 
+    fn take_refusals(&mut self, sink: &mut dyn FnMut(&PeerRefusal)) -> u64 {
+        self.refusals.take(sink)
+    }
+
     fn clear_activity(&mut self) {
         // Level-triggered: the set is readable while a socket has unread input. Reading
         // it is the clearing.
@@ -1486,6 +1525,9 @@ mod tests {
         pump(&mut h, |h| h.slots[0].pending.len() == 1);
         pump(&mut h, |h| h.slots[0].pending.is_empty());
         assert!(silent.closed());
+        let mut refused = Vec::new();
+        assert_eq!(h.take_refusals(&mut |r| refused.push(r.kind)), 0);
+        assert_eq!(refused, [RefusalKind::Silent]);
         assert!(h.is_connected(0));
         // A real second client replaces the first.
         let mut second = join(&mut h, base, 0, 0, Dialect::Burkhardt);
