@@ -8,7 +8,7 @@ use crate::util::{
 };
 
 /// The text of the first fenced ` ```LANG ` block after `heading` in the README.
-fn readme_block(heading: &str, lang: &str) -> String {
+pub(crate) fn readme_block(heading: &str, lang: &str) -> String {
     let readme = std::fs::read_to_string(workspace().join("README.md")).unwrap();
     let section = readme
         .split_once(&format!("\n{heading}\n"))

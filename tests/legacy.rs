@@ -716,3 +716,18 @@ fn legacy_and_shm_agents_in_one_world_give_the_all_shm_trajectory() {
     assert_eq!(mixed["stop_timeouts"], 0, "{mixed}");
     assert_eq!(mixed["trajectory_hash"], all_shm["trajectory_hash"]);
 }
+
+/// The README's legacy config block is a valid config (with the default port and the agent
+/// on the legacy transport).
+#[test]
+fn the_readme_legacy_config_block_parses() {
+    let block =
+        crate::examples::readme_block("### Running agents written for the original system", "toml");
+    let config = vrsync_bridge::Config::from_toml_str(&block, std::path::Path::new("README.md"))
+        .unwrap_or_else(|e| panic!("{e}\n{block}"));
+    assert_eq!(config.transport.legacy.local_port, 1337);
+    assert_eq!(
+        config.agents[0].transport,
+        vrsync_bridge::TransportKind::Legacy
+    );
+}

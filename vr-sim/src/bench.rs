@@ -19,6 +19,8 @@ use vrsync_bridge::{Config, Host, SignalHandling};
 use vrsync_floor::alloc_count::allocations;
 use vrsync_floor::{ShmFloorHost, TcpFloorHost};
 
+mod legacy;
+
 /// What to run and where to write.
 #[derive(Debug)]
 pub struct BenchOptions {
@@ -38,7 +40,7 @@ pub struct BenchOptions {
 /// One measured configuration (DESIGN §8 bench JSON keys, plus allocations).
 #[derive(Debug, Clone, Serialize)]
 pub struct Row {
-    /// `shm`, `shm-spin`, `tcp`, `floor-shm`, `floor-shm-spin`, `floor-tcp`.
+    /// `shm`, `shm-spin`, `tcp`, `floor-shm`, `floor-shm-spin`, `floor-tcp`, `legacy`.
     pub transport: String,
     /// Agents.
     pub agents: u32,
@@ -67,6 +69,9 @@ pub struct Row {
     /// Time vr-sim's renderer needs for one agent's 3 images at this size, µs (measured
     /// separately, not part of the cycle; `null` on floor rows).
     pub render_us: f64,
+    /// `legacy` rows: time to PNG-encode one of these images at the fastest level, µs
+    /// (measured separately; `null` elsewhere).
+    pub png_us: f64,
 }
 
 const CAMERAS: u32 = 3;
@@ -77,6 +82,8 @@ const BPP: usize = 3;
 struct Case {
     transport: &'static str,
     agents: u32,
+    /// Images per agent (3, or 2 for the original's stereo pair).
+    cameras: u32,
     width: u32,
     height: u32,
     warmup: u64,
@@ -85,7 +92,7 @@ struct Case {
 
 impl Case {
     fn frame_bytes(&self) -> usize {
-        CAMERAS as usize * self.width as usize * self.height as usize * BPP
+        self.cameras as usize * self.width as usize * self.height as usize * BPP
     }
 }
 
@@ -177,6 +184,7 @@ struct Measured {
     allocs: f64,
     agent_allocs: f64,
     render_us: f64,
+    png_us: f64,
 }
 
 impl Measured {
@@ -187,6 +195,7 @@ impl Measured {
             allocs,
             agent_allocs,
             render_us: f64::NAN,
+            png_us: f64::NAN,
         }
     }
 
@@ -198,6 +207,9 @@ impl Measured {
         self.agent_allocs = self.agent_allocs.max(other.agent_allocs);
         if self.render_us.is_nan() {
             self.render_us = other.render_us;
+        }
+        if self.png_us.is_nan() {
+            self.png_us = other.png_us;
         }
         Ok(())
     }
@@ -220,7 +232,7 @@ fn row(case: &Case, m: &Measured) -> Row {
     Row {
         transport: case.transport.to_string(),
         agents: case.agents,
-        cameras: CAMERAS,
+        cameras: case.cameras,
         width: case.width,
         height: case.height,
         format: "rgb8".into(),
@@ -232,6 +244,7 @@ fn row(case: &Case, m: &Measured) -> Row {
         allocs_per_cycle: m.allocs,
         agent_allocs_per_cycle: m.agent_allocs,
         render_us: m.render_us,
+        png_us: m.png_us,
     }
 }
 
@@ -263,7 +276,7 @@ fn config_text(case: &Case, session: &str) -> String {
     );
     for id in 0..case.agents {
         s += &format!("[[agent]]\nid = {id}\n");
-        for c in 0..CAMERAS {
+        for c in 0..case.cameras {
             s += &format!(
                 "[[agent.camera]]\nname = \"c{c}\"\nwidth = {}\nheight = {}\nformat = \"rgb8\"\n",
                 case.width, case.height
@@ -559,6 +572,7 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
             let mk = |transport: &'static str, cycles: u64| Case {
                 transport,
                 agents,
+                cameras: CAMERAS,
                 width: w,
                 height: h,
                 warmup: (cycles / ROUNDS / 10).max(10),
@@ -606,6 +620,46 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
                 print_row(&r);
                 rows.push(r);
             }
+        }
+    }
+    // The original protocol (1 agent): PNG over TCP, one socket per agent, at the
+    // original's stereo 256x148 (with an shm row of the same images) and at 3x1920x1080
+    // (against the shm row above).
+    for (w, h, cameras, cycles) in [
+        (256, 148, 2, if opts.quick { 250 } else { 1000 }),
+        (1920, 1080, 3, if opts.quick { 25 } else { 60 }),
+    ] {
+        let mk = |transport: &'static str, cycles: u64| Case {
+            transport,
+            agents: 1,
+            cameras,
+            width: w,
+            height: h,
+            warmup: (cycles / ROUNDS / 10).max(5),
+            cycles: (cycles / ROUNDS).max(5),
+        };
+        let mut cases = vec![mk("legacy", cycles)];
+        if w == 256 {
+            cases.push(mk("shm", shm_cycles));
+        }
+        let mut measured: Vec<Option<Measured>> = cases.iter().map(|_| None).collect();
+        for round in 0..ROUNDS {
+            for (case, acc) in cases.iter().zip(measured.iter_mut()) {
+                let m = match case.transport {
+                    "legacy" => legacy::bench_legacy(case, &session(&mut n), round == 0)?,
+                    _ => bench_vrsync(case, &session(&mut n), dir.path(), round == 0, None)?,
+                };
+                match acc {
+                    Some(a) => a.merge(m)?,
+                    None => *acc = Some(m),
+                }
+            }
+        }
+        for (case, m) in cases.iter().zip(measured) {
+            let Some(m) = m else { continue };
+            let r = row(case, &m);
+            print_row(&r);
+            rows.push(r);
         }
     }
     print_ratios(&rows);
@@ -660,6 +714,9 @@ fn print_row(r: &Row) {
 }
 
 fn size_name(w: u32) -> &'static str {
+    if w == 256 {
+        return "2x256x148";
+    }
     if w == 1920 {
         "3x1920x1080"
     } else {
@@ -761,6 +818,23 @@ fn print_ratios(rows: &[Row]) {
         ),
         "<= 2",
     );
+    for w in [256, 1920] {
+        line(
+            &format!("legacy / shm, 1 agent, {}", size_name(w)),
+            ratio(find(rows, "legacy", 1, w), find(rows, "shm", 1, w)),
+            "report",
+        );
+        if let Some(r) = find(rows, "legacy", 1, w) {
+            line(
+                &format!(
+                    "PNG encode per image (fastest), {}x{} µs",
+                    r.width, r.height
+                ),
+                Some(r.png_us),
+                "report",
+            );
+        }
+    }
     let max_allocs = rows
         .iter()
         .filter(|r| r.transport.starts_with("shm"))
@@ -896,6 +970,7 @@ mod tests {
         let case = Case {
             transport: "shm",
             agents: 1,
+            cameras: CAMERAS,
             width: 320,
             height: 240,
             warmup: 1,
