@@ -455,13 +455,14 @@ impl Scripted {
     }
 
     fn stop_batch(&self, cycle: u64) -> Vec<u8> {
-        assert_eq!(std::mem::size_of::<MotorHeader>(), 24);
-        let mut body = Vec::with_capacity(24);
+        assert_eq!(std::mem::size_of::<MotorHeader>(), 32);
+        let mut body = Vec::with_capacity(32);
         body.extend_from_slice(&PROTOCOL_VERSION.to_le_bytes());
         body.extend_from_slice(&self.id.to_le_bytes());
         body.extend_from_slice(&cycle.to_le_bytes());
         body.extend_from_slice(&vrsync_bridge::MOTOR_FLAG_STOP.to_le_bytes());
-        body.extend_from_slice(&0u32.to_le_bytes());
+        body.extend_from_slice(&0u32.to_le_bytes()); // command count
+        body.extend_from_slice(&0u64.to_le_bytes()); // ack_cycle (no MOTOR_FLAG_ACK)
         record(kind::MOTOR, &body)
     }
 

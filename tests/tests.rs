@@ -9,6 +9,7 @@ mod util;
 
 mod config;
 mod cpp;
+mod events;
 mod examples;
 mod faults;
 mod hostile;

@@ -20,7 +20,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let left = frame.image_by_name("left").ok_or("no camera named left")?; // an Image
         let pixels: &[u8] = left.data(); // a view into the frame, no copy
         let position: Vec3 = frame.pose().position(); // glam, re-exported by vrsync_agent
-        for status in frame.header().statuses() {
+        for status in frame.statuses() {
             let state = ActionState::from_u32(status.state);
             let done = matches!(state, Some(ActionState::Finished | ActionState::Aborted));
             if done && running == Some(status.action_id) {

@@ -440,8 +440,10 @@ vrs_status_t vrs_agent_image_by_name(struct vrs_agent_t *agent,
                                      const char *name,
                                      struct vrs_image_t *out_image);
 
-// Action status `index` (`0..status_count`) of the current frame: the statuses that
-// changed since the previous frame, keyed by the action ids the sends returned.
+// Action status `index` (`0..status_count`) of the current frame, keyed by the action ids
+// the sends returned: the statuses this frame brings, each exactly once — also those of
+// frames the agent skipped (the host repeats a status until the agent's stop acknowledges
+// a frame that carried it). The latest status of any action: [`vrs_agent_action_state`].
 //
 // # Errors
 // `VRS_ERROR_OUT_OF_RANGE`, `VRS_ERROR_NO_FRAME`, `VRS_ERROR_INVALID_ARGUMENT`, handle
@@ -453,7 +455,8 @@ vrs_status_t vrs_agent_status(struct vrs_agent_t *agent,
                               size_t index,
                               struct vrs_action_status_t *out_status);
 
-// Collision `index` (`0..collision_count`) of the current frame.
+// Collision `index` (`0..collision_count`) of the current frame: each collision exactly
+// once, as [`vrs_agent_status`].
 //
 // # Errors
 // `VRS_ERROR_OUT_OF_RANGE`, `VRS_ERROR_NO_FRAME`, `VRS_ERROR_INVALID_ARGUMENT`, handle
@@ -464,6 +467,22 @@ vrs_status_t vrs_agent_status(struct vrs_agent_t *agent,
 vrs_status_t vrs_agent_collision(struct vrs_agent_t *agent,
                                  size_t index,
                                  struct vrs_collision_t *out_collision);
+
+// The latest status of action `action_id` that a frame brought, like the original
+// client's status map: `*out_known` is whether there is one, `*out_state` the
+// `vrs_action_state_t` value (0 when unknown). The agent remembers the latest 1024
+// actions (`ACTION_STATES_CAPACITY` of the Rust SDK). Needs no current frame.
+//
+// # Errors
+// `VRS_ERROR_INVALID_ARGUMENT` (NULL `out_state` or `out_known`), handle errors.
+//
+// # Safety
+// `out_state` is NULL or valid for writing a `uint32_t`; `out_known` is NULL or valid for
+// writing a `bool`.
+vrs_status_t vrs_agent_action_state(struct vrs_agent_t *agent,
+                                    uint32_t action_id,
+                                    uint32_t *out_state,
+                                    bool *out_known);
 
 // This agent's id.
 //

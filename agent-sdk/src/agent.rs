@@ -5,13 +5,13 @@ use std::time::{Duration, Instant};
 pub use vrsync_bridge::HOST_LIVENESS_PERIOD;
 use vrsync_bridge::shm::{ShmAgent, ShmFrame};
 use vrsync_bridge::tcp::{TcpAgent, TcpFrame};
+use vrsync_bridge::{
+    ActionState, ActionStatus, Collision, Command, ImageDesc, MOTOR_FLAG_ACK, MOTOR_FLAG_STOP,
+    MotorCommand, MotorHeader, PROTOCOL_VERSION, PixelFormat, Pose, SensorHeader,
+};
 pub use vrsync_bridge::{AgentConnectError, SignalHandling};
 use vrsync_bridge::{
     AgentReceiveError, AgentSendError, AgentTransport, AgentWaitError, wait_for_newer_frame,
-};
-use vrsync_bridge::{
-    Command, ImageDesc, MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION, PixelFormat,
-    Pose, SensorHeader,
 };
 use vrsync_bridge::{Config, TransportKind};
 
@@ -157,9 +157,12 @@ impl<'a> Image<'a> {
 #[derive(Debug)]
 pub struct Frame {
     inner: FrameInner,
+    /// Index of the first status (collision) of the header that this frame hands out.
+    new_statuses: usize,
+    new_collisions: usize,
 }
 
-// The TCP variant carries its 592-byte header by value (a frame is moved once, from the
+// The TCP variant carries its 784-byte header by value (a frame is moved once, from the
 // transport to the caller); boxing it would allocate every cycle.
 #[allow(clippy::large_enum_variant)]
 #[derive(Debug)]
@@ -201,6 +204,25 @@ impl Frame {
     pub fn pose(&self) -> Pose {
         self.header().pose
     }
+    /// The action statuses this frame brings, in the order the host reported them: each
+    /// status reaches the agent's code exactly once, in the first frame the agent reads
+    /// after the host reported it, even when the frames in between were skipped (the host
+    /// repeats every status until the agent acknowledges a frame that carried it; the
+    /// header's own table, [`SensorHeader::statuses`], holds the repeats too). The latest
+    /// status of every action is also in [`Agent::action_state`].
+    pub fn statuses(&self) -> &[ActionStatus] {
+        self.header()
+            .statuses()
+            .get(self.new_statuses..)
+            .unwrap_or(&[])
+    }
+    /// The collisions this frame brings, each exactly once (as [`Frame::statuses`]).
+    pub fn collisions(&self) -> &[Collision] {
+        self.header()
+            .collisions()
+            .get(self.new_collisions..)
+            .unwrap_or(&[])
+    }
     /// Number of images.
     pub fn image_count(&self) -> usize {
         self.header().image_descs().len()
@@ -238,6 +260,16 @@ fn validate(header: &SensorHeader, payload_len: usize, id: u32) -> Result<(), St
             "frame is for agent {}, we are agent {id}",
             header.agent_id
         ));
+    }
+    fn ascending(seqs: impl Iterator<Item = u64>) -> bool {
+        let mut last = 0;
+        seqs.into_iter()
+            .all(|seq| core::mem::replace(&mut last, seq) < seq)
+    }
+    if !ascending(header.statuses().iter().map(|s| s.seq))
+        || !ascending(header.collisions().iter().map(|c| c.seq))
+    {
+        return Err("event sequence numbers are not ascending from 1".into());
     }
     if header.image_count as usize > header.images.len() {
         return Err(format!(
@@ -356,6 +388,8 @@ impl<'c> AgentBuilder<'c> {
             next_action_id: 1,
             frames_skipped: 0,
             next_liveness: Instant::now() + HOST_LIVENESS_PERIOD,
+            last_event_seq: 0,
+            action_states: ActionStates::new(),
         })
     }
 }
@@ -379,6 +413,58 @@ pub struct Agent {
     next_action_id: u32,
     frames_skipped: u64,
     next_liveness: Instant,
+    /// The highest event sequence number handed out.
+    last_event_seq: u64,
+    action_states: ActionStates,
+}
+
+/// How many actions [`Agent::action_state`] remembers; beyond, the one whose status came
+/// earliest is forgotten (a finished or aborted one first).
+pub const ACTION_STATES_CAPACITY: usize = 1024;
+
+/// The latest status per action id, bounded (no allocation after connect).
+#[derive(Debug)]
+struct ActionStates {
+    /// `(action id, state, seq of the status)`.
+    entries: Vec<(u32, ActionState, u64)>,
+}
+
+impl ActionStates {
+    fn new() -> Self {
+        Self {
+            entries: Vec::with_capacity(ACTION_STATES_CAPACITY),
+        }
+    }
+
+    fn get(&self, action_id: u32) -> Option<ActionState> {
+        self.entries.iter().find(|e| e.0 == action_id).map(|e| e.1)
+    }
+
+    fn update(&mut self, status: &ActionStatus) {
+        let Some(state) = ActionState::from_u32(status.state) else {
+            return;
+        };
+        if let Some(e) = self.entries.iter_mut().find(|e| e.0 == status.action_id) {
+            *e = (status.action_id, state, status.seq);
+            return;
+        }
+        if self.entries.len() >= ACTION_STATES_CAPACITY {
+            let oldest = |done: bool| {
+                self.entries
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, e)| {
+                        !done || matches!(e.1, ActionState::Finished | ActionState::Aborted)
+                    })
+                    .min_by_key(|(_, e)| e.2)
+                    .map(|(i, _)| i)
+            };
+            if let Some(i) = oldest(true).or_else(|| oldest(false)) {
+                self.entries.swap_remove(i);
+            }
+        }
+        self.entries.push((status.action_id, state, status.seq));
+    }
 }
 
 impl Agent {
@@ -401,9 +487,22 @@ impl Agent {
     }
 
     /// Frames the host published that this agent never saw because a newer one arrived
-    /// first (only in async mode or after a stop timeout).
+    /// first (only in async mode or after a stop timeout). Their action statuses and
+    /// collisions are not lost: the next frame read brings them ([`Frame::statuses`]).
     pub fn frames_skipped(&self) -> u64 {
         self.frames_skipped
+    }
+
+    /// The latest status of action `action_id` that a frame brought (`None`: none yet),
+    /// like the original client's status map. Remembers the latest
+    /// [`ACTION_STATES_CAPACITY`] actions.
+    pub fn action_state(&self, action_id: u32) -> Option<ActionState> {
+        self.action_states.get(action_id)
+    }
+
+    /// Every action's latest status, as [`Agent::action_state`], in no particular order.
+    pub fn action_states(&self) -> impl Iterator<Item = (u32, ActionState)> + '_ {
+        self.action_states.entries.iter().map(|e| (e.0, e.1))
     }
 
     /// Blocks until the host signals *start* with a new frame, and returns that frame.
@@ -451,9 +550,26 @@ impl Agent {
         if let Some(last) = self.last_cycle {
             self.frames_skipped += cycle - last - 1;
         }
+        // The host repeats events until acknowledged: hand out the ones not seen yet (a
+        // suffix of each table, whose sequence numbers ascend).
+        let seen = self.last_event_seq;
+        let new_statuses = h.statuses().partition_point(|s| s.seq <= seen);
+        let new_collisions = h.collisions().partition_point(|c| c.seq <= seen);
+        for status in &h.statuses()[new_statuses..] {
+            self.action_states.update(status);
+        }
+        let newest = |a: Option<u64>, b: Option<u64>| a.max(b).unwrap_or(0);
+        self.last_event_seq = seen.max(newest(
+            h.statuses().last().map(|s| s.seq),
+            h.collisions().last().map(|c| c.seq),
+        ));
         self.last_cycle = Some(cycle);
         self.queue.clear();
-        Ok(Frame { inner })
+        Ok(Frame {
+            inner,
+            new_statuses,
+            new_collisions,
+        })
     }
 
     /// Queues a command with a fresh action id (returned; statuses and collisions quote it).
@@ -491,7 +607,8 @@ impl Agent {
     }
 
     /// Sends the queued commands with the *stop* flag for the cycle of the newest frame,
-    /// and signals *stop*: this agent is done with the cycle.
+    /// and signals *stop*: this agent is done with the cycle. The batch also acknowledges
+    /// that frame, so the host stops repeating the events it carried.
     ///
     /// # Errors
     /// [`StopError`].
@@ -504,8 +621,9 @@ impl Agent {
             protocol_version: PROTOCOL_VERSION,
             agent_id: self.id,
             cycle,
-            flags: MOTOR_FLAG_STOP,
+            flags: MOTOR_FLAG_STOP | MOTOR_FLAG_ACK,
             command_count: self.queue.len() as u32,
+            ack_cycle: cycle,
         };
         let sent = match &mut self.backend {
             Backend::Shm(shm) => AgentTransport::send_batch(&mut **shm, &header, &self.queue),

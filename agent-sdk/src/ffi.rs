@@ -648,8 +648,8 @@ fn frame_info(frame: &Frame, frames_skipped: u64) -> vrs_frame_t {
         agent_id: h.agent_id,
         sync_mode: h.sync_mode(),
         image_count: frame.image_count() as u32,
-        status_count: h.statuses().len() as u32,
-        collision_count: h.collisions().len() as u32,
+        status_count: frame.statuses().len() as u32,
+        collision_count: frame.collisions().len() as u32,
         pose: vrs_pose_t {
             position: h.pose.position,
             rotation: h.pose.rotation,
@@ -840,7 +840,7 @@ fn status_impl(
     out_status: *mut vrs_action_status_t,
 ) -> Result<(), FfiError> {
     with_agent(agent, |st| {
-        let statuses = current_frame(st)?.header().statuses();
+        let statuses = current_frame(st)?.statuses();
         let s = statuses.get(index).ok_or(FfiError::OutOfRange {
             what: "status",
             index,
@@ -861,7 +861,7 @@ fn collision_impl(
     out_collision: *mut vrs_collision_t,
 ) -> Result<(), FfiError> {
     with_agent(agent, |st| {
-        let collisions = current_frame(st)?.header().collisions();
+        let collisions = current_frame(st)?.collisions();
         let c = collisions.get(index).ok_or(FfiError::OutOfRange {
             what: "collision",
             index,
@@ -873,6 +873,22 @@ fn collision_impl(
         };
         // SAFETY: null or writable by the caller's contract.
         unsafe { write_required(out_collision, "out_collision", value) }
+    })
+}
+
+fn action_state_impl(
+    agent: *mut vrs_agent_t,
+    action_id: u32,
+    out_state: *mut u32,
+    out_known: *mut bool,
+) -> Result<(), FfiError> {
+    with_agent(agent, |st| {
+        let state = st.agent.action_state(action_id);
+        // SAFETY: null or writable by the caller's contract.
+        unsafe {
+            write_required(out_known, "out_known", state.is_some())?;
+            write_required(out_state, "out_state", state.map_or(0, |s| s as u32))
+        }
     })
 }
 
@@ -1136,8 +1152,10 @@ pub unsafe extern "C" fn vrs_agent_image_by_name(
     boundary(|| image_by_name_impl(agent, name, out_image))
 }
 
-/// Action status `index` (`0..status_count`) of the current frame: the statuses that
-/// changed since the previous frame, keyed by the action ids the sends returned.
+/// Action status `index` (`0..status_count`) of the current frame, keyed by the action ids
+/// the sends returned: the statuses this frame brings, each exactly once — also those of
+/// frames the agent skipped (the host repeats a status until the agent's stop acknowledges
+/// a frame that carried it). The latest status of any action: [`vrs_agent_action_state`].
 ///
 /// # Errors
 /// `VRS_ERROR_OUT_OF_RANGE`, `VRS_ERROR_NO_FRAME`, `VRS_ERROR_INVALID_ARGUMENT`, handle
@@ -1154,7 +1172,8 @@ pub unsafe extern "C" fn vrs_agent_status(
     boundary(|| status_impl(agent, index, out_status))
 }
 
-/// Collision `index` (`0..collision_count`) of the current frame.
+/// Collision `index` (`0..collision_count`) of the current frame: each collision exactly
+/// once, as [`vrs_agent_status`].
 ///
 /// # Errors
 /// `VRS_ERROR_OUT_OF_RANGE`, `VRS_ERROR_NO_FRAME`, `VRS_ERROR_INVALID_ARGUMENT`, handle
@@ -1169,6 +1188,27 @@ pub unsafe extern "C" fn vrs_agent_collision(
     out_collision: *mut vrs_collision_t,
 ) -> vrs_status_t {
     boundary(|| collision_impl(agent, index, out_collision))
+}
+
+/// The latest status of action `action_id` that a frame brought, like the original
+/// client's status map: `*out_known` is whether there is one, `*out_state` the
+/// `vrs_action_state_t` value (0 when unknown). The agent remembers the latest 1024
+/// actions (`ACTION_STATES_CAPACITY` of the Rust SDK). Needs no current frame.
+///
+/// # Errors
+/// `VRS_ERROR_INVALID_ARGUMENT` (NULL `out_state` or `out_known`), handle errors.
+///
+/// # Safety
+/// `out_state` is NULL or valid for writing a `uint32_t`; `out_known` is NULL or valid for
+/// writing a `bool`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_agent_action_state(
+    agent: *mut vrs_agent_t,
+    action_id: u32,
+    out_state: *mut u32,
+    out_known: *mut bool,
+) -> vrs_status_t {
+    boundary(|| action_state_impl(agent, action_id, out_state, out_known))
 }
 
 /// This agent's id.

@@ -34,11 +34,13 @@ pub mod log;
 pub mod policy;
 
 pub use agent::{
-    Agent, AgentBuilder, AgentConnectError, Frame, HOST_LIVENESS_PERIOD, Image, SendError,
-    SignalHandling, StopError, WaitStartError,
+    ACTION_STATES_CAPACITY, Agent, AgentBuilder, AgentConnectError, Frame, HOST_LIVENESS_PERIOD,
+    Image, SendError, SignalHandling, StopError, WaitStartError,
 };
 /// The [glam](https://docs.rs/glam) this SDK uses for poses and targets ([`Pose::position`],
 /// [`Command::MoveTo`]): use `vrsync_agent::glam` instead of pinning the same version.
 pub use glam;
 pub use vrsync_bridge::Config;
-pub use vrsync_bridge::{ActionState, Command, PixelFormat, Pose, SensorHeader};
+pub use vrsync_bridge::{
+    ActionState, ActionStatus, Collision, Command, PixelFormat, Pose, SensorHeader,
+};

@@ -2,14 +2,14 @@
 //! the agent id and the frames received, never on time, so a run is reproducible.
 //!
 //! `wander` and `seek` run one action at a time: after a command they wait for its
-//! `Finished`/`Aborted` status (or a collision) in a later frame's header before they send
-//! the next. A host that reports no statuses gets the next command only once
+//! `Finished`/`Aborted` status (or a collision) in a later frame ([`Frame::statuses`]:
+//! each status once, also after skipped frames) before they send the next. A host that reports no statuses gets the next command only once
 //! [`STATUS_WAIT_CYCLES`] cycles have passed without one (`seek`'s search turns give up after
 //! [`SEEK_SEARCH_WAIT_CYCLES`]). `circle` sends every cycle, `idle` never.
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use vrsync_bridge::{ActionState, Command, PixelFormat, SensorHeader};
+use vrsync_bridge::{ActionState, ActionStatus, Collision, Command, PixelFormat, SensorHeader};
 
 use crate::{Frame, Image};
 
@@ -111,6 +111,13 @@ fn red_in(image: Option<Image<'_>>) -> Option<RedBlob> {
     find_red(i.data(), i.width(), i.height(), i.stride(), i.format())
 }
 
+/// The events a frame brings (each once).
+#[derive(Debug, Clone, Copy)]
+struct Events<'a> {
+    statuses: &'a [ActionStatus],
+    collisions: &'a [Collision],
+}
+
 /// What the policy wants to send this cycle (at most two commands).
 pub type Decision = heapless_pair::Pair;
 
@@ -177,11 +184,21 @@ impl Policy {
 
     /// Decides on this frame.
     pub fn decide(&mut self, frame: &Frame) -> Decision {
-        self.decide_on(frame.header(), Some(frame))
+        let events = Events {
+            statuses: frame.statuses(),
+            collisions: frame.collisions(),
+        };
+        self.decide_on(frame.header(), events, Some(frame))
     }
 
-    /// Decides on a frame's header; `frame` gives `seek` its images (`None`: sees nothing).
-    fn decide_on(&mut self, h: &SensorHeader, frame: Option<&Frame>) -> Decision {
+    /// Decides on a frame's header and the events it brings; `frame` gives `seek` its
+    /// images (`None`: sees nothing).
+    fn decide_on(
+        &mut self,
+        h: &SensorHeader,
+        events: Events<'_>,
+        frame: Option<&Frame>,
+    ) -> Decision {
         let mut out = Decision::default();
         self.cycle = h.cycle;
         match self.kind {
@@ -199,9 +216,9 @@ impl Policy {
         self.heading_deg = yaw.to_degrees().rem_euclid(360.0);
         let collided = self
             .running
-            .is_some_and(|id| h.collisions().iter().any(|c| c.action_id == id));
+            .is_some_and(|id| events.collisions.iter().any(|c| c.action_id == id));
         let finished = self.running.is_none_or(|id| {
-            h.statuses().iter().any(|s| {
+            events.statuses.iter().any(|s| {
                 s.action_id == id
                     && matches!(
                         ActionState::from_u32(s.state),
@@ -357,13 +374,20 @@ mod tests {
         h
     }
 
+    fn events(h: &SensorHeader) -> Events<'_> {
+        Events {
+            statuses: h.statuses(),
+            collisions: h.collisions(),
+        }
+    }
+
     /// Runs `policy` over `cycles` frames from a host that reports no statuses, and returns
     /// the cycles on which it sent a command.
     fn commands_without_statuses(policy: &mut Policy, cycles: std::ops::Range<u64>) -> Vec<u64> {
         let mut sent = Vec::new();
         for (action_id, cycle) in (1..).zip(cycles) {
             if policy
-                .decide_on(&header(cycle), None)
+                .decide_on(&header(cycle), events(&header(cycle)), None)
                 .iter()
                 .next()
                 .is_some()
@@ -388,19 +412,43 @@ mod tests {
         let mut wander = Policy::new(PolicyKind::Wander, 7, 0);
         assert_eq!(commands_without_statuses(&mut wander, 0..1), [0]);
         // A stalled agent sees cycle 1, then cycle 1 + STATUS_WAIT_CYCLES.
-        assert!(wander.decide_on(&header(1), None).iter().next().is_none());
+        assert!(
+            wander
+                .decide_on(&header(1), events(&header(1)), None)
+                .iter()
+                .next()
+                .is_none()
+        );
         let late = header(STATUS_WAIT_CYCLES);
-        assert!(wander.decide_on(&late, None).iter().next().is_some());
+        assert!(
+            wander
+                .decide_on(&late, events(&late), None)
+                .iter()
+                .next()
+                .is_some()
+        );
     }
 
     #[test]
     fn wander_sends_its_next_command_on_the_finished_status() {
         let mut wander = Policy::new(PolicyKind::Wander, 7, 0);
         assert_eq!(commands_without_statuses(&mut wander, 0..1), [0]);
-        assert!(wander.decide_on(&header(1), None).iter().next().is_none());
+        assert!(
+            wander
+                .decide_on(&header(1), events(&header(1)), None)
+                .iter()
+                .next()
+                .is_none()
+        );
         let mut h = header(2);
         h.push_status(1, ActionState::Finished);
-        assert!(wander.decide_on(&h, None).iter().next().is_some());
+        assert!(
+            wander
+                .decide_on(&h, events(&h), None)
+                .iter()
+                .next()
+                .is_some()
+        );
     }
 
     #[test]

@@ -220,6 +220,7 @@ fn send_batch<T: AgentTransport>(agent: &mut T, cycle: u64, stop: bool, commands
         cycle,
         flags: if stop { MOTOR_FLAG_STOP } else { 0 },
         command_count: commands.len() as u32,
+        ack_cycle: 0,
     };
     agent.send_batch(&header, commands).unwrap();
 }

@@ -16,14 +16,15 @@ use tracing::{debug, info, warn};
 
 use crate::barrier::{AgentOutcome, BatchVerdict, CycleBarrier};
 use crate::config::{AgentLostPolicy, Config};
+use crate::events::PendingEvents;
 use crate::signal::SignalHandling;
 use crate::transport::mixed::{AnyLoan, Transports, TransportsCreateError};
 use crate::transport::shm::ShmHostCreateError;
 use crate::transport::tcp::TcpHostCreateError;
 use crate::transport::{FrameLoanMut, HostTransport, HostTransportError, PeerRefusal};
 use crate::wire::{
-    ImageDesc, MAX_CAMERAS, MotorCommand, PROTOCOL_VERSION, SENSOR_FLAG_SYNC_MODE, SensorHeader,
-    WireOutcome,
+    ActionState, ImageDesc, MAX_CAMERAS, MotorCommand, PROTOCOL_VERSION, SENSOR_FLAG_SYNC_MODE,
+    SensorHeader, WireOutcome,
 };
 
 /// One writable image of a loaned sensor frame.
@@ -116,6 +117,10 @@ pub struct AgentReport {
     pub agent_id: u32,
     /// How its cycle ended.
     pub outcome: AgentOutcome,
+    /// The newest cycle whose frame the agent acknowledged having read (its batches say
+    /// so), `None` before its first acknowledgement (and again after an eviction). A frame
+    /// delivered to it and older than this, and never acknowledged, was skipped.
+    pub read_cycle: Option<u64>,
     commands: Vec<MotorCommand>,
 }
 
@@ -142,9 +147,14 @@ pub struct CycleReport {
 }
 
 impl CycleReport {
-    /// Every agent's report, in agent id order.
+    /// Every agent's report, in the config's agent order.
     pub fn agents(&self) -> &[AgentReport] {
         &self.agents
+    }
+
+    /// The report of agent `id` (`None`: not an agent of this session).
+    pub fn agent(&self, id: u32) -> Option<&AgentReport> {
+        self.agents.iter().find(|a| a.agent_id == id)
     }
 
     /// Ids of agents that timed out this cycle.
@@ -175,6 +185,20 @@ pub struct HostStats {
     pub commands_overflowed: u64,
     /// Frames that reached no agent (not connected, or async TCP with a full socket).
     pub frames_undelivered: u64,
+    /// Frames delivered to an agent.
+    pub frames_delivered: u64,
+    /// Frames an agent acknowledged having read (see [`AgentReport::read_cycle`]).
+    /// `frames_delivered - frames_read` frames were skipped by their agent (a newer one
+    /// was read first) or are still being read.
+    pub frames_read: u64,
+    /// Action statuses dropped because an agent's table of unacknowledged events was full
+    /// (it did not acknowledge frames for a while): superseded statuses first, so the
+    /// newest status of every action is kept as long as there is room (see
+    /// `MAX_STATUSES`).
+    pub statuses_dropped: u64,
+    /// Collisions dropped because an agent's table of unacknowledged collisions was full
+    /// (the oldest goes; see `MAX_COLLISIONS`).
+    pub collisions_dropped: u64,
     /// Agents evicted at least once (process died or disconnected), ascending.
     pub evicted_agents: Vec<u32>,
     /// Times an evicted agent came back.
@@ -339,6 +363,8 @@ impl<T: HostTransport> Host<T> {
                     last_rejected: 0,
                     evicted: false,
                     seen: false,
+                    events: PendingEvents::new(),
+                    read_cycle: None,
                 }
             })
             .collect();
@@ -348,6 +374,7 @@ impl<T: HostTransport> Host<T> {
             .map(|a| AgentReport {
                 agent_id: a.id,
                 outcome: AgentOutcome::NotAwaited,
+                read_cycle: None,
                 commands: Vec::with_capacity(cap),
             })
             .collect();
@@ -394,6 +421,10 @@ struct SlotState {
     evicted: bool,
     /// A frame reached it since it was last evicted (so losing it now is news).
     seen: bool,
+    /// Its statuses and collisions not acknowledged yet, repeated in every frame.
+    events: PendingEvents,
+    /// The newest cycle it acknowledged having read.
+    read_cycle: Option<u64>,
 }
 
 /// How often the host looks for dead agent processes while it waits.
@@ -600,6 +631,9 @@ impl<T: HostTransport> Host<T> {
         h.images = s.descs;
         h.previous_outcome = s.last_outcome as u32;
         h.previous_rejected = s.last_rejected;
+        // The simulator adds this cycle's events; publish adds the unacknowledged ones.
+        h.status_count = 0;
+        h.collision_count = 0;
         Ok(SensorFrameMut {
             slot,
             agent_id: id,
@@ -613,9 +647,14 @@ impl<T: HostTransport> Host<T> {
     /// Publishes a frame; if it reached its agent, that agent is awaited this cycle (sync
     /// mode). A frame for an agent that is not connected is dropped and counted.
     ///
+    /// The statuses and collisions the simulator wrote into the header are this cycle's
+    /// new events; publish adds every earlier event the agent has not acknowledged yet
+    /// (see [`SensorHeader::statuses`]), so the simulator reports each event once and the
+    /// agent gets it even if it skips frames.
+    ///
     /// # Errors
     /// [`HostCycleError`].
-    pub fn publish(&mut self, frame: SensorFrameMut<T::Loan>) -> Result<(), HostCycleError> {
+    pub fn publish(&mut self, mut frame: SensorFrameMut<T::Loan>) -> Result<(), HostCycleError> {
         if frame.cycle != self.cycle {
             return Err(HostCycleError::StaleFrame {
                 agent: frame.agent_id,
@@ -624,7 +663,21 @@ impl<T: HostTransport> Host<T> {
             });
         }
         let slot = frame.slot;
+        let dropped = self.slots[slot]
+            .events
+            .merge_into(frame.loan.parts_mut().0, self.cycle);
+        if dropped.statuses + dropped.collisions > 0 {
+            self.stats.statuses_dropped += u64::from(dropped.statuses);
+            self.stats.collisions_dropped += u64::from(dropped.collisions);
+            debug!(
+                agent = frame.agent_id,
+                statuses = dropped.statuses,
+                collisions = dropped.collisions,
+                "unacknowledged events dropped: the agent's table is full"
+            );
+        }
         if self.backend.publish(slot, frame.loan)? {
+            self.stats.frames_delivered += 1;
             self.barrier.await_slot(slot);
             self.slots[slot].seen = true;
             if self.slots[slot].evicted {
@@ -674,6 +727,9 @@ impl<T: HostTransport> Host<T> {
         } else {
             self.collect_async()?;
         }
+        for (a, s) in self.report.agents.iter_mut().zip(&self.slots) {
+            a.read_cycle = s.read_cycle;
+        }
         self.stats.cycles += 1;
         self.cycle += 1;
         self.barrier.begin(self.cycle);
@@ -684,13 +740,25 @@ impl<T: HostTransport> Host<T> {
         let barrier = &mut self.barrier;
         let report = &mut self.report;
         let stats = &mut self.stats;
+        let slots = &mut self.slots;
+        let cycle = self.cycle;
         self.backend.drain(&mut |slot, header, commands| {
+            // Any batch may acknowledge a frame, a late one too; never one not yet sent.
+            if let Some(read) = header.acknowledged().filter(|&c| c <= cycle)
+                && let Some(s) = slots.get_mut(slot)
+                && s.read_cycle.is_none_or(|r| read > r)
+            {
+                s.read_cycle = Some(read);
+                s.events.acknowledge(read);
+                stats.frames_read += 1;
+            }
             let verdict = if sync {
                 barrier.on_batch(slot, header.cycle, header.is_stop())
             } else {
                 BatchVerdict::Accept { stop: false }
             };
-            match verdict {
+            // Commands from this index on are dropped.
+            let applied = match verdict {
                 BatchVerdict::Accept { .. } => {
                     let Some(a) = report.agents.get_mut(slot) else {
                         return;
@@ -707,11 +775,13 @@ impl<T: HostTransport> Host<T> {
                             "too many commands in one cycle"
                         );
                     }
+                    take
                 }
                 BatchVerdict::Late => {
                     report.late_batches += 1;
                     stats.late_batches += 1;
                     debug!(slot, batch_cycle = header.cycle, "late batch dropped");
+                    0
                 }
                 BatchVerdict::Future => {
                     stats.future_batches += 1;
@@ -725,8 +795,21 @@ impl<T: HostTransport> Host<T> {
                             "batch for a future cycle dropped"
                         );
                     }
+                    0
                 }
-                BatchVerdict::NotAwaited => {}
+                BatchVerdict::NotAwaited => 0,
+            };
+            // A dropped command never runs: its agent learns so from an `Aborted` status in
+            // its next frame (an agent that waits for its action's end must not wait in
+            // vain, e.g. after its batch came late).
+            if let Some(s) = slots.get_mut(slot) {
+                for c in commands.get(applied..).unwrap_or(&[]) {
+                    if s.events
+                        .push_status(c.action_id, ActionState::Aborted as u32, cycle + 1)
+                    {
+                        stats.statuses_dropped += 1;
+                    }
+                }
             }
         })?;
         Ok(())
@@ -759,6 +842,9 @@ impl<T: HostTransport> Host<T> {
                 );
                 self.slots[slot].evicted = true;
                 self.slots[slot].seen = false;
+                // A process that rejoins starts afresh: its events were for the old one.
+                self.slots[slot].events.clear();
+                self.slots[slot].read_cycle = None;
                 if let Some(hook) = &mut self.evicted_hook {
                     hook(id, self.cycle);
                 }
@@ -890,7 +976,7 @@ mod tests {
 
     use super::*;
     use crate::transport::BatchSink;
-    use crate::wire::{Command, MOTOR_FLAG_STOP, MotorHeader};
+    use crate::wire::{ActionState, Command, MOTOR_FLAG_ACK, MOTOR_FLAG_STOP, MotorHeader};
 
     /// What the fake's agents do; shared between the test and the host's transport.
     #[derive(Default)]
@@ -906,6 +992,8 @@ mod tests {
         delivered: Vec<(usize, u64)>,
         /// Batches waiting for the host's next drain.
         inbox: Vec<(usize, MotorHeader, Vec<MotorCommand>)>,
+        /// Every header published: (slot, header).
+        published: Vec<(usize, SensorHeader)>,
     }
 
     impl Agents {
@@ -916,6 +1004,7 @@ mod tests {
                 cycle,
                 flags: if stop { MOTOR_FLAG_STOP } else { 0 },
                 command_count: commands.len() as u32,
+                ack_cycle: 0,
             };
             self.inbox.push((slot, header, commands));
         }
@@ -961,6 +1050,7 @@ mod tests {
                 return Ok(false);
             }
             a.delivered.push((slot, frame.header.cycle));
+            a.published.push((slot, frame.header));
             Ok(true)
         }
         fn signal_start(&mut self) -> Result<(), HostTransportError> {
@@ -983,6 +1073,11 @@ mod tests {
                 if a.answers[slot] && a.connected[slot] {
                     let command = Command::Turn { angle_deg: 1.0 }.encode(cycle as u32);
                     a.batch(slot, cycle, true, vec![command]);
+                    // An answer acknowledges the frame it answers, as the SDK's stop does.
+                    if let Some((_, header, _)) = a.inbox.last_mut() {
+                        header.flags |= MOTOR_FLAG_ACK;
+                        header.ack_cycle = cycle;
+                    }
                 }
             }
             if a.inbox.is_empty() {
@@ -1177,6 +1272,122 @@ mod tests {
         assert!(
             matches!(err, HostCycleError::AgentNotBack { agent: 7, .. }),
             "{err:?}"
+        );
+    }
+
+    /// Publishes agent 3's and 7's frames, agent 3's with `statuses` as the simulator's
+    /// new events, and collects; returns the (action id, state, seq) agent 3 got.
+    fn cycle_with_statuses(
+        host: &mut Host<Fake>,
+        agents: &Rc<RefCell<Agents>>,
+        statuses: &[(u32, ActionState)],
+    ) -> Vec<(u32, u32, u64)> {
+        for id in [3, 7] {
+            let mut frame = host.loan_frame(id).unwrap();
+            assert_eq!(
+                frame.header().status_count,
+                0,
+                "a loaned frame starts empty"
+            );
+            if id == 3 {
+                for &(action, state) in statuses {
+                    frame.header_mut().push_status(action, state);
+                }
+            }
+            host.publish(frame).unwrap();
+        }
+        host.start().unwrap();
+        let got = {
+            let a = agents.borrow();
+            let (_, h) = a
+                .published
+                .iter()
+                .rev()
+                .find(|(slot, _)| *slot == 0)
+                .unwrap();
+            h.statuses()
+                .iter()
+                .map(|s| (s.action_id, s.state, s.seq))
+                .collect()
+        };
+        host.collect().unwrap();
+        got
+    }
+
+    #[test]
+    fn events_repeat_until_a_batch_acknowledges_a_frame_that_carried_them() {
+        let (mut host, agents) = host("evict");
+        let (fin, walk) = (ActionState::Finished as u32, ActionState::Walking as u32);
+        // Agent 3 answers: each frame's events are acknowledged by its stop.
+        assert_eq!(
+            cycle_with_statuses(&mut host, &agents, &[(1, ActionState::Finished)]),
+            [(1, fin, 1)]
+        );
+        assert_eq!(host.report.agent(3).unwrap().read_cycle, Some(0));
+        assert!(cycle_with_statuses(&mut host, &agents, &[]).is_empty());
+        // Agent 3 stalls for two cycles: its events pile up and repeat.
+        agents.borrow_mut().answers[0] = false;
+        let two = [(2, ActionState::Walking)];
+        assert_eq!(
+            cycle_with_statuses(&mut host, &agents, &two),
+            [(2, walk, 2)]
+        );
+        let three = [(2, ActionState::Finished)];
+        assert_eq!(
+            cycle_with_statuses(&mut host, &agents, &three),
+            [(2, walk, 2), (2, fin, 3)]
+        );
+        // It is back: the frame it reads still carries both, then they are gone.
+        agents.borrow_mut().answers[0] = true;
+        assert_eq!(
+            cycle_with_statuses(&mut host, &agents, &[]),
+            [(2, walk, 2), (2, fin, 3)]
+        );
+        assert_eq!(host.report.agent(3).unwrap().read_cycle, Some(4));
+        assert!(cycle_with_statuses(&mut host, &agents, &[]).is_empty());
+        let stats = host.stats();
+        assert_eq!(stats.frames_delivered, 12);
+        // Agent 3 read 4 of its 6 frames (and skipped 2); agent 7 all 6.
+        assert_eq!(stats.frames_read, 10);
+        assert_eq!(stats.statuses_dropped, 0);
+    }
+
+    #[test]
+    fn the_commands_of_a_dropped_batch_are_reported_aborted() {
+        let (mut host, agents) = host("evict");
+        agents.borrow_mut().answers[0] = false;
+        cycle_with_statuses(&mut host, &agents, &[]);
+        // Agent 3's batch for cycle 0 arrives in cycle 1: late, its command never runs.
+        agents
+            .borrow_mut()
+            .batch(0, 0, true, vec![Command::CancelMove.encode(42)]);
+        cycle_with_statuses(&mut host, &agents, &[]);
+        let abort = ActionState::Aborted as u32;
+        assert_eq!(
+            cycle_with_statuses(&mut host, &agents, &[]),
+            [(42, abort, 1)]
+        );
+        assert_eq!(host.stats().late_batches, 1);
+    }
+
+    #[test]
+    fn an_evicted_agent_does_not_inherit_its_old_events() {
+        let (mut host, agents) = host("evict");
+        agents.borrow_mut().answers[0] = false;
+        cycle_with_statuses(&mut host, &agents, &[(1, ActionState::Finished)]);
+        // Gone during cycle 1, back for cycle 2: a new process starts afresh.
+        agents.borrow_mut().connected[0] = false;
+        cycle_with_statuses(&mut host, &agents, &[]);
+        assert!(host.is_evicted(3));
+        {
+            let mut a = agents.borrow_mut();
+            a.connected[0] = true;
+            a.answers[0] = true;
+        }
+        let fin = ActionState::Finished as u32;
+        assert_eq!(
+            cycle_with_statuses(&mut host, &agents, &[(9, ActionState::Finished)]),
+            [(9, fin, 2)]
         );
     }
 

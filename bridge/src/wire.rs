@@ -19,13 +19,15 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 /// Version of the vrsync protocol. Bumped on every incompatible change of the wire types
 /// or of the cycle semantics.
-pub const PROTOCOL_VERSION: u32 = 1;
+pub const PROTOCOL_VERSION: u32 = 2;
 
 /// Maximum number of cameras (images) per agent and sensor frame.
 pub const MAX_CAMERAS: usize = 4;
-/// Maximum number of action statuses reported in one sensor frame.
+/// Maximum number of action statuses in one sensor frame, and of statuses the host keeps
+/// for an agent until it acknowledges them (see [`SensorHeader::statuses`]).
 pub const MAX_STATUSES: usize = 16;
-/// Maximum number of collisions reported in one sensor frame.
+/// Maximum number of collisions in one sensor frame, and of collisions the host keeps for
+/// an agent until it acknowledges them.
 pub const MAX_COLLISIONS: usize = 8;
 /// Maximum length of a camera name in bytes (UTF-8, zero padded).
 pub const CAMERA_NAME_LEN: usize = 16;
@@ -194,12 +196,16 @@ impl ActionState {
     Immutable,
     KnownLayout,
 )]
-#[type_name("vrsync::ActionStatus/v1")]
+#[type_name("vrsync::ActionStatus/v2")]
 pub struct ActionStatus {
     /// The action id the agent sent with the command.
     pub action_id: u32,
     /// An [`ActionState`] as `u32`.
     pub state: u32,
+    /// Sequence number of the event (one increasing series per agent, statuses and
+    /// collisions together), set by the host's bridge when it publishes the frame; what the
+    /// simulator writes here is ignored. The agent SDK hands out each number once.
+    pub seq: u64,
 }
 
 /// One collision entry of a sensor frame.
@@ -216,12 +222,14 @@ pub struct ActionStatus {
     Immutable,
     KnownLayout,
 )]
-#[type_name("vrsync::Collision/v1")]
+#[type_name("vrsync::Collision/v2")]
 pub struct Collision {
     /// The action that was running when the collision happened.
     pub action_id: u32,
     /// Id of the object (or wall) that was hit.
     pub collider_id: u32,
+    /// Sequence number of the event, as [`ActionStatus::seq`].
+    pub seq: u64,
 }
 
 /// Pixel format of an image.
@@ -400,7 +408,7 @@ pub enum WireOutcome {
     Immutable,
     KnownLayout,
 )]
-#[type_name("vrsync::SensorHeader/v1")]
+#[type_name("vrsync::SensorHeader/v2")]
 pub struct SensorHeader {
     /// [`PROTOCOL_VERSION`] of the writer.
     pub protocol_version: u32,
@@ -428,9 +436,11 @@ pub struct SensorHeader {
     pub status_count: u32,
     /// Number of valid entries in `collisions`.
     pub collision_count: u32,
-    /// Action statuses that changed since the previous frame.
+    /// Action statuses: in the frame the simulator loans, those since the previous frame;
+    /// in the frame an agent receives, every status it has not acknowledged yet (see
+    /// [`SensorHeader::statuses`]), ascending `seq`.
     pub statuses: [ActionStatus; MAX_STATUSES],
-    /// Collisions since the previous frame.
+    /// Collisions, like `statuses`.
     pub collisions: [Collision; MAX_COLLISIONS],
     /// Image table.
     pub images: [ImageDesc; MAX_CAMERAS],
@@ -442,11 +452,17 @@ pub struct SensorHeader {
 
 impl SensorHeader {
     /// Valid action statuses.
+    ///
+    /// Written by the simulator: the statuses since the previous frame. As published: the
+    /// host's bridge adds the statuses the agent has not acknowledged yet, so a status
+    /// arrives in every frame until the agent's batch acknowledges a frame that carried it
+    /// ([`MotorHeader::ack_cycle`]); an agent that skips frames misses none. Agents see
+    /// repeats here: the agent SDK's frame hands out each event once.
     pub fn statuses(&self) -> &[ActionStatus] {
         &self.statuses[..(self.status_count as usize).min(MAX_STATUSES)]
     }
 
-    /// Valid collisions.
+    /// Valid collisions (repeated until acknowledged, like [`SensorHeader::statuses`]).
     pub fn collisions(&self) -> &[Collision] {
         &self.collisions[..(self.collision_count as usize).min(MAX_COLLISIONS)]
     }
@@ -465,6 +481,7 @@ impl SensorHeader {
         self.statuses[n] = ActionStatus {
             action_id,
             state: state as u32,
+            seq: 0,
         };
         self.status_count += 1;
         true
@@ -479,6 +496,7 @@ impl SensorHeader {
         self.collisions[n] = Collision {
             action_id,
             collider_id,
+            seq: 0,
         };
         self.collision_count += 1;
         true
@@ -492,6 +510,8 @@ impl SensorHeader {
 
 /// Motor header flag: this batch ends the agent's cycle (the *stop*).
 pub const MOTOR_FLAG_STOP: u32 = 1;
+/// Motor header flag: [`MotorHeader::ack_cycle`] is valid.
+pub const MOTOR_FLAG_ACK: u32 = 2;
 
 /// Header of a motor batch: the iceoryx2 user header of an `agent/<id>/motor` sample whose
 /// payload is `[MotorCommand]`.
@@ -508,7 +528,7 @@ pub const MOTOR_FLAG_STOP: u32 = 1;
     Immutable,
     KnownLayout,
 )]
-#[type_name("vrsync::MotorHeader/v1")]
+#[type_name("vrsync::MotorHeader/v2")]
 pub struct MotorHeader {
     /// [`PROTOCOL_VERSION`] of the writer.
     pub protocol_version: u32,
@@ -520,12 +540,22 @@ pub struct MotorHeader {
     pub flags: u32,
     /// Number of commands in the payload.
     pub command_count: u32,
+    /// With [`MOTOR_FLAG_ACK`]: the newest cycle whose sensor frame the agent has read. The
+    /// host stops repeating the events that frame (or an earlier one) carried, and counts
+    /// the frame as read. Valid in any batch, also a late one. A transport that reads every
+    /// frame for its agent (one that does not skip) may set it for the agent.
+    pub ack_cycle: u64,
 }
 
 impl MotorHeader {
     /// Whether this batch carries the stop.
     pub fn is_stop(&self) -> bool {
         self.flags & MOTOR_FLAG_STOP != 0
+    }
+
+    /// The acknowledged cycle, if the batch carries one.
+    pub fn acknowledged(&self) -> Option<u64> {
+        (self.flags & MOTOR_FLAG_ACK != 0).then_some(self.ack_cycle)
     }
 }
 
@@ -878,11 +908,11 @@ const _: () = {
     assert!(size_of::<GridPosition>() == 24);
     assert!(size_of::<HeadMotion>() == 48);
     assert!(size_of::<EyePosition>() == 24);
-    assert!(size_of::<ActionStatus>() == 8);
-    assert!(size_of::<Collision>() == 8);
+    assert!(size_of::<ActionStatus>() == 16 && align_of::<ActionStatus>() == 8);
+    assert!(size_of::<Collision>() == 16 && align_of::<Collision>() == 8);
     assert!(size_of::<ImageDesc>() == 56 && align_of::<ImageDesc>() == 8);
-    assert!(size_of::<SensorHeader>() == 592 && align_of::<SensorHeader>() == 8);
-    assert!(size_of::<MotorHeader>() == 24 && align_of::<MotorHeader>() == 8);
+    assert!(size_of::<SensorHeader>() == 784 && align_of::<SensorHeader>() == 8);
+    assert!(size_of::<MotorHeader>() == 32 && align_of::<MotorHeader>() == 8);
     assert!(size_of::<MotorCommand>() == 32 && align_of::<MotorCommand>() == 4);
 };
 
@@ -897,7 +927,7 @@ const fn fnv1a(mut hash: u64, value: u64) -> u64 {
 }
 
 const fn layout_hash() -> u64 {
-    let items: [usize; 40] = [
+    let items: [usize; 47] = [
         size_of::<SensorHeader>(),
         offset_of!(SensorHeader, protocol_version),
         offset_of!(SensorHeader, agent_id),
@@ -929,6 +959,13 @@ const fn layout_hash() -> u64 {
         offset_of!(MotorHeader, cycle),
         offset_of!(MotorHeader, flags),
         offset_of!(MotorHeader, command_count),
+        offset_of!(MotorHeader, ack_cycle),
+        size_of::<ActionStatus>(),
+        offset_of!(ActionStatus, state),
+        offset_of!(ActionStatus, seq),
+        size_of::<Collision>(),
+        offset_of!(Collision, collider_id),
+        offset_of!(Collision, seq),
         size_of::<MotorCommand>(),
         offset_of!(MotorCommand, kind),
         offset_of!(MotorCommand, action_id),

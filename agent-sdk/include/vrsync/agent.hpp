@@ -191,11 +191,12 @@ public:
         throw Error(VRS_ERROR_INVALID_ARGUMENT,
                     "the frame has no camera named \"" + std::string(name) + "\"");
     }
-    /// Action statuses that changed since the previous frame.
+    /// Action statuses this frame brings: each exactly once, also those of frames the
+    /// agent skipped (the host repeats them until a stop acknowledges them).
     View<ActionStatus> statuses() const noexcept {
         return View<ActionStatus>(statuses_.data(), raw_.status_count);
     }
-    /// Collisions since the previous frame.
+    /// Collisions this frame brings, each exactly once.
     View<Collision> collisions() const noexcept {
         return View<Collision>(collisions_.data(), raw_.collision_count);
     }
@@ -240,6 +241,16 @@ public:
         std::uint32_t id = 0;
         detail::check(vrs_agent_id(handle(), &id), "vrs_agent_id");
         return id;
+    }
+    /// The latest status (a vrs_action_state_t value) a frame brought for action_id, if
+    /// any (the original client's status map; the latest 1024 actions are kept).
+    std::optional<std::uint32_t> action_state(std::uint32_t action_id) const {
+        std::uint32_t state = 0;
+        bool known = false;
+        detail::check(vrs_agent_action_state(handle(), action_id, &state, &known),
+                      "vrs_agent_action_state");
+        if (!known) return std::nullopt;
+        return state;
     }
 
     /// Blocks until the host signals start with a new frame, up to `timeout`. Returns an

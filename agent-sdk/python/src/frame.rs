@@ -206,21 +206,22 @@ impl PyFrame {
         self.header().reward
     }
 
-    /// Action statuses reported in this frame, in the host's order.
+    /// Action statuses this frame brings, in the host's order: each status exactly once,
+    /// also those of frames the agent skipped.
     #[getter]
     fn statuses(&self) -> Vec<PyActionStatus> {
-        self.header()
+        self.frame()
             .statuses()
             .iter()
             .filter_map(PyActionStatus::from_wire)
             .collect()
     }
 
-    /// The newest state per action id reported in this frame, as a dict.
+    /// The newest state per action id this frame brings, as a dict.
     #[getter]
     fn action_states<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
-        for s in self.header().statuses() {
+        for s in self.frame().statuses() {
             if let Some(state) = ActionState::from_u32(s.state) {
                 d.set_item(s.action_id, PyActionState::from(state))?;
             }
@@ -228,10 +229,10 @@ impl PyFrame {
         Ok(d)
     }
 
-    /// Collisions since the previous frame.
+    /// Collisions this frame brings, each exactly once.
     #[getter]
     fn collisions(&self) -> Vec<PyCollision> {
-        self.header().collisions().iter().map(Into::into).collect()
+        self.frame().collisions().iter().map(Into::into).collect()
     }
 
     /// How this agent's previous cycle ended: `"stopped"`, `"timed_out"` (the host did not

@@ -56,6 +56,12 @@ struct Args {
     /// the agent id, so spawned agents can share one --agent-arg.
     #[arg(long, value_name = "FILE")]
     log_cycles: Option<PathBuf>,
+    /// Write one line per action status and collision the frames bring (each once, also
+    /// those of skipped frames) to FILE: `CYCLE status ACTION_ID STATE SEQ` or `CYCLE
+    /// collision ACTION_ID COLLIDER_ID SEQ` (STATE: 0 in execution, 1 finished, 2 aborted,
+    /// 3 walking, 4 rotating, 5 walking and rotating). `{id}` as in --log-cycles.
+    #[arg(long, value_name = "FILE")]
+    log_events: Option<PathBuf>,
     /// Testing aid: before the policy's commands, send four invalid ones every cycle (NaN
     /// distance, distance out of range, unknown object id, unknown command kind), all with
     /// action id 4294967295; the host must reject them and leave the world untouched.
@@ -66,6 +72,10 @@ struct Args {
     /// to answer the next cycle in time.
     #[arg(long, value_name = "CYCLE", hide = true)]
     late_stop_at: Option<u64>,
+    /// Testing aid: with --late-stop-at, be late for N cycles instead of one (compute for
+    /// N + 0.5 stop timeouts), so the frames of N - 1 cycles are skipped.
+    #[arg(long, value_name = "N", hide = true, default_value_t = 1)]
+    late_stop_cycles: u32,
 }
 
 fn main() -> ExitCode {
@@ -132,16 +142,14 @@ fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let seed = args.seed.unwrap_or(config.seed);
     let mut policy = Policy::new(args.policy, seed, args.id);
     let mut jitter = ChaCha8Rng::seed_from_u64(seed.wrapping_add(0x5EED) ^ u64::from(args.id));
-    let mut log = match &args.log_cycles {
-        Some(p) => {
-            let p = PathBuf::from(p.to_string_lossy().replace("{id}", &args.id.to_string()));
-            Some(std::io::BufWriter::new(
-                std::fs::File::create(&p)
-                    .with_context(|| format!("cannot create {}", p.display()))?,
-            ))
-        }
-        None => None,
+    let create = |p: &PathBuf| -> anyhow::Result<_> {
+        let p = PathBuf::from(p.to_string_lossy().replace("{id}", &args.id.to_string()));
+        Ok(std::io::BufWriter::new(
+            std::fs::File::create(&p).with_context(|| format!("cannot create {}", p.display()))?,
+        ))
     };
+    let mut log = args.log_cycles.as_ref().map(create).transpose()?;
+    let mut event_log = args.log_events.as_ref().map(create).transpose()?;
     let mut sent = Vec::with_capacity(4);
     let mut cycles = 0u64;
     let outcome = loop {
@@ -163,6 +171,22 @@ fn run(args: &Args) -> anyhow::Result<ExitCode> {
             info!(id = args.id, cycle, "first frame received");
         }
         let decision = policy.decide(&frame);
+        if let Some(out) = &mut event_log {
+            use std::io::Write;
+            for s in frame.statuses() {
+                writeln!(out, "{cycle} status {} {} {}", s.action_id, s.state, s.seq)
+                    .context("write --log-events")?;
+            }
+            for c in frame.collisions() {
+                writeln!(
+                    out,
+                    "{cycle} collision {} {} {}",
+                    c.action_id, c.collider_id, c.seq
+                )
+                .context("write --log-events")?;
+            }
+            out.flush().context("write --log-events")?;
+        }
         drop(frame);
         sent.clear();
         if args.bad_commands {
@@ -218,7 +242,8 @@ fn run(args: &Args) -> anyhow::Result<ExitCode> {
             );
             // 1.5 ×, not 2 ×: after 2 × the agent would wake just as the next cycle's
             // timeout ends, and that cycle would time out too, depending on scheduling.
-            std::thread::sleep(config.sync.stop_timeout * 3 / 2);
+            let late = f64::from(args.late_stop_cycles.max(1)) + 0.5;
+            std::thread::sleep(config.sync.stop_timeout.mul_f64(late));
         }
         match agent.stop() {
             Ok(()) => {}

@@ -139,6 +139,7 @@ fn write_header(h: &mut vrsync_bridge::SensorHeader, s: &vrs_host_sensors_t) {
             Some(src) if i < s.status_count as usize => ActionStatus {
                 action_id: src.action_id,
                 state: src.state,
+                seq: 0,
             },
             _ => ActionStatus::default(),
         };
@@ -149,6 +150,7 @@ fn write_header(h: &mut vrsync_bridge::SensorHeader, s: &vrs_host_sensors_t) {
             Some(src) if i < s.collision_count as usize => Collision {
                 action_id: src.action_id,
                 collider_id: src.collider_id,
+                seq: 0,
             },
             _ => Collision::default(),
         };

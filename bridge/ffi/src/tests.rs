@@ -246,12 +246,12 @@ fn cycles_through_the_c_abi_with_a_real_agent() {
                 position: h.pose.position,
                 rotation: h.pose.rotation,
                 reward: h.reward,
-                statuses: h
+                statuses: frame
                     .statuses()
                     .iter()
                     .map(|s| (s.action_id, s.state))
                     .collect(),
-                collisions: h
+                collisions: frame
                     .collisions()
                     .iter()
                     .map(|c| (c.action_id, c.collider_id))

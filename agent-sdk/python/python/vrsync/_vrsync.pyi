@@ -139,12 +139,14 @@ class Frame:
     @property
     def reward(self) -> float: ...
     @property
-    def statuses(self) -> list[ActionStatus]: ...
+    def statuses(self) -> list[ActionStatus]:
+        """The statuses this frame brings: each exactly once, also those of skipped frames."""
     @property
     def action_states(self) -> dict[int, ActionState]:
-        """The newest state per action id reported in this frame."""
+        """The newest state per action id this frame brings."""
     @property
-    def collisions(self) -> list[Collision]: ...
+    def collisions(self) -> list[Collision]:
+        """The collisions this frame brings: each exactly once."""
     @property
     def previous_outcome(self) -> str:
         """``"stopped"``, ``"timed_out"`` or ``"none"``."""

@@ -19,8 +19,8 @@ use crate::transport::{
     BatchSink, FrameLoanMut, HostTransport, HostTransportError, PeerRefusal, RefusalKind, Refusals,
 };
 use crate::wire::{
-    ActionState, Command, ImageDesc, MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION,
-    PixelFormat, SensorHeader,
+    ActionState, Command, ImageDesc, MOTOR_FLAG_ACK, MOTOR_FLAG_STOP, MotorCommand, MotorHeader,
+    PROTOCOL_VERSION, PixelFormat, SensorHeader,
 };
 
 /// How long a new connection may take to send its version check.
@@ -157,6 +157,9 @@ struct Slot {
     /// Action ids handed over for `applied_cycle` (to answer rejected ones Aborted).
     applied: Vec<u32>,
     applied_cycle: Option<u64>,
+    /// The highest event sequence number written to the client: the host repeats events
+    /// until acknowledged (see `SensorHeader::statuses`); the client gets each once.
+    last_event_seq: u64,
     /// Reused buffers.
     header: Option<Box<SensorHeader>>,
     payload: Option<Vec<u8>>,
@@ -266,6 +269,7 @@ impl LegacyHost {
                 queued_stop: None,
                 applied: Vec::new(),
                 applied_cycle: None,
+                last_event_seq: 0,
                 header: Some(Box::default()),
                 payload: Some(vec![0; payload_len]),
                 payload_len,
@@ -887,7 +891,15 @@ impl LegacyHost {
                 }
             }
         }
-        for c in header.collisions() {
+        // Events the host repeats (not acknowledged yet) went to the client already.
+        let seen = s.last_event_seq;
+        s.last_event_seq = header
+            .statuses()
+            .iter()
+            .map(|st| st.seq)
+            .chain(header.collisions().iter().map(|c| c.seq))
+            .fold(seen, u64::max);
+        for c in header.collisions().iter().filter(|c| c.seq > seen) {
             codec::push_message(
                 &mut out,
                 field::COLLISION,
@@ -897,7 +909,7 @@ impl LegacyHost {
                 },
             );
         }
-        for st in header.statuses() {
+        for st in header.statuses().iter().filter(|st| st.seq > seen) {
             if st.action_id != RESET_ACTION_ID {
                 codec::push_message(
                     &mut out,
@@ -1137,12 +1149,15 @@ impl HostTransport for LegacyHost {
             if s.batch.is_empty() && !s.batch_stop {
                 continue;
             }
+            // Every frame goes down the client's stream, none is skipped: the batch
+            // acknowledges the frame it answers, so the host stops repeating its events.
             let header = MotorHeader {
                 protocol_version: PROTOCOL_VERSION,
                 agent_id: s.id,
                 cycle,
-                flags: if s.batch_stop { MOTOR_FLAG_STOP } else { 0 },
+                flags: MOTOR_FLAG_ACK | if s.batch_stop { MOTOR_FLAG_STOP } else { 0 },
                 command_count: s.batch.len() as u32,
+                ack_cycle: cycle,
             };
             if s.applied_cycle != Some(cycle) {
                 s.applied.clear();

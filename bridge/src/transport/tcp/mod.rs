@@ -543,19 +543,21 @@ mod tests {
             cycle: 9,
             flags: crate::wire::MOTOR_FLAG_STOP,
             command_count: 2,
+            ack_cycle: 0,
         };
+        let hl = core::mem::size_of::<MotorHeader>();
         let mut buf = RecordBuf::with_capacity(256);
-        let body_len = 24 + 64;
+        let body_len = hl + 64;
         buf.reserve_body(body_len);
-        buf.bytes_mut()[PREFIX..PREFIX + 24].copy_from_slice(header.as_bytes());
-        buf.bytes_mut()[PREFIX + 24..].copy_from_slice(cmds.as_bytes());
+        buf.bytes_mut()[PREFIX..PREFIX + hl].copy_from_slice(header.as_bytes());
+        buf.bytes_mut()[PREFIX + hl..].copy_from_slice(cmds.as_bytes());
         let (h, c) = decode_motor(buf.body()).unwrap();
         assert_eq!(h, header);
         assert_eq!(c, &cmds);
         // A count that does not match the body is malformed, never an over-read.
         let mut bad = header;
         bad.command_count = 1000;
-        buf.bytes_mut()[PREFIX..PREFIX + 24].copy_from_slice(bad.as_bytes());
+        buf.bytes_mut()[PREFIX..PREFIX + hl].copy_from_slice(bad.as_bytes());
         assert!(decode_motor(buf.body()).is_err());
     }
 
@@ -780,6 +782,7 @@ mod tests {
             cycle,
             flags: crate::wire::MOTOR_FLAG_STOP,
             command_count: 0,
+            ack_cycle: 0,
         };
         let mut r = Vec::new();
         r.extend_from_slice(&(header.as_bytes().len() as u32).to_le_bytes());
