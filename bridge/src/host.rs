@@ -121,6 +121,12 @@ pub struct AgentReport {
     /// so), `None` before its first acknowledgement (and again after an eviction). A frame
     /// delivered to it and older than this, and never acknowledged, was skipped.
     pub read_cycle: Option<u64>,
+    /// The agent was evicted during this cycle (lost: its process died or it
+    /// disconnected), also when its stop had arrived first (then `outcome` stays
+    /// [`AgentOutcome::Stopped`]).
+    pub evicted: bool,
+    /// The agent rejoined in this cycle: its first frame since an eviction reached it.
+    pub rejoined: bool,
     commands: Vec<MotorCommand>,
 }
 
@@ -155,6 +161,19 @@ impl CycleReport {
     /// The report of agent `id` (`None`: not an agent of this session).
     pub fn agent(&self, id: u32) -> Option<&AgentReport> {
         self.agents.iter().find(|a| a.agent_id == id)
+    }
+
+    /// Ids of agents evicted during this cycle ([`AgentReport::evicted`]).
+    pub fn evicted_agents(&self) -> impl Iterator<Item = u32> + '_ {
+        self.agents.iter().filter(|a| a.evicted).map(|a| a.agent_id)
+    }
+
+    /// Ids of agents that rejoined in this cycle ([`AgentReport::rejoined`]).
+    pub fn rejoined_agents(&self) -> impl Iterator<Item = u32> + '_ {
+        self.agents
+            .iter()
+            .filter(|a| a.rejoined)
+            .map(|a| a.agent_id)
     }
 
     /// Ids of agents that timed out this cycle.
@@ -203,6 +222,8 @@ pub struct HostStats {
     pub evicted_agents: Vec<u32>,
     /// Times an evicted agent came back.
     pub rejoins: u64,
+    /// Evictions (an agent evicted twice counts 2).
+    pub evictions: u64,
     /// Peers refused or dropped before they were admitted as agents (see
     /// [`Host::on_peer_refused`]).
     pub peers_refused: u64,
@@ -365,6 +386,8 @@ impl<T: HostTransport> Host<T> {
                     seen: false,
                     events: PendingEvents::new(),
                     read_cycle: None,
+                    evicted_in: None,
+                    rejoined_in: None,
                 }
             })
             .collect();
@@ -375,6 +398,8 @@ impl<T: HostTransport> Host<T> {
                 agent_id: a.id,
                 outcome: AgentOutcome::NotAwaited,
                 read_cycle: None,
+                evicted: false,
+                rejoined: false,
                 commands: Vec::with_capacity(cap),
             })
             .collect();
@@ -425,6 +450,10 @@ struct SlotState {
     events: PendingEvents,
     /// The newest cycle it acknowledged having read.
     read_cycle: Option<u64>,
+    /// The cycle of its latest eviction.
+    evicted_in: Option<u64>,
+    /// The cycle it latest rejoined in.
+    rejoined_in: Option<u64>,
 }
 
 /// How often the host looks for dead agent processes while it waits.
@@ -682,6 +711,7 @@ impl<T: HostTransport> Host<T> {
             self.slots[slot].seen = true;
             if self.slots[slot].evicted {
                 self.slots[slot].evicted = false;
+                self.slots[slot].rejoined_in = Some(self.cycle);
                 self.stats.rejoins += 1;
                 info!(agent = frame.agent_id, cycle = self.cycle, "agent rejoined");
             }
@@ -729,6 +759,8 @@ impl<T: HostTransport> Host<T> {
         }
         for (a, s) in self.report.agents.iter_mut().zip(&self.slots) {
             a.read_cycle = s.read_cycle;
+            a.evicted = s.evicted_in == Some(cycle);
+            a.rejoined = s.rejoined_in == Some(cycle);
         }
         self.stats.cycles += 1;
         self.cycle += 1;
@@ -841,6 +873,8 @@ impl<T: HostTransport> Host<T> {
                     "agent lost (process died or disconnected): evicted"
                 );
                 self.slots[slot].evicted = true;
+                self.slots[slot].evicted_in = Some(self.cycle);
+                self.stats.evictions += 1;
                 self.slots[slot].seen = false;
                 // A process that rejoins starts afresh: its events were for the old one.
                 self.slots[slot].events.clear();
@@ -1195,28 +1229,37 @@ mod tests {
             outcomes(report),
             [(3, AgentOutcome::Stopped), (7, AgentOutcome::Evicted)]
         );
+        assert_eq!(report.evicted_agents().collect::<Vec<_>>(), [7]);
+        assert!(report.agent(7).unwrap().evicted && !report.agent(3).unwrap().evicted);
         assert_eq!(*evicted.borrow(), [(7, 1)]);
         assert!(host.is_evicted(7));
         // Cycle 2: its frame is not delivered; cycle 3: it is back.
         publish_all(&mut host);
+        let report = host.collect().unwrap();
         assert_eq!(
-            outcomes(host.collect().unwrap()),
+            outcomes(report),
             [(3, AgentOutcome::Stopped), (7, AgentOutcome::NotAwaited)]
         );
+        assert_eq!(report.evicted_agents().count(), 0);
+        assert_eq!(report.rejoined_agents().count(), 0);
         {
             let mut a = agents.borrow_mut();
             a.connected[1] = true;
             a.answers[1] = true;
         }
         publish_all(&mut host);
+        let report = host.collect().unwrap();
         assert_eq!(
-            outcomes(host.collect().unwrap()),
+            outcomes(report),
             [(3, AgentOutcome::Stopped), (7, AgentOutcome::Stopped)]
         );
+        assert_eq!(report.rejoined_agents().collect::<Vec<_>>(), [7]);
+        assert!(report.agent(7).unwrap().rejoined);
+        assert!(report.agent(5).is_none());
         assert!(!host.is_evicted(7));
         let stats = host.stats();
         assert_eq!(stats.evicted_agents, [7]);
-        assert_eq!(stats.rejoins, 1);
+        assert_eq!((stats.evictions, stats.rejoins), (1, 1));
         assert_eq!(stats.frames_undelivered, 1);
     }
 

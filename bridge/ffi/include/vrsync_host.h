@@ -427,6 +427,12 @@ typedef struct vrs_host_cycle_t {
   uint32_t late_batches;
   // Commands received this cycle, all agents together.
   uint32_t command_count;
+  // Agents evicted during this cycle (lost: process died or disconnected); which ones:
+  // `evicted` in their reports.
+  uint32_t evicted_agents;
+  // Agents that rejoined in this cycle (their first frame since an eviction reached
+  // them); which ones: `rejoined` in their reports.
+  uint32_t rejoined_agents;
 } vrs_host_cycle_t;
 
 // A motor command as the agent sent it. `kind` is a `vrs_host_command_kind_t` value, or
@@ -459,6 +465,14 @@ typedef struct vrs_host_agent_report_t {
   // The commands in the order the agent sent them; NULL when there are none. Valid
   // until `vrs_host_end_cycle`.
   const struct vrs_host_command_t *commands;
+  // The newest cycle whose frame the agent acknowledged having read, -1 before its
+  // first acknowledgement (and after an eviction). A frame it was sent and never
+  // acknowledged before a newer one was, it skipped (its events still reach it).
+  int64_t read_cycle;
+  // 1 if the agent was evicted during this cycle (also after its stop arrived), else 0.
+  uint32_t evicted;
+  // 1 if the agent rejoined in this cycle, else 0.
+  uint32_t rejoined;
 } vrs_host_agent_report_t;
 
 // Counters since the host was created.
@@ -479,6 +493,20 @@ typedef struct vrs_host_stats_t {
   uint64_t commands_overflowed;
   // Frames that reached no agent (not connected).
   uint64_t frames_undelivered;
+  // Evictions (an agent evicted twice counts 2).
+  uint64_t evictions;
+  // Times an evicted agent came back.
+  uint64_t rejoins;
+  // Frames delivered to an agent.
+  uint64_t frames_delivered;
+  // Frames an agent acknowledged having read; `frames_delivered - frames_read` were
+  // skipped (a newer one was read first) or are still being read.
+  uint64_t frames_read;
+  // Action statuses dropped because an agent acknowledged nothing for long enough that
+  // its table of unacknowledged events (`VRS_HOST_MAX_STATUSES`) was full.
+  uint64_t statuses_dropped;
+  // Collisions dropped likewise (`VRS_HOST_MAX_COLLISIONS`).
+  uint64_t collisions_dropped;
 } vrs_host_stats_t;
 
 #ifdef __cplusplus
@@ -730,6 +758,21 @@ vrs_host_status_t vrs_host_collect(struct vrs_host_t *host, struct vrs_host_cycl
 vrs_host_status_t vrs_host_agent_report(struct vrs_host_t *host,
                                         uint32_t index,
                                         struct vrs_host_agent_report_t *out_report);
+
+// The report of agent `agent_id` in the cycle just collected (as
+// [`vrs_host_agent_report`], found by id instead of position).
+//
+// # Errors
+// `VRS_HOST_ERROR_UNKNOWN_AGENT` (not an agent of the config), `VRS_HOST_ERROR_WRONG_STATE`
+// (not after collect), `VRS_HOST_ERROR_INVALID_ARGUMENT` (NULL `out_report`), handle
+// errors.
+//
+// # Safety
+// Any handle value may be passed; `out_report` is NULL or valid for writing a
+// [`vrs_host_agent_report_t`].
+vrs_host_status_t vrs_host_agent_report_by_id(struct vrs_host_t *host,
+                                              uint32_t agent_id,
+                                              struct vrs_host_agent_report_t *out_report);
 
 // Copies command `command_index` of agent report `agent_index` (for callers that prefer
 // copies to the report's pointer).

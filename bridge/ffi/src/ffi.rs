@@ -11,8 +11,8 @@ use vrsync_bridge::{Config, TransportKind};
 use vrsync_bridge::{Host, HostWaitError, SignalHandling};
 
 use crate::state::{
-    FfiError, ImageView, Phase, boundary, boundary_status, c_name, copy_report, destroy,
-    last_error_ptr, register, with_host,
+    FfiError, ImageView, Phase, ReportCopy, boundary, boundary_status, c_name, copy_report,
+    destroy, last_error_ptr, register, with_host,
 };
 use crate::types::*;
 
@@ -506,22 +506,47 @@ fn agent_report_impl(
             index: index as usize,
             count,
         })?;
-        let report = vrs_host_agent_report_t {
-            agent_id: r.agent_id,
-            outcome: r.outcome,
-            command_count: r.commands.len() as u32,
-            reserved: 0,
-            commands: if r.commands.is_empty() {
-                std::ptr::null()
-            } else {
-                // Same layout (asserted in types.rs); the buffer is not touched until
-                // vrs_host_end_cycle.
-                r.commands.as_ptr().cast::<vrs_host_command_t>()
-            },
-        };
         // SAFETY: null or writable by the caller's contract.
-        unsafe { write_required(out_report, "out_report", report) }
+        unsafe { write_required(out_report, "out_report", agent_report(r)) }
     })
+}
+
+fn agent_report_by_id_impl(
+    host: *mut vrs_host_t,
+    agent_id: u32,
+    out_report: *mut vrs_host_agent_report_t,
+) -> Result<(), FfiError> {
+    with_host(host, |st| {
+        st.expect_phase("vrs_host_agent_report_by_id", Phase::Collected)?;
+        let r = st
+            .reports
+            .iter()
+            .find(|r| r.agent_id == agent_id)
+            .ok_or(FfiError::UnknownAgent(agent_id))?;
+        // SAFETY: null or writable by the caller's contract.
+        unsafe { write_required(out_report, "out_report", agent_report(r)) }
+    })
+}
+
+fn agent_report(r: &ReportCopy) -> vrs_host_agent_report_t {
+    vrs_host_agent_report_t {
+        agent_id: r.agent_id,
+        outcome: r.outcome,
+        command_count: r.commands.len() as u32,
+        reserved: 0,
+        commands: if r.commands.is_empty() {
+            std::ptr::null()
+        } else {
+            // Same layout (asserted in types.rs); the buffer is not touched until
+            // vrs_host_end_cycle.
+            r.commands.as_ptr().cast::<vrs_host_command_t>()
+        },
+        read_cycle: r
+            .read_cycle
+            .map_or(-1, |c| i64::try_from(c).unwrap_or(i64::MAX)),
+        evicted: u32::from(r.evicted),
+        rejoined: u32::from(r.rejoined),
+    }
 }
 
 fn command_impl(
@@ -595,6 +620,12 @@ fn stats_impl(host: *mut vrs_host_t, out_stats: *mut vrs_host_stats_t) -> Result
             commands_received: s.commands_received,
             commands_overflowed: s.commands_overflowed,
             frames_undelivered: s.frames_undelivered,
+            evictions: s.evictions,
+            rejoins: s.rejoins,
+            frames_delivered: s.frames_delivered,
+            frames_read: s.frames_read,
+            statuses_dropped: s.statuses_dropped,
+            collisions_dropped: s.collisions_dropped,
         };
         // SAFETY: null or writable by the caller's contract.
         unsafe { write_required(out_stats, "out_stats", stats) }
@@ -1037,6 +1068,26 @@ pub unsafe extern "C" fn vrs_host_agent_report(
     out_report: *mut vrs_host_agent_report_t,
 ) -> vrs_host_status_t {
     boundary(|| agent_report_impl(host, index, out_report))
+}
+
+/// The report of agent `agent_id` in the cycle just collected (as
+/// [`vrs_host_agent_report`], found by id instead of position).
+///
+/// # Errors
+/// `VRS_HOST_ERROR_UNKNOWN_AGENT` (not an agent of the config), `VRS_HOST_ERROR_WRONG_STATE`
+/// (not after collect), `VRS_HOST_ERROR_INVALID_ARGUMENT` (NULL `out_report`), handle
+/// errors.
+///
+/// # Safety
+/// Any handle value may be passed; `out_report` is NULL or valid for writing a
+/// [`vrs_host_agent_report_t`].
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn vrs_host_agent_report_by_id(
+    host: *mut vrs_host_t,
+    agent_id: u32,
+    out_report: *mut vrs_host_agent_report_t,
+) -> vrs_host_status_t {
+    boundary(|| agent_report_by_id_impl(host, agent_id, out_report))
 }
 
 /// Copies command `command_index` of agent report `agent_index` (for callers that prefer

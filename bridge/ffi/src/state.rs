@@ -266,6 +266,9 @@ pub(crate) struct FrameSlot {
 pub(crate) struct ReportCopy {
     pub(crate) agent_id: u32,
     pub(crate) outcome: vrs_host_outcome_t,
+    pub(crate) read_cycle: Option<u64>,
+    pub(crate) evicted: bool,
+    pub(crate) rejoined: bool,
     pub(crate) commands: Vec<MotorCommand>,
 }
 
@@ -292,6 +295,9 @@ impl HostState {
             .map(|&agent_id| ReportCopy {
                 agent_id,
                 outcome: vrs_host_outcome_t::VRS_HOST_OUTCOME_NOT_AWAITED,
+                read_cycle: None,
+                evicted: false,
+                rejoined: false,
                 commands: Vec::with_capacity(cap),
             })
             .collect();
@@ -339,9 +345,15 @@ pub(crate) fn copy_report(
 ) -> vrs_host_cycle_t {
     let mut timed_out = 0u32;
     let mut commands = 0u32;
+    let (mut evicted, mut rejoined) = (0u32, 0u32);
     for (copy, agent) in reports.iter_mut().zip(report.agents()) {
         copy.agent_id = agent.agent_id;
         copy.outcome = outcome(agent.outcome);
+        copy.read_cycle = agent.read_cycle;
+        copy.evicted = agent.evicted;
+        copy.rejoined = agent.rejoined;
+        evicted += u32::from(agent.evicted);
+        rejoined += u32::from(agent.rejoined);
         copy.commands.clear();
         copy.commands.extend_from_slice(agent.commands());
         commands = commands.saturating_add(copy.commands.len() as u32);
@@ -356,6 +368,8 @@ pub(crate) fn copy_report(
         timed_out_agents: timed_out,
         late_batches: report.late_batches,
         command_count: commands,
+        evicted_agents: evicted,
+        rejoined_agents: rejoined,
     }
 }
 

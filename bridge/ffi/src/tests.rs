@@ -490,6 +490,20 @@ fn cycles_through_the_c_abi_with_a_real_agent() {
             assert_eq!(r.agent_id, 0);
             assert_eq!(r.outcome, vrs_host_outcome_t::VRS_HOST_OUTCOME_STOPPED);
             assert_eq!(r.command_count, 2);
+            // The agent's stop acknowledged the frame it answered.
+            assert_eq!((r.read_cycle, r.evicted, r.rejoined), (i64::from(n), 0, 0));
+            assert_eq!((c.evicted_agents, c.rejoined_agents), (0, 0));
+            let mut by_id = MaybeUninit::<vrs_host_agent_report_t>::uninit();
+            assert_eq!(
+                vrs_host_agent_report_by_id(host, 0, by_id.as_mut_ptr()),
+                VRS_HOST_OK
+            );
+            let by_id = by_id.assume_init();
+            assert_eq!((by_id.agent_id, by_id.commands), (0, r.commands));
+            assert_eq!(
+                vrs_host_agent_report_by_id(host, 9, report.as_mut_ptr()),
+                VRS_HOST_ERROR_UNKNOWN_AGENT
+            );
             let commands = std::slice::from_raw_parts(r.commands, r.command_count as usize);
             assert_eq!(
                 commands[0].kind,
@@ -533,6 +547,8 @@ fn cycles_through_the_c_abi_with_a_real_agent() {
         assert_eq!(vrs_host_stats(host, stats.as_mut_ptr()), VRS_HOST_OK);
         let s = stats.assume_init();
         assert_eq!((s.cycles, s.stop_timeouts, s.commands_received), (3, 0, 6));
+        assert_eq!((s.frames_delivered, s.frames_read), (3, 3));
+        assert_eq!((s.evictions, s.rejoins, s.statuses_dropped), (0, 0, 0));
     }
     // SAFETY: a handle from create.
     assert_eq!(unsafe { vrs_host_destroy(host) }, VRS_HOST_OK);

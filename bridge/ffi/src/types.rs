@@ -448,6 +448,12 @@ pub struct vrs_host_cycle_t {
     pub late_batches: u32,
     /// Commands received this cycle, all agents together.
     pub command_count: u32,
+    /// Agents evicted during this cycle (lost: process died or disconnected); which ones:
+    /// `evicted` in their reports.
+    pub evicted_agents: u32,
+    /// Agents that rejoined in this cycle (their first frame since an eviction reached
+    /// them); which ones: `rejoined` in their reports.
+    pub rejoined_agents: u32,
 }
 
 /// A motor command as the agent sent it. `kind` is a `vrs_host_command_kind_t` value, or
@@ -484,6 +490,14 @@ pub struct vrs_host_agent_report_t {
     /// The commands in the order the agent sent them; NULL when there are none. Valid
     /// until `vrs_host_end_cycle`.
     pub commands: *const vrs_host_command_t,
+    /// The newest cycle whose frame the agent acknowledged having read, -1 before its
+    /// first acknowledgement (and after an eviction). A frame it was sent and never
+    /// acknowledged before a newer one was, it skipped (its events still reach it).
+    pub read_cycle: i64,
+    /// 1 if the agent was evicted during this cycle (also after its stop arrived), else 0.
+    pub evicted: u32,
+    /// 1 if the agent rejoined in this cycle, else 0.
+    pub rejoined: u32,
 }
 
 /// Counters since the host was created.
@@ -506,6 +520,20 @@ pub struct vrs_host_stats_t {
     pub commands_overflowed: u64,
     /// Frames that reached no agent (not connected).
     pub frames_undelivered: u64,
+    /// Evictions (an agent evicted twice counts 2).
+    pub evictions: u64,
+    /// Times an evicted agent came back.
+    pub rejoins: u64,
+    /// Frames delivered to an agent.
+    pub frames_delivered: u64,
+    /// Frames an agent acknowledged having read; `frames_delivered - frames_read` were
+    /// skipped (a newer one was read first) or are still being read.
+    pub frames_read: u64,
+    /// Action statuses dropped because an agent acknowledged nothing for long enough that
+    /// its table of unacknowledged events (`VRS_HOST_MAX_STATUSES`) was full.
+    pub statuses_dropped: u64,
+    /// Collisions dropped likewise (`VRS_HOST_MAX_COLLISIONS`).
+    pub collisions_dropped: u64,
 }
 
 // The command array of a report is the host's `[MotorCommand]`, handed out as is.
@@ -520,6 +548,6 @@ const _: () = {
     // Sizes the C# binding mirrors (64-bit targets; the pointer structs differ on 32-bit).
     assert!(size_of::<vrs_host_sensors_t>() == 328);
     assert!(size_of::<vrs_host_command_t>() == 32);
-    assert!(size_of::<vrs_host_cycle_t>() == 32);
-    assert!(size_of::<vrs_host_stats_t>() == 64);
+    assert!(size_of::<vrs_host_cycle_t>() == 40);
+    assert!(size_of::<vrs_host_stats_t>() == 112);
 };

@@ -226,6 +226,15 @@ namespace Vrsync
         public readonly AgentOutcome Outcome;
         /// <summary>The commands, in the order the agent sent them.</summary>
         public readonly ReadOnlySpan<MotorCommand> Commands;
+        /// <summary>The agent was evicted during this cycle (process died or disconnected),
+        /// also when its stop had arrived first.</summary>
+        public readonly bool Evicted;
+        /// <summary>The agent rejoined in this cycle (its first frame since an
+        /// eviction).</summary>
+        public readonly bool Rejoined;
+        /// <summary>The newest cycle whose frame the agent acknowledged having read, -1
+        /// before its first acknowledgement (and after an eviction).</summary>
+        public readonly long ReadCycle;
 
         internal unsafe AgentReport(NativeStructs.AgentReport r)
         {
@@ -234,6 +243,51 @@ namespace Vrsync
             Commands = r.Commands == null
                 ? ReadOnlySpan<MotorCommand>.Empty
                 : new ReadOnlySpan<MotorCommand>(r.Commands, (int)r.CommandCount);
+            Evicted = r.Evicted != 0;
+            Rejoined = r.Rejoined != 0;
+            ReadCycle = r.ReadCycle;
+        }
+
+        /// <summary>A copy of everything but the commands: a plain struct that may be kept,
+        /// stored or captured in a lambda.</summary>
+        public AgentSummary Summary
+        {
+            get { return new AgentSummary(AgentId, Outcome, Commands.Length, Evicted, Rejoined, ReadCycle); }
+        }
+    }
+
+    /// <summary>
+    /// One agent's part of a cycle without its commands (<see cref="AgentReport.Summary"/>,
+    /// <see cref="Host.GetSummary"/>): a copyable struct, unlike the
+    /// <see cref="AgentReport"/> ref struct, so it can be used in lambdas and kept.
+    /// </summary>
+    public readonly struct AgentSummary
+    {
+        public readonly uint AgentId;
+        public readonly AgentOutcome Outcome;
+        /// <summary>How many commands the agent sent this cycle.</summary>
+        public readonly int CommandCount;
+        /// <summary>See <see cref="AgentReport.Evicted"/>.</summary>
+        public readonly bool Evicted;
+        /// <summary>See <see cref="AgentReport.Rejoined"/>.</summary>
+        public readonly bool Rejoined;
+        /// <summary>See <see cref="AgentReport.ReadCycle"/>.</summary>
+        public readonly long ReadCycle;
+
+        public AgentSummary(uint agentId, AgentOutcome outcome, int commandCount, bool evicted, bool rejoined, long readCycle)
+        {
+            AgentId = agentId;
+            Outcome = outcome;
+            CommandCount = commandCount;
+            Evicted = evicted;
+            Rejoined = rejoined;
+            ReadCycle = readCycle;
+        }
+
+        public override string ToString()
+        {
+            return string.Format("agent {0}: {1}, {2} commands{3}{4}", AgentId, Outcome, CommandCount,
+                Evicted ? ", evicted" : "", Rejoined ? ", rejoined" : "");
         }
     }
 
@@ -497,6 +551,24 @@ namespace Vrsync
             NativeStructs.AgentReport r;
             Check(Native.vrs_host_agent_report(Handle, (uint)index, out r), "vrs_host_agent_report");
             return new AgentReport(r);
+        }
+
+        /// <summary>The report of agent <paramref name="agentId"/> in the cycle just collected
+        /// (by id, where <see cref="GetReport"/> goes by position).</summary>
+        /// <exception cref="VrsyncException"><see cref="Status.UnknownAgent"/> for an id not in
+        /// the config.</exception>
+        public AgentReport GetReportById(uint agentId)
+        {
+            NativeStructs.AgentReport r;
+            Check(Native.vrs_host_agent_report_by_id(Handle, agentId, out r), "vrs_host_agent_report_by_id");
+            return new AgentReport(r);
+        }
+
+        /// <summary>The summary of agent <paramref name="agentId"/>'s part of the cycle just
+        /// collected: a copyable struct (see <see cref="AgentSummary"/>).</summary>
+        public AgentSummary GetSummary(uint agentId)
+        {
+            return GetReportById(agentId).Summary;
         }
 
         /// <summary>A copy of command <paramref name="commandIndex"/> of report

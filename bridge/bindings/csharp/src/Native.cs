@@ -480,6 +480,12 @@ namespace Vrsync
         public uint TimedOutAgents;
         public uint LateBatches;
         public uint CommandCount;
+        /// <summary>Agents evicted during this cycle (process died or disconnected); which
+        /// ones: <see cref="AgentReport.Evicted"/>.</summary>
+        public uint EvictedAgents;
+        /// <summary>Agents that rejoined in this cycle; which ones:
+        /// <see cref="AgentReport.Rejoined"/>.</summary>
+        public uint RejoinedAgents;
 
         /// <summary>Simulated time of the cycle that ended, seconds.</summary>
         public double SimTime
@@ -500,6 +506,21 @@ namespace Vrsync
         public ulong CommandsReceived;
         public ulong CommandsOverflowed;
         public ulong FramesUndelivered;
+        /// <summary>Evictions (an agent evicted twice counts 2).</summary>
+        public ulong Evictions;
+        /// <summary>Times an evicted agent came back.</summary>
+        public ulong Rejoins;
+        /// <summary>Frames delivered to an agent.</summary>
+        public ulong FramesDelivered;
+        /// <summary>Frames an agent acknowledged having read; the difference to
+        /// <see cref="FramesDelivered"/> was skipped (its events still reached the agent) or is
+        /// still being read.</summary>
+        public ulong FramesRead;
+        /// <summary>Action statuses dropped because an agent's table of unacknowledged events
+        /// was full (it acknowledged nothing for long).</summary>
+        public ulong StatusesDropped;
+        /// <summary>Collisions dropped likewise.</summary>
+        public ulong CollisionsDropped;
     }
 
     /// <summary>The raw C structs the public types are built from.</summary>
@@ -544,6 +565,9 @@ namespace Vrsync
             public uint CommandCount;
             public uint Reserved;
             public MotorCommand* Commands;
+            public long ReadCycle;
+            public uint Evicted;
+            public uint Rejoined;
         }
     }
 
@@ -585,6 +609,7 @@ namespace Vrsync
         [DllImport(Lib)] public static extern Status vrs_host_start(HostHandle host);
         [DllImport(Lib)] public static extern Status vrs_host_collect(HostHandle host, out CycleResult cycle);
         [DllImport(Lib)] public static extern Status vrs_host_agent_report(HostHandle host, uint index, out NativeStructs.AgentReport report);
+        [DllImport(Lib)] public static extern Status vrs_host_agent_report_by_id(HostHandle host, uint agentId, out NativeStructs.AgentReport report);
         [DllImport(Lib)] public static extern Status vrs_host_command(HostHandle host, uint agentIndex, uint commandIndex, out MotorCommand command);
         [DllImport(Lib)] public static extern Status vrs_host_set_rejected(HostHandle host, uint agentId, uint rejected);
         [DllImport(Lib)] public static extern Status vrs_host_end_cycle(HostHandle host);

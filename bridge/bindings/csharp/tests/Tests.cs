@@ -90,12 +90,12 @@ static class Tests
         "vrs_host_info_t", typeof(HostInfo),
             "cycle=Cycle sim_time_ns=SimTimeNs simulation_time_per_frame_ns=SimulationTimePerFrameNs stop_timeout_ns=StopTimeoutNs connect_timeout_ns=ConnectTimeoutNs agent_count=AgentCount sync_mode=SyncMode transport=Transport tcp_port=TcpPort max_commands_per_cycle=MaxCommandsPerCycle protocol_version=ProtocolVersion",
         "vrs_host_cycle_t", typeof(CycleResult),
-            "cycle=Cycle sim_time_ns=SimTimeNs agent_count=AgentCount timed_out_agents=TimedOutAgents late_batches=LateBatches command_count=CommandCount",
+            "cycle=Cycle sim_time_ns=SimTimeNs agent_count=AgentCount timed_out_agents=TimedOutAgents late_batches=LateBatches command_count=CommandCount evicted_agents=EvictedAgents rejoined_agents=RejoinedAgents",
         "vrs_host_command_t", typeof(MotorCommand), "kind=Kind action_id=ActionId object_id=ObjectId reserved=reserved args=Arg0",
         "vrs_host_agent_report_t", typeof(NativeStructs.AgentReport),
-            "agent_id=AgentId outcome=Outcome command_count=CommandCount reserved=Reserved commands=Commands",
+            "agent_id=AgentId outcome=Outcome command_count=CommandCount reserved=Reserved commands=Commands read_cycle=ReadCycle evicted=Evicted rejoined=Rejoined",
         "vrs_host_stats_t", typeof(HostStats),
-            "cycles=Cycles stop_timeouts=StopTimeouts agent_timeouts=AgentTimeouts late_batches=LateBatches future_batches=FutureBatches commands_received=CommandsReceived commands_overflowed=CommandsOverflowed frames_undelivered=FramesUndelivered",
+            "cycles=Cycles stop_timeouts=StopTimeouts agent_timeouts=AgentTimeouts late_batches=LateBatches future_batches=FutureBatches commands_received=CommandsReceived commands_overflowed=CommandsOverflowed frames_undelivered=FramesUndelivered evictions=Evictions rejoins=Rejoins frames_delivered=FramesDelivered frames_read=FramesRead statuses_dropped=StatusesDropped collisions_dropped=CollisionsDropped",
     };
 
     static string Snake(string pascal)
@@ -274,11 +274,23 @@ static class Tests
                 Equal(r0.Commands[i].ActionId, copy.ActionId, "command copy");
                 Expect(copy.IsWellFormed, "wander sends well-formed commands: " + copy);
             }
+            Equal((long)n, r0.ReadCycle, "agent 0 acknowledged the frame it answered");
+            Expect(!r0.Evicted && !r0.Rejoined, "agent 0 neither evicted nor rejoined");
             AgentReport r1 = host.GetReport(1);
             Equal(1u, r1.AgentId, "agent 1 id");
             Equal(AgentOutcome.NotAwaited, r1.Outcome, "agent 1 (not connected) is not awaited");
             Equal(0, r1.Commands.Length, "agent 1 commands");
+            Equal(-1L, r1.ReadCycle, "agent 1 read nothing");
             Throws(Status.OutOfRange, () => host.GetReport(2), "report index");
+            AgentReport byId = host.GetReportById(0);
+            Equal(0u, byId.AgentId, "report by id");
+            Equal(r0.Commands.Length, byId.Commands.Length, "report by id: commands");
+            AgentSummary summary = host.GetSummary(0);
+            Func<AgentSummary> captured = () => summary; // a summary may be captured
+            Equal(r0.Commands.Length, captured().CommandCount, "summary command count");
+            Equal(AgentOutcome.Stopped, captured().Outcome, "summary outcome");
+            Throws(Status.UnknownAgent, () => host.GetReportById(9), "report of an unknown id");
+            Equal(0u, cycle.EvictedAgents + cycle.RejoinedAgents, "no evictions or rejoins");
             Throws(Status.WrongState, () => host.LoanFrame(0), "loan before end cycle");
             host.SetRejected(0, 0);
             host.EndCycle();
@@ -294,6 +306,9 @@ static class Tests
         Equal(3ul, stats.Cycles, "stats cycles");
         Equal(0ul, stats.StopTimeouts, "stats stop timeouts");
         Equal(3ul, stats.FramesUndelivered, "frames for agent 1 undelivered");
+        Equal(3ul, stats.FramesDelivered, "frames for agent 0 delivered");
+        Equal(3ul, stats.FramesRead, "frames agent 0 acknowledged");
+        Equal(0ul, stats.Evictions + stats.Rejoins, "no evictions or rejoins");
         Ok("3 cycles: agent 0 stopped, agent 1 not awaited; images through spans");
 
         // Discard: the agent is not waited for.

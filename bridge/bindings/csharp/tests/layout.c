@@ -91,6 +91,8 @@ int main(void) {
     F(vrs_host_cycle_t, timed_out_agents);
     F(vrs_host_cycle_t, late_batches);
     F(vrs_host_cycle_t, command_count);
+    F(vrs_host_cycle_t, evicted_agents);
+    F(vrs_host_cycle_t, rejoined_agents);
     S(vrs_host_command_t);
     F(vrs_host_command_t, kind);
     F(vrs_host_command_t, action_id);
@@ -103,6 +105,9 @@ int main(void) {
     F(vrs_host_agent_report_t, command_count);
     F(vrs_host_agent_report_t, reserved);
     F(vrs_host_agent_report_t, commands);
+    F(vrs_host_agent_report_t, read_cycle);
+    F(vrs_host_agent_report_t, evicted);
+    F(vrs_host_agent_report_t, rejoined);
     S(vrs_host_stats_t);
     F(vrs_host_stats_t, cycles);
     F(vrs_host_stats_t, stop_timeouts);
@@ -112,6 +117,12 @@ int main(void) {
     F(vrs_host_stats_t, commands_received);
     F(vrs_host_stats_t, commands_overflowed);
     F(vrs_host_stats_t, frames_undelivered);
+    F(vrs_host_stats_t, evictions);
+    F(vrs_host_stats_t, rejoins);
+    F(vrs_host_stats_t, frames_delivered);
+    F(vrs_host_stats_t, frames_read);
+    F(vrs_host_stats_t, statuses_dropped);
+    F(vrs_host_stats_t, collisions_dropped);
 
     E(VRS_HOST_OK);
     E(VRS_HOST_TIMEOUT);
