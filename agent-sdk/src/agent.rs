@@ -21,8 +21,12 @@ use vrsync_bridge::{Config, TransportKind};
 pub enum WaitStartError {
     /// No new frame before the timeout.
     #[error(
-        "no start from the host within {} (last cycle seen: {last_cycle:?})",
-        crate::log::Rounded(*.waited)
+        "no start from the host within {} ({})",
+        crate::log::Rounded(*.waited),
+        match .last_cycle {
+            Some(cycle) => format!("last cycle seen: {cycle}"),
+            None => "no frame received yet".to_owned(),
+        }
     )]
     Timeout {
         /// How long we waited.
@@ -653,7 +657,15 @@ mod tests {
         };
         assert_eq!(
             e.to_string(),
-            "no start from the host within 10 s (last cycle seen: Some(3))"
+            "no start from the host within 10 s (last cycle seen: 3)"
+        );
+        let first = WaitStartError::Timeout {
+            waited: Duration::from_millis(250),
+            last_cycle: None,
+        };
+        assert_eq!(
+            first.to_string(),
+            "no start from the host within 250 ms (no frame received yet)"
         );
     }
 

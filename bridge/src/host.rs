@@ -17,6 +17,7 @@ use tracing::{debug, info, warn};
 use crate::barrier::{AgentOutcome, BatchVerdict, CycleBarrier};
 use crate::config::{AgentLostPolicy, Config};
 use crate::events::PendingEvents;
+use crate::rounded::Rounded;
 use crate::signal::SignalHandling;
 use crate::transport::mixed::{AnyLoan, Transports, TransportsCreateError};
 use crate::transport::shm::ShmHostCreateError;
@@ -248,18 +249,17 @@ pub enum HostCreateError {
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum HostWaitError {
-    /// Some agents did not connect in time.
-    #[error(
-        "agents {missing:?} of session {session:?} did not connect within {waited:?}: start \
-         those agents with this session's config (same session, transport and address), or \
-         raise sync.connect_timeout"
-    )]
+    /// Some agents are not connected after the timeout: they never connected, or they
+    /// connected and left again.
+    #[error("{}", agents_missing_message(session, missing, left, *waited))]
     AgentsMissing {
         /// The session.
         session: String,
-        /// Ids still missing.
+        /// Ids not connected, ascending (also those in `left`).
         missing: Vec<u32>,
-        /// How long we waited.
+        /// Those of `missing` that had connected during the wait and left again.
+        left: Vec<u32>,
+        /// How long we waited (this call).
         waited: Duration,
     },
     /// SIGINT/SIGTERM.
@@ -268,6 +268,37 @@ pub enum HostWaitError {
     /// Transport failure.
     #[error(transparent)]
     Transport(#[from] HostTransportError),
+}
+
+fn agents_missing_message(
+    session: &str,
+    missing: &[u32],
+    left: &[u32],
+    waited: Duration,
+) -> String {
+    let never: Vec<u32> = missing
+        .iter()
+        .copied()
+        .filter(|id| !left.contains(id))
+        .collect();
+    let mut text = format!("session {session:?}: ");
+    if !never.is_empty() {
+        text += &format!(
+            "agents {never:?} did not connect within {}",
+            Rounded(waited)
+        );
+    }
+    if !left.is_empty() {
+        if !never.is_empty() {
+            text += "; ";
+        }
+        text += &format!(
+            "agents {left:?} connected and left again (their process ended or dropped the \
+             connection)"
+        );
+    }
+    text + ": start those agents with this session's config (same session, transport and \
+            address), or raise sync.connect_timeout"
 }
 
 /// Why a cycle operation failed.
@@ -304,7 +335,8 @@ pub enum HostCycleError {
     },
     /// An agent was lost, `on_agent_lost = "wait"`, and it did not come back.
     #[error(
-        "agent {agent} was lost and did not reconnect within {waited:?} (on_agent_lost = \"wait\")"
+        "agent {agent} was lost and did not reconnect within {} (on_agent_lost = \"wait\")",
+        Rounded(*.waited)
     )]
     AgentNotBack {
         /// Agent id.
@@ -388,6 +420,7 @@ impl<T: HostTransport> Host<T> {
                     read_cycle: None,
                     evicted_in: None,
                     rejoined_in: None,
+                    connected_once: false,
                 }
             })
             .collect();
@@ -430,6 +463,7 @@ impl<T: HostTransport> Host<T> {
             lost_this_cycle: Vec::with_capacity(n),
             evicted_hook: None,
             refused_hook: None,
+            wait_started: None,
             config,
         }
     }
@@ -454,6 +488,8 @@ struct SlotState {
     evicted_in: Option<u64>,
     /// The cycle it latest rejoined in.
     rejoined_in: Option<u64>,
+    /// Seen connected while the host waited for its agents.
+    connected_once: bool,
 }
 
 /// How often the host looks for dead agent processes while it waits.
@@ -475,6 +511,8 @@ pub struct Host<T: HostTransport = Transports> {
     lost_this_cycle: Vec<usize>,
     evicted_hook: Option<Box<dyn FnMut(u32, u64)>>,
     refused_hook: Option<RefusedHook>,
+    /// When the current wait for agents began (a caller may wait in slices).
+    wait_started: Option<Instant>,
 }
 
 /// What [`Host::on_peer_refused`] installs.
@@ -594,28 +632,43 @@ impl<T: HostTransport> Host<T> {
     /// [`HostWaitError::AgentsMissing`] naming the ids after `timeout`.
     pub fn wait_for_agents(&mut self, timeout: Duration) -> Result<(), HostWaitError> {
         let started = Instant::now();
+        // Callers may wait in slices (vr-sim does, to report progress): the log counts
+        // from the first slice.
+        let first_started = *self.wait_started.get_or_insert(started);
         let deadline = started + timeout;
         let mut next_log = started + Duration::from_secs(2);
         let mut logged_once = false;
         loop {
-            let missing: Vec<u32> = (0..self.slots.len())
-                .filter(|&s| !self.backend.is_connected(s))
-                .map(|s| self.slots[s].id)
-                .collect();
+            let mut missing = Vec::new();
+            for (slot, s) in self.slots.iter_mut().enumerate() {
+                if self.backend.is_connected(slot) {
+                    s.connected_once = true;
+                } else {
+                    missing.push(s.id);
+                }
+            }
             if missing.is_empty() {
                 self.backend.update_connections()?;
+                self.wait_started = None;
                 info!(
                     agents = self.slots.len(),
-                    waited_ms = started.elapsed().as_millis() as u64,
+                    waited_ms = first_started.elapsed().as_millis() as u64,
                     "all agents connected"
                 );
                 return Ok(());
             }
             let now = Instant::now();
             if now >= deadline {
+                let left = self
+                    .slots
+                    .iter()
+                    .filter(|s| s.connected_once && missing.contains(&s.id))
+                    .map(|s| s.id)
+                    .collect();
                 return Err(HostWaitError::AgentsMissing {
                     session: self.config.session.clone(),
                     missing,
+                    left,
                     waited: started.elapsed(),
                 });
             }
@@ -1455,5 +1508,33 @@ mod tests {
             other => panic!("{other:?}"),
         }
         assert!(!err.to_string().contains("vr-agent"), "{err}");
+    }
+
+    #[test]
+    fn an_agent_that_connected_and_left_is_named_as_such() {
+        let text = "session = \"fake\"\n[[agent]]\nid = 3\n[[agent]]\nid = 7\n";
+        let config = Config::from_toml_str(text, Path::new("fake.toml")).unwrap();
+        let agents = Rc::new(RefCell::new(Agents {
+            connected: vec![false, true],
+            answers: vec![true, true],
+            ..Agents::default()
+        }));
+        let mut host = Host::over(&config, Fake(agents.clone()));
+        assert!(host.wait_for_agents(Duration::from_millis(5)).is_err());
+        agents.borrow_mut().connected[1] = false;
+        let err = host.wait_for_agents(Duration::from_millis(5)).unwrap_err();
+        let HostWaitError::AgentsMissing { missing, left, .. } = &err else {
+            panic!("{err:?}");
+        };
+        assert_eq!(
+            (missing.as_slice(), left.as_slice()),
+            (&[3, 7][..], &[7][..])
+        );
+        let message = err.to_string();
+        assert!(
+            message.contains("agents [3] did not connect within ")
+                && message.contains("agents [7] connected and left again"),
+            "{message}"
+        );
     }
 }

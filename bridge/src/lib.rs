@@ -56,6 +56,7 @@ mod barrier;
 mod config;
 mod events;
 mod host;
+mod rounded;
 mod signal;
 mod transport;
 mod wire;
@@ -71,6 +72,7 @@ pub use host::{
     AgentReport, CycleReport, Host, HostBuilder, HostCreateError, HostCycleError, HostStats,
     HostWaitError, ImageMut, ImagesMut, REAP_PERIOD, SensorFrameMut,
 };
+pub use rounded::Rounded;
 pub use shm::{ShmBudgetError, check_shm_budget};
 pub use signal::SignalHandling;
 pub use transport::mixed::{AnyLoan, Transports, TransportsCreateError};

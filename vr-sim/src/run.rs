@@ -216,15 +216,35 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
                 events.emit(Event::AllAgentsConnected { agents: ids.len() })?;
                 break;
             }
-            Err(HostWaitError::AgentsMissing { missing, .. }) => {
+            Err(HostWaitError::AgentsMissing {
+                missing,
+                left: gone,
+                ..
+            }) => {
                 if let Some((id, status)) = agents.failed() {
                     bail!("agent {id} exited before connecting ({status})");
                 }
                 if left.is_zero() {
+                    // Agents that connected and left again are named as such, not as
+                    // agents that never came.
+                    let never: Vec<u32> = missing
+                        .iter()
+                        .copied()
+                        .filter(|id| !gone.contains(id))
+                        .collect();
+                    let mut why = Vec::new();
+                    if !never.is_empty() {
+                        why.push(format!(
+                            "agents {never:?} did not connect within {}",
+                            vrsync_agent::log::Rounded(config.sync.connect_timeout)
+                        ));
+                    }
+                    if !gone.is_empty() {
+                        why.push(format!("agents {gone:?} connected and left again"));
+                    }
                     bail!(
-                        "agents {missing:?} did not connect within {}; start them with \
-                         `vr-agent --config {} --id <id>`",
-                        vrsync_agent::log::Rounded(config.sync.connect_timeout),
+                        "{}; start them with `vr-agent --config {} --id <id>`",
+                        why.join("; "),
                         opts.agent_config_path.display()
                     );
                 }

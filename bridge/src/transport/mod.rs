@@ -92,9 +92,10 @@ pub enum HostTransportError {
 pub enum AgentConnectError {
     /// No host answered for the session before the connect timeout.
     #[error(
-        "no host for session {session:?} within {waited:?}: {looked_for} (agent {agent} \
+        "no host for session {session:?} within {}: {looked_for} (agent {agent} \
          connects only after the session's host side, the simulator, has started; start it \
-         first or raise sync.connect_timeout)"
+         first or raise sync.connect_timeout)",
+        crate::rounded::Rounded(*.waited)
     )]
     HostNotFound {
         /// The session.

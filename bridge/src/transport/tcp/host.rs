@@ -2,6 +2,7 @@
 //! `poll(2)` over every socket.
 
 use super::*;
+use crate::rounded::Rounded;
 use crate::transport::{PeerRefusal, RefusalKind, Refusals};
 
 // ---------------------------------------------------------------------------------------
@@ -18,7 +19,7 @@ pub struct TcpFrameLoan {
 
 impl FrameLoanMut for TcpFrameLoan {
     /// Header and image bytes, both writable. The header is copied into the record when
-    /// the frame is published (592 bytes); the images are written where they are sent from.
+    /// the frame is published (784 bytes); the images are written where they are sent from.
     fn parts_mut(&mut self) -> (&mut SensorHeader, &mut [u8]) {
         let payload = &mut self.buf.bytes_mut()[PREFIX + HEADER..];
         (&mut self.header, payload)
@@ -322,12 +323,14 @@ impl TcpHost {
                     if p.since.elapsed() >= HELLO_TIMEOUT {
                         let why = if p.reader.buffered() == 0 {
                             format!(
-                                "sent nothing within {HELLO_TIMEOUT:?} of connecting (no hello)"
+                                "sent nothing within {} of connecting (no hello)",
+                                Rounded(HELLO_TIMEOUT)
                             )
                         } else {
                             format!(
-                                "stalled mid-record: {} of its hello within {HELLO_TIMEOUT:?} of connecting",
-                                p.reader.progress()
+                                "stalled mid-record: {} of its hello within {} of connecting",
+                                p.reader.progress(),
+                                Rounded(HELLO_TIMEOUT)
                             )
                         };
                         let p = self.pending.swap_remove(i);
@@ -621,8 +624,9 @@ impl TcpHost {
 
 fn stall_reason(reader: &RecordReader, stall_timeout: Duration) -> String {
     format!(
-        "stalled mid-record: {} of a motor batch, not complete within {stall_timeout:?}",
-        reader.progress()
+        "stalled mid-record: {} of a motor batch, not complete within {}",
+        reader.progress(),
+        Rounded(stall_timeout)
     )
 }
 
