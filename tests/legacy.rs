@@ -731,3 +731,38 @@ fn the_readme_legacy_config_block_parses() {
         vrsync_bridge::TransportKind::Legacy
     );
 }
+
+/// Strangers on the legacy ports — garbage instead of a version check on an agent port, a
+/// negative length on the environment socket — are refused (and reported as
+/// `peer_refused`), and the agent's run goes on without a stop timeout.
+#[test]
+fn strangers_on_the_legacy_ports_leave_the_run_unaffected() {
+    let session = util::session("legacy-hostile");
+    let run = start_host(
+        &[0],
+        |base| config(&session, base, &[0], &[], ""),
+        &["--frames", "50", "--summary-json", "{dir}/summary.json"],
+    );
+    let summary = run.dir.path().join("summary.json");
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let mut stranger = connect(run.base + 1, deadline);
+    Client::frame(&mut stranger, &[0xFF; 16]);
+    let mut env_stranger = connect(run.base, deadline);
+    env_stranger.write_all(&(-7i32).to_le_bytes()).unwrap();
+    // The stranger is refused: the host closes its connection.
+    let mut buf = [0u8; 64];
+    assert!(matches!(stranger.read(&mut buf), Ok(0) | Err(_)));
+    let mut c = Client::start(run.base, 0, Dialect::Vrnew, false);
+    let mut cycles = 0;
+    while let Some(cycle) = c.cycle() {
+        assert_eq!(cycle.number, cycles);
+        cycles += 1;
+        c.stop_zero_length();
+    }
+    assert_eq!(cycles, 50);
+    let out = run.host.wait(RUN_DEADLINE);
+    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    let sum = util::summary(&summary);
+    assert_eq!(sum["stop_timeouts"], 0, "{sum}");
+    assert!(sum["peers_refused"].as_u64().unwrap() >= 1, "{sum}");
+}

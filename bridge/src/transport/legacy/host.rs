@@ -443,18 +443,22 @@ impl LegacyHost {
                     }
                     Ok(FrameProgress::Pending) => break,
                     Ok(FrameProgress::Closed) => {
-                        drop_why = Some("connection closed".to_string());
+                        drop_why = Some((false, "connection closed".to_string()));
                         break;
                     }
                     Err(e) => {
-                        drop_why = Some(e.to_string());
+                        drop_why = Some((true, e.to_string()));
                         break;
                     }
                 }
             }
-            if let Some(why) = drop_why {
+            if let Some((bad, why)) = drop_why {
                 let c = self.env_conns.swap_remove(i);
-                debug!(peer = %c.peer, "legacy environment connection dropped: {why}");
+                if bad {
+                    warn!(peer = %c.peer, "legacy environment connection dropped: {why}");
+                } else {
+                    debug!(peer = %c.peer, "legacy environment connection closed");
+                }
             } else {
                 i += 1;
             }
