@@ -14,6 +14,7 @@ use super::codec::{
     Incoming, MAX_INCOMING_FRAME, Reward, VERSION, VersionCheck, field,
 };
 use crate::config::{Config, LegacyDialect, PngCompression, TransportKind};
+use crate::rounded::Rounded;
 use crate::signal::SignalHandling;
 use crate::transport::{
     BatchSink, FrameLoanMut, HostTransport, HostTransportError, PeerRefusal, RefusalKind, Refusals,
@@ -555,8 +556,8 @@ impl LegacyHost {
                         Err((
                             RefusalKind::Silent,
                             format!(
-                                "sent no version check within {:?} of connecting",
-                                self.hello_timeout
+                                "sent no version check within {} of connecting",
+                                Rounded(self.hello_timeout)
                             ),
                         ))
                     } else {
@@ -754,8 +755,9 @@ impl LegacyHost {
                         let since = *c.partial_since.get_or_insert(now);
                         if now.duration_since(since) >= STALL_TIMEOUT {
                             drop_why = Some(format!(
-                                "stalled mid-frame: {} within {STALL_TIMEOUT:?}",
-                                c.reader.progress()
+                                "stalled mid-frame: {} within {}",
+                                c.reader.progress(),
+                                Rounded(STALL_TIMEOUT)
                             ));
                         }
                     }
