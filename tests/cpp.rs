@@ -5,6 +5,14 @@
 //!
 //! Needs cmake, a C and C++ compiler and pkg-config (CI installs them); without them the
 //! tests fail and say so.
+//!
+//! The examples run with the library they were built against, the installed
+//! `PREFIX/lib/libvrsync_agent.so` (found through their RUNPATH, as a user's program finds
+//! it), not the one of the folders `cargo test` puts first in `LD_LIBRARY_PATH`
+//! (`target/<profile>`): Cargo updates `target/<profile>/libvrsync_agent.so` only when it
+//! builds `vrsync-agent` itself (`cargo test --workspace`), not for a `cargo test -p
+//! vrsync-tests`, so after a protocol change the examples would load an old library and
+//! their session would close right after connecting.
 
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -25,6 +33,8 @@ const BUILD_DEADLINE: Duration = Duration::from_secs(300);
 
 /// The installed SDK and the example agents built against it.
 struct Sdk {
+    /// `PREFIX/lib`: the installed `libvrsync_agent.so` the examples must load.
+    lib: PathBuf,
     /// `vrsync/agent.hpp` example, CMake, shared library.
     cpp_agent: PathBuf,
     /// `vrsync/compat.hpp` example, CMake, shared library.
@@ -198,6 +208,7 @@ fn sdk() -> &'static Sdk {
         );
 
         Sdk {
+            lib: prefix.join("lib"),
             cpp_agent: build.join("cpp_agent/cpp_agent"),
             compat_agent: build.join("compat_agent/compat_agent"),
             c_agent: build.join("c_agent/c_agent"),
@@ -205,6 +216,35 @@ fn sdk() -> &'static Sdk {
             c_pkg_config,
         }
     })
+}
+
+/// `program args` for a C/C++ example: as [`Proc::spawn`], with the folders of the
+/// target dir removed from `LD_LIBRARY_PATH` (see the module docs).
+fn example_command(program: &Path, args: &[&str]) -> Command {
+    let mut cmd = Command::new(program);
+    cmd.args(args);
+    let target = util::bin_dir().parent().expect("target dir").to_path_buf();
+    let kept: Vec<PathBuf> = std::env::var_os("LD_LIBRARY_PATH")
+        .map(|v| {
+            std::env::split_paths(&v)
+                .filter(|p| !p.starts_with(&target))
+                .collect()
+        })
+        .unwrap_or_default();
+    if kept.is_empty() {
+        cmd.env_remove("LD_LIBRARY_PATH");
+    } else {
+        cmd.env(
+            "LD_LIBRARY_PATH",
+            std::env::join_paths(kept).expect("LD_LIBRARY_PATH"),
+        );
+    }
+    cmd
+}
+
+/// Runs a C/C++ example (see [`example_command`]).
+fn agent(program: &Path, args: &[&str]) -> Proc {
+    Proc::spawn_command(example_command(program, args))
 }
 
 fn position(entry: &Value) -> [f64; 3] {
@@ -237,22 +277,18 @@ fn c_and_cpp_agents_run_100_sync_cycles(t: Transport) {
     // Agent 0 is the Rust example; the others are the C and C++ examples.
     let rust = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "0"]);
     let agents: Vec<(u64, &str, Proc)> = vec![
-        (1, "cpp_agent", Proc::spawn(&sdk.cpp_agent, &[config, "1"])),
-        (
-            2,
-            "compat_agent",
-            Proc::spawn(&sdk.compat_agent, &[config, "2"]),
-        ),
-        (3, "c_agent", Proc::spawn(&sdk.c_agent, &[config, "3"])),
+        (1, "cpp_agent", agent(&sdk.cpp_agent, &[config, "1"])),
+        (2, "compat_agent", agent(&sdk.compat_agent, &[config, "2"])),
+        (3, "c_agent", agent(&sdk.c_agent, &[config, "3"])),
         (
             4,
             "compat_agent (g++, static)",
-            Proc::spawn(&sdk.compat_static, &[config, "4"]),
+            agent(&sdk.compat_static, &[config, "4"]),
         ),
         (
             5,
             "c_agent (pkg-config)",
-            Proc::spawn(&sdk.c_pkg_config, &[config, "5"]),
+            agent(&sdk.c_pkg_config, &[config, "5"]),
         ),
     ];
 
@@ -331,8 +367,8 @@ fn agents_end_when_the_host_is_killed(t: Transport) {
     // No --frames: the host runs until it is killed.
     let host = spawn_host(&config_path, &events, &[]);
     cfg.follow_host(&events, &config_path);
-    let compat = Proc::spawn(&sdk.compat_agent, &[config, "0"]);
-    let cpp = Proc::spawn(&sdk.cpp_agent, &[config, "1"]);
+    let compat = agent(&sdk.compat_agent, &[config, "0"]);
+    let cpp = agent(&sdk.cpp_agent, &[config, "1"]);
     events.wait_for("all_agents_connected", EVENT_DEADLINE);
     host.signal(libc::SIGKILL);
     let _ = host.wait(Duration::from_secs(30));
@@ -380,8 +416,7 @@ fn c_abi_reports_connect_failures_to_a_cpp_program() {
     cfg.connect_timeout_s = 0.2;
     let config = cfg.write(dir.path());
     // No host: vrsync::Agent's constructor throws vrsync::Error with the library's message.
-    let out =
-        Proc::spawn(&sdk.cpp_agent, &[config.to_str().unwrap(), "0"]).wait(Duration::from_secs(60));
+    let out = agent(&sdk.cpp_agent, &[config.to_str().unwrap(), "0"]).wait(Duration::from_secs(60));
     assert_eq!(out.code(), Some(1), "stderr:\n{}", out.stderr);
     assert!(
         out.stderr.contains("VRS_ERROR_CONNECT") && out.stderr.contains("no host"),
@@ -389,14 +424,49 @@ fn c_abi_reports_connect_failures_to_a_cpp_program() {
         out.stderr
     );
     // A missing config file.
-    let out = Proc::spawn(&sdk.compat_agent, &["/nonexistent/vrsync.toml", "0"])
-        .wait(Duration::from_secs(60));
+    let out =
+        agent(&sdk.compat_agent, &["/nonexistent/vrsync.toml", "0"]).wait(Duration::from_secs(60));
     assert_eq!(out.code(), Some(1), "stderr:\n{}", out.stderr);
     assert!(
         out.stderr.contains("VRS_ERROR_CONFIG"),
         "stderr:\n{}",
         out.stderr
     );
+}
+
+/// The examples linked against the shared library load the installed one, not a
+/// `libvrsync_agent.so` that `cargo test` left on `LD_LIBRARY_PATH` (which is older than
+/// the sources after a `cargo test -p vrsync-tests`). Asked of the dynamic loader without
+/// running them (`LD_TRACE_LOADED_OBJECTS`, what `ldd` does).
+#[test]
+fn c_and_cpp_examples_load_the_installed_library() {
+    let sdk = sdk();
+    for program in [
+        &sdk.cpp_agent,
+        &sdk.compat_agent,
+        &sdk.c_agent,
+        &sdk.c_pkg_config,
+    ] {
+        let mut cmd = example_command(program, &[]);
+        cmd.env("LD_TRACE_LOADED_OBJECTS", "1");
+        let out = tool(&mut cmd, "the dynamic loader's list of libraries");
+        let line = out
+            .lines()
+            .find(|l| l.trim_start().starts_with("libvrsync_agent.so"))
+            .unwrap_or_else(|| panic!("{}: no libvrsync_agent.so in\n{out}", program.display()));
+        // `libvrsync_agent.so => /path/libvrsync_agent.so (0x...)`
+        let path = line
+            .split_once("=>")
+            .map(|(_, r)| r.trim().split(" (").next().unwrap_or("").trim())
+            .unwrap_or("");
+        assert_eq!(
+            Path::new(path).parent(),
+            Some(sdk.lib.as_path()),
+            "{} loads {path}, not the installed library in {}:\n{out}",
+            program.display(),
+            sdk.lib.display()
+        );
+    }
 }
 
 for_both_transports!(

@@ -384,14 +384,31 @@ pub struct Proc {
 impl Proc {
     /// Spawns `program args` with piped output.
     pub fn spawn(program: &Path, args: &[&str]) -> Self {
-        let mut child = Command::new(program)
-            .args(args)
+        let mut cmd = Command::new(program);
+        cmd.args(args);
+        Self::spawn_command(cmd)
+    }
+
+    /// Spawns `cmd` (program, arguments and environment set by the caller) with piped
+    /// output.
+    pub fn spawn_command(mut cmd: Command) -> Self {
+        let name = std::iter::once(
+            Path::new(cmd.get_program())
+                .file_name()
+                .unwrap_or_default()
+                .to_string_lossy(),
+        )
+        .chain(cmd.get_args().map(|a| a.to_string_lossy()))
+        .collect::<Vec<_>>()
+        .join(" ");
+        let program = cmd.get_program().to_string_lossy().into_owned();
+        let mut child = cmd
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .env("RUST_LOG", "info")
             .spawn()
-            .unwrap_or_else(|e| panic!("cannot start {}: {e}", program.display()));
+            .unwrap_or_else(|e| panic!("cannot start {program}: {e}"));
         let mut out = child.stdout.take().expect("stdout");
         let err = child.stderr.take().expect("stderr");
         let stdout = std::thread::spawn(move || {
@@ -411,14 +428,7 @@ impl Proc {
             }
         });
         Self {
-            name: format!(
-                "{} {}",
-                program
-                    .file_name()
-                    .map(|n| n.to_string_lossy())
-                    .unwrap_or_default(),
-                args.join(" ")
-            ),
+            name,
             child: Some(child),
             stdout: Some(stdout),
             stderr_all: all,
