@@ -766,3 +766,26 @@ fn strangers_on_the_legacy_ports_leave_the_run_unaffected() {
     assert_eq!(sum["stop_timeouts"], 0, "{sum}");
     assert!(sum["peers_refused"].as_u64().unwrap() >= 1, "{sum}");
 }
+
+/// A legacy agent that never connects: vr-sim names it and the port its program connects
+/// to (exit 1).
+#[test]
+fn a_missing_legacy_agent_is_named_with_its_port() {
+    let session = util::session("legacy-missing");
+    let run = start_host(
+        &[0],
+        |base| {
+            config(&session, base, &[0], &[], "")
+                .replace("connect_timeout = 60", "connect_timeout = 1")
+        },
+        &["--frames", "5"],
+    );
+    let port = run.base.to_string();
+    let out = run.host.wait(RUN_DEADLINE);
+    assert_eq!(out.code(), Some(1), "stderr:\n{}", out.stderr);
+    assert!(
+        out.stderr.contains("original system's protocol") && out.stderr.contains(&port),
+        "stderr:\n{}",
+        out.stderr
+    );
+}

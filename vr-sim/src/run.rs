@@ -242,6 +242,24 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
                     if !gone.is_empty() {
                         why.push(format!("agents {gone:?} connected and left again"));
                     }
+                    // Legacy agents are programs written for the original system, not
+                    // vr-agent: say where they connect.
+                    let legacy: Vec<u32> = missing
+                        .iter()
+                        .copied()
+                        .filter(|&id| {
+                            config.agent(id).is_some_and(|a| {
+                                a.transport == vrsync_bridge::TransportKind::Legacy
+                            })
+                        })
+                        .collect();
+                    if !legacy.is_empty() {
+                        let port = config.transport.legacy.local_port;
+                        why.push(format!(
+                            "agents {legacy:?} use the original system's protocol: start their \
+                             programs against port {port} (agent N listens on {port} + 1 + N)"
+                        ));
+                    }
                     bail!(
                         "{}; start them with `vr-agent --config {} --id <id>`",
                         why.join("; "),
