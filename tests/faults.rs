@@ -112,6 +112,25 @@ fn a_killed_agent_is_evicted_and_can_rejoin(t: Transport) {
     let frames = sum["frames"].as_u64().unwrap();
     assert!(frames > rejoined_at, "{sum}");
     assert_eq!(sum["evicted_agents"], serde_json::json!([1]));
+    assert_eq!(sum["evictions"], 1, "{sum}");
+    assert_eq!(sum["rejoins"], 1, "{sum}");
+    // Agent 0 got every frame, agent 1 its first 10 (maybe the one of the cycle it was
+    // evicted in) and every one since it rejoined.
+    let delivered = sum["frames_delivered"].as_u64().unwrap();
+    let read = sum["frames_read"].as_u64().unwrap();
+    assert!(
+        delivered >= frames + 10 + (frames - rejoined_at),
+        "{rejoined_at}: {sum}"
+    );
+    assert!(read > 0 && read <= delivered, "{sum}");
+    for key in [
+        "future_stops",
+        "commands_overflowed",
+        "statuses_dropped",
+        "collisions_dropped",
+    ] {
+        assert_eq!(sum[key], 0, "{key}: {sum}");
+    }
     assert_eq!(
         sum["stop_timeouts"], 0,
         "a dead agent is evicted, not waited for"

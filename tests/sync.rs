@@ -62,6 +62,12 @@ fn three_agents_500_cycles_see_every_cycle_once_in_order(t: Transport) {
     );
     assert_eq!(sum["stop_timeouts"], 0);
     assert_eq!(sum["late_stops"], 0);
+    // Every agent got and read every frame; nobody left.
+    assert_eq!(sum["frames_delivered"], 1500, "{sum}");
+    assert_eq!(sum["frames_read"], 1500, "{sum}");
+    assert_eq!(sum["frames_undelivered"], 0, "{sum}");
+    assert_eq!(sum["evictions"], 0, "{sum}");
+    assert_eq!(sum["rejoins"], 0, "{sum}");
 
     let rec = record(&rec);
     assert_eq!(rec.len(), 1500);

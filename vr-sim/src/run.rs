@@ -69,6 +69,25 @@ pub struct Summary {
     pub evicted_agents: Vec<u32>,
     /// Connections refused or dropped before they were admitted as agents.
     pub peers_refused: u64,
+    /// Evictions (an agent evicted twice counts 2).
+    pub evictions: u64,
+    /// Times an evicted agent came back.
+    pub rejoins: u64,
+    /// Frames delivered to an agent (one per agent and cycle when nothing goes wrong).
+    pub frames_delivered: u64,
+    /// Frames an agent acknowledged having read; `frames_delivered - frames_read` were
+    /// skipped by their agent (async mode: a newer one was read first) or still being read.
+    pub frames_read: u64,
+    /// Frames that reached no agent (not connected, or async TCP with a full socket).
+    pub frames_undelivered: u64,
+    /// Stops dropped because they named a cycle that had not started.
+    pub future_stops: u64,
+    /// Commands dropped because an agent exceeded `max_commands_per_cycle`.
+    pub commands_overflowed: u64,
+    /// Action statuses dropped because an agent did not acknowledge frames for a while.
+    pub statuses_dropped: u64,
+    /// Collisions dropped because an agent did not acknowledge frames for a while.
+    pub collisions_dropped: u64,
     /// Commands applied to the world.
     pub commands_applied: u64,
     /// Commands rejected (undecodable, out of range, unsupported).
@@ -530,6 +549,15 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
         late_stops: stats.late_batches,
         evicted_agents: stats.evicted_agents.clone(),
         peers_refused: stats.peers_refused,
+        evictions: stats.evictions,
+        rejoins: stats.rejoins,
+        frames_delivered: stats.frames_delivered,
+        frames_read: stats.frames_read,
+        frames_undelivered: stats.frames_undelivered,
+        future_stops: stats.future_batches,
+        commands_overflowed: stats.commands_overflowed,
+        statuses_dropped: stats.statuses_dropped,
+        collisions_dropped: stats.collisions_dropped,
         commands_applied: applied,
         commands_rejected: rejected_total,
         trajectory_hash: hasher.finalize().to_hex().to_string(),
@@ -547,7 +575,7 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
 
 /// Prints the summary as a table.
 pub fn print_summary(s: &Summary) {
-    let rows: [(&str, String); 15] = [
+    let rows: [(&str, String); 21] = [
         ("mode", s.mode.clone()),
         ("transport", s.transport.clone()),
         ("agents", s.agents.to_string()),
@@ -557,10 +585,25 @@ pub fn print_summary(s: &Summary) {
         ("cycles per second", format!("{:.1}", s.frames_per_s)),
         ("stop timeouts", s.stop_timeouts.to_string()),
         ("late stops dropped", s.late_stops.to_string()),
+        ("future stops dropped", s.future_stops.to_string()),
         ("evicted agents", format!("{:?}", s.evicted_agents)),
+        (
+            "evictions, rejoins",
+            format!("{}, {}", s.evictions, s.rejoins),
+        ),
         ("peers refused", s.peers_refused.to_string()),
+        (
+            "frames delivered",
+            format!(
+                "{} ({} read, {} undelivered)",
+                s.frames_delivered, s.frames_read, s.frames_undelivered
+            ),
+        ),
+        ("statuses dropped", s.statuses_dropped.to_string()),
+        ("collisions dropped", s.collisions_dropped.to_string()),
         ("commands applied", s.commands_applied.to_string()),
         ("commands rejected", s.commands_rejected.to_string()),
+        ("commands overflowed", s.commands_overflowed.to_string()),
         (
             "render per cycle",
             format!("{:.0} µs ({} threads)", s.render_us, s.render_threads),
