@@ -401,6 +401,7 @@ struct LegacyRun {
     host: Proc,
     base: u16,
     dir: tempfile::TempDir,
+    events: Events,
 }
 
 /// Starts `vr-sim run` with the config `make(base)` and `args` (`{dir}` in an argument
@@ -421,7 +422,12 @@ fn start_host(ids: &[u32], make: impl Fn(u16) -> String, args: &[&str]) -> Legac
         let deadline = Instant::now() + util::EVENT_DEADLINE;
         loop {
             if !events.of("listening").is_empty() {
-                return LegacyRun { host, base, dir };
+                return LegacyRun {
+                    host,
+                    base,
+                    dir,
+                    events,
+                };
             }
             if host.try_exited() {
                 // Most likely a port of the range was taken in between: try the next
@@ -445,7 +451,7 @@ fn config(session: &str, base: u16, legacy: &[u32], shm: &[u32], extra_sync: &st
     let mut s = format!(
         "session = {session:?}\nseed = 7\n[sync]\nsync_mode = true\nstop_timeout = 5\n\
          connect_timeout = 60\n{extra_sync}\n[transport]\nkind = \"shm\"\n\
-         [transport.legacy]\nlocal_port = {base}\n"
+         tcp_listen = \"127.0.0.1:0\"\n[transport.legacy]\nlocal_port = {base}\n"
     );
     let mut ids: Vec<(u32, &str)> = legacy.iter().map(|&i| (i, "legacy")).collect();
     ids.extend(shm.iter().map(|&i| (i, "shm")));
@@ -663,27 +669,37 @@ fn a_client_that_blocks_on_finished_before_stopping_completes() {
     assert!(timeouts >= 1, "{sum}");
 }
 
-/// One legacy agent beside an shm agent gives the trajectory of the same world with both
-/// agents on shm (agent 0 idle on either transport, agent 1 `seek`, which decides from
-/// its images, where agent 0 is seen).
+/// One legacy agent beside an shm agent, and beside a tcp agent, gives the trajectory of
+/// the same world with both agents on shm (agent 0 idle on either transport, agent 1
+/// `seek`, which decides from its images, where agent 0 is seen).
 #[test]
-fn legacy_and_shm_agents_in_one_world_give_the_all_shm_trajectory() {
+fn legacy_and_shm_or_tcp_agents_in_one_world_give_the_all_shm_trajectory() {
     let frames = "120";
-    let run_with = |legacy: bool| -> serde_json::Value {
-        let session = util::session(if legacy {
-            "legacy-mixed"
-        } else {
-            "legacy-allshm"
-        });
+    // `other`: agent 1's transport; `legacy`: agent 0 is a legacy client (else vr-agent).
+    let run_with = |legacy: bool, other: &str| -> serde_json::Value {
+        let session = util::session(&format!("legacy-{legacy}-{other}"));
         let legacy_ids: &[u32] = if legacy { &[0] } else { &[] };
         let shm_ids: &[u32] = if legacy { &[1] } else { &[0, 1] };
         let run = start_host(
             &[0],
-            |base| config(&session, base, legacy_ids, shm_ids, ""),
+            |base| {
+                config(&session, base, legacy_ids, shm_ids, "").replace(
+                    "id = 1\ntransport = \"shm\"",
+                    &format!("id = 1\ntransport = \"{other}\""),
+                )
+            },
             &["--frames", frames, "--summary-json", "{dir}/s.json"],
         );
         let summary = run.dir.path().join("s.json");
         let config_path = run.dir.path().join("legacy.toml");
+        if other == "tcp" {
+            // The host bound port 0: the agents connect to the port it reports.
+            let listening = run.events.of("listening");
+            let addr = listening[0]["address"].as_str().unwrap().to_string();
+            let text = std::fs::read_to_string(&config_path).unwrap();
+            let text = text.replace("127.0.0.1:0", &addr);
+            std::fs::write(&config_path, text).unwrap();
+        }
         let agent = |id: &str, policy: &str| {
             Proc::spawn(
                 &util::bin("vr-agent"),
@@ -710,11 +726,16 @@ fn legacy_and_shm_agents_in_one_world_give_the_all_shm_trajectory() {
         drop((seek, idle));
         util::summary(&summary)
     };
-    let mixed = run_with(true);
-    let all_shm = run_with(false);
-    assert_eq!(mixed["frames"], 120);
-    assert_eq!(mixed["stop_timeouts"], 0, "{mixed}");
-    assert_eq!(mixed["trajectory_hash"], all_shm["trajectory_hash"]);
+    let all_shm = run_with(false, "shm");
+    for other in ["shm", "tcp"] {
+        let mixed = run_with(true, other);
+        assert_eq!(mixed["frames"], 120, "legacy + {other}");
+        assert_eq!(mixed["stop_timeouts"], 0, "legacy + {other}: {mixed}");
+        assert_eq!(
+            mixed["trajectory_hash"], all_shm["trajectory_hash"],
+            "legacy + {other}"
+        );
+    }
 }
 
 /// The README's legacy config block is a valid config (with the default port and the agent
