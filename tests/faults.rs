@@ -4,8 +4,8 @@
 use std::time::Duration;
 
 use crate::util::{
-    self, EVENT_DEADLINE, Events, Proc, RUN_DEADLINE, TestConfig, Transport, bin, cycle_log,
-    spawn_host, summary, wait_for_cycle_line,
+    self, EVENT_DEADLINE, Events, HostRun, Proc, RUN_DEADLINE, TestConfig, Transport, bin,
+    cycle_log, spawn_host, summary, wait_for_cycle_line,
 };
 
 /// Names of iceoryx2 services of `session` that still exist.
@@ -27,50 +27,22 @@ fn services_of(session: &str) -> Vec<String> {
 /// An agent is SIGKILLed mid-run: the host evicts it (long before the stop timeout), the
 /// other agent goes on without a gap, and a restarted agent with the same id rejoins.
 fn a_killed_agent_is_evicted_and_can_rejoin(t: Transport) {
-    let dir = tempfile::tempdir().unwrap();
     let mut cfg = TestConfig::with_transport("evict", 2, t);
     cfg.stop_timeout_s = 30.0; // eviction must not wait for it
-    let config_path = cfg.write(dir.path());
-    let config = config_path.to_str().unwrap();
-    let s = dir.path().join("summary.json");
-    let events = Events::in_dir(dir.path());
     // No --frames: the run goes on (fast: nobody is waited for) until the restarted agent
     // took part, then SIGTERM ends it.
-    let host = spawn_host(
-        &config_path,
-        &events,
-        &["--summary-json", s.to_str().unwrap()],
-    );
-    cfg.follow_host(&events, &config_path);
-    let log0 = dir.path().join("a0.log");
-    let log1 = dir.path().join("a1.log");
-    let a0 = Proc::spawn(
-        &bin("vr-agent"),
-        &[
-            "--config",
-            config,
-            "--id",
-            "0",
-            "--policy",
-            "circle",
-            "--log-cycles",
-            log0.to_str().unwrap(),
-        ],
-    );
+    let run = HostRun::start(cfg, &[]);
+    let events = &run.events;
+    let (a0, log0) = run.agent(0, "a0.log", &["--policy", "circle"]);
     // Agent 1 leaves after 10 cycles by being killed: it stops answering in cycle 10.
-    let victim = Proc::spawn(
-        &bin("vr-agent"),
+    let (victim, log1) = run.agent(
+        1,
+        "a1.log",
         &[
-            "--config",
-            config,
-            "--id",
-            "1",
             "--policy",
             "circle",
             "--frames",
             "10",
-            "--log-cycles",
-            log1.to_str().unwrap(),
             "--late-stop-at",
             "9",
         ],
@@ -84,31 +56,18 @@ fn a_killed_agent_is_evicted_and_can_rejoin(t: Transport) {
     assert_eq!(evicted["agent"], 1, "{evicted}");
     assert_eq!(evicted["cycle"], 9, "{evicted}");
     // Restart agent 1: it rejoins at the next cycle and takes part from there.
-    let log_back = dir.path().join("back.log");
-    let back = Proc::spawn(
-        &bin("vr-agent"),
-        &[
-            "--config",
-            config,
-            "--id",
-            "1",
-            "--policy",
-            "circle",
-            "--log-cycles",
-            log_back.to_str().unwrap(),
-        ],
-    );
+    let (back, log_back) = run.agent(1, "back.log", &["--policy", "circle"]);
     let rejoined = events.wait_for("agent_rejoined", EVENT_DEADLINE);
     assert_eq!(rejoined["agent"], 1, "{rejoined}");
     let rejoined_at = rejoined["cycle"].as_u64().unwrap();
     assert!(rejoined_at > 9, "{rejoined}");
     wait_for_cycle_line(&log_back, rejoined_at, EVENT_DEADLINE);
-    host.signal(libc::SIGTERM);
-    let out = host.wait(RUN_DEADLINE);
+    run.host.signal(libc::SIGTERM);
+    let out = run.host.wait(RUN_DEADLINE);
     assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
     assert_eq!(a0.wait(Duration::from_secs(10)).code(), Some(0));
     assert_eq!(back.wait(Duration::from_secs(10)).code(), Some(0));
-    let sum = summary(&s);
+    let sum = summary(&run.summary);
     let frames = sum["frames"].as_u64().unwrap();
     assert!(frames > rejoined_at, "{sum}");
     assert_eq!(sum["evicted_agents"], serde_json::json!([1]));
@@ -317,61 +276,31 @@ fn bad_commands_are_rejected_and_leave_the_world_untouched(t: Transport) {
 /// SIGINT and SIGTERM end the host's loop after the current cycle: the summary is still
 /// printed and written, the agent leaves cleanly, and no service of the session remains.
 fn a_signal_ends_the_run_cleanly(t: Transport, sig: i32) {
-    let dir = tempfile::tempdir().unwrap();
-    let mut cfg = TestConfig::with_transport("signal", 1, t);
-    let config_path = cfg.write(dir.path());
-    let config = config_path.to_str().unwrap();
-    let s = dir.path().join("summary.json");
-    let events = Events::in_dir(dir.path());
-    let host = spawn_host(
-        &config_path,
-        &events,
-        &["--summary-json", s.to_str().unwrap()],
-    );
-    cfg.follow_host(&events, &config_path);
-    let agent = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "0"]);
+    let run = HostRun::start(TestConfig::with_transport("signal", 1, t), &[]);
+    let events = &run.events;
+    let agent = Proc::spawn(&bin("vr-agent"), &["--config", run.config(), "--id", "0"]);
     events.wait_for("all_agents_connected", EVENT_DEADLINE);
-    host.signal(sig);
-    let out = host.wait(Duration::from_secs(30));
+    run.host.signal(sig);
+    let out = run.host.wait(Duration::from_secs(30));
     assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
     assert!(out.stdout.contains("(interrupted)"), "{}", out.stdout);
-    assert_eq!(summary(&s)["interrupted"], true);
+    assert_eq!(summary(&run.summary)["interrupted"], true);
     let finished = events.wait_for("finished", EVENT_DEADLINE);
     assert_eq!(finished["interrupted"], true, "{finished}");
     assert_eq!(agent.wait(Duration::from_secs(10)).code(), Some(0));
     if t == Transport::Shm {
-        assert_eq!(services_of(&cfg.session), Vec::<String>::new());
+        assert_eq!(services_of(&run.cfg.session), Vec::<String>::new());
     }
 }
 
 /// SIGTERM on an agent ends its loop: it exits 0, and the host goes on without it.
 fn sigterm_on_an_agent(t: Transport) {
-    let dir = tempfile::tempdir().unwrap();
     let mut cfg = TestConfig::with_transport("agentsig", 2, t);
     cfg.stop_timeout_s = 30.0;
-    let config_path = cfg.write(dir.path());
-    let config = config_path.to_str().unwrap();
-    let s = dir.path().join("summary.json");
-    let events = Events::in_dir(dir.path());
-    let host = spawn_host(
-        &config_path,
-        &events,
-        &["--summary-json", s.to_str().unwrap()],
-    );
-    cfg.follow_host(&events, &config_path);
-    let log1 = dir.path().join("a1.log");
-    let a0 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "0"]);
-    let a1 = Proc::spawn(
-        &bin("vr-agent"),
-        &[
-            "--config",
-            config,
-            "--id",
-            "1",
-            "--log-cycles",
-            log1.to_str().unwrap(),
-        ],
-    );
+    let run = HostRun::start(cfg, &[]);
+    let events = &run.events;
+    let a0 = Proc::spawn(&bin("vr-agent"), &["--config", run.config(), "--id", "0"]);
+    let (a1, log1) = run.agent(1, "a1.log", &[]);
     events.wait_for("all_agents_connected", EVENT_DEADLINE);
     // Only an agent that took part is "lost" when it leaves.
     wait_for_cycle_line(&log1, 0, EVENT_DEADLINE);
@@ -392,11 +321,11 @@ fn sigterm_on_an_agent(t: Transport) {
         left_at == evicted_at || left_at == evicted_at + 1,
         "{left} and {evicted}"
     );
-    host.signal(libc::SIGTERM);
-    let out = host.wait(Duration::from_secs(30));
+    run.host.signal(libc::SIGTERM);
+    let out = run.host.wait(Duration::from_secs(30));
     assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
     assert_eq!(a0.wait(Duration::from_secs(10)).code(), Some(0));
-    let sum = summary(&s);
+    let sum = summary(&run.summary);
     assert_eq!(sum["evicted_agents"], serde_json::json!([1]));
     assert_eq!(sum["stop_timeouts"], 0);
 }
@@ -449,51 +378,20 @@ fn on_agent_lost_abort_ends_the_run(t: Transport) {
 /// `on_agent_lost = "wait"`: the simulation pauses until the agent is back, then goes on;
 /// nobody is left behind.
 fn on_agent_lost_wait_pauses_until_the_agent_is_back(t: Transport) {
-    let dir = tempfile::tempdir().unwrap();
     let mut cfg = TestConfig::with_transport("waitlost", 2, t);
     cfg.stop_timeout_s = 30.0;
     cfg.sync_extra = "on_agent_lost = \"wait\"\n".into();
-    let config_path = cfg.write(dir.path());
-    let config = config_path.to_str().unwrap();
-    let s = dir.path().join("summary.json");
-    let events = Events::in_dir(dir.path());
-    let host = spawn_host(
-        &config_path,
-        &events,
-        &["--summary-json", s.to_str().unwrap()],
-    );
-    cfg.follow_host(&events, &config_path);
-    let log0 = dir.path().join("a0.log");
-    let log1 = dir.path().join("a1.log");
-    let a0 = Proc::spawn(
-        &bin("vr-agent"),
-        &[
-            "--config",
-            config,
-            "--id",
-            "0",
-            "--log-cycles",
-            log0.to_str().unwrap(),
-        ],
-    );
-    let a1 = Proc::spawn(
-        &bin("vr-agent"),
-        &[
-            "--config",
-            config,
-            "--id",
-            "1",
-            "--log-cycles",
-            log1.to_str().unwrap(),
-        ],
-    );
+    let run = HostRun::start(cfg, &[]);
+    let events = &run.events;
+    let (a0, _log0) = run.agent(0, "a0.log", &[]);
+    let (a1, log1) = run.agent(1, "a1.log", &[]);
     wait_for_cycle_line(&log1, 0, EVENT_DEADLINE);
     a1.signal(libc::SIGKILL);
     let _ = a1.wait(Duration::from_secs(10));
     let evicted = events.wait_for("agent_evicted", EVENT_DEADLINE);
     assert_eq!(evicted["agent"], 1, "{evicted}");
     let paused_at = evicted["cycle"].as_u64().unwrap();
-    let back = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "1"]);
+    let back = Proc::spawn(&bin("vr-agent"), &["--config", run.config(), "--id", "1"]);
     let rejoined = events.wait_for("agent_rejoined", EVENT_DEADLINE);
     assert_eq!(rejoined["agent"], 1, "{rejoined}");
     // Nobody was left behind: the host paused, so agent 1 is back at the very next cycle.
@@ -502,12 +400,15 @@ fn on_agent_lost_wait_pauses_until_the_agent_is_back(t: Transport) {
         paused_at + 1,
         "{rejoined}"
     );
-    host.signal(libc::SIGTERM);
-    let out = host.wait(Duration::from_secs(30));
+    run.host.signal(libc::SIGTERM);
+    let out = run.host.wait(Duration::from_secs(30));
     assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
     assert_eq!(a0.wait(Duration::from_secs(10)).code(), Some(0));
     assert_eq!(back.wait(Duration::from_secs(10)).code(), Some(0));
-    assert_eq!(summary(&s)["evicted_agents"], serde_json::json!([1]));
+    assert_eq!(
+        summary(&run.summary)["evicted_agents"],
+        serde_json::json!([1])
+    );
 }
 
 fn sigint(t: Transport) {

@@ -6,8 +6,8 @@ use std::time::Duration;
 use serde_json::Value;
 
 use crate::util::{
-    self, EVENT_DEADLINE, Events, Proc, RUN_DEADLINE, TestConfig, Transport, bin, cycle_log,
-    record, spawn_host, summary,
+    self, EVENT_DEADLINE, HostRun, Proc, RUN_DEADLINE, TestConfig, Transport, bin, cycle_log,
+    record, summary,
 };
 
 fn entries_for(rec: &[Value], agent: u64) -> Vec<&Value> {
@@ -108,56 +108,16 @@ fn a_late_stop_times_out_its_cycle_and_never_completes_the_next(t: Transport) {
     let dir = tempfile::tempdir().unwrap();
     let mut cfg = TestConfig::with_transport("late", 2, t);
     cfg.stop_timeout_s = 0.3;
-    let config_path = cfg.write(dir.path());
-    let config = config_path.to_str().unwrap();
-    let s = dir.path().join("summary.json");
     let rec = dir.path().join("record.jsonl");
-    let events = Events::in_dir(dir.path());
-    let host = spawn_host(
-        &config_path,
-        &events,
-        &[
-            "--frames",
-            "12",
-            "--summary-json",
-            s.to_str().unwrap(),
-            "--record",
-            rec.to_str().unwrap(),
-        ],
+    let run = HostRun::start_in(
+        dir,
+        cfg,
+        &["--frames", "12", "--record", rec.to_str().unwrap()],
     );
-    cfg.follow_host(&events, &config_path);
-    let logs: Vec<_> = (0..2)
-        .map(|i| dir.path().join(format!("a{i}.log")))
-        .collect();
-    let a0 = Proc::spawn(
-        &bin("vr-agent"),
-        &[
-            "--config",
-            config,
-            "--id",
-            "0",
-            "--policy",
-            "circle",
-            "--log-cycles",
-            logs[0].to_str().unwrap(),
-        ],
-    );
-    let a1 = Proc::spawn(
-        &bin("vr-agent"),
-        &[
-            "--config",
-            config,
-            "--id",
-            "1",
-            "--policy",
-            "circle",
-            "--late-stop-at",
-            "5",
-            "--log-cycles",
-            logs[1].to_str().unwrap(),
-        ],
-    );
-    let out = host.wait(RUN_DEADLINE);
+    let events = &run.events;
+    let (a0, _log0) = run.agent(0, "a0.log", &["--policy", "circle"]);
+    let (a1, log1) = run.agent(1, "a1.log", &["--policy", "circle", "--late-stop-at", "5"]);
+    let out = run.host.wait(RUN_DEADLINE);
     assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
     assert_eq!(a0.wait(Duration::from_secs(10)).code(), Some(0));
     assert_eq!(a1.wait(Duration::from_secs(10)).code(), Some(0));
@@ -172,14 +132,14 @@ fn a_late_stop_times_out_its_cycle_and_never_completes_the_next(t: Transport) {
     assert_eq!(timed_out[0]["cycle"], 5, "{timed_out:?}");
     assert_eq!(timed_out[0]["timed_out_agents"], serde_json::json!([1]));
 
-    let sum = summary(&s);
+    let sum = summary(&run.summary);
     assert_eq!(sum["frames"], 12);
     assert_eq!(sum["stop_timeouts"], 1);
     assert_eq!(sum["agent_timeouts"], 1);
     assert_eq!(sum["late_stops"], 1);
 
     let rec = record(&rec);
-    let agent1 = cycle_log(&logs[1]);
+    let agent1 = cycle_log(&log1);
     assert_eq!(
         agent1.iter().map(|l| l.cycle).collect::<Vec<_>>(),
         (0..12).collect::<Vec<_>>()
@@ -205,55 +165,17 @@ fn a_late_stop_times_out_its_cycle_and_never_completes_the_next(t: Transport) {
 }
 
 fn async_mode_a_slow_agent_always_reads_the_newest_frame(t: Transport) {
-    let dir = tempfile::tempdir().unwrap();
     let mut cfg = TestConfig::with_transport("async", 2, t);
     cfg.sync_mode = false;
     cfg.dt_s = 0.01;
-    let config = cfg.write(dir.path());
-    let s = dir.path().join("summary.json");
-    let events = Events::in_dir(dir.path());
-    let host = spawn_host(
-        &config,
-        &events,
-        &["--frames", "150", "--summary-json", s.to_str().unwrap()],
-    );
-    cfg.follow_host(&events, &config);
-    let fast_log = dir.path().join("fast.log");
-    let slow_log = dir.path().join("slow.log");
-    let config = config.to_str().unwrap();
-    let fast = Proc::spawn(
-        &bin("vr-agent"),
-        &[
-            "--config",
-            config,
-            "--id",
-            "0",
-            "--policy",
-            "circle",
-            "--log-cycles",
-            fast_log.to_str().unwrap(),
-        ],
-    );
-    let slow = Proc::spawn(
-        &bin("vr-agent"),
-        &[
-            "--config",
-            config,
-            "--id",
-            "1",
-            "--policy",
-            "circle",
-            "--jitter-ms",
-            "80",
-            "--log-cycles",
-            slow_log.to_str().unwrap(),
-        ],
-    );
-    let out = host.wait(RUN_DEADLINE);
+    let run = HostRun::start(cfg, &["--frames", "150"]);
+    let (fast, _fast_log) = run.agent(0, "fast.log", &["--policy", "circle"]);
+    let (slow, slow_log) = run.agent(1, "slow.log", &["--policy", "circle", "--jitter-ms", "80"]);
+    let out = run.host.wait(RUN_DEADLINE);
     assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
     assert_eq!(fast.wait(Duration::from_secs(10)).code(), Some(0));
     assert_eq!(slow.wait(Duration::from_secs(10)).code(), Some(0));
-    let sum = summary(&s);
+    let sum = summary(&run.summary);
     assert_eq!(sum["mode"], "async");
     assert_eq!(sum["frames"], 150);
 
@@ -274,6 +196,22 @@ fn async_mode_a_slow_agent_always_reads_the_newest_frame(t: Transport) {
         "a slow agent in async mode must skip frames: {slow:?}"
     );
     assert!((slow.len() as u64) < sum["frames"].as_u64().unwrap());
+}
+
+/// `vr-agent` refused a host of protocol 999 (session id `0xdeadbeef`) and said both
+/// versions.
+fn assert_refused_protocol_999(out: &util::Output) {
+    assert_eq!(out.code(), Some(1), "stderr:\n{}", out.stderr);
+    assert!(out.stderr.contains("protocol 999"), "{}", out.stderr);
+    assert!(out.stderr.contains("00000000deadbeef"), "{}", out.stderr);
+    assert!(
+        out.stderr.contains(&format!(
+            "this agent speaks protocol {}",
+            vrsync_bridge::PROTOCOL_VERSION
+        )),
+        "{}",
+        out.stderr
+    );
 }
 
 #[test]
@@ -311,42 +249,25 @@ fn a_protocol_mismatch_is_refused_at_connect_with_both_versions_shm() {
         &["--config", config.to_str().unwrap(), "--id", "0"],
         Duration::from_secs(30),
     );
-    assert_eq!(out.code(), Some(1), "stderr:\n{}", out.stderr);
-    assert!(out.stderr.contains("protocol 999"), "{}", out.stderr);
-    assert!(out.stderr.contains("00000000deadbeef"), "{}", out.stderr);
-    assert!(
-        out.stderr.contains(&format!(
-            "this agent speaks protocol {}",
-            vrsync_bridge::PROTOCOL_VERSION
-        )),
-        "{}",
-        out.stderr
-    );
+    assert_refused_protocol_999(&out);
 }
 
 fn without_spawn_the_host_says_which_agents_it_waits_for(t: Transport) {
-    let dir = tempfile::tempdir().unwrap();
-    let mut cfg = TestConfig::with_transport("external", 2, t);
-    let config_path = cfg.write(dir.path());
-    let config = config_path.to_str().unwrap();
-    let s = dir.path().join("summary.json");
-    let events = Events::in_dir(dir.path());
-    let host = spawn_host(
-        &config_path,
-        &events,
-        &["--frames", "20", "--summary-json", s.to_str().unwrap()],
+    let run = HostRun::start(
+        TestConfig::with_transport("external", 2, t),
+        &["--frames", "20"],
     );
-    cfg.follow_host(&events, &config_path);
+    let (events, config) = (&run.events, run.config());
     let waiting = events.wait_for("waiting_for_agents", EVENT_DEADLINE);
     assert_eq!(waiting["agents"], serde_json::json!([0, 1]), "{waiting}");
     // Start them in reverse order: the host starts cycle 0 only when both are there.
     let a1 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "1"]);
     let a0 = Proc::spawn(&bin("vr-agent"), &["--config", config, "--id", "0"]);
-    let out = host.wait(RUN_DEADLINE);
+    let out = run.host.wait(RUN_DEADLINE);
     assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
     assert_eq!(a0.wait(Duration::from_secs(10)).code(), Some(0));
     assert_eq!(a1.wait(Duration::from_secs(10)).code(), Some(0));
-    let sum = summary(&s);
+    let sum = summary(&run.summary);
     assert_eq!(sum["frames"], 20);
     assert_eq!(sum["stop_timeouts"], 0);
     // Every agent connected before cycle 0, and cycle 0 came after all of them.
@@ -456,17 +377,7 @@ fn a_protocol_mismatch_is_refused_at_connect_with_both_versions_tcp() {
     welcome.extend_from_slice(&1024u32.to_le_bytes());
     conn.write_all(&welcome).unwrap();
     let out = agent.wait(Duration::from_secs(30));
-    assert_eq!(out.code(), Some(1), "stderr:\n{}", out.stderr);
-    assert!(out.stderr.contains("protocol 999"), "{}", out.stderr);
-    assert!(out.stderr.contains("00000000deadbeef"), "{}", out.stderr);
-    assert!(
-        out.stderr.contains(&format!(
-            "this agent speaks protocol {}",
-            vrsync_bridge::PROTOCOL_VERSION
-        )),
-        "{}",
-        out.stderr
-    );
+    assert_refused_protocol_999(&out);
 }
 
 // The barrier tests, written once, run over both transports (same assertions).

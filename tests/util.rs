@@ -358,6 +358,73 @@ pub fn spawn_host(config: &Path, events: &Events, args: &[&str]) -> Proc {
     Proc::spawn(&bin("vr-sim"), &all)
 }
 
+/// A `vr-sim run` host of a test config, in a temp dir of its own that also holds its
+/// events file, its `--summary-json` and the cycle logs of the agents started with
+/// [`HostRun::agent`]. [`HostRun::start`] returns once the host listens.
+pub struct HostRun {
+    /// The host: `vr-sim run --summary-json SUMMARY ARGS` (see [`spawn_host`]); first, so
+    /// it is killed before its folder is removed.
+    pub host: Proc,
+    /// The config, with the port the host bound over TCP.
+    pub cfg: TestConfig,
+    /// The config file.
+    pub config_path: PathBuf,
+    /// Where the host writes its summary.
+    pub summary: PathBuf,
+    /// The host's events.
+    pub events: Events,
+    /// The temp dir (removed on drop, last).
+    pub dir: tempfile::TempDir,
+}
+
+impl HostRun {
+    /// Writes `cfg`, starts the host with `args` and waits until it listens
+    /// ([`TestConfig::follow_host`]).
+    pub fn start(cfg: TestConfig, args: &[&str]) -> Self {
+        Self::start_in(tempfile::tempdir().expect("temp dir"), cfg, args)
+    }
+
+    /// [`HostRun::start`] in `dir` (for `args` naming files in it, e.g. `--record`).
+    pub fn start_in(dir: tempfile::TempDir, mut cfg: TestConfig, args: &[&str]) -> Self {
+        let config_path = cfg.write(dir.path());
+        let summary = dir.path().join("summary.json");
+        let events = Events::in_dir(dir.path());
+        let mut all = vec!["--summary-json", summary.to_str().expect("UTF-8 path")];
+        all.extend_from_slice(args);
+        let host = spawn_host(&config_path, &events, &all);
+        cfg.follow_host(&events, &config_path);
+        Self {
+            host,
+            cfg,
+            config_path,
+            summary,
+            events,
+            dir,
+        }
+    }
+
+    /// The config file's path as a `--config` argument.
+    pub fn config(&self) -> &str {
+        self.config_path.to_str().expect("UTF-8 path")
+    }
+
+    /// A file `name` in the run's temp dir.
+    pub fn path(&self, name: &str) -> PathBuf {
+        self.dir.path().join(name)
+    }
+
+    /// Starts `vr-agent --config CONFIG --id ID ARGS --log-cycles DIR/LOG` and returns it
+    /// with its cycle log's path.
+    pub fn agent(&self, id: u32, log: &str, args: &[&str]) -> (Proc, PathBuf) {
+        let log = self.path(log);
+        let id = id.to_string();
+        let mut all = vec!["--config", self.config(), "--id", &id];
+        all.extend_from_slice(args);
+        all.extend_from_slice(&["--log-cycles", log.to_str().expect("UTF-8 path")]);
+        (Proc::spawn(&bin("vr-agent"), &all), log)
+    }
+}
+
 /// Captured output of a finished process.
 #[derive(Debug)]
 pub struct Output {
