@@ -51,9 +51,12 @@ trap 'exit 130' INT TERM
 # Unique per run, so parallel runs and leftovers of crashed runs never meet.
 session_base="cs$$-$RANDOM"
 
-step "cargo build -p vrsync-host-ffi (libvrsync_host) and vr-agent"
-timeout 1800 cargo build -p vrsync-host-ffi
-timeout 1800 cargo build -p vrsync-agent --bin vr-agent
+step "cargo build --workspace --all-targets (libvrsync_host, vr-agent)"
+# The whole workspace with its tests, as `cargo test --workspace` builds it: the same feature
+# set, so after that command (scripts/test-all, CI) nothing is compiled again. (Building only
+# `-p vrsync-host-ffi` resolves dependency features without the dev-dependencies and rebuilds
+# a large part of the tree.)
+timeout 1800 cargo build --workspace --all-targets
 target_dir="$(cargo metadata --format-version 1 --no-deps | grep -o '"target_directory":"[^"]*"' | cut -d'"' -f4)"
 bin="$target_dir/debug"
 [[ -e "$bin/libvrsync_host.so" ]] || fail "$bin/libvrsync_host.so was not built"
