@@ -5,13 +5,15 @@ use std::time::{Duration, Instant};
 pub use vrsync_bridge::HOST_LIVENESS_PERIOD;
 use vrsync_bridge::shm::{ShmAgent, ShmFrame};
 use vrsync_bridge::tcp::{TcpAgent, TcpFrame};
+use vrsync_bridge::zenoh::{ZenohAgent, ZenohFrame};
 use vrsync_bridge::{
     ActionState, ActionStatus, Collision, Command, ImageDesc, MOTOR_FLAG_ACK, MOTOR_FLAG_STOP,
     MotorCommand, MotorHeader, PROTOCOL_VERSION, PixelFormat, Pose, SensorHeader,
 };
 pub use vrsync_bridge::{AgentConnectError, SignalHandling};
 use vrsync_bridge::{
-    AgentReceiveError, AgentSendError, AgentTransport, AgentWaitError, wait_for_newer_frame,
+    AgentFrame, AgentReceiveError, AgentSendError, AgentTransport, AgentWaitError,
+    wait_for_newer_frame,
 };
 use vrsync_bridge::{Config, TransportKind};
 
@@ -173,6 +175,7 @@ pub struct Frame {
 enum FrameInner {
     Shm(ShmFrame),
     Tcp(TcpFrame),
+    Zenoh(ZenohFrame),
 }
 
 impl FrameInner {
@@ -180,6 +183,7 @@ impl FrameInner {
         match self {
             Self::Shm(f) => f.header(),
             Self::Tcp(f) => f.header(),
+            Self::Zenoh(f) => AgentFrame::header(f),
         }
     }
 
@@ -187,6 +191,7 @@ impl FrameInner {
         match self {
             Self::Shm(f) => f.payload(),
             Self::Tcp(f) => f.payload(),
+            Self::Zenoh(f) => AgentFrame::payload(f),
         }
     }
 }
@@ -379,6 +384,18 @@ impl<'c> AgentBuilder<'c> {
                         .into(),
                 });
             }
+            TransportKind::Zenoh => Backend::Zenoh(Box::new(ZenohAgent::connect(
+                self.config,
+                self.id,
+                timeout,
+                self.config
+                    .transport
+                    .zenoh
+                    .token
+                    .as_deref()
+                    .map(str::as_bytes),
+                self.signals,
+            )?)),
         };
         let max = self.config.transport.max_commands_per_cycle as usize;
         Ok(Agent {
@@ -402,6 +419,7 @@ impl<'c> AgentBuilder<'c> {
 enum Backend {
     Shm(Box<ShmAgent>),
     Tcp(TcpAgent),
+    Zenoh(Box<ZenohAgent>),
 }
 
 /// A connected agent.
@@ -525,6 +543,9 @@ impl Agent {
             Backend::Tcp(tcp) => {
                 wait_for_newer_frame(tcp, last, deadline, liveness).map(FrameInner::Tcp)
             }
+            Backend::Zenoh(z) => {
+                wait_for_newer_frame(&mut **z, last, deadline, liveness).map(FrameInner::Zenoh)
+            }
         };
         let inner = waited.map_err(|e| match e {
             AgentWaitError::Timeout => WaitStartError::Timeout {
@@ -632,6 +653,7 @@ impl Agent {
         let sent = match &mut self.backend {
             Backend::Shm(shm) => AgentTransport::send_batch(&mut **shm, &header, &self.queue),
             Backend::Tcp(tcp) => AgentTransport::send_batch(tcp, &header, &self.queue),
+            Backend::Zenoh(z) => AgentTransport::send_batch(&mut **z, &header, &self.queue),
         };
         match sent {
             Ok(()) => {}

@@ -36,6 +36,7 @@ use std::time::{Duration, Instant};
 use vrsync_agent::{AgentBuilder, Command, SignalHandling, WaitStartError};
 use vrsync_bridge::shm::ShmAgent;
 use vrsync_bridge::tcp::TcpAgent;
+use vrsync_bridge::zenoh::ZenohAgent;
 use vrsync_bridge::{
     AgentFrame, AgentOutcome, AgentTransport, Config, Host, MOTOR_FLAG_STOP, MotorCommand,
     MotorHeader, PROTOCOL_VERSION, wait_for_newer_frame,
@@ -54,11 +55,23 @@ fn config_with(kind: &str, sync_mode: bool, stop_timeout: f64, max_commands: u32
         std::process::id(),
         N.fetch_add(1, Ordering::Relaxed)
     );
+    // zenoh: explicit loopback endpoints on a port free a moment ago (zenoh cannot
+    // report a port-0 listener's port through its stable API); scouting is off.
+    let zenoh = if kind == "zenoh" {
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
+        format!("[transport.zenoh]\nlisten = [\"tcp/127.0.0.1:{port}\"]\n")
+    } else {
+        String::new()
+    };
     let text = format!(
         "session = {session:?}\n[sync]\nsync_mode = {sync_mode}\n\
          simulation_time_per_frame = 0.005\nstop_timeout = {stop_timeout:?}\n\
          connect_timeout = 20.0\n[transport]\nkind = {kind:?}\ntcp_listen = \"127.0.0.1:0\"\n\
-         max_commands_per_cycle = {max_commands}\n\
+         max_commands_per_cycle = {max_commands}\n{zenoh}\
          [[agent]]\nid = 4\n[[agent.camera]]\nname = \"left\"\nwidth = 16\nheight = 8\n"
     );
     Config::from_toml_str(&text, Path::new("<conformance>")).unwrap()
@@ -239,6 +252,10 @@ fn connect_shm(config: &Config) -> ShmAgent {
 
 fn connect_tcp(config: &Config) -> TcpAgent {
     TcpAgent::connect(config, 4, WAIT, None, SignalHandling::Leave).unwrap()
+}
+
+fn connect_zenoh(config: &Config) -> ZenohAgent {
+    ZenohAgent::connect(config, 4, WAIT, None, SignalHandling::Leave).unwrap()
 }
 
 fn a_future_batch_is_dropped_and_counted<T: AgentTransport>(
@@ -519,4 +536,4 @@ macro_rules! conformance {
     )*};
 }
 
-conformance!(shm => connect_shm, tcp => connect_tcp);
+conformance!(shm => connect_shm, tcp => connect_tcp, zenoh => connect_zenoh);

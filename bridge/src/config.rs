@@ -33,11 +33,13 @@ pub enum TransportKind {
     /// iceoryx2 shared memory (default).
     #[default]
     Shm,
-    /// TCP, for remote agents and as a baseline.
+    /// TCP, the measured baseline.
     Tcp,
     /// The original system's protobuf/TCP protocol, for agents written for it
     /// (`[transport.legacy]`; see [`crate::legacy`]).
     Legacy,
+    /// zenoh, for agents on other machines (`[transport.zenoh]`).
+    Zenoh,
 }
 
 impl TransportKind {
@@ -47,6 +49,7 @@ impl TransportKind {
             Self::Shm => "shm",
             Self::Tcp => "tcp",
             Self::Legacy => "legacy",
+            Self::Zenoh => "zenoh",
         }
     }
 }
@@ -177,6 +180,8 @@ pub struct TransportConfig {
     pub max_commands_per_cycle: u32,
     /// Shared secret TCP agents must present in their hello (`tcp_token`); `None`: none.
     pub tcp_token: Option<String>,
+    /// `[transport.zenoh]`.
+    pub zenoh: ZenohConfig,
     /// `[transport.legacy]`: the original system's protocol.
     pub legacy: LegacyConfig,
 }
@@ -261,6 +266,37 @@ impl Default for LegacyConfig {
             png_compression: PngCompression::Fastest,
             send_eye_position: false,
             send_head_motion: false,
+        }
+    }
+}
+
+/// Default of `[transport.zenoh] listen` and `connect`.
+pub const DEFAULT_ZENOH_ENDPOINT: &str = "tcp/127.0.0.1:7447";
+
+/// `[transport.zenoh]` section: how the host and its zenoh agents find each other.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ZenohConfig {
+    /// Endpoints the host listens on (`listen`), e.g. `tcp/0.0.0.0:7447`.
+    pub listen: Vec<String>,
+    /// Endpoints agents connect to (`connect`; default: `listen`).
+    pub connect: Vec<String>,
+    /// How long a silent link lives before zenoh closes it (`lease`): bounds how fast a
+    /// pulled cable evicts an agent, and how fast an agent notices its host is gone.
+    pub lease: Duration,
+    /// Multicast and gossip scouting (`scouting`; default off: only explicit endpoints).
+    pub scouting: bool,
+    /// Shared secret zenoh agents present in their hello (`token`); `None`: none.
+    pub token: Option<String>,
+}
+
+impl Default for ZenohConfig {
+    fn default() -> Self {
+        Self {
+            listen: vec![DEFAULT_ZENOH_ENDPOINT.into()],
+            connect: vec![DEFAULT_ZENOH_ENDPOINT.into()],
+            lease: Duration::from_secs(2),
+            scouting: false,
+            token: None,
         }
     }
 }
@@ -363,6 +399,7 @@ struct RawTransport {
     max_commands_per_cycle: Option<Spanned<i64>>,
     tcp_token: Option<Spanned<String>>,
     legacy: Option<RawLegacy>,
+    zenoh: Option<RawZenoh>,
 }
 
 #[derive(Deserialize)]
@@ -375,6 +412,16 @@ struct RawLegacy {
     png_compression: Option<PngCompression>,
     send_eye_position: Option<bool>,
     send_head_motion: Option<bool>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawZenoh {
+    listen: Option<Spanned<Vec<String>>>,
+    connect: Option<Spanned<Vec<String>>>,
+    lease: Option<Spanned<f64>>,
+    scouting: Option<bool>,
+    token: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize)]
@@ -407,6 +454,23 @@ fn default_fov_v() -> Spanned<f64> {
     Spanned::new(0..0, 90.0)
 }
 
+/// Checks a zenoh endpoint of this build: `tcp/<host>:<port>` (only TCP links are
+/// compiled in), port 1..=65535.
+fn check_zenoh_endpoint(e: &str) -> Result<(), String> {
+    let hint = "use an endpoint like \"tcp/192.168.1.10:7447\" (only tcp/ links are built in)";
+    let Some(addr) = e.strip_prefix("tcp/") else {
+        return Err(format!("{e:?} is not a tcp/ endpoint: {hint}"));
+    };
+    let addr = addr.split('#').next().unwrap_or(addr);
+    let port = addr
+        .rsplit_once(':')
+        .map(|(host, port)| (host, port.parse::<u16>()));
+    match port {
+        Some((host, Ok(p))) if !host.is_empty() && p != 0 => Ok(()),
+        _ => Err(format!("{e:?} has no host and port 1..=65535: {hint}")),
+    }
+}
+
 /// The built-in default configuration (`config/default.toml`).
 pub const DEFAULT_CONFIG_TOML: &str = include_str!("../../config/default.toml");
 
@@ -432,6 +496,67 @@ impl Ctx<'_> {
             key: key.to_string(),
             reason: reason.into(),
         }
+    }
+
+    fn zenoh(&self, rz: RawZenoh) -> Result<ZenohConfig, ConfigLoadError> {
+        let endpoints = |v: Spanned<Vec<String>>, key: &str| {
+            let span = v.span();
+            let list = v.into_inner();
+            if list.is_empty() || list.len() > 16 {
+                return Err(self.invalid(
+                    span.clone(),
+                    key,
+                    format!("must list 1 to 16 endpoints, found {}", list.len()),
+                ));
+            }
+            for e in &list {
+                if let Err(reason) = check_zenoh_endpoint(e) {
+                    return Err(self.invalid(span.clone(), key, reason));
+                }
+            }
+            Ok(list)
+        };
+        let listen = match rz.listen {
+            Some(v) => endpoints(v, "transport.zenoh.listen")?,
+            None => vec![DEFAULT_ZENOH_ENDPOINT.into()],
+        };
+        let connect = match rz.connect {
+            Some(v) => endpoints(v, "transport.zenoh.connect")?,
+            None => listen.clone(),
+        };
+        let lease = self.seconds(rz.lease, "transport.zenoh.lease", 2.0)?;
+        if !(0.1..=3600.0).contains(&lease.as_secs_f64()) {
+            return Err(ConfigLoadError::Invalid {
+                path: self.path.to_path_buf(),
+                line: 1,
+                key: "transport.zenoh.lease".into(),
+                reason: format!(
+                    "must be 0.1..=3600 seconds, found {:?}",
+                    lease.as_secs_f64()
+                ),
+            });
+        }
+        let token = match rz.token {
+            None => None,
+            Some(t) => {
+                let len = t.get_ref().len();
+                if len == 0 || len > MAX_TOKEN {
+                    return Err(self.invalid(
+                        t.span(),
+                        "transport.zenoh.token",
+                        format!("must be 1..={MAX_TOKEN} bytes, found {len}"),
+                    ));
+                }
+                Some(t.into_inner())
+            }
+        };
+        Ok(ZenohConfig {
+            listen,
+            connect,
+            lease,
+            scouting: rz.scouting.unwrap_or(false),
+            token,
+        })
     }
 
     fn seconds(
@@ -623,6 +748,7 @@ impl Config {
             max_commands_per_cycle: None,
             tcp_token: None,
             legacy: None,
+            zenoh: None,
         });
         let tcp_listen = match rt.tcp_listen {
             None => SocketAddr::from(([127, 0, 0, 1], 7400)),
@@ -669,12 +795,17 @@ impl Config {
             None => LegacyConfig::default(),
             Some(l) => ctx.legacy(l)?,
         };
+        let zenoh = match rt.zenoh {
+            None => ZenohConfig::default(),
+            Some(rz) => ctx.zenoh(rz)?,
+        };
         let transport = TransportConfig {
             kind: rt.kind.unwrap_or_default(),
             tcp_listen,
             max_commands_per_cycle,
             tcp_token,
             legacy,
+            zenoh,
         };
 
         if raw.agent.is_empty() {
@@ -853,6 +984,24 @@ impl Config {
             l.send_eye_position,
             l.send_head_motion
         );
+        let z = &self.transport.zenoh;
+        let list = |l: &[String]| {
+            l.iter()
+                .map(|e| toml_string(e))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let _ = writeln!(
+            s,
+            "\n[transport.zenoh]\nlisten = [{}]\nconnect = [{}]\nlease = {:?}\nscouting = {}",
+            list(&z.listen),
+            list(&z.connect),
+            z.lease.as_secs_f64(),
+            z.scouting
+        );
+        if let Some(token) = &z.token {
+            let _ = writeln!(s, "token = {}", toml_string(token));
+        }
         for a in &self.agents {
             let _ = writeln!(
                 s,

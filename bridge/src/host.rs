@@ -243,6 +243,9 @@ pub enum HostCreateError {
     /// The legacy transport (the original protocol) failed.
     #[error(transparent)]
     Legacy(#[from] crate::transport::legacy::LegacyHostCreateError),
+    /// The zenoh transport failed.
+    #[error(transparent)]
+    Zenoh(#[from] crate::transport::zenoh::ZenohHostCreateError),
 }
 
 /// Why waiting for agents failed.
@@ -392,6 +395,7 @@ impl<'c> HostBuilder<'c> {
             TransportsCreateError::Shm(e) => HostCreateError::Shm(e),
             TransportsCreateError::Tcp(e) => HostCreateError::Tcp(e),
             TransportsCreateError::Legacy(e) => HostCreateError::Legacy(e),
+            TransportsCreateError::Zenoh(e) => HostCreateError::Zenoh(e),
         })?;
         Ok(Host::over(self.config, backend))
     }

@@ -64,9 +64,9 @@ mod wire;
 pub use barrier::AgentOutcome;
 pub use config::{
     AgentConfig, AgentLostPolicy, CameraConfig, Config, ConfigLoadError, DEFAULT_CONFIG_TOML,
-    DEFAULT_SPIN_BEFORE_BLOCK_US, LegacyConfig, LegacyDialect, MAX_AGENT_ID, MAX_CONFIG_BYTES,
-    MAX_IMAGE_SIDE_PX, PngCompression, SyncConfig, TransportConfig, TransportKind, WaitMode,
-    derived_height,
+    DEFAULT_SPIN_BEFORE_BLOCK_US, DEFAULT_ZENOH_ENDPOINT, LegacyConfig, LegacyDialect,
+    MAX_AGENT_ID, MAX_CONFIG_BYTES, MAX_IMAGE_SIDE_PX, PngCompression, SyncConfig, TransportConfig,
+    TransportKind, WaitMode, ZenohConfig, derived_height,
 };
 pub use host::{
     AgentReport, CycleReport, Host, HostBuilder, HostCreateError, HostCycleError, HostStats,
@@ -105,4 +105,9 @@ pub mod tcp {
 /// codec (what the fuzz target and the legacy bench client use).
 pub mod legacy {
     pub use crate::transport::legacy::*;
+}
+
+/// The zenoh transport: agents on other machines (keys, hello, liveliness, validation).
+pub mod zenoh {
+    pub use crate::transport::zenoh::*;
 }

@@ -23,6 +23,9 @@ pub enum FloorError {
     /// A socket failed.
     #[error("tcp: {0}")]
     Io(#[from] std::io::Error),
+    /// zenoh refused.
+    #[error("zenoh: {0}")]
+    Zenoh(String),
     /// Agents did not answer in time.
     #[error("floor agents did not answer within {} s", .0.as_secs_f64())]
     Timeout(Duration),
@@ -355,7 +358,7 @@ pub struct FloorAgentReport {
 }
 
 impl FloorAgentReport {
-    fn new(checksum: u64, at_warmup: Option<(u64, u64)>, done: u64) -> Self {
+    pub(crate) fn new(checksum: u64, at_warmup: Option<(u64, u64)>, done: u64) -> Self {
         let allocs_per_cycle = match at_warmup {
             Some((a, c)) if done > c => {
                 (crate::alloc_count::allocations() - a) as f64 / (done - c) as f64

@@ -4,15 +4,18 @@
 //!
 //! - the **transport floors**: the raw round trip each transport allows, measured by
 //!   `vr-sim bench` with the same bytes and fan-out as a vrsync cycle and nothing else
-//!   (host side [`ShmFloorHost`] / [`TcpFloorHost`], agent side [`shm_floor_agent`] /
-//!   [`tcp_floor_agent`], run by `vr-bench-agent --mode floor-shm|floor-tcp`);
+//!   (host side [`ShmFloorHost`] / [`TcpFloorHost`] / [`ZenohFloorHost`], agent side
+//!   [`shm_floor_agent`] / [`tcp_floor_agent`] / [`zenoh_floor_agent`], run by
+//!   `vr-bench-agent --mode floor-shm|floor-tcp|floor-zenoh`);
 //! - a **counting global allocator** ([`alloc_count::CountingAlloc`]) for the benchmark's
 //!   allocations-per-cycle figure.
 
 pub mod alloc_count;
 mod floor;
+mod zenoh_floor;
 
 pub use floor::{
     FloorAgentReport, FloorError, ShmFloorAgentOptions, ShmFloorHost, TcpFloorHost,
     shm_floor_agent, tcp_floor_agent, touch_rows,
 };
+pub use zenoh_floor::{ZenohFloorHost, zenoh_floor_agent};

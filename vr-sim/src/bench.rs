@@ -17,7 +17,7 @@ use hdrhistogram::Histogram;
 use serde::Serialize;
 use vrsync_bridge::{Config, Host, SignalHandling};
 use vrsync_floor::alloc_count::allocations;
-use vrsync_floor::{ShmFloorHost, TcpFloorHost};
+use vrsync_floor::{ShmFloorHost, TcpFloorHost, ZenohFloorHost};
 
 mod legacy;
 
@@ -40,7 +40,8 @@ pub struct BenchOptions {
 /// One measured configuration (DESIGN §8 bench JSON keys, plus allocations).
 #[derive(Debug, Clone, Serialize)]
 pub struct Row {
-    /// `shm`, `shm-spin`, `tcp`, `floor-shm`, `floor-shm-spin`, `floor-tcp`, `legacy`.
+    /// `shm`, `shm-spin`, `tcp`, `zenoh`, `floor-shm`, `floor-shm-spin`, `floor-tcp`,
+    /// `floor-zenoh`, `legacy`.
     pub transport: String,
     /// Agents.
     pub agents: u32,
@@ -266,6 +267,7 @@ fn measure_render(config: &Config, host: &mut Host, n: u32) -> anyhow::Result<f6
 fn config_text(case: &Case, session: &str) -> String {
     let (kind, wait) = match case.transport {
         "tcp" => ("tcp", "block"),
+        "zenoh" => ("zenoh", "block"),
         "shm-spin" => ("shm", "spin"),
         _ => ("shm", "block"),
     };
@@ -274,6 +276,14 @@ fn config_text(case: &Case, session: &str) -> String {
          stop_timeout = 10.0\nconnect_timeout = 30.0\nwait = {wait:?}\n[transport]\nkind = {kind:?}\n\
          tcp_listen = \"127.0.0.1:0\"\nmax_commands_per_cycle = 8\n"
     );
+    if kind == "zenoh" {
+        // Loopback, a port free a moment ago (zenoh's stable API cannot report the port
+        // of a port-0 listener), scouting off (the default).
+        s += &format!(
+            "[transport.zenoh]\nlisten = [\"{}\"]\n",
+            loopback_endpoint().unwrap_or_default()
+        );
+    }
     for id in 0..case.agents {
         s += &format!("[[agent]]\nid = {id}\n");
         for c in 0..case.cameras {
@@ -472,6 +482,63 @@ fn bench_floor_shm(case: &Case, session: &str, spin: bool) -> anyhow::Result<Mea
     Ok(Measured::new(hist, host_allocs, agent_allocs))
 }
 
+/// `tcp/127.0.0.1:<a port free a moment ago>`.
+fn loopback_endpoint() -> anyhow::Result<String> {
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .context("find a free loopback port")?
+        .port();
+    Ok(format!("tcp/127.0.0.1:{port}"))
+}
+
+/// The raw zenoh round trip (put → subscriber → 8-byte reply, same fan-out).
+fn bench_floor_zenoh(case: &Case, session: &str) -> anyhow::Result<Measured> {
+    let bytes = case.frame_bytes();
+    let endpoint = loopback_endpoint()?;
+    let mut host = ZenohFloorHost::create(session, &endpoint, case.agents, bytes)?;
+    let total = case.warmup + case.cycles;
+    let row_bytes = case.width as usize * BPP;
+    let agents = Agents::spawn(
+        |id| {
+            vec![
+                "--mode".into(),
+                "floor-zenoh".into(),
+                "--session".into(),
+                session.to_string(),
+                "--endpoint".into(),
+                endpoint.clone(),
+                "--id".into(),
+                id.to_string(),
+                "--cycles".into(),
+                total.to_string(),
+                "--row-bytes".into(),
+                row_bytes.to_string(),
+                "--warmup".into(),
+                case.warmup.to_string(),
+            ]
+        },
+        case.agents,
+    )?;
+    host.wait_connected(Duration::from_secs(30))?;
+    let mut hist = histogram()?;
+    let mut allocs_start = 0;
+    for cycle in 0..total {
+        if cycle == case.warmup {
+            allocs_start = allocations();
+        }
+        let t0 = Instant::now();
+        host.cycle(cycle, Duration::from_secs(10))?;
+        if cycle >= case.warmup {
+            hist.record(t0.elapsed().as_nanos() as u64)
+                .context("record")?;
+        }
+    }
+    let host_allocs = (allocations() - allocs_start) as f64 / case.cycles as f64;
+    drop(host);
+    let agent_allocs = agents.finish()?;
+    Ok(Measured::new(hist, host_allocs, agent_allocs))
+}
+
 /// The raw TCP round trip.
 fn bench_floor_tcp(case: &Case) -> anyhow::Result<Measured> {
     let bytes = case.frame_bytes();
@@ -586,6 +653,8 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
             }
             cases.push(mk("tcp", tcp_cycles));
             cases.push(mk("floor-tcp", tcp_cycles));
+            cases.push(mk("zenoh", tcp_cycles));
+            cases.push(mk("floor-zenoh", tcp_cycles));
             // The Python agent (1 agent, the smallest and the largest image set).
             if python.is_some() && agents == 1 && (w == 320 || w == 1920) {
                 cases.push(mk("python", shm_cycles));
@@ -600,6 +669,7 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
                         "floor-shm" => bench_floor_shm(case, &session(&mut n), false)?,
                         "floor-shm-spin" => bench_floor_shm(case, &session(&mut n), true)?,
                         "floor-tcp" => bench_floor_tcp(case)?,
+                        "floor-zenoh" => bench_floor_zenoh(case, &session(&mut n))?,
                         _ => bench_vrsync(
                             case,
                             &session(&mut n),
@@ -781,6 +851,23 @@ fn print_ratios(rows: &[Row]) {
             ),
             if agents == 1 { ">= 200" } else { "report" },
         );
+    }
+    for agents in [1, 4] {
+        for w in [320, 1920] {
+            line(
+                &format!("zenoh / floor-zenoh, {agents} agent(s), {}", size_name(w)),
+                ratio(
+                    find(rows, "zenoh", agents, w),
+                    find(rows, "floor-zenoh", agents, w),
+                ),
+                "<= 1.3",
+            );
+            line(
+                &format!("zenoh / tcp, {agents} agent(s), {}", size_name(w)),
+                ratio(find(rows, "zenoh", agents, w), find(rows, "tcp", agents, w)),
+                "report",
+            );
+        }
     }
     for w in [320, 1920] {
         line(

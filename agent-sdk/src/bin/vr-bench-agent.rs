@@ -13,7 +13,9 @@ use clap::{Parser, ValueEnum};
 use vrsync_agent::{AgentBuilder, Command, SignalHandling, StopError, WaitStartError};
 use vrsync_bridge::Config;
 use vrsync_floor::alloc_count::{CountingAlloc, allocations};
-use vrsync_floor::{ShmFloorAgentOptions, shm_floor_agent, tcp_floor_agent, touch_rows};
+use vrsync_floor::{
+    ShmFloorAgentOptions, shm_floor_agent, tcp_floor_agent, touch_rows, zenoh_floor_agent,
+};
 
 #[global_allocator]
 static ALLOC: CountingAlloc = CountingAlloc;
@@ -26,6 +28,8 @@ enum Mode {
     FloorShm,
     /// Raw TCP round trip.
     FloorTcp,
+    /// Raw zenoh round trip.
+    FloorZenoh,
 }
 
 /// Benchmark agent for `vr-sim bench` (not meant to be started by hand).
@@ -46,12 +50,15 @@ struct Args {
     /// Cycles not counted for allocations.
     #[arg(long, default_value_t = 0)]
     warmup: u64,
-    /// Floor session (floor-shm).
+    /// Floor session (floor-shm, floor-zenoh).
     #[arg(long, default_value = "")]
     session: String,
     /// Host address (floor-tcp).
     #[arg(long)]
     addr: Option<SocketAddr>,
+    /// The host's zenoh endpoint (floor-zenoh).
+    #[arg(long, default_value = "")]
+    endpoint: String,
     /// Bytes per frame (floors).
     #[arg(long, default_value_t = 0)]
     frame_bytes: usize,
@@ -107,6 +114,19 @@ fn run(args: &Args) -> anyhow::Result<()> {
             let r = tcp_floor_agent(
                 addr,
                 args.frame_bytes,
+                args.cycles,
+                args.warmup,
+                args.row_bytes,
+                timeout,
+            )?;
+            println!("allocs_per_cycle {}", r.allocs_per_cycle);
+            Ok(())
+        }
+        Mode::FloorZenoh => {
+            let r = zenoh_floor_agent(
+                &args.session,
+                &args.endpoint,
+                args.id,
                 args.cycles,
                 args.warmup,
                 args.row_bytes,

@@ -102,6 +102,8 @@ enum vrs_host_transport_t
   VRS_HOST_TRANSPORT_SHM = 0,
   // TCP.
   VRS_HOST_TRANSPORT_TCP = 1,
+  // zenoh (agents on other machines).
+  VRS_HOST_TRANSPORT_ZENOH = 2,
   // The original system's protobuf/TCP protocol.
   VRS_HOST_TRANSPORT_LEGACY = 3,
 };

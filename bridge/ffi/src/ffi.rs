@@ -198,6 +198,7 @@ fn info_impl(host: *mut vrs_host_t, out_info: *mut vrs_host_info_t) -> Result<()
                 TransportKind::Shm => vrs_host_transport_t::VRS_HOST_TRANSPORT_SHM,
                 TransportKind::Tcp => vrs_host_transport_t::VRS_HOST_TRANSPORT_TCP,
                 TransportKind::Legacy => vrs_host_transport_t::VRS_HOST_TRANSPORT_LEGACY,
+                TransportKind::Zenoh => vrs_host_transport_t::VRS_HOST_TRANSPORT_ZENOH,
             },
             tcp_port: h.tcp_local_addr().map_or(0, |a| u32::from(a.port())),
             max_commands_per_cycle: c.transport.max_commands_per_cycle,

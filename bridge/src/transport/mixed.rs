@@ -4,7 +4,9 @@
 //! Each transport is created for its own agents only (a sub-config with those agents);
 //! slots inside a transport are its own, this module maps them to the host's. The shm
 //! transport's wake-up descriptor joins the TCP transport's `poll(2)`, so a stop over
-//! shared memory and a batch over TCP end the same wait. The legacy transport waits on an
+//! shared memory and a batch over TCP end the same wait. zenoh's callbacks write an
+//! `eventfd` that joins the same wait (in the legacy epoll set when there is one, else in
+//! the `poll(2)`, or an epoll set of its own next to shm's). The legacy transport waits on an
 //! `epoll` set: the shm descriptor joins that set, and the set's descriptor joins the TCP
 //! poll.
 
@@ -13,6 +15,7 @@ use std::time::Duration;
 use super::legacy::{LegacyFrameLoan, LegacyHost, LegacyHostCreateError};
 use super::shm::{ShmFrameLoan, ShmHost, ShmHostCreateError};
 use super::tcp::{TcpFrameLoan, TcpHost, TcpHostCreateError};
+use super::zenoh::{ZenohFrameLoan, ZenohHost, ZenohHostCreateError, poll_fds};
 use super::{BatchSink, FrameLoanMut, HostTransport, HostTransportError, PeerRefusal};
 use crate::config::{Config, TransportKind};
 use crate::signal::SignalHandling;
@@ -31,6 +34,9 @@ pub enum TransportsCreateError {
     /// The legacy transport failed.
     #[error(transparent)]
     Legacy(#[from] LegacyHostCreateError),
+    /// The zenoh transport failed.
+    #[error(transparent)]
+    Zenoh(#[from] ZenohHostCreateError),
 }
 
 /// A loan of whichever transport serves the agent.
@@ -42,6 +48,8 @@ pub enum AnyLoan {
     Tcp(TcpFrameLoan),
     /// The original protocol.
     Legacy(LegacyFrameLoan),
+    /// zenoh.
+    Zenoh(ZenohFrameLoan),
 }
 
 impl FrameLoanMut for AnyLoan {
@@ -50,6 +58,7 @@ impl FrameLoanMut for AnyLoan {
             Self::Shm(l) => l.parts_mut(),
             Self::Tcp(l) => l.parts_mut(),
             Self::Legacy(l) => l.parts_mut(),
+            Self::Zenoh(l) => l.parts_mut(),
         }
     }
 
@@ -58,6 +67,7 @@ impl FrameLoanMut for AnyLoan {
             Self::Shm(l) => l.header(),
             Self::Tcp(l) => l.header(),
             Self::Legacy(l) => l.header(),
+            Self::Zenoh(l) => l.header(),
         }
     }
 }
@@ -74,11 +84,16 @@ pub struct Transports {
     shm: Option<ShmHost>,
     tcp: Option<TcpHost>,
     legacy: Option<LegacyHost>,
+    zenoh: Option<ZenohHost>,
+    /// Without legacy, with TCP, shm and zenoh: an epoll set of the shm and zenoh
+    /// descriptors (TCP's wait takes one extra descriptor).
+    epoll: Option<std::os::fd::OwnedFd>,
     routes: Vec<Route>,
     /// Host slot of each shm slot / tcp slot.
     shm_slots: Vec<usize>,
     tcp_slots: Vec<usize>,
     legacy_slots: Vec<usize>,
+    zenoh_slots: Vec<usize>,
     scratch: Vec<usize>,
     signals: SignalHandling,
 }
@@ -89,6 +104,7 @@ impl core::fmt::Debug for Transports {
             .field("shm_slots", &self.shm_slots)
             .field("tcp_slots", &self.tcp_slots)
             .field("legacy_slots", &self.legacy_slots)
+            .field("zenoh_slots", &self.zenoh_slots)
             .finish()
     }
 }
@@ -100,12 +116,14 @@ impl Transports {
     /// [`TransportsCreateError`].
     pub fn create(config: &Config, signals: SignalHandling) -> Result<Self, TransportsCreateError> {
         let mut routes = Vec::with_capacity(config.agents.len());
-        let (mut shm_slots, mut tcp_slots, mut legacy_slots) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut shm_slots, mut tcp_slots, mut legacy_slots, mut zenoh_slots) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         for (slot, a) in config.agents.iter().enumerate() {
             let list = match a.transport {
                 TransportKind::Shm => &mut shm_slots,
                 TransportKind::Tcp => &mut tcp_slots,
                 TransportKind::Legacy => &mut legacy_slots,
+                TransportKind::Zenoh => &mut zenoh_slots,
             };
             routes.push(Route {
                 kind: a.transport,
@@ -138,15 +156,43 @@ impl Transports {
             l.watch_extra(fd)
                 .map_err(|e| TransportsCreateError::Legacy(LegacyHostCreateError::Epoll(e)))?;
         }
+        let zenoh = if zenoh_slots.is_empty() {
+            None
+        } else {
+            Some(ZenohHost::create(&only(TransportKind::Zenoh), signals)?)
+        };
+        let zenoh_fd = zenoh.as_ref().and_then(|z| z.activity_fd());
+        let mut epoll = None;
+        if let (Some(l), Some(fd)) = (&mut legacy, zenoh_fd) {
+            // zenoh's eventfd joins the legacy epoll set too.
+            l.watch_extra(fd)
+                .map_err(|e| TransportsCreateError::Legacy(LegacyHostCreateError::Epoll(e)))?;
+        } else if let (Some(s), Some(_), Some(_)) = (&shm, &tcp, &zenoh) {
+            epoll = Some(epoll_of(&[s.activity_fd(), zenoh_fd]).map_err(|e| {
+                ZenohHostCreateError::Declare {
+                    what: "an epoll set for the shm and zenoh wake-ups".into(),
+                    reason: e.to_string(),
+                }
+            })?);
+        }
         Ok(Self {
             shm,
             tcp,
             legacy,
+            zenoh,
+            epoll,
             routes,
-            scratch: Vec::with_capacity(shm_slots.len().max(tcp_slots.len())),
+            scratch: Vec::with_capacity(
+                shm_slots
+                    .len()
+                    .max(tcp_slots.len())
+                    .max(legacy_slots.len())
+                    .max(zenoh_slots.len()),
+            ),
             shm_slots,
             tcp_slots,
             legacy_slots,
+            zenoh_slots,
             signals,
         })
     }
@@ -158,111 +204,9 @@ impl Transports {
             .ok_or(HostTransportError::NoSuchSlot { slot })
     }
 
-    fn missing(kind: TransportKind) -> HostTransportError {
-        HostTransportError::Send {
-            what: format!("a frame over {}", kind.as_str()),
-            reason: "that transport serves no agent".into(),
-        }
-    }
-}
-
-impl HostTransport for Transports {
-    type Loan = AnyLoan;
-
-    fn is_connected(&self, slot: usize) -> bool {
-        let Some(r) = self.routes.get(slot) else {
-            return false;
-        };
-        match r.kind {
-            TransportKind::Shm => self.shm.as_ref().is_some_and(|t| t.is_connected(r.local)),
-            TransportKind::Tcp => self.tcp.as_ref().is_some_and(|t| t.is_connected(r.local)),
-            TransportKind::Legacy => self
-                .legacy
-                .as_ref()
-                .is_some_and(|t| t.is_connected(r.local)),
-        }
-    }
-
-    fn loan(&mut self, slot: usize) -> Result<AnyLoan, HostTransportError> {
-        let r = self.route(slot)?;
-        match r.kind {
-            TransportKind::Shm => match &mut self.shm {
-                Some(t) => t.loan(r.local).map(AnyLoan::Shm),
-                None => Err(Self::missing(r.kind)),
-            },
-            TransportKind::Tcp => match &mut self.tcp {
-                Some(t) => t.loan(r.local).map(AnyLoan::Tcp),
-                None => Err(Self::missing(r.kind)),
-            },
-            TransportKind::Legacy => match &mut self.legacy {
-                Some(t) => t.loan(r.local).map(AnyLoan::Legacy),
-                None => Err(Self::missing(r.kind)),
-            },
-        }
-    }
-
-    fn publish(&mut self, slot: usize, frame: AnyLoan) -> Result<bool, HostTransportError> {
-        let r = self.route(slot)?;
-        // A loan comes from `loan` of the same slot, so its kind is the route's.
-        match (frame, &mut self.shm, &mut self.tcp, &mut self.legacy) {
-            (AnyLoan::Shm(l), Some(t), _, _) if r.kind == TransportKind::Shm => {
-                t.publish(r.local, l)
-            }
-            (AnyLoan::Tcp(l), _, Some(t), _) if r.kind == TransportKind::Tcp => {
-                t.publish(r.local, l)
-            }
-            (AnyLoan::Legacy(l), _, _, Some(t)) if r.kind == TransportKind::Legacy => {
-                t.publish(r.local, l)
-            }
-            _ => Err(HostTransportError::Send {
-                what: format!("the sensor frame of slot {slot}"),
-                reason: "the frame was loaned for another agent".into(),
-            }),
-        }
-    }
-
-    fn signal_start(&mut self) -> Result<(), HostTransportError> {
-        if let Some(t) = &mut self.shm {
-            t.signal_start()?;
-        }
-        if let Some(t) = &mut self.tcp {
-            t.signal_start()?;
-        }
-        if let Some(t) = &mut self.legacy {
-            t.signal_start()?;
-        }
-        Ok(())
-    }
-
-    fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError> {
-        if let Some(t) = &mut self.shm {
-            let map = &self.shm_slots;
-            t.drain(&mut |local, header, commands| {
-                if let Some(&slot) = map.get(local) {
-                    sink(slot, header, commands);
-                }
-            })?;
-        }
-        if let Some(t) = &mut self.tcp {
-            let map = &self.tcp_slots;
-            t.drain(&mut |local, header, commands| {
-                if let Some(&slot) = map.get(local) {
-                    sink(slot, header, commands);
-                }
-            })?;
-        }
-        if let Some(t) = &mut self.legacy {
-            let map = &self.legacy_slots;
-            t.drain(&mut |local, header, commands| {
-                if let Some(&slot) = map.get(local) {
-                    sink(slot, header, commands);
-                }
-            })?;
-        }
-        Ok(())
-    }
-
-    fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
+    /// The wait of the shm, TCP and legacy transports (zenoh's eventfd, if any, is in
+    /// the legacy epoll set).
+    fn wait_without_zenoh(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
         match (&mut self.shm, &mut self.tcp, &mut self.legacy) {
             (Some(shm), None, None) => shm.wait_activity(timeout),
             (None, Some(tcp), None) => tcp.wait_activity(timeout),
@@ -305,6 +249,177 @@ impl HostTransport for Transports {
         }
     }
 
+    fn missing(kind: TransportKind) -> HostTransportError {
+        HostTransportError::Send {
+            what: format!("a frame over {}", kind.as_str()),
+            reason: "that transport serves no agent".into(),
+        }
+    }
+}
+
+impl HostTransport for Transports {
+    type Loan = AnyLoan;
+
+    fn is_connected(&self, slot: usize) -> bool {
+        let Some(r) = self.routes.get(slot) else {
+            return false;
+        };
+        match r.kind {
+            TransportKind::Shm => self.shm.as_ref().is_some_and(|t| t.is_connected(r.local)),
+            TransportKind::Tcp => self.tcp.as_ref().is_some_and(|t| t.is_connected(r.local)),
+            TransportKind::Legacy => self
+                .legacy
+                .as_ref()
+                .is_some_and(|t| t.is_connected(r.local)),
+            TransportKind::Zenoh => self.zenoh.as_ref().is_some_and(|t| t.is_connected(r.local)),
+        }
+    }
+
+    fn loan(&mut self, slot: usize) -> Result<AnyLoan, HostTransportError> {
+        let r = self.route(slot)?;
+        match r.kind {
+            TransportKind::Shm => match &mut self.shm {
+                Some(t) => t.loan(r.local).map(AnyLoan::Shm),
+                None => Err(Self::missing(r.kind)),
+            },
+            TransportKind::Tcp => match &mut self.tcp {
+                Some(t) => t.loan(r.local).map(AnyLoan::Tcp),
+                None => Err(Self::missing(r.kind)),
+            },
+            TransportKind::Legacy => match &mut self.legacy {
+                Some(t) => t.loan(r.local).map(AnyLoan::Legacy),
+                None => Err(Self::missing(r.kind)),
+            },
+            TransportKind::Zenoh => match &mut self.zenoh {
+                Some(t) => t.loan(r.local).map(AnyLoan::Zenoh),
+                None => Err(Self::missing(r.kind)),
+            },
+        }
+    }
+
+    fn publish(&mut self, slot: usize, frame: AnyLoan) -> Result<bool, HostTransportError> {
+        let r = self.route(slot)?;
+        // A loan comes from `loan` of the same slot, so its kind is the route's.
+        match (frame, &mut self.shm, &mut self.tcp, &mut self.legacy) {
+            (AnyLoan::Shm(l), Some(t), _, _) if r.kind == TransportKind::Shm => {
+                t.publish(r.local, l)
+            }
+            (AnyLoan::Tcp(l), _, Some(t), _) if r.kind == TransportKind::Tcp => {
+                t.publish(r.local, l)
+            }
+            (AnyLoan::Legacy(l), _, _, Some(t)) if r.kind == TransportKind::Legacy => {
+                t.publish(r.local, l)
+            }
+            (AnyLoan::Zenoh(l), _, _, _) if r.kind == TransportKind::Zenoh => {
+                match &mut self.zenoh {
+                    Some(t) => t.publish(r.local, l),
+                    None => Err(Self::missing(r.kind)),
+                }
+            }
+            _ => Err(HostTransportError::Send {
+                what: format!("the sensor frame of slot {slot}"),
+                reason: "the frame was loaned for another agent".into(),
+            }),
+        }
+    }
+
+    fn signal_start(&mut self) -> Result<(), HostTransportError> {
+        if let Some(t) = &mut self.shm {
+            t.signal_start()?;
+        }
+        if let Some(t) = &mut self.tcp {
+            t.signal_start()?;
+        }
+        if let Some(t) = &mut self.legacy {
+            t.signal_start()?;
+        }
+        if let Some(t) = &mut self.zenoh {
+            t.signal_start()?;
+        }
+        Ok(())
+    }
+
+    fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError> {
+        if let Some(t) = &mut self.shm {
+            let map = &self.shm_slots;
+            t.drain(&mut |local, header, commands| {
+                if let Some(&slot) = map.get(local) {
+                    sink(slot, header, commands);
+                }
+            })?;
+        }
+        if let Some(t) = &mut self.tcp {
+            let map = &self.tcp_slots;
+            t.drain(&mut |local, header, commands| {
+                if let Some(&slot) = map.get(local) {
+                    sink(slot, header, commands);
+                }
+            })?;
+        }
+        if let Some(t) = &mut self.legacy {
+            let map = &self.legacy_slots;
+            t.drain(&mut |local, header, commands| {
+                if let Some(&slot) = map.get(local) {
+                    sink(slot, header, commands);
+                }
+            })?;
+        }
+        if let Some(t) = &mut self.zenoh {
+            let map = &self.zenoh_slots;
+            t.drain(&mut |local, header, commands| {
+                if let Some(&slot) = map.get(local) {
+                    sink(slot, header, commands);
+                }
+            })?;
+        }
+        Ok(())
+    }
+
+    fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
+        if let (Some(zenoh), None) = (&mut self.zenoh, &self.legacy) {
+            match (&mut self.shm, &mut self.tcp) {
+                (None, None) => return zenoh.wait_activity(timeout),
+                (Some(shm), None) => {
+                    // One poll(2) over the shm stop listener and zenoh's eventfd.
+                    let fds: Vec<_> = [shm.activity_fd(), zenoh.activity_fd()]
+                        .into_iter()
+                        .flatten()
+                        .collect();
+                    poll_fds(&fds, timeout).map_err(|e| HostTransportError::Wait {
+                        reason: format!("poll: {e}"),
+                    })?;
+                    shm.clear_activity();
+                    zenoh.clear_activity();
+                }
+                (shm, Some(tcp)) => {
+                    // TCP polls its sockets plus one more descriptor: zenoh's eventfd, or
+                    // the epoll set of shm's listener and zenoh's eventfd.
+                    let extra = match &self.epoll {
+                        Some(e) => Some(std::os::fd::AsRawFd::as_raw_fd(e)),
+                        None => zenoh.activity_fd(),
+                    };
+                    if tcp.wait_activity_with(timeout, extra)? {
+                        if let Some(shm) = shm {
+                            shm.clear_activity();
+                        }
+                        zenoh.clear_activity();
+                    }
+                }
+            }
+            if self.signals.termination_requested() {
+                return Err(HostTransportError::Terminated);
+            }
+            return Ok(());
+        }
+        // With legacy, zenoh's eventfd is in the legacy epoll set: forget its wake-ups
+        // once the wait is over (the batches are read by the next drain).
+        let waited = self.wait_without_zenoh(timeout);
+        if let Some(z) = &mut self.zenoh {
+            z.clear_activity();
+        }
+        waited
+    }
+
     fn update_connections(&mut self) -> Result<(), HostTransportError> {
         if let Some(t) = &mut self.shm {
             t.update_connections()?;
@@ -313,6 +428,9 @@ impl HostTransport for Transports {
             t.update_connections()?;
         }
         if let Some(t) = &mut self.legacy {
+            t.update_connections()?;
+        }
+        if let Some(t) = &mut self.zenoh {
             t.update_connections()?;
         }
         Ok(())
@@ -331,6 +449,9 @@ impl HostTransport for Transports {
             unkept += t.take_refusals(sink);
         }
         if let Some(t) = &mut self.legacy {
+            unkept += t.take_refusals(sink);
+        }
+        if let Some(t) = &mut self.zenoh {
             unkept += t.take_refusals(sink);
         }
         unkept
@@ -356,9 +477,37 @@ impl HostTransport for Transports {
                     .filter_map(|&l| self.legacy_slots.get(l)),
             );
         }
+        if let Some(t) = &mut self.zenoh {
+            self.scratch.clear();
+            t.reap_dead_agents(&mut self.scratch);
+            dead.extend(self.scratch.iter().filter_map(|&l| self.zenoh_slots.get(l)));
+        }
     }
 
     fn local_addr(&self) -> Option<std::net::SocketAddr> {
         self.tcp.as_ref().and_then(HostTransport::local_addr)
     }
+}
+
+/// An epoll set of `fds` (the `None`s skipped): readable whenever one of them is.
+fn epoll_of(fds: &[Option<std::os::fd::RawFd>]) -> std::io::Result<std::os::fd::OwnedFd> {
+    use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
+    // SAFETY: plain syscall; the result is checked before use.
+    let ep = unsafe { libc::epoll_create1(libc::EPOLL_CLOEXEC) };
+    if ep < 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    // SAFETY: `ep` is a fresh descriptor nobody else owns.
+    let ep = unsafe { OwnedFd::from_raw_fd(ep) };
+    for &fd in fds.iter().flatten() {
+        let mut ev = libc::epoll_event {
+            events: libc::EPOLLIN as u32,
+            u64: fd as u64,
+        };
+        // SAFETY: `ev` is a valid epoll_event for the call; both descriptors are open.
+        if unsafe { libc::epoll_ctl(ep.as_raw_fd(), libc::EPOLL_CTL_ADD, fd, &mut ev) } < 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+    }
+    Ok(ep)
 }

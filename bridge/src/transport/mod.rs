@@ -17,6 +17,7 @@ pub mod legacy;
 pub(crate) mod mixed;
 pub mod shm;
 pub mod tcp;
+pub mod zenoh;
 
 use std::time::{Duration, Instant};
 

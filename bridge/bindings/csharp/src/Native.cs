@@ -114,6 +114,7 @@ namespace Vrsync
     {
         Shm = 0,
         Tcp = 1,
+        Zenoh = 2,
         /// <summary>The original system's protobuf/TCP protocol.</summary>
         Legacy = 3,
     }

@@ -1,0 +1,494 @@
+//! The zenoh transport's agent side: hello, the newest frame, batches, the host's token.
+
+use std::rc::Rc;
+use std::time::Instant;
+
+use ::zenoh::Wait;
+use ::zenoh::liveliness::LivelinessToken;
+use ::zenoh::pubsub::{Publisher, Subscriber};
+use ::zenoh::qos::CongestionControl;
+use ::zenoh::sample::{Sample, SampleKind};
+use tracing::{debug, warn};
+use zerocopy::{FromBytes, IntoBytes};
+
+use super::super::tcp::{Hello, decode_reject, encode_hello, reject};
+use super::super::{
+    AGENT_MAX_HELD_FRAMES, AgentConnectError, AgentFrame, AgentReceiveError, AgentSendError,
+    AgentTransport, Attempt, HostLiveness, retry_until,
+};
+use super::*;
+use crate::config::Config;
+use crate::signal::SignalHandling;
+use crate::wire::{LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, SensorHeader};
+
+const HEADER: usize = core::mem::size_of::<SensorHeader>();
+
+/// A received frame's bytes: zenoh's own buffer when it arrived in one piece (no copy),
+/// else an aligned copy.
+#[derive(Debug)]
+enum Body {
+    Zenoh(::zenoh::bytes::ZBytes),
+    Copied(AlignedBuf),
+}
+
+impl Body {
+    fn bytes(&self) -> &[u8] {
+        match self {
+            // One slice: checked when the frame arrived.
+            Self::Zenoh(z) => z.slices().next().unwrap_or(&[]),
+            Self::Copied(b) => b.bytes(),
+        }
+    }
+}
+
+#[derive(Debug, Default)]
+struct AgentState {
+    newest: Option<Body>,
+    pool: Vec<AlignedBuf>,
+    /// The host's `alive` token was seen.
+    host_seen: bool,
+    closed: bool,
+    gone: Option<String>,
+    max_frame_body: usize,
+    dropped: u64,
+}
+
+#[derive(Debug)]
+struct AgentShared {
+    state: Mutex<AgentState>,
+    wake: WakeFd,
+    keys: Keys,
+}
+
+impl AgentShared {
+    fn on_frame(&self, sample: &Sample) {
+        let payload = sample.payload();
+        let len = payload.len();
+        let mut st = lock(&self.state);
+        if len < HEADER || len > st.max_frame_body {
+            st.dropped += 1;
+            let (n, max) = (st.dropped, st.max_frame_body);
+            drop(st);
+            if worth_logging(n) {
+                warn!(
+                    total = n,
+                    "zenoh frame dropped: {len} bytes (a frame is {HEADER}..={max})"
+                );
+            }
+            return;
+        }
+        let body = if payload.slices().count() == 1 {
+            // In one piece: kept as zenoh delivered it, read in place.
+            drop(st);
+            Body::Zenoh(payload.clone())
+        } else {
+            // In pieces: copied outside the lock into a pooled buffer of the largest
+            // frame's size.
+            let mut buf = st.pool.pop().unwrap_or_default();
+            let max = st.max_frame_body;
+            drop(st);
+            if buf.capacity() < max {
+                buf = AlignedBuf::with_capacity(max);
+            }
+            buf.fill_from(payload);
+            Body::Copied(buf)
+        };
+        let mut st = lock(&self.state);
+        if let Some(Body::Copied(old)) = st.newest.replace(body) {
+            st.pool.push(old);
+        }
+        drop(st);
+        self.wake.wake();
+    }
+
+    fn on_host_token(&self, sample: &Sample) {
+        let key = sample.key_expr().as_str();
+        let mut st = lock(&self.state);
+        match sample.kind() {
+            SampleKind::Put if key == self.keys.host_closed() => st.closed = true,
+            SampleKind::Put if key == self.keys.host_alive() => st.host_seen = true,
+            SampleKind::Delete if key == self.keys.host_alive() && !st.closed => {
+                st.gone = Some(
+                    "the host's zenoh liveliness token vanished (its process ended, or the link \
+                     was lost for longer than the lease)"
+                        .into(),
+                );
+            }
+            _ => return,
+        }
+        drop(st);
+        self.wake.wake();
+    }
+}
+
+/// A received zenoh frame: zenoh's buffer, or an aligned copy that goes back to the
+/// agent's pool when dropped.
+#[derive(Debug)]
+pub struct ZenohFrame {
+    header: SensorHeader,
+    buf: Option<Body>,
+    shared: Arc<AgentShared>,
+    _held: Rc<()>,
+}
+
+impl AgentFrame for ZenohFrame {
+    fn header(&self) -> &SensorHeader {
+        &self.header
+    }
+
+    fn payload(&self) -> &[u8] {
+        self.buf
+            .as_ref()
+            .and_then(|b| b.bytes().get(HEADER..))
+            .unwrap_or(&[])
+    }
+}
+
+impl Drop for ZenohFrame {
+    fn drop(&mut self) {
+        if let Some(Body::Copied(buf)) = self.buf.take() {
+            lock(&self.shared.state).pool.push(buf);
+        }
+    }
+}
+
+/// The agent side of the zenoh transport.
+pub struct ZenohAgent {
+    id: u32,
+    shared: Arc<AgentShared>,
+    held: Rc<()>,
+    out: Vec<u8>,
+    signals: SignalHandling,
+    publisher: Publisher<'static>,
+    _frames: Subscriber<()>,
+    _host: Subscriber<()>,
+    _token: LivelinessToken,
+    session: ::zenoh::Session,
+}
+
+impl core::fmt::Debug for ZenohAgent {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("ZenohAgent")
+            .field("id", &self.id)
+            .finish_non_exhaustive()
+    }
+}
+
+/// What the host answered to a hello.
+enum Answer {
+    Welcome { max_frame_body: usize, nonce: u64 },
+    Refused(AgentConnectError),
+}
+
+impl ZenohAgent {
+    /// Opens a zenoh peer connecting to `transport.zenoh.connect`, says hello (retrying
+    /// until `timeout` while no host answers), then subscribes to its frames and declares
+    /// its liveliness token. `token` is the session's secret, if it has one.
+    ///
+    /// # Errors
+    /// [`AgentConnectError`]: no host, protocol mismatch, id not served or in use, wrong
+    /// token.
+    pub fn connect(
+        config: &Config,
+        id: u32,
+        timeout: Duration,
+        token: Option<&[u8]>,
+        signals: SignalHandling,
+    ) -> Result<Self, AgentConnectError> {
+        signals.apply();
+        let session_name = &config.session;
+        let z = &config.transport.zenoh;
+        let started = Instant::now();
+        let deadline = started + timeout;
+        let fail = |detail: String| AgentConnectError::Transport {
+            session: session_name.clone(),
+            agent: id,
+            detail,
+        };
+        let zc = session_config(config, &[], &z.connect, None).map_err(&fail)?;
+        let session = ::zenoh::open(zc)
+            .wait()
+            .map_err(|e| fail(format!("cannot open a zenoh session: {e}")))?;
+        let keys = Keys::new(session_name);
+        let shared = Arc::new(AgentShared {
+            state: Mutex::new(AgentState::default()),
+            wake: WakeFd::new().map_err(|e| fail(format!("eventfd: {e}")))?,
+            keys: keys.clone(),
+        });
+        let declare = |what: &'static str| {
+            move |e: ::zenoh::Error| fail(format!("cannot declare {what}: {e}"))
+        };
+        let sh = shared.clone();
+        let host = session
+            .liveliness()
+            .declare_subscriber(keys.host_any())
+            .history(true)
+            .callback(move |s| sh.on_host_token(&s))
+            .wait()
+            .map_err(declare("the host's liveliness subscriber"))?;
+        let hello = encode_hello(&Hello {
+            protocol_version: PROTOCOL_VERSION,
+            layout_hash: LAYOUT_HASH,
+            agent_id: id,
+            token: token.map(<[u8]>::to_vec).unwrap_or_default(),
+        });
+        let answer = retry_until(
+            deadline,
+            || signals.termination_requested(),
+            || {
+                let left = deadline.saturating_duration_since(Instant::now());
+                let replies = session
+                    .get(keys.hello())
+                    .payload(hello.clone())
+                    .timeout(left.clamp(Duration::from_millis(1), Duration::from_secs(2)))
+                    .wait();
+                let replies = match replies {
+                    Ok(r) => r,
+                    Err(e) => return Attempt::Failed(fail(format!("hello query: {e}"))),
+                };
+                let mut last = String::from("no host answered the hello");
+                while let Ok(reply) = replies.recv() {
+                    match reply.result() {
+                        Ok(sample) => {
+                            let body = sample.payload().to_bytes();
+                            return match parse_answer(&body, session_name, id) {
+                                Ok(a) => Attempt::Done(a),
+                                Err(e) => Attempt::Failed(fail(e)),
+                            };
+                        }
+                        Err(e) => last = format!("hello answered with an error: {e:?}"),
+                    }
+                }
+                Attempt::NotYet(last)
+            },
+        );
+        let (max_frame_body, nonce) = match answer {
+            Ok(Answer::Welcome {
+                max_frame_body,
+                nonce,
+            }) => (max_frame_body, nonce),
+            Ok(Answer::Refused(e)) => return Err(e),
+            Err(Err(e)) => return Err(e),
+            Err(Ok(missing)) => {
+                return Err(AgentConnectError::HostNotFound {
+                    session: session_name.clone(),
+                    agent: id,
+                    waited: started.elapsed(),
+                    looked_for: format!(
+                        "a zenoh host answering {} via {:?} ({missing})",
+                        keys.hello(),
+                        z.connect
+                    ),
+                });
+            }
+        };
+        {
+            let mut st = lock(&shared.state);
+            st.max_frame_body = max_frame_body;
+            // Two frames held, one newest, one being filled.
+            st.pool = (0..AGENT_MAX_HELD_FRAMES + 2)
+                .map(|_| AlignedBuf::with_capacity(max_frame_body))
+                .collect();
+        }
+        let sh = shared.clone();
+        let frames = session
+            .declare_subscriber(keys.sensors(id))
+            .callback(move |s| sh.on_frame(&s))
+            .wait()
+            .map_err(declare("the frame subscriber"))?;
+        // Batches are small and a stop must never be lost: block rather than drop.
+        let publisher = session
+            .declare_publisher(keys.motor(id))
+            .congestion_control(CongestionControl::Block)
+            .wait()
+            .map_err(declare("the batch publisher"))?;
+        // Declared last: the host counts the agent connected once it sees this token and
+        // the subscriber above (declarations arrive in order).
+        let token = session
+            .liveliness()
+            .declare_token(keys.agent_alive(id, nonce))
+            .wait()
+            .map_err(declare("the agent's liveliness token"))?;
+        debug!(agent = id, nonce, "zenoh agent welcomed");
+        Ok(Self {
+            id,
+            shared,
+            held: Rc::new(()),
+            out: Vec::with_capacity(
+                core::mem::size_of::<MotorHeader>()
+                    + config.transport.max_commands_per_cycle as usize
+                        * core::mem::size_of::<MotorCommand>(),
+            ),
+            signals,
+            publisher,
+            _frames: frames,
+            _host: host,
+            _token: token,
+            session,
+        })
+    }
+
+    /// This agent's id.
+    pub fn id(&self) -> u32 {
+        self.id
+    }
+
+    /// Frames dropped on receipt (too short or too long).
+    pub fn frames_dropped(&self) -> u64 {
+        lock(&self.shared.state).dropped
+    }
+}
+
+fn parse_answer(body: &[u8], session: &str, id: u32) -> Result<Answer, String> {
+    let u32_at = |at: usize| {
+        body.get(at..at + 4)
+            .and_then(|b| b.try_into().ok())
+            .map(u32::from_le_bytes)
+    };
+    let u64_at = |at: usize| {
+        body.get(at..at + 8)
+            .and_then(|b| b.try_into().ok())
+            .map(u64::from_le_bytes)
+    };
+    let mismatch = |host_protocol: u32, host_layout: u64| AgentConnectError::VersionMismatch {
+        session: session.to_string(),
+        host_protocol: host_protocol.to_string(),
+        host_layout: format!("{host_layout:016x}"),
+        agent_protocol: PROTOCOL_VERSION,
+        agent_layout: format!("{LAYOUT_HASH:016x}"),
+    };
+    match u32_at(0) {
+        Some(reply::WELCOME) => {
+            let (Some(proto), Some(layout), Some(max), Some(nonce)) =
+                (u32_at(4), u64_at(8), u32_at(16), u64_at(20))
+            else {
+                return Err("malformed welcome".into());
+            };
+            if proto != PROTOCOL_VERSION || layout != LAYOUT_HASH {
+                return Ok(Answer::Refused(mismatch(proto, layout)));
+            }
+            Ok(Answer::Welcome {
+                max_frame_body: max as usize,
+                nonce,
+            })
+        }
+        Some(reply::REJECT) => {
+            let (code, host_protocol, host_layout, reason) =
+                decode_reject(&body[4..]).ok_or("malformed refusal")?;
+            let session = session.to_string();
+            Ok(Answer::Refused(match code {
+                reject::VERSION => mismatch(host_protocol, host_layout),
+                reject::UNKNOWN_AGENT => AgentConnectError::IdNotServed {
+                    session,
+                    agent: id,
+                    served: served_ids(&reason),
+                },
+                reject::ID_IN_USE => AgentConnectError::IdInUse { session, agent: id },
+                _ => AgentConnectError::Refused {
+                    session,
+                    agent: id,
+                    reason,
+                },
+            }))
+        }
+        _ => Err("the hello's answer is neither a welcome nor a refusal".into()),
+    }
+}
+
+/// The ids in the `[…]` list at the end of an unknown-agent refusal.
+fn served_ids(message: &str) -> Vec<u32> {
+    let list = message
+        .rfind('[')
+        .and_then(|start| Some(&message[start + 1..start + message[start..].find(']')?]));
+    list.map(|l| {
+        l.split(',')
+            .filter_map(|id| id.trim().parse::<u32>().ok())
+            .collect()
+    })
+    .unwrap_or_default()
+}
+
+impl Drop for ZenohAgent {
+    fn drop(&mut self) {
+        let _ = self.session.close().wait();
+    }
+}
+
+impl AgentTransport for ZenohAgent {
+    type Frame = ZenohFrame;
+
+    fn try_receive_newest(&mut self) -> Result<Option<ZenohFrame>, AgentReceiveError> {
+        if Rc::strong_count(&self.held) > AGENT_MAX_HELD_FRAMES {
+            return Err(AgentReceiveError::TooManyFramesHeld {
+                max: AGENT_MAX_HELD_FRAMES,
+            });
+        }
+        let Some(buf) = lock(&self.shared.state).newest.take() else {
+            return Ok(None);
+        };
+        let header = buf
+            .bytes()
+            .get(..HEADER)
+            .and_then(|h| SensorHeader::read_from_bytes(h).ok())
+            .ok_or_else(|| AgentReceiveError::Protocol("frame header".into()))?;
+        Ok(Some(ZenohFrame {
+            header,
+            buf: Some(buf),
+            shared: self.shared.clone(),
+            _held: self.held.clone(),
+        }))
+    }
+
+    fn wait_readable(&mut self, timeout: Duration) {
+        {
+            let st = lock(&self.shared.state);
+            if st.newest.is_some() || st.closed || st.gone.is_some() {
+                return;
+            }
+        }
+        self.shared.wake.wait(timeout);
+    }
+
+    fn discard_wakeups(&mut self) {
+        self.shared.wake.clear();
+    }
+
+    fn host_liveness(&mut self, _check_process: bool) -> HostLiveness {
+        let st = lock(&self.shared.state);
+        if st.closed {
+            HostLiveness::Closed
+        } else if let Some(reason) = &st.gone {
+            HostLiveness::Gone {
+                reason: reason.clone(),
+            }
+        } else {
+            HostLiveness::Alive
+        }
+    }
+
+    fn send_batch(
+        &mut self,
+        header: &MotorHeader,
+        commands: &[MotorCommand],
+    ) -> Result<(), AgentSendError> {
+        let header = MotorHeader {
+            command_count: commands.len() as u32,
+            ..*header
+        };
+        self.out.clear();
+        self.out.extend_from_slice(header.as_bytes());
+        self.out.extend_from_slice(commands.as_bytes());
+        let sent = self.publisher.put(self.out.as_slice()).wait();
+        match sent {
+            Ok(()) => Ok(()),
+            Err(_) if lock(&self.shared.state).closed => Err(AgentSendError::HostClosed),
+            Err(e) => Err(AgentSendError::Transport(format!(
+                "cannot send the motor batch over zenoh: {e}"
+            ))),
+        }
+    }
+
+    fn termination_requested(&self) -> bool {
+        self.signals.termination_requested()
+    }
+}

@@ -1,0 +1,711 @@
+//! The zenoh transport's host side: the hello queryable, presence from liveliness tokens
+//! and matching, one publisher per agent, one subscriber for every agent's batches.
+
+use std::collections::VecDeque;
+use std::time::Instant;
+
+use ::zenoh::Wait;
+use ::zenoh::liveliness::LivelinessToken;
+use ::zenoh::matching::MatchingListener;
+use ::zenoh::pubsub::{Publisher, Subscriber};
+use ::zenoh::qos::CongestionControl;
+use ::zenoh::query::{Query, Queryable};
+use ::zenoh::sample::{Sample, SampleKind};
+use tracing::{info, warn};
+use zerocopy::IntoBytes;
+
+use super::super::tcp::{Hello, constant_time_eq, decode_hello, encode_reject, reject};
+use super::super::{
+    BatchSink, FrameLoanMut, HostTransport, HostTransportError, PeerRefusal, RefusalKind, Refusals,
+};
+use super::*;
+use crate::config::Config;
+use crate::signal::SignalHandling;
+use crate::wire::{LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, SensorHeader};
+
+const HEADER: usize = core::mem::size_of::<SensorHeader>();
+const MOTOR_HEADER: usize = core::mem::size_of::<MotorHeader>();
+
+/// A loaned zenoh frame: a pooled buffer the images are written into, sent from in place.
+#[derive(Debug)]
+pub struct ZenohFrameLoan {
+    header: Box<SensorHeader>,
+    buf: AlignedBuf,
+}
+
+impl FrameLoanMut for ZenohFrameLoan {
+    /// Header and image bytes, both writable. The header is copied into the buffer when
+    /// the frame is published; the images are sent from where they are written.
+    fn parts_mut(&mut self) -> (&mut SensorHeader, &mut [u8]) {
+        (&mut self.header, &mut self.buf.bytes_mut()[HEADER..])
+    }
+
+    fn header(&self) -> &SensorHeader {
+        &self.header
+    }
+}
+
+/// What the zenoh host dropped or refused, by reason (each is also logged).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+#[non_exhaustive]
+pub struct ZenohHostStats {
+    /// Hellos refused: wrong version or layout.
+    pub refused_version: u64,
+    /// Hellos refused: missing or wrong token.
+    pub refused_token: u64,
+    /// Hellos refused: the agent id is not part of the session.
+    pub refused_unknown_agent: u64,
+    /// Hellos refused: the agent id is connected already.
+    pub refused_id_in_use: u64,
+    /// Hellos refused: not a hello (garbage, too long, truncated).
+    pub refused_malformed: u64,
+    /// Batches dropped: too long, or not a header plus its commands, or naming another agent.
+    pub dropped_malformed: u64,
+    /// Batches dropped: from an agent id that is not connected.
+    pub dropped_not_connected: u64,
+    /// Batches dropped: more than [`MAX_QUEUED_BATCHES`] waiting (a flood).
+    pub dropped_flood: u64,
+    /// Liveliness tokens ignored: no welcome with that nonce.
+    pub ignored_tokens: u64,
+    /// Frames sent, for the log at close.
+    pub frames_sent: u64,
+}
+
+#[derive(Debug)]
+struct SlotState {
+    id: u32,
+    /// The nonce of the last welcome and when it was sent.
+    admitted: Option<(u64, Instant)>,
+    /// The token of the admitted nonce exists.
+    alive: bool,
+    /// The sensor publisher matches a subscriber.
+    matched: bool,
+    queue: VecDeque<AlignedBuf>,
+}
+
+impl SlotState {
+    fn connected(&self) -> bool {
+        self.admitted.is_some() && self.alive && self.matched
+    }
+}
+
+#[derive(Debug)]
+struct HostState {
+    slots: Vec<SlotState>,
+    next_nonce: u64,
+    free: Vec<AlignedBuf>,
+    stats: ZenohHostStats,
+    refusals: Refusals,
+}
+
+#[derive(Debug)]
+struct Shared {
+    state: Mutex<HostState>,
+    wake: WakeFd,
+    keys: Keys,
+    session: String,
+    token: Option<Vec<u8>>,
+    max_motor_body: usize,
+    frame_bodies: Vec<usize>,
+}
+
+impl Shared {
+    fn slot_of(state: &HostState, id: u32) -> Option<usize> {
+        state.slots.iter().position(|s| s.id == id)
+    }
+
+    /// The hello queryable: admits, or refuses with a reason.
+    fn on_hello(&self, query: &Query) {
+        // Bounded before it is made contiguous (zenoh's own reassembly is bounded too).
+        let payload = query
+            .payload()
+            .filter(|p| p.len() <= super::super::tcp::MAX_HELLO)
+            .map(|p| p.to_bytes());
+        let hello = match payload.as_deref().map(decode_hello) {
+            Some(Ok(h)) => h,
+            Some(Err(e)) => return self.refuse(query, None, reject::MALFORMED, e.to_string()),
+            None => {
+                let why = "no hello payload, or one longer than a hello".into();
+                return self.refuse(query, None, reject::MALFORMED, why);
+            }
+        };
+        let mut st = lock(&self.state);
+        let verdict = self.admit(&mut st, &hello);
+        drop(st);
+        match verdict {
+            Ok((nonce, body_len)) => {
+                let mut b = Vec::with_capacity(4 + WELCOME_LEN);
+                b.extend_from_slice(&reply::WELCOME.to_le_bytes());
+                b.extend_from_slice(&PROTOCOL_VERSION.to_le_bytes());
+                b.extend_from_slice(&LAYOUT_HASH.to_le_bytes());
+                b.extend_from_slice(&(body_len as u32).to_le_bytes());
+                b.extend_from_slice(&nonce.to_le_bytes());
+                if let Err(e) = query.reply(query.key_expr().clone(), b).wait() {
+                    warn!(agent = hello.agent_id, "zenoh welcome not sent: {e}");
+                }
+                info!(
+                    agent = hello.agent_id,
+                    nonce, "zenoh agent admitted (waiting for its token and subscriber)"
+                );
+            }
+            Err((code, why)) => self.refuse(query, Some(hello.agent_id), code, why),
+        }
+    }
+
+    fn admit(&self, st: &mut HostState, hello: &Hello) -> Result<(u64, usize), (u32, String)> {
+        if hello.protocol_version != PROTOCOL_VERSION || hello.layout_hash != LAYOUT_HASH {
+            return Err((
+                reject::VERSION,
+                format!(
+                    "agent speaks protocol {} (layout {:016x}), host speaks protocol {PROTOCOL_VERSION} (layout {LAYOUT_HASH:016x})",
+                    hello.protocol_version, hello.layout_hash
+                ),
+            ));
+        }
+        if let Some(token) = &self.token
+            && !constant_time_eq(token, &hello.token)
+        {
+            return Err((
+                reject::TOKEN,
+                "wrong or missing transport.zenoh.token".into(),
+            ));
+        }
+        let Some(slot) = Self::slot_of(st, hello.agent_id) else {
+            return Err((
+                reject::UNKNOWN_AGENT,
+                format!(
+                    "agent {} is not part of this session (it serves agents {:?})",
+                    hello.agent_id,
+                    st.slots.iter().map(|s| s.id).collect::<Vec<_>>()
+                ),
+            ));
+        };
+        let s = &st.slots[slot];
+        let in_use = match s.admitted {
+            Some(_) if s.alive => true,
+            // Welcomed, token not seen yet: the id is taken until the token timeout.
+            Some((_, since)) => since.elapsed() < TOKEN_TIMEOUT,
+            None => false,
+        };
+        if in_use {
+            return Err((
+                reject::ID_IN_USE,
+                format!("agent {} is already connected", hello.agent_id),
+            ));
+        }
+        let nonce = st.next_nonce;
+        st.next_nonce += 1;
+        let s = &mut st.slots[slot];
+        s.admitted = Some((nonce, Instant::now()));
+        s.alive = false;
+        let body_len = self.frame_bodies.get(slot).copied().unwrap_or(HEADER);
+        Ok((nonce, body_len))
+    }
+
+    fn refuse(&self, query: &Query, agent: Option<u32>, code: u32, why: String) {
+        {
+            let mut st = lock(&self.state);
+            let s = &mut st.stats;
+            let (n, kind) = match code {
+                reject::VERSION => (&mut s.refused_version, RefusalKind::Version),
+                reject::TOKEN => (&mut s.refused_token, RefusalKind::Token),
+                reject::UNKNOWN_AGENT => (&mut s.refused_unknown_agent, RefusalKind::UnknownAgent),
+                reject::ID_IN_USE => (&mut s.refused_id_in_use, RefusalKind::IdInUse),
+                _ => (&mut s.refused_malformed, RefusalKind::Malformed),
+            };
+            *n += 1;
+            st.refusals.push(PeerRefusal {
+                kind,
+                agent,
+                // zenoh's stable API does not name the querying peer.
+                peer: format!("zenoh hello on {}", self.keys.hello()),
+                reason: why.clone(),
+            });
+        }
+        warn!(?agent, session = %self.session, "zenoh agent refused: {why}");
+        let mut b = reply::REJECT.to_le_bytes().to_vec();
+        b.extend_from_slice(&encode_reject(code, &why));
+        let _ = query.reply(query.key_expr().clone(), b).wait();
+    }
+
+    /// An agent's liveliness token appeared or vanished.
+    fn on_token(&self, sample: &Sample) {
+        let Some((id, Some(nonce))) = self.keys.parse_agent(sample.key_expr().as_str()) else {
+            return;
+        };
+        let mut st = lock(&self.state);
+        let Some(slot) = Self::slot_of(&st, id) else {
+            return;
+        };
+        let current = st.slots[slot].admitted.map(|(n, _)| n);
+        match sample.kind() {
+            SampleKind::Put if current == Some(nonce) => {
+                st.slots[slot].alive = true;
+                drop(st);
+                info!(agent = id, "zenoh agent's token is there");
+            }
+            SampleKind::Put => {
+                st.stats.ignored_tokens += 1;
+                let n = st.stats.ignored_tokens;
+                drop(st);
+                if worth_logging(n) {
+                    warn!(
+                        agent = id,
+                        nonce,
+                        total = n,
+                        "zenoh token ignored: no welcome with that nonce"
+                    );
+                }
+            }
+            SampleKind::Delete if current == Some(nonce) => {
+                let s = &mut st.slots[slot];
+                s.admitted = None;
+                s.alive = false;
+                let dropped: Vec<AlignedBuf> = s.queue.drain(..).collect();
+                st.free.extend(dropped);
+                drop(st);
+                warn!(
+                    agent = id,
+                    "zenoh agent's token vanished (process ended or link lost)"
+                );
+            }
+            SampleKind::Delete => {}
+        }
+        self.wake.wake();
+    }
+
+    /// A motor batch arrived on `…/agent/<id>/motor`.
+    fn on_batch(&self, sample: &Sample) {
+        let payload = sample.payload();
+        let len = payload.len();
+        let parsed = self.keys.parse_agent(sample.key_expr().as_str());
+        let mut st = lock(&self.state);
+        let slot = parsed.and_then(|(id, _)| Self::slot_of(&st, id));
+        let Some(slot) = slot.filter(|&s| st.slots[s].connected()) else {
+            st.stats.dropped_not_connected += 1;
+            let n = st.stats.dropped_not_connected;
+            drop(st);
+            if worth_logging(n) {
+                warn!(key = %sample.key_expr(), total = n, "zenoh batch dropped: not from a connected agent");
+            }
+            return;
+        };
+        let id = st.slots[slot].id;
+        if len > self.max_motor_body || len < MOTOR_HEADER {
+            return self.malformed(
+                st,
+                id,
+                format!(
+                    "{len} bytes (a batch is {MOTOR_HEADER}..={} bytes)",
+                    self.max_motor_body
+                ),
+            );
+        }
+        // A buffer from the free list (allocated up front, or by an earlier batch: at
+        // most 2 x MAX_QUEUED_BATCHES per agent are ever queued), never sized from the
+        // payload.
+        let mut buf = st
+            .free
+            .pop()
+            .unwrap_or_else(|| AlignedBuf::with_capacity(self.max_motor_body));
+        buf.fill_from(payload);
+        let stop = match super::super::tcp::decode_motor(buf.bytes()) {
+            Ok((h, _)) if h.agent_id == id => h.is_stop(),
+            Ok((h, _)) => {
+                st.free.push(buf);
+                return self.malformed(st, id, format!("names agent {}", h.agent_id));
+            }
+            Err(e) => {
+                st.free.push(buf);
+                return self.malformed(st, id, e.to_string());
+            }
+        };
+        // A flood fills the queue; batches that end a cycle keep room of their own, so
+        // the agent's stop still arrives after a flood of its own batches.
+        let limit = if stop {
+            2 * MAX_QUEUED_BATCHES
+        } else {
+            MAX_QUEUED_BATCHES
+        };
+        if st.slots[slot].queue.len() >= limit {
+            st.free.push(buf);
+            st.stats.dropped_flood += 1;
+            let n = st.stats.dropped_flood;
+            drop(st);
+            if worth_logging(n) {
+                warn!(
+                    agent = id,
+                    total = n,
+                    "zenoh batch dropped: {limit} batches wait already (flood)"
+                );
+            }
+            return;
+        }
+        st.slots[slot].queue.push_back(buf);
+        drop(st);
+        self.wake.wake();
+    }
+
+    fn malformed(&self, mut st: MutexGuard<'_, HostState>, id: u32, why: String) {
+        st.stats.dropped_malformed += 1;
+        let n = st.stats.dropped_malformed;
+        drop(st);
+        if worth_logging(n) {
+            warn!(agent = id, total = n, "zenoh batch dropped: {why}");
+        }
+    }
+}
+
+/// Why the zenoh host could not be created.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ZenohHostCreateError {
+    /// The zenoh session could not be opened (e.g. a listen endpoint is taken).
+    #[error(
+        "cannot open the zenoh session listening on {listen:?}: {reason} (set [transport.zenoh] listen to a free address)"
+    )]
+    Open {
+        /// The listen endpoints.
+        listen: Vec<String>,
+        /// zenoh's message.
+        reason: String,
+    },
+    /// Declaring a key (queryable, publisher, subscriber, token) failed.
+    #[error("cannot declare zenoh {what}: {reason}")]
+    Declare {
+        /// What was declared.
+        what: String,
+        /// zenoh's message.
+        reason: String,
+    },
+}
+
+struct SlotPort {
+    publisher: Publisher<'static>,
+    _matching: MatchingListener<()>,
+    header: Option<Box<SensorHeader>>,
+    body_len: usize,
+}
+
+/// The host side of the zenoh transport.
+pub struct ZenohHost {
+    shared: Arc<Shared>,
+    ports: Vec<SlotPort>,
+    pool: Arc<Mutex<Vec<AlignedBuf>>>,
+    scratch: Vec<(usize, AlignedBuf)>,
+    signals: SignalHandling,
+    _queryable: Queryable<()>,
+    _motor: Subscriber<()>,
+    _tokens: Subscriber<()>,
+    alive: Option<LivelinessToken>,
+    session: ::zenoh::Session,
+}
+
+impl core::fmt::Debug for ZenohHost {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("ZenohHost")
+            .field("keys", &self.shared.keys)
+            .finish_non_exhaustive()
+    }
+}
+
+/// A pooled frame buffer on its way through zenoh: back to the pool when zenoh is done.
+struct Outgoing {
+    buf: AlignedBuf,
+    pool: Arc<Mutex<Vec<AlignedBuf>>>,
+}
+
+impl AsRef<[u8]> for Outgoing {
+    fn as_ref(&self) -> &[u8] {
+        self.buf.bytes()
+    }
+}
+
+impl Drop for Outgoing {
+    fn drop(&mut self) {
+        let buf = std::mem::take(&mut self.buf);
+        lock(&self.pool).push(buf);
+    }
+}
+
+impl ZenohHost {
+    /// Opens a zenoh peer listening on `transport.zenoh.listen`, declares the hello
+    /// queryable, the host's liveliness token, one sensor publisher per agent (blocking
+    /// congestion control in sync mode) and the batch subscriber; `signals` says whether
+    /// SIGINT/SIGTERM handlers are installed (see [`SignalHandling`]).
+    ///
+    /// # Errors
+    /// [`ZenohHostCreateError`].
+    pub fn create(config: &Config, signals: SignalHandling) -> Result<Self, ZenohHostCreateError> {
+        signals.apply();
+        let z = &config.transport.zenoh;
+        let keys = Keys::new(&config.session);
+        let max_motor_body = MOTOR_HEADER
+            + config.transport.max_commands_per_cycle as usize
+                * core::mem::size_of::<MotorCommand>();
+        // zenoh reassembles a message before our callback sees it: bound it to a little
+        // more than the largest hello or batch, so a peer cannot make the host allocate
+        // more.
+        let max_rx = (max_motor_body + 4096).max(64 * 1024);
+        let open_err = |reason: String| ZenohHostCreateError::Open {
+            listen: z.listen.clone(),
+            reason,
+        };
+        let zc = session_config(config, &z.listen, &[], Some(max_rx)).map_err(open_err)?;
+        let session = ::zenoh::open(zc)
+            .wait()
+            .map_err(|e| open_err(e.to_string()))?;
+        let declare = |what: &str| {
+            let what = what.to_string();
+            move |e: ::zenoh::Error| ZenohHostCreateError::Declare {
+                what,
+                reason: e.to_string(),
+            }
+        };
+        let wake = WakeFd::new().map_err(|e| ZenohHostCreateError::Declare {
+            what: "the wake-up eventfd".into(),
+            reason: e.to_string(),
+        })?;
+        let frame_bodies: Vec<usize> = config
+            .agents
+            .iter()
+            .map(|a| HEADER + a.frame_bytes())
+            .collect();
+        let shared = Arc::new(Shared {
+            state: Mutex::new(HostState {
+                slots: config
+                    .agents
+                    .iter()
+                    .map(|a| SlotState {
+                        id: a.id,
+                        admitted: None,
+                        alive: false,
+                        matched: false,
+                        queue: VecDeque::with_capacity(MAX_QUEUED_BATCHES),
+                    })
+                    .collect(),
+                next_nonce: 1,
+                free: (0..config.agents.len() * 4)
+                    .map(|_| AlignedBuf::with_capacity(max_motor_body))
+                    .collect(),
+                stats: ZenohHostStats::default(),
+                refusals: Refusals::default(),
+            }),
+            wake,
+            keys: keys.clone(),
+            session: config.session.clone(),
+            token: z.token.clone().map(String::into_bytes),
+            max_motor_body,
+            frame_bodies: frame_bodies.clone(),
+        });
+        let congestion = if config.sync.sync_mode {
+            CongestionControl::Block
+        } else {
+            CongestionControl::Drop
+        };
+        let mut ports = Vec::with_capacity(config.agents.len());
+        for (slot, a) in config.agents.iter().enumerate() {
+            let publisher = session
+                .declare_publisher(keys.sensors(a.id))
+                .congestion_control(congestion)
+                .wait()
+                .map_err(declare("a sensor publisher"))?;
+            let sh = shared.clone();
+            let matching = publisher
+                .matching_listener()
+                .callback(move |status| {
+                    if let Some(s) = lock(&sh.state).slots.get_mut(slot) {
+                        s.matched = status.matching();
+                    }
+                    sh.wake.wake();
+                })
+                .wait()
+                .map_err(declare("a matching listener"))?;
+            ports.push(SlotPort {
+                publisher,
+                _matching: matching,
+                header: Some(Box::default()),
+                body_len: frame_bodies[slot],
+            });
+        }
+        let sh = shared.clone();
+        let motor = session
+            .declare_subscriber(keys.motor_any())
+            .callback(move |sample| sh.on_batch(&sample))
+            .wait()
+            .map_err(declare("the batch subscriber"))?;
+        let sh = shared.clone();
+        let tokens = session
+            .liveliness()
+            .declare_subscriber(keys.agent_alive_any())
+            .history(true)
+            .callback(move |sample| sh.on_token(&sample))
+            .wait()
+            .map_err(declare("the agents' liveliness subscriber"))?;
+        let sh = shared.clone();
+        let queryable = session
+            .declare_queryable(keys.hello())
+            .callback(move |query| sh.on_hello(&query))
+            .wait()
+            .map_err(declare("the hello queryable"))?;
+        let alive = session
+            .liveliness()
+            .declare_token(keys.host_alive())
+            .wait()
+            .map_err(declare("the host's liveliness token"))?;
+        info!(listen = ?z.listen, session = %config.session, "zenoh host listening");
+        Ok(Self {
+            shared,
+            ports,
+            pool: Arc::default(),
+            scratch: Vec::with_capacity(MAX_BATCHES_PER_DRAIN),
+            signals,
+            _queryable: queryable,
+            _motor: motor,
+            _tokens: tokens,
+            alive: Some(alive),
+            session,
+        })
+    }
+
+    /// What was dropped or refused so far.
+    pub fn stats(&self) -> ZenohHostStats {
+        lock(&self.shared.state).stats.clone()
+    }
+
+    /// The key expressions of this host's session.
+    pub fn keys(&self) -> &Keys {
+        &self.shared.keys
+    }
+}
+
+impl Drop for ZenohHost {
+    fn drop(&mut self) {
+        // A clean close: agents see `host/closed` before `host/alive` vanishes (both are
+        // declarations, sent in order ahead of data).
+        let closed = self
+            .session
+            .liveliness()
+            .declare_token(self.shared.keys.host_closed())
+            .wait();
+        if let Some(t) = self.alive.take() {
+            let _ = t.undeclare().wait();
+        }
+        drop(closed);
+        let _ = self.session.close().wait();
+    }
+}
+
+impl HostTransport for ZenohHost {
+    type Loan = ZenohFrameLoan;
+
+    fn is_connected(&self, slot: usize) -> bool {
+        lock(&self.shared.state)
+            .slots
+            .get(slot)
+            .is_some_and(SlotState::connected)
+    }
+
+    fn loan(&mut self, slot: usize) -> Result<ZenohFrameLoan, HostTransportError> {
+        let p = self
+            .ports
+            .get_mut(slot)
+            .ok_or(HostTransportError::NoSuchSlot { slot })?;
+        // Steady state: the buffer zenoh released after sending the frame before last.
+        let mut buf = lock(&self.pool)
+            .pop()
+            .unwrap_or_else(|| AlignedBuf::with_capacity(p.body_len));
+        buf.set_len(p.body_len);
+        let mut header = p.header.take().unwrap_or_default();
+        *header = SensorHeader::default();
+        Ok(ZenohFrameLoan { header, buf })
+    }
+
+    fn publish(&mut self, slot: usize, frame: ZenohFrameLoan) -> Result<bool, HostTransportError> {
+        let ZenohFrameLoan { header, mut buf } = frame;
+        buf.bytes_mut()[..HEADER].copy_from_slice(header.as_bytes());
+        let connected = self.is_connected(slot);
+        let Some(p) = self.ports.get_mut(slot) else {
+            return Err(HostTransportError::NoSuchSlot { slot });
+        };
+        p.header = Some(header);
+        if !connected {
+            lock(&self.pool).push(buf);
+            return Ok(false);
+        }
+        let out = Outgoing {
+            buf,
+            pool: self.pool.clone(),
+        };
+        let payload = ::zenoh::bytes::ZBytes::from(bytes::Bytes::from_owner(out));
+        p.publisher
+            .put(payload)
+            .wait()
+            .map_err(|e| HostTransportError::Send {
+                what: format!("the sensor frame of slot {slot} over zenoh"),
+                reason: e.to_string(),
+            })?;
+        lock(&self.shared.state).stats.frames_sent += 1;
+        Ok(true)
+    }
+
+    fn signal_start(&mut self) -> Result<(), HostTransportError> {
+        // The frame is the start.
+        Ok(())
+    }
+
+    fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError> {
+        {
+            let mut st = lock(&self.shared.state);
+            for (slot, s) in st.slots.iter_mut().enumerate() {
+                for _ in 0..MAX_BATCHES_PER_DRAIN {
+                    match s.queue.pop_front() {
+                        Some(b) => self.scratch.push((slot, b)),
+                        None => break,
+                    }
+                }
+            }
+        }
+        for (slot, buf) in &self.scratch {
+            // Validated on receipt.
+            if let Ok((header, commands)) = super::super::tcp::decode_motor(buf.bytes()) {
+                sink(*slot, &header, commands);
+            }
+        }
+        if !self.scratch.is_empty() {
+            let mut st = lock(&self.shared.state);
+            st.free.extend(self.scratch.drain(..).map(|(_, b)| b));
+        }
+        Ok(())
+    }
+
+    fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
+        if self.shared.wake.wait(timeout) {
+            self.shared.wake.clear();
+        }
+        if self.signals.termination_requested() {
+            return Err(HostTransportError::Terminated);
+        }
+        Ok(())
+    }
+
+    fn update_connections(&mut self) -> Result<(), HostTransportError> {
+        Ok(())
+    }
+
+    fn termination_requested(&self) -> bool {
+        self.signals.termination_requested()
+    }
+
+    fn take_refusals(&mut self, sink: &mut dyn FnMut(&PeerRefusal)) -> u64 {
+        lock(&self.shared.state).refusals.take(sink)
+    }
+
+    fn activity_fd(&self) -> Option<RawFd> {
+        Some(self.shared.wake.raw())
+    }
+
+    fn clear_activity(&mut self) {
+        self.shared.wake.clear();
+    }
+}

@@ -1,0 +1,352 @@
+//! The zenoh transport: agents on other machines, over an existing distributed engine
+//! (Eclipse zenoh) instead of a network protocol of our own.
+//!
+//! # Keys (all under `vrsync/<session>/`)
+//!
+//! | key | what | writer → reader |
+//! |---|---|---|
+//! | `hello` | queryable: the hello ([`super::tcp::encode_hello`]) as the query's payload; the reply is a welcome or a refusal | agent → host → agent |
+//! | `host/alive` | liveliness token: the host is there | host |
+//! | `host/closed` | liveliness token declared when the host closes the session cleanly | host |
+//! | `agent/<id>/alive/<nonce>` | liveliness token of an admitted agent (`nonce` from its welcome) | agent |
+//! | `agent/<id>/sensors` | the sensor frame: `SensorHeader` bytes then the images; the frame of cycle *f* is its start | host → agent |
+//! | `agent/<id>/motor` | a motor batch: `MotorHeader` then the commands; the stop flag ends the agent's cycle | agent → host |
+//!
+//! # Presence
+//! The host treats an agent as connected only once it answered its hello with a welcome,
+//! the agent's liveliness token with that welcome's nonce exists, and the host's sensor
+//! publisher of that agent matches a subscriber. A vanished token (the agent's process
+//! died: at once; its link was lost: after the `lease`) evicts it; a new hello and token
+//! rejoin it at the next cycle. Agents see the host's `host/alive` token vanish as "host
+//! gone", and `host/closed` as a clean close.
+//!
+//! # What is validated
+//! Everything received is checked as over TCP: a hello is decoded by the TCP decoder
+//! (bounded); a motor batch longer than the largest the config allows, or not a header
+//! plus exactly `command_count` commands, or naming another agent, or from an agent that is
+//! not connected, is dropped, counted ([`ZenohHostStats`]) and logged (a warning at the
+//! 1st, 2nd, 4th, … of each kind); at most [`MAX_QUEUED_BATCHES`] batches wait per agent
+//! (a flood beyond is dropped the same way; stops have as much room again, so an agent's
+//! own flood does not lose its stop). Refused hellos reach the host's
+//! [`super::HostTransport::take_refusals`]. Received bytes are copied into buffers
+//! allocated up front; no allocation follows a length read from the network. zenoh's own
+//! reassembly buffer on the host is bounded by `transport/link/rx/max_message_size`.
+//!
+//! # Copies
+//! Host: the simulator renders into a pooled buffer that zenoh sends from (no copy of
+//! ours); zenoh copies it into its transmission batches (64 KiB fragments). Agent: zenoh
+//! reassembles the fragments into one buffer, which the agent keeps and reads in place; a
+//! frame that arrives in several pieces is copied once into a pooled buffer.
+//!
+//! # Waking
+//! Every callback (a batch, a token, a match) writes an `eventfd` that the host's (and
+//! agent's) wait polls: no polling loop, and a host serving shm and zenoh agents waits for
+//! both in one `poll(2)` ([`super::HostTransport::activity_fd`]).
+
+use std::io;
+use std::os::fd::{AsRawFd, FromRawFd, OwnedFd, RawFd};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Duration;
+
+use crate::config::Config;
+
+mod agent;
+mod host;
+
+pub use agent::*;
+pub use host::*;
+
+/// Most batches that may wait per agent between two drains; more are dropped (a flood),
+/// except batches with the stop flag, which may fill as many again.
+pub const MAX_QUEUED_BATCHES: usize = 256;
+/// Most batches handed to the sink per agent in one drain.
+pub const MAX_BATCHES_PER_DRAIN: usize = 256;
+/// How long an admitted agent may take to declare its liveliness token before its id is
+/// free again for another hello.
+pub const TOKEN_TIMEOUT: Duration = Duration::from_secs(5);
+/// Bytes of a welcome reply body: protocol version, layout hash, largest frame, nonce.
+pub const WELCOME_LEN: usize = 4 + 8 + 4 + 8;
+
+/// First 4 bytes of a hello reply.
+pub mod reply {
+    /// Welcome: protocol version u32, layout hash u64, largest frame body u32, nonce u64.
+    pub const WELCOME: u32 = 2;
+    /// Refusal: the TCP transport's reject body ([`super::super::tcp::encode_reject`]).
+    pub const REJECT: u32 = 3;
+}
+
+/// The key expressions of one session.
+#[derive(Debug, Clone)]
+pub struct Keys {
+    prefix: String,
+}
+
+impl Keys {
+    /// The keys of `session`.
+    pub fn new(session: &str) -> Self {
+        Self {
+            prefix: format!("vrsync/{session}"),
+        }
+    }
+
+    /// `vrsync/<session>/hello`.
+    pub fn hello(&self) -> String {
+        format!("{}/hello", self.prefix)
+    }
+
+    /// `vrsync/<session>/host/alive`.
+    pub fn host_alive(&self) -> String {
+        format!("{}/host/alive", self.prefix)
+    }
+
+    /// `vrsync/<session>/host/closed`.
+    pub fn host_closed(&self) -> String {
+        format!("{}/host/closed", self.prefix)
+    }
+
+    /// `vrsync/<session>/host/*`.
+    pub fn host_any(&self) -> String {
+        format!("{}/host/*", self.prefix)
+    }
+
+    /// `vrsync/<session>/agent/<id>/sensors`.
+    pub fn sensors(&self, id: u32) -> String {
+        format!("{}/agent/{id}/sensors", self.prefix)
+    }
+
+    /// `vrsync/<session>/agent/<id>/motor`.
+    pub fn motor(&self, id: u32) -> String {
+        format!("{}/agent/{id}/motor", self.prefix)
+    }
+
+    /// `vrsync/<session>/agent/*/motor`.
+    pub fn motor_any(&self) -> String {
+        format!("{}/agent/*/motor", self.prefix)
+    }
+
+    /// `vrsync/<session>/agent/<id>/alive/<nonce>`.
+    pub fn agent_alive(&self, id: u32, nonce: u64) -> String {
+        format!("{}/agent/{id}/alive/{nonce}", self.prefix)
+    }
+
+    /// `vrsync/<session>/agent/*/alive/*`.
+    pub fn agent_alive_any(&self) -> String {
+        format!("{}/agent/*/alive/*", self.prefix)
+    }
+
+    /// The agent id in `…/agent/<id>/<rest>` (and the nonce after `alive/`), if the key
+    /// has that shape.
+    pub fn parse_agent(&self, key: &str) -> Option<(u32, Option<u64>)> {
+        let rest = key.strip_prefix(&self.prefix)?.strip_prefix("/agent/")?;
+        let mut parts = rest.split('/');
+        let id = parse_decimal(parts.next()?)?;
+        let id = u32::try_from(id).ok()?;
+        let nonce = match (parts.next(), parts.next()) {
+            (Some("alive"), Some(n)) => Some(parse_decimal(n)?),
+            _ => None,
+        };
+        Some((id, nonce))
+    }
+}
+
+/// A short decimal number (at most 20 digits), nothing else.
+fn parse_decimal(s: &str) -> Option<u64> {
+    if s.is_empty() || s.len() > 20 || !s.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    s.parse().ok()
+}
+
+/// The zenoh session configuration of one side: peer mode, scouting as configured (off by
+/// default), explicit endpoints, the lease, and — on the host — a bound on what one
+/// message may grow to while zenoh reassembles it.
+///
+/// # Errors
+/// zenoh's message for a key it rejects.
+pub(crate) fn session_config(
+    config: &Config,
+    listen: &[String],
+    connect: &[String],
+    max_rx_message: Option<usize>,
+) -> Result<::zenoh::Config, String> {
+    let z = &config.transport.zenoh;
+    let mut c = ::zenoh::Config::default();
+    let json = |v: &[String]| {
+        let quoted: Vec<String> = v.iter().map(|e| format!("{e:?}")).collect();
+        format!("[{}]", quoted.join(","))
+    };
+    let lease_ms = z.lease.as_millis().max(100);
+    let mut set = |key: &str, value: String| {
+        c.insert_json5(key, &value)
+            .map_err(|e| format!("zenoh config {key} = {value}: {e}"))
+    };
+    set("mode", "\"peer\"".into())?;
+    set("listen/endpoints", json(listen))?;
+    set("connect/endpoints", json(connect))?;
+    // Agents may start before their host: peers keep trying in the background
+    // (zenoh's peer default), here quickly.
+    set("connect/exit_on_failure", "false".into())?;
+    set(
+        "connect/retry",
+        "{period_init_ms: 50, period_max_ms: 500, period_increase_factor: 2}".into(),
+    )?;
+    set("scouting/multicast/enabled", z.scouting.to_string())?;
+    set("scouting/gossip/enabled", z.scouting.to_string())?;
+    set("transport/link/tx/lease", lease_ms.to_string())?;
+    // zenoh's default sends a keep-alive every lease / 4.
+    set("transport/link/tx/keep_alive", "4".into())?;
+    if let Some(max) = max_rx_message {
+        set("transport/link/rx/max_message_size", max.to_string())?;
+    }
+    // Sync mode blocks a frame rather than dropping it: give up on a link that does not
+    // drain only after the stop timeout (at least 1 s; zenoh counts microseconds).
+    let block_us = config
+        .sync
+        .stop_timeout
+        .max(Duration::from_secs(1))
+        .as_micros();
+    set(
+        "transport/link/tx/queue/congestion_control/block/wait_before_close",
+        block_us.to_string(),
+    )?;
+    Ok(c)
+}
+
+/// Locks a mutex, taking the data of a poisoned one (a panicking zenoh callback must not
+/// take the host down with it).
+pub(crate) fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// An `eventfd`: written by zenoh's callbacks, polled by the waiting side.
+#[derive(Debug)]
+pub(crate) struct WakeFd(OwnedFd);
+
+impl WakeFd {
+    pub(crate) fn new() -> io::Result<Self> {
+        // SAFETY: plain syscall; the result is checked before use.
+        let fd = unsafe { libc::eventfd(0, libc::EFD_NONBLOCK | libc::EFD_CLOEXEC) };
+        if fd < 0 {
+            return Err(io::Error::last_os_error());
+        }
+        // SAFETY: `fd` is a fresh descriptor nobody else owns.
+        Ok(Self(unsafe { OwnedFd::from_raw_fd(fd) }))
+    }
+
+    /// Makes the descriptor readable (wake-ups merge).
+    pub(crate) fn wake(&self) {
+        let one: u64 = 1;
+        // SAFETY: writes 8 bytes from a valid u64. A full counter (EAGAIN) is readable
+        // already, which is all a wake-up needs.
+        unsafe { libc::write(self.0.as_raw_fd(), (&raw const one).cast(), 8) };
+    }
+
+    /// Forgets pending wake-ups.
+    pub(crate) fn clear(&self) {
+        let mut n: u64 = 0;
+        // SAFETY: reads at most 8 bytes into a valid u64; non-blocking.
+        unsafe { libc::read(self.0.as_raw_fd(), (&raw mut n).cast(), 8) };
+    }
+
+    /// Waits until woken or `timeout` passed; returns whether it was woken (the wake-up
+    /// stays pending until [`WakeFd::clear`]).
+    pub(crate) fn wait(&self, timeout: Duration) -> bool {
+        poll_fds(&[self.0.as_raw_fd()], timeout).unwrap_or(false)
+    }
+
+    pub(crate) fn raw(&self) -> RawFd {
+        self.0.as_raw_fd()
+    }
+}
+
+/// Waits until one of `fds` is readable or `timeout` passed; returns whether one is.
+///
+/// # Errors
+/// `poll(2)`'s error (an interruption is a return without readiness).
+pub(crate) fn poll_fds(fds: &[RawFd], timeout: Duration) -> io::Result<bool> {
+    let mut pfds = [libc::pollfd {
+        fd: -1,
+        events: 0,
+        revents: 0,
+    }; 4];
+    let n = fds.len().min(pfds.len());
+    for (p, &fd) in pfds.iter_mut().zip(fds) {
+        p.fd = fd;
+        p.events = libc::POLLIN;
+    }
+    let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
+    // Round sub-millisecond timeouts up so a short wait does not spin.
+    let ms = if ms == 0 && !timeout.is_zero() { 1 } else { ms };
+    // SAFETY: `pfds` holds `n` valid pollfd structs for the whole call.
+    let r = unsafe { libc::poll(pfds.as_mut_ptr(), n as libc::nfds_t, ms) };
+    if r < 0 {
+        let e = io::Error::last_os_error();
+        if e.kind() == io::ErrorKind::Interrupted {
+            return Ok(false);
+        }
+        return Err(e);
+    }
+    Ok(r > 0)
+}
+
+/// An 8-byte aligned byte buffer of a fixed capacity (so headers and commands can be
+/// viewed in place), reused through a pool.
+#[derive(Debug, Default)]
+pub(crate) struct AlignedBuf {
+    words: Vec<u64>,
+    len: usize,
+}
+
+impl AlignedBuf {
+    pub(crate) fn with_capacity(bytes: usize) -> Self {
+        Self {
+            words: vec![0; bytes.div_ceil(8)],
+            len: 0,
+        }
+    }
+
+    pub(crate) fn capacity(&self) -> usize {
+        self.words.len() * 8
+    }
+
+    /// Sets the length, growing only beyond the capacity.
+    pub(crate) fn set_len(&mut self, len: usize) {
+        if self.capacity() < len {
+            self.words.resize(len.div_ceil(8), 0);
+        }
+        self.len = len;
+    }
+
+    pub(crate) fn bytes(&self) -> &[u8] {
+        use zerocopy::IntoBytes;
+        &self.words.as_bytes()[..self.len]
+    }
+
+    pub(crate) fn bytes_mut(&mut self) -> &mut [u8] {
+        use zerocopy::IntoBytes;
+        let len = self.len;
+        &mut self.words.as_mut_bytes()[..len]
+    }
+
+    /// Copies a received payload in: `len` must be `payload.len()` and within the
+    /// capacity (checked by the caller, so this never allocates).
+    pub(crate) fn fill_from(&mut self, payload: &::zenoh::bytes::ZBytes) {
+        let len = payload.len();
+        self.set_len(len);
+        let dst = self.bytes_mut();
+        let mut at = 0;
+        for s in payload.slices() {
+            let n = s.len().min(dst.len() - at);
+            dst[at..at + n].copy_from_slice(&s[..n]);
+            at += n;
+        }
+    }
+}
+
+/// Log at the 1st, 2nd, 4th, 8th … occurrence: a misbehaving peer must not flood the log.
+pub(crate) fn worth_logging(count: u64) -> bool {
+    count.is_power_of_two()
+}
+
+#[cfg(test)]
+mod tests;
