@@ -15,5 +15,6 @@ mod faults;
 mod hostile;
 mod legacy;
 mod logs;
+mod netns;
 mod sync;
 mod world;

@@ -337,3 +337,56 @@ fn the_same_world_over_tcp_or_mixed_transports_gives_the_same_trajectory() {
     assert_eq!(mixed["frames"], 150);
     assert_eq!(mixed["stop_timeouts"], 0);
 }
+
+/// Agents on zenoh beside agents on shared memory (agent 0 on shm, agents 1 and 2 on
+/// zenoh over loopback, one host serving all): the all-shm trajectory.
+#[test]
+fn shm_and_zenoh_agents_in_one_run_give_the_all_shm_trajectory() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |kind: &str| {
+        let session = util::session(&format!("world-z{kind}"));
+        let endpoint = format!("tcp/127.0.0.1:{}", util::free_tcp_port());
+        let mut text = std::fs::read_to_string(default_config())
+            .unwrap()
+            .replace("session = \"default\"", &format!("session = {session:?}"))
+            .replace("tcp/127.0.0.1:7447", &endpoint);
+        if kind == "mixed" {
+            // Agent 0 on shm; agents 1 and 2 (added by --spawn-agents 3) take the
+            // default kind: zenoh.
+            text = text
+                .replacen("\nid = 0\n", "\nid = 0\ntransport = \"shm\"\n", 1)
+                .replace("kind = \"shm\"", "kind = \"zenoh\"");
+            assert!(text.contains("kind = \"zenoh\""));
+        }
+        let config = dir.path().join(format!("z{kind}.toml"));
+        std::fs::write(&config, text).unwrap();
+        let s = dir.path().join(format!("z{kind}.json"));
+        let out = util::run(
+            "vr-sim",
+            &[
+                "run",
+                "--config",
+                config.to_str().unwrap(),
+                "--frames",
+                "150",
+                "--spawn-agents",
+                "3",
+                "--agent-arg=--policy",
+                "--agent-arg=seek",
+                "--summary-json",
+                s.to_str().unwrap(),
+                "--quiet",
+            ],
+            RUN_DEADLINE,
+        );
+        assert_eq!(out.code(), Some(0), "{kind}: stderr:\n{}", out.stderr);
+        summary(&s)
+    };
+    let shm = run("shm");
+    let mixed = run("mixed");
+    // seek decides from the images: equal trajectories mean equal pixels arrived.
+    assert_eq!(shm["trajectory_hash"], mixed["trajectory_hash"]);
+    assert_eq!(mixed["frames"], 150);
+    assert_eq!(mixed["stop_timeouts"], 0);
+    assert_eq!(mixed["agents"], 3);
+}

@@ -1,0 +1,356 @@
+//! Agents on another machine over zenoh, for real: two network namespaces joined by a
+//! veth pair, the host (`vr-sim run`) and one local shm agent in one, two zenoh agents in
+//! the other, talking over the veth addresses (not loopback). Needs root (CI runs as
+//! root); skipped with a message only where `ip netns add` fails.
+
+use std::path::Path;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use crate::util::{
+    self, EVENT_DEADLINE, Events, Proc, bin, cycle_log, summary, wait_for_cycle_line,
+};
+
+const RUN_DEADLINE: Duration = Duration::from_secs(300);
+const HOST_IP: &str = "10.77.0.1";
+const AGENT_IP: &str = "10.77.0.2";
+/// The zenoh lease of these runs: a pulled link is noticed after about this long.
+const LEASE_S: f64 = 1.0;
+/// Far beyond the lease: an agent lost with its link is evicted by the lease, never by a
+/// stop timeout (asserted through the summary's `stop_timeouts`).
+const STOP_TIMEOUT_S: f64 = 30.0;
+
+/// Two namespaces and the veth pair between them; deleted on drop (which deletes the
+/// veth pair too).
+struct Netns {
+    host: String,
+    agents: String,
+}
+
+fn ip(args: &[&str]) -> Result<(), String> {
+    let out = Command::new("ip")
+        .args(args)
+        .output()
+        .map_err(|e| format!("cannot run ip: {e}"))?;
+    if out.status.success() {
+        Ok(())
+    } else {
+        Err(format!(
+            "ip {}: {}",
+            args.join(" "),
+            String::from_utf8_lossy(&out.stderr).trim()
+        ))
+    }
+}
+
+impl Netns {
+    /// `None` (and a message why) when namespaces cannot be created here.
+    fn create() -> Option<Self> {
+        let pid = std::process::id();
+        let (host, agents) = (format!("vzh{pid}"), format!("vza{pid}"));
+        if let Err(e) = ip(&["netns", "add", &host]) {
+            eprintln!(
+                "SKIPPED: network namespaces cannot be created here ({e}); this test needs root"
+            );
+            return None;
+        }
+        let ns = Self {
+            host: host.clone(),
+            agents: agents.clone(),
+        };
+        let setup = || -> Result<(), String> {
+            ip(&["netns", "add", &agents])?;
+            // Interface names are the namespace names (at most 15 bytes).
+            ip(&[
+                "link", "add", &host, "type", "veth", "peer", "name", &agents,
+            ])?;
+            ip(&["link", "set", &host, "netns", &host])?;
+            ip(&["link", "set", &agents, "netns", &agents])?;
+            for (n, addr) in [(&host, HOST_IP), (&agents, AGENT_IP)] {
+                ip(&["-n", n, "addr", "add", &format!("{addr}/30"), "dev", n])?;
+                ip(&["-n", n, "link", "set", "lo", "up"])?;
+                ip(&["-n", n, "link", "set", n, "up"])?;
+            }
+            Ok(())
+        };
+        setup().unwrap_or_else(|e| panic!("netns set-up failed after `ip netns add` worked: {e}"));
+        Some(ns)
+    }
+
+    /// Starts `program args` inside namespace `ns`.
+    fn spawn(&self, ns: &str, program: &Path, args: &[&str]) -> Proc {
+        let mut all = vec!["netns", "exec", ns, program.to_str().expect("UTF-8 path")];
+        all.extend_from_slice(args);
+        // `ip netns exec` execs the program: the child's pid is the program's.
+        Proc::spawn(Path::new("ip"), &all)
+    }
+
+    /// Sets the agents' end of the link down or up.
+    fn link(&self, up: bool) {
+        let state = if up { "up" } else { "down" };
+        ip(&["-n", &self.agents, "link", "set", &self.agents, state]).unwrap();
+    }
+}
+
+impl Drop for Netns {
+    fn drop(&mut self) {
+        let _ = ip(&["netns", "del", &self.host]);
+        let _ = ip(&["netns", "del", &self.agents]);
+    }
+}
+
+/// 3 agents with one camera each: agent 0 over shm, 1 and 2 over `remote` (zenoh, or shm
+/// for the reference run).
+fn config_text(session: &str, remote: &str) -> String {
+    let mut s = format!(
+        "session = {session:?}\nseed = 11\n[sync]\nsync_mode = true\n\
+         simulation_time_per_frame = 0.1\nstop_timeout = {STOP_TIMEOUT_S}\n\
+         connect_timeout = 60.0\n[transport]\nkind = \"shm\"\n\
+         [transport.zenoh]\nlisten = [\"tcp/{HOST_IP}:7447\"]\n\
+         connect = [\"tcp/{HOST_IP}:7447\"]\nlease = {LEASE_S}\n"
+    );
+    for id in 0..3 {
+        let transport = if id == 0 { "shm" } else { remote };
+        s += &format!(
+            "\n[[agent]]\nid = {id}\ntransport = {transport:?}\n[[agent.camera]]\n\
+             name = \"left\"\nwidth = 160\nheight = 120\n"
+        );
+    }
+    s
+}
+
+fn agent_args<'a>(config: &'a str, id: &'a str, log: &'a Path) -> Vec<&'a str> {
+    vec![
+        "--config",
+        config,
+        "--id",
+        id,
+        "--policy",
+        "seek",
+        "--log-cycles",
+        log.to_str().unwrap(),
+    ]
+}
+
+#[test]
+fn zenoh_agents_across_network_namespaces_run_in_lock_step_and_survive_faults() {
+    let Some(ns) = Netns::create() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+
+    // --- 300 cycles: the all-shm trajectory, 0 timeouts --------------------------------
+    let reference = dir.path().join("shm.toml");
+    std::fs::write(&reference, config_text(&util::session("nsref"), "shm")).unwrap();
+    let ref_sum = dir.path().join("shm.json");
+    let out = util::run(
+        "vr-sim",
+        &[
+            "run",
+            "--config",
+            reference.to_str().unwrap(),
+            "--frames",
+            "300",
+            "--spawn-agents",
+            "3",
+            "--agent-arg=--policy",
+            "--agent-arg=seek",
+            "--summary-json",
+            ref_sum.to_str().unwrap(),
+            "--quiet",
+        ],
+        RUN_DEADLINE,
+    );
+    assert_eq!(out.code(), Some(0), "reference run: {}", out.stderr);
+
+    let config_path = dir.path().join("zenoh.toml");
+    std::fs::write(&config_path, config_text(&util::session("ns"), "zenoh")).unwrap();
+    let config = config_path.to_str().unwrap();
+    let sum_path = dir.path().join("zenoh.json");
+    let host = ns.spawn(
+        &ns.host,
+        &bin("vr-sim"),
+        &[
+            "run",
+            "--config",
+            config,
+            "--frames",
+            "300",
+            "--summary-json",
+            sum_path.to_str().unwrap(),
+            "--quiet",
+        ],
+    );
+    let logs: Vec<_> = (0..3)
+        .map(|i| dir.path().join(format!("a{i}.log")))
+        .collect();
+    let a0 = ns.spawn(
+        &ns.host,
+        &bin("vr-agent"),
+        &agent_args(config, "0", &logs[0]),
+    );
+    let a1 = ns.spawn(
+        &ns.agents,
+        &bin("vr-agent"),
+        &agent_args(config, "1", &logs[1]),
+    );
+    let a2 = ns.spawn(
+        &ns.agents,
+        &bin("vr-agent"),
+        &agent_args(config, "2", &logs[2]),
+    );
+    let out = host.wait(RUN_DEADLINE);
+    assert_eq!(out.code(), Some(0), "host: {}", out.stderr);
+    for (i, a) in [a0, a1, a2].into_iter().enumerate() {
+        let out = a.wait(Duration::from_secs(30));
+        assert_eq!(out.code(), Some(0), "agent {i}: {}", out.stderr);
+    }
+    let (zs, rs) = (summary(&sum_path), summary(&ref_sum));
+    assert_eq!(zs["frames"], 300, "{zs}");
+    assert_eq!(zs["stop_timeouts"], 0, "{zs}");
+    assert_eq!(zs["evicted_agents"], serde_json::json!([]), "{zs}");
+    assert_eq!(zs["trajectory_hash"], rs["trajectory_hash"], "{zs}\n{rs}");
+    for log in &logs {
+        let cycles: Vec<u64> = cycle_log(log).iter().map(|l| l.cycle).collect();
+        assert_eq!(cycles, (0..300).collect::<Vec<_>>(), "{}", log.display());
+    }
+    // For BENCHMARKS.md: the cycle time of this run (not asserted).
+    let wall = zs["wall_s"].as_f64().unwrap_or(0.0);
+    eprintln!(
+        "netns zenoh run: 300 cycles in {wall:.2} s, {:.2} ms per cycle (2 remote zenoh agents + 1 shm agent, 3 x 160x120 rgb8)",
+        wall * 1000.0 / 300.0
+    );
+
+    // --- faults: a killed agent, a pulled link, a killed host ---------------------------
+    let session = util::session("nsfault");
+    std::fs::write(&config_path, config_text(&session, "zenoh")).unwrap();
+    let events = Events::in_dir(dir.path());
+    let sum_path = dir.path().join("faults.json");
+    let host = ns.spawn(
+        &ns.host,
+        &bin("vr-sim"),
+        &[
+            "run",
+            "--config",
+            config,
+            "--events",
+            events.arg(),
+            "--summary-json",
+            sum_path.to_str().unwrap(),
+            "--quiet",
+        ],
+    );
+    let logs: Vec<_> = (0..3)
+        .map(|i| dir.path().join(format!("f{i}.log")))
+        .collect();
+    let a0 = ns.spawn(
+        &ns.host,
+        &bin("vr-agent"),
+        &agent_args(config, "0", &logs[0]),
+    );
+    let a1 = ns.spawn(
+        &ns.agents,
+        &bin("vr-agent"),
+        &agent_args(config, "1", &logs[1]),
+    );
+    let a2 = ns.spawn(
+        &ns.agents,
+        &bin("vr-agent"),
+        &agent_args(config, "2", &logs[2]),
+    );
+    events.wait_for("all_agents_connected", EVENT_DEADLINE);
+    wait_for_cycle_line(&logs[1], 5, EVENT_DEADLINE);
+
+    // A remote agent is killed: evicted, the others go on, a new one rejoins.
+    a1.signal(libc::SIGKILL);
+    let _ = a1.wait(Duration::from_secs(10));
+    let evicted = events.wait_for_match("agent_evicted", |e| e["agent"] == 1, EVENT_DEADLINE);
+    let at = evicted["cycle"].as_u64().unwrap();
+    wait_for_cycle_line(&logs[2], at + 3, EVENT_DEADLINE);
+    wait_for_cycle_line(&logs[0], at + 3, EVENT_DEADLINE);
+    let back_log = dir.path().join("f1-back.log");
+    let a1 = ns.spawn(
+        &ns.agents,
+        &bin("vr-agent"),
+        &agent_args(config, "1", &back_log),
+    );
+    let rejoined = events.wait_for_match("agent_rejoined", |e| e["agent"] == 1, EVENT_DEADLINE);
+    let rejoined_at = rejoined["cycle"].as_u64().unwrap();
+    assert!(rejoined_at > at, "{rejoined}");
+    wait_for_cycle_line(&back_log, rejoined_at + 2, EVENT_DEADLINE);
+
+    // The link goes down: both remote agents are evicted by the lease (not by the 30 s
+    // stop timeout), the local agent goes on, the remote agents see their host gone.
+    let before = events.of("agent_evicted").len();
+    ns.link(false);
+    let pulled = Instant::now();
+    for id in [1, 2] {
+        events.wait_for_match(
+            "agent_evicted",
+            |e| e["agent"] == id && e["cycle"].as_u64().unwrap() > rejoined_at,
+            EVENT_DEADLINE,
+        );
+    }
+    eprintln!(
+        "netns zenoh run: link down -> both remote agents evicted after {:.2} s (lease {LEASE_S} s)",
+        pulled.elapsed().as_secs_f64()
+    );
+    assert_eq!(events.of("agent_evicted").len(), before + 2);
+    // Every cycle event so far: no agent was waited for until the stop timeout.
+    let timeouts: Vec<_> = events
+        .of("cycle")
+        .into_iter()
+        .filter(|e| e["timed_out_agents"] != serde_json::json!([]))
+        .collect();
+    assert!(timeouts.is_empty(), "stop timeouts: {timeouts:?}");
+    let last0 = cycle_log(&logs[0]).last().unwrap().cycle;
+    wait_for_cycle_line(&logs[0], last0 + 3, EVENT_DEADLINE);
+    for (id, a) in [(1, a1), (2, a2)] {
+        let out = a.wait(EVENT_DEADLINE);
+        assert_eq!(out.code(), Some(1), "agent {id}: {}", out.stderr);
+        assert!(
+            out.stderr.contains("host is gone"),
+            "agent {id}: {}",
+            out.stderr
+        );
+    }
+
+    // The link comes back: new remote agents join; then the host is killed and they exit
+    // with "host gone".
+    ns.link(true);
+    let r1_log = dir.path().join("f1-again.log");
+    let r2_log = dir.path().join("f2-again.log");
+    let r1 = ns.spawn(
+        &ns.agents,
+        &bin("vr-agent"),
+        &agent_args(config, "1", &r1_log),
+    );
+    let r2 = ns.spawn(
+        &ns.agents,
+        &bin("vr-agent"),
+        &agent_args(config, "2", &r2_log),
+    );
+    for id in [1, 2] {
+        events.wait_for_match(
+            "agent_rejoined",
+            |e| e["agent"] == id && e["cycle"].as_u64().unwrap() > rejoined_at + 2,
+            EVENT_DEADLINE,
+        );
+    }
+    let r1_first = cycle_log(&r1_log).first().map_or(0, |l| l.cycle);
+    wait_for_cycle_line(&r1_log, r1_first + 2, EVENT_DEADLINE);
+    host.signal(libc::SIGKILL);
+    let _ = host.wait(Duration::from_secs(10));
+    for (id, a) in [(1, r1), (2, r2)] {
+        let out = a.wait(EVENT_DEADLINE);
+        assert_eq!(out.code(), Some(1), "agent {id}: {}", out.stderr);
+        assert!(
+            out.stderr.contains("host is gone"),
+            "agent {id}: {}",
+            out.stderr
+        );
+    }
+    let out = a0.wait(EVENT_DEADLINE);
+    assert_eq!(out.code(), Some(1), "agent 0: {}", out.stderr);
+    drop(ns);
+}
