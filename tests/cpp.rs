@@ -32,11 +32,11 @@ use crate::util::{
 const BUILD_DEADLINE: Duration = Duration::from_secs(300);
 
 /// The installed SDK and the example agents built against it.
-struct Sdk {
+pub struct Sdk {
     /// `PREFIX/lib`: the installed `libvrsync_agent.so` the examples must load.
     lib: PathBuf,
     /// `vrsync/agent.hpp` example, CMake, shared library.
-    cpp_agent: PathBuf,
+    pub cpp_agent: PathBuf,
     /// `vrsync/compat.hpp` example, CMake, shared library.
     compat_agent: PathBuf,
     /// C example, CMake, shared library.
@@ -134,7 +134,7 @@ fn work_dir() -> PathBuf {
 }
 
 /// Installs the SDK and builds the examples once per test process.
-fn sdk() -> &'static Sdk {
+pub fn sdk() -> &'static Sdk {
     static SDK: OnceLock<Sdk> = OnceLock::new();
     SDK.get_or_init(|| {
         for program in ["cmake", "cc", "c++", "g++", "pkg-config"] {
@@ -220,7 +220,7 @@ fn sdk() -> &'static Sdk {
 
 /// `program args` for a C/C++ example: as [`Proc::spawn`], with the folders of the
 /// target dir removed from `LD_LIBRARY_PATH` (see the module docs).
-fn example_command(program: &Path, args: &[&str]) -> Command {
+pub fn example_command(program: &Path, args: &[&str]) -> Command {
     let mut cmd = Command::new(program);
     cmd.args(args);
     let target = util::bin_dir().parent().expect("target dir").to_path_buf();

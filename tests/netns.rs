@@ -5,6 +5,7 @@
 
 use std::path::Path;
 use std::process::Command;
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::util::{
@@ -46,8 +47,14 @@ fn ip(args: &[&str]) -> Result<(), String> {
 impl Netns {
     /// `None` (and a message why) when namespaces cannot be created here.
     fn create() -> Option<Self> {
-        let pid = std::process::id();
-        let (host, agents) = (format!("vzh{pid}"), format!("vza{pid}"));
+        // Unique per test process and per call: tests in one process run in parallel.
+        static NEXT: AtomicU32 = AtomicU32::new(0);
+        let tag = format!(
+            "{}x{}",
+            std::process::id(),
+            NEXT.fetch_add(1, Ordering::Relaxed)
+        );
+        let (host, agents) = (format!("vzh{tag}"), format!("vza{tag}"));
         if let Err(e) = ip(&["netns", "add", &host]) {
             eprintln!(
                 "SKIPPED: network namespaces cannot be created here ({e}); this test needs root"
@@ -79,10 +86,15 @@ impl Netns {
 
     /// Starts `program args` inside namespace `ns`.
     fn spawn(&self, ns: &str, program: &Path, args: &[&str]) -> Proc {
-        let mut all = vec!["netns", "exec", ns, program.to_str().expect("UTF-8 path")];
-        all.extend_from_slice(args);
-        // `ip netns exec` execs the program: the child's pid is the program's.
-        Proc::spawn(Path::new("ip"), &all)
+        Proc::spawn_command(Self::command(Command::new("ip"), ns, program, args))
+    }
+
+    /// `base` (a `Command` for `ip`, with its environment set) running `program args`
+    /// inside namespace `ns`. `ip netns exec` execs the program with the environment it
+    /// was given: the child's pid is the program's.
+    fn command(mut base: Command, ns: &str, program: &Path, args: &[&str]) -> Command {
+        base.args(["netns", "exec", ns]).arg(program).args(args);
+        base
     }
 
     /// Sets the agents' end of the link down or up.
@@ -102,6 +114,11 @@ impl Drop for Netns {
 /// 3 agents with one camera each: agent 0 over shm, 1 and 2 over `remote` (zenoh, or shm
 /// for the reference run).
 fn config_text(session: &str, remote: &str) -> String {
+    config_text_n(session, remote, 3)
+}
+
+/// `agents` agents with one camera each: agent 0 over shm, the others over `remote`.
+fn config_text_n(session: &str, remote: &str, agents: u32) -> String {
     let mut s = format!(
         "session = {session:?}\nseed = 11\n[sync]\nsync_mode = true\n\
          simulation_time_per_frame = 0.1\nstop_timeout = {STOP_TIMEOUT_S}\n\
@@ -109,7 +126,7 @@ fn config_text(session: &str, remote: &str) -> String {
          [transport.zenoh]\nlisten = [\"tcp/{HOST_IP}:7447\"]\n\
          connect = [\"tcp/{HOST_IP}:7447\"]\nlease = {LEASE_S}\n"
     );
-    for id in 0..3 {
+    for id in 0..agents {
         let transport = if id == 0 { "shm" } else { remote };
         s += &format!(
             "\n[[agent]]\nid = {id}\ntransport = {transport:?}\n[[agent.camera]]\n\
@@ -352,5 +369,71 @@ fn zenoh_agents_across_network_namespaces_run_in_lock_step_and_survive_faults() 
     }
     let out = a0.wait(EVENT_DEADLINE);
     assert_eq!(out.code(), Some(1), "agent 0: {}", out.stderr);
+    drop(ns);
+}
+
+/// The C++ SDK's example agent (built with CMake against the installed SDK, as in
+/// `cpp.rs`) on the other side of the veth pair over zenoh, beside a local shm agent:
+/// 100 lock-step cycles, every one ended by every agent's stop.
+#[test]
+fn cpp_agent_across_network_namespaces_runs_in_lock_step() {
+    let Some(ns) = Netns::create() else {
+        return;
+    };
+    let sdk = crate::cpp::sdk();
+    let dir = tempfile::tempdir().unwrap();
+    let config_path = dir.path().join("cpp.toml");
+    std::fs::write(
+        &config_path,
+        config_text_n(&util::session("nscpp"), "zenoh", 2),
+    )
+    .unwrap();
+    let config = config_path.to_str().unwrap();
+    let sum_path = dir.path().join("cpp.json");
+    let host = ns.spawn(
+        &ns.host,
+        &bin("vr-sim"),
+        &[
+            "run",
+            "--config",
+            config,
+            "--frames",
+            "100",
+            "--summary-json",
+            sum_path.to_str().unwrap(),
+            "--quiet",
+        ],
+    );
+    let log0 = dir.path().join("a0.log");
+    let a0 = ns.spawn(&ns.host, &bin("vr-agent"), &agent_args(config, "0", &log0));
+    // The example loads the installed library, not target/<profile>'s (cpp.rs's docs).
+    let cpp = Proc::spawn_command(Netns::command(
+        crate::cpp::example_command(Path::new("ip"), &[]),
+        &ns.agents,
+        &sdk.cpp_agent,
+        &[config, "1"],
+    ));
+    let out = host.wait(RUN_DEADLINE);
+    assert_eq!(out.code(), Some(0), "host: {}", out.stderr);
+    let out = a0.wait(Duration::from_secs(30));
+    assert_eq!(out.code(), Some(0), "agent 0: {}", out.stderr);
+    let out = cpp.wait(Duration::from_secs(30));
+    assert_eq!(
+        out.code(),
+        Some(0),
+        "cpp_agent: stdout:\n{}\nstderr:\n{}",
+        out.stdout,
+        out.stderr
+    );
+    assert!(
+        out.stdout.contains(": 100 cycles"),
+        "cpp_agent should have run every cycle:\n{}",
+        out.stdout
+    );
+    let sum = summary(&sum_path);
+    assert_eq!(sum["frames"], 100, "{sum}");
+    assert_eq!(sum["stop_timeouts"], 0, "{sum}");
+    assert_eq!(sum["evicted_agents"], serde_json::json!([]), "{sum}");
+    assert!(sum["commands_applied"].as_u64().unwrap() >= 100, "{sum}");
     drop(ns);
 }

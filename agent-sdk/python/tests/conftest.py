@@ -59,11 +59,14 @@ def write_config(
     cameras: Sequence[tuple[str, int, str]] = CAMERAS_SMALL,
     tcp_port: int = 0,
     agent_transports: dict[int, str] | None = None,
+    zenoh_endpoint: str | None = None,
 ) -> tuple[Path, str]:
     """Writes a config for `agents` agents with `cameras` ((name, width, format); height
     from a 120°×90° field of view) and returns (path, session). `agent_transports` gives
     agents a transport of their own (default: `transport`). TCP hosts bind port 0
-    unless `tcp_port` is given; `start_host` puts the bound port into the file."""
+    unless `tcp_port` is given; `start_host` puts the bound port into the file.
+    `zenoh_endpoint` (e.g. ``"tcp/10.0.0.1:7447"``) is where a zenoh host listens and
+    its agents connect (lease 1 s)."""
     name = session(tag)
     port = tcp_port
     lines = [
@@ -78,6 +81,13 @@ def write_config(
         f'kind = "{transport}"',
         f'tcp_listen = "127.0.0.1:{port}"',
     ]
+    if zenoh_endpoint is not None:
+        lines += [
+            "[transport.zenoh]",
+            f'listen = ["{zenoh_endpoint}"]',
+            f'connect = ["{zenoh_endpoint}"]',
+            "lease = 1.0",
+        ]
     for i in range(agents):
         lines += ["[[agent]]", f"id = {i}"]
         if agent_transports and i in agent_transports:
@@ -110,10 +120,17 @@ class Host:
     port (from vr-sim's `listening` event), so agents started afterwards find the host.
     """
 
-    def __init__(self, config: Path, frames: int | None, extra: Sequence[str] = ()) -> None:
+    def __init__(
+        self,
+        config: Path,
+        frames: int | None,
+        extra: Sequence[str] = (),
+        prefix: Sequence[str] = (),
+    ) -> None:
         self.summary_path = config.with_suffix(".summary.json")
         self.events_path = config.with_suffix(".events.jsonl")
-        args = [str(binary("vr-sim")), "run", "--config", str(config), "--quiet"]
+        # `prefix`: e.g. ["ip", "netns", "exec", NAME], which execs vr-sim in a namespace.
+        args = [*prefix, str(binary("vr-sim")), "run", "--config", str(config), "--quiet"]
         if frames is not None:
             args += ["--frames", str(frames)]
         args += ["--summary-json", str(self.summary_path), "--events", str(self.events_path)]
@@ -172,8 +189,13 @@ def hosts() -> Iterator[list[Host]]:
 
 @pytest.fixture
 def start_host(hosts: list[Host]):  # type: ignore[no-untyped-def]
-    def start(config: Path, frames: int | None = None, extra: Sequence[str] = ()) -> Host:
-        h = Host(config, frames, extra)
+    def start(
+        config: Path,
+        frames: int | None = None,
+        extra: Sequence[str] = (),
+        prefix: Sequence[str] = (),
+    ) -> Host:
+        h = Host(config, frames, extra, prefix)
         hosts.append(h)
         return h
 
