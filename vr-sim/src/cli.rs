@@ -24,9 +24,10 @@ pub enum Command {
     Demo(DemoArgs),
     /// Run a world from a config file, with spawned or external agents.
     Run(RunArgs),
-    /// Benchmark full sync cycles over shared memory and TCP against the raw transport
-    /// floors (3 rgb8 images per agent; 1/2/4 agents; 320x240 up to 1920x1080). Build with
-    /// --release: it spawns `vr-bench-agent` from the same folder.
+    /// Benchmark full sync cycles over shared memory, TCP and zenoh against the raw
+    /// transport floors (3 rgb8 images per agent; 1/2/4 agents; 320x240 up to 1920x1080),
+    /// plus the original protocol and the Python agent. Build with --release: it spawns
+    /// `vr-bench-agent` from the same folder.
     Bench(BenchArgs),
 }
 
