@@ -274,8 +274,9 @@ def test_commands_reach_the_host_and_bad_ones_never_do(tmp_path: Path, start_hos
 def test_ctrl_c_while_waiting_raises_keyboard_interrupt(tmp_path: Path, start_host) -> None:
     # Two agents configured, one connects: the host never starts cycle 0, so the agent
     # waits without limit until SIGINT. The host waits for the second agent far longer
-    # than this test's deadline (with the default 20 s a slow CI run saw the host give up
-    # first, and the agent's wait end with HostClosedError).
+    # than this test's deadline, so only the signal can end the wait. (This test caught
+    # iceoryx2 replacing Python's SIGINT handler in the middle of a wait; see
+    # `keep_process_signal_handlers` in bridge/src/transport/shm/mod.rs.)
     config, _ = write_config(tmp_path, "sigint", agents=2, connect_timeout=300.0)
     start_host(config)
     # The child interrupts itself once its main thread is inside `agent.wait()` (seen

@@ -175,7 +175,44 @@ pub fn init_iceoryx2_logging() {
     set_log_level_from_env_or(LogLevel::Error);
 }
 
+/// iceoryx2 creates a process-wide signal handler (`iceoryx2_bb_posix::signal::
+/// SignalHandler`) lazily, the first time it needs one — e.g. when it zeroes a new
+/// shared-memory segment, which can happen in the middle of a wait once a peer's
+/// connection appears — and that handler installs its own functions for SIGINT, SIGTERM
+/// and ten other signals, whatever `SignalHandlingMode` the nodes have. A Python agent's
+/// Ctrl-C then never reached Python. So before the first node, create that handler once
+/// and put every signal's previous action back: iceoryx2 never installs anything later.
+fn keep_process_signal_handlers() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        const SIGNALS: core::ops::RangeInclusive<libc::c_int> = 1..=31;
+        let mut saved: Vec<(libc::c_int, libc::sigaction)> = Vec::new();
+        for sig in SIGNALS {
+            if sig == libc::SIGKILL || sig == libc::SIGSTOP {
+                continue;
+            }
+            // SAFETY: querying (act = null) the current action of a valid signal number
+            // into a zeroed, properly aligned sigaction.
+            unsafe {
+                let mut old: libc::sigaction = core::mem::zeroed();
+                if libc::sigaction(sig, core::ptr::null(), &mut old) == 0 {
+                    saved.push((sig, old));
+                }
+            }
+        }
+        // Creates the handler (and its registrations) now; reports no signal.
+        let _ = iceoryx2_bb_posix::signal::SignalHandler::last_signal();
+        for (sig, old) in &saved {
+            // SAFETY: restoring an action sigaction(2) itself returned for this signal.
+            unsafe {
+                libc::sigaction(*sig, old, core::ptr::null_mut());
+            }
+        }
+    });
+}
+
 fn node(name: &str) -> Result<Node<Svc>, String> {
+    keep_process_signal_handlers();
     let node_name =
         NodeName::new(name).map_err(|e| format!("invalid node name {name:?}: {e:?}"))?;
     NodeBuilder::new()
@@ -351,5 +388,40 @@ mod tests {
         );
         assert_eq!(cleanup_dead_nodes(&dead), 1);
         assert_eq!(dead_nodes_of(&dead), 0);
+    }
+}
+
+#[cfg(test)]
+mod signal_tests {
+    extern "C" fn mine(_: libc::c_int) {}
+
+    fn action(sig: libc::c_int) -> libc::sighandler_t {
+        // SAFETY: querying the current action into a zeroed sigaction.
+        unsafe {
+            let mut old: libc::sigaction = core::mem::zeroed();
+            assert_eq!(libc::sigaction(sig, core::ptr::null(), &mut old), 0);
+            old.sa_sigaction
+        }
+    }
+
+    /// The process's own handler survives a node and iceoryx2's lazy signal handler (which
+    /// iceoryx2 creates e.g. when it zeroes a new segment during a wait).
+    #[test]
+    fn iceoryx2_never_replaces_the_process_signal_handlers() {
+        // SAFETY: installing a handler that does nothing for SIGURG (ignored by default).
+        unsafe {
+            let mut act: libc::sigaction = core::mem::zeroed();
+            act.sa_sigaction = mine as *const () as libc::sighandler_t;
+            assert_eq!(
+                libc::sigaction(libc::SIGURG, &act, core::ptr::null_mut()),
+                0
+            );
+        }
+        let _node = super::node(&format!("sigtest{}", std::process::id())).unwrap();
+        let _ = iceoryx2_bb_posix::signal::SignalHandler::last_signal();
+        assert_eq!(
+            action(libc::SIGURG),
+            mine as *const () as libc::sighandler_t
+        );
     }
 }
