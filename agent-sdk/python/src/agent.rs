@@ -21,7 +21,7 @@ const WAIT_SLICE: Duration = Duration::from_millis(50);
 
 /// Moves a value that is not `Send` through [`Python::detach`], which runs its closure on
 /// the *calling* thread: nothing crosses a thread.
-struct SameThread<T>(T);
+pub(crate) struct SameThread<T>(pub(crate) T);
 // SAFETY: only used to pass values into and out of `Python::detach`, whose closure runs
 // synchronously on the current thread.
 unsafe impl<T> Send for SameThread<T> {}
@@ -37,16 +37,16 @@ unsafe impl Sync for AgentCell {}
 
 /// One camera of this agent, as configured: what `Frame.image(name)` returns for it.
 #[pyclass(module = "vrsync._vrsync", name = "Camera", frozen, get_all)]
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub(crate) struct PyCamera {
     /// Camera name.
-    name: String,
+    pub(crate) name: String,
     /// Width in pixels.
-    width: u32,
+    pub(crate) width: u32,
     /// Height in pixels.
-    height: u32,
+    pub(crate) height: u32,
     /// `"rgb8"`, `"rgba8"`, `"gray8"` or `"depth32f"`.
-    format: String,
+    pub(crate) format: String,
     /// Horizontal field of view in degrees.
     fov_horizontal_deg: f32,
     /// Vertical field of view in degrees.
@@ -57,7 +57,7 @@ pub(crate) struct PyCamera {
 impl PyCamera {
     /// The numpy shape of this camera's images: (H, W, 3), (H, W, 4) or (H, W).
     #[getter]
-    fn shape(&self) -> Vec<u32> {
+    pub(crate) fn shape(&self) -> Vec<u32> {
         match self.format.as_str() {
             "rgb8" => vec![self.height, self.width, 3],
             "rgba8" => vec![self.height, self.width, 4],
@@ -67,7 +67,7 @@ impl PyCamera {
 
     /// The numpy dtype name of this camera's images: `"uint8"` or `"float32"`.
     #[getter]
-    fn dtype(&self) -> &'static str {
+    pub(crate) fn dtype(&self) -> &'static str {
         if self.format == "depth32f" {
             "float32"
         } else {
@@ -122,7 +122,7 @@ pub(crate) struct PyAgent {
     cameras: Vec<PyCamera>,
 }
 
-fn secs(name: &str, v: Option<f64>) -> PyResult<Option<Duration>> {
+pub(crate) fn secs(name: &str, v: Option<f64>) -> PyResult<Option<Duration>> {
     v.map(|s| {
         Duration::try_from_secs_f64(s).map_err(|_| {
             PyValueError::new_err(format!(
@@ -166,6 +166,54 @@ fn connect_error(py: Python<'_>, e: AgentConnectError, session: &str, id: u32) -
     }
 }
 
+/// The cameras of one `[[agent]]` entry, in image order.
+pub(crate) fn cameras_of(agent: &vrsync_bridge::AgentConfig) -> Vec<PyCamera> {
+    agent
+        .cameras
+        .iter()
+        .map(|c| PyCamera {
+            name: c.name.clone(),
+            width: c.width_px,
+            height: c.height_px,
+            format: format_name(c.format).to_owned(),
+            fov_horizontal_deg: c.fov_horizontal_deg,
+            fov_vertical_deg: c.fov_vertical_deg,
+        })
+        .collect()
+}
+
+/// Connects agent `id` of `cfg`, waiting up to `timeout` for the host, in slices so that
+/// Ctrl-C raises `KeyboardInterrupt` while the host is not up yet.
+pub(crate) fn connect_one(
+    py: Python<'_>,
+    cfg: &Config,
+    id: u32,
+    timeout: Duration,
+) -> PyResult<Agent> {
+    let started = Instant::now();
+    loop {
+        let left = timeout.saturating_sub(started.elapsed());
+        let slice = left.min(Duration::from_millis(200));
+        let attempt = py.detach(|| {
+            SameThread(
+                AgentBuilder::new(cfg, id)
+                    .connect_timeout(slice)
+                    // Python keeps its own SIGINT/SIGTERM handlers (Ctrl-C raises
+                    // KeyboardInterrupt while waiting, see `PyAgent::wait_frame`).
+                    .signal_handling(SignalHandling::Leave)
+                    .connect(),
+            )
+        });
+        match attempt.0 {
+            Ok(agent) => return Ok(agent),
+            Err(AgentConnectError::HostNotFound { .. }) if started.elapsed() < timeout => {
+                py.check_signals()?;
+            }
+            Err(e) => return Err(connect_error(py, e, &cfg.session, id)),
+        }
+    }
+}
+
 impl PyAgent {
     /// Admits the calling thread: the owner, or any thread while no frame of this agent
     /// is alive (ownership moves with it). Drops frames released on other threads.
@@ -187,46 +235,6 @@ impl PyAgent {
                 "agent {} of session {:?} is closed",
                 self.id, self.session
             ))),
-        }
-    }
-
-    fn wait_error(&self, py: Python<'_>, e: WaitStartError, waited: Duration) -> PyErr {
-        let msg = e.to_string();
-        let base = [
-            ("session", obj(py, self.session.as_str())),
-            ("agent_id", obj(py, self.id)),
-        ];
-        match e {
-            WaitStartError::HostClosed => error(py, "HostClosedError", msg, &base),
-            WaitStartError::HostGone { .. } => error(py, "HostGoneError", msg, &base),
-            WaitStartError::BadFrame { .. } => error(py, "ProtocolError", msg, &base),
-            WaitStartError::Timeout { last_cycle, .. } => error(
-                py,
-                "WaitTimeoutError",
-                format!(
-                    "no frame from the host of session {:?} within {:.3} s (last cycle seen: {})",
-                    self.session,
-                    waited.as_secs_f64(),
-                    last_cycle.map_or_else(|| "none".to_owned(), |c| c.to_string())
-                ),
-                &base,
-            ),
-            WaitStartError::TooManyFramesHeld { max } => error(
-                py,
-                "TooManyFramesHeldError",
-                format!(
-                    "agent {} already holds {max} frames, the most it may: numpy arrays of \
-                     earlier frames keep their frames alive; copy what you keep beyond the \
-                     cycle (`arr.copy()`) or drop those arrays",
-                    self.id
-                ),
-                &[
-                    ("session", obj(py, self.session.as_str())),
-                    ("agent_id", obj(py, self.id)),
-                    ("max", obj(py, max)),
-                ],
-            ),
-            _ => error(py, "TransportError", msg, &base),
         }
     }
 
@@ -261,11 +269,11 @@ impl PyAgent {
                             waited: started.elapsed(),
                             last_cycle: self.agent.as_ref().and_then(|a| a.0.last_cycle()),
                         };
-                        return Err(self.wait_error(py, e, started.elapsed()));
+                        return Err(wait_error(py, e, &self.session, self.id, started.elapsed()));
                     }
                 }
                 Err(WaitStartError::HostClosed) => return Ok(None),
-                Err(e) => return Err(self.wait_error(py, e, started.elapsed())),
+                Err(e) => return Err(wait_error(py, e, &self.session, self.id, started.elapsed())),
             }
         }
     }
@@ -308,44 +316,8 @@ impl PyAgent {
             )
         })?;
         let agent_transport = agent_cfg.transport;
-        let cameras = agent_cfg
-            .cameras
-            .iter()
-            .map(|c| PyCamera {
-                name: c.name.clone(),
-                width: c.width_px,
-                height: c.height_px,
-                format: format_name(c.format).to_owned(),
-                fov_horizontal_deg: c.fov_horizontal_deg,
-                fov_vertical_deg: c.fov_vertical_deg,
-            })
-            .collect();
-
-        // Connect in slices too, so that Ctrl-C works while the host is not up yet.
-        let started = Instant::now();
-        let agent = loop {
-            let left = timeout.saturating_sub(started.elapsed());
-            let slice = left.min(Duration::from_millis(200));
-            let cfg_ref = &cfg;
-            let attempt = py.detach(|| {
-                SameThread(
-                    AgentBuilder::new(cfg_ref, id)
-                        .connect_timeout(slice)
-                        // Python keeps its own SIGINT/SIGTERM handlers (Ctrl-C raises
-                        // KeyboardInterrupt while waiting, see `wait_frame`).
-                        .signal_handling(SignalHandling::Leave)
-                        .connect()
-                        .map(AgentCell),
-                )
-            });
-            match attempt.0 {
-                Ok(agent) => break agent,
-                Err(AgentConnectError::HostNotFound { .. }) if started.elapsed() < timeout => {
-                    py.check_signals()?;
-                }
-                Err(e) => return Err(connect_error(py, e, &cfg.session, id)),
-            }
-        };
+        let cameras = cameras_of(agent_cfg);
+        let agent = AgentCell(connect_one(py, &cfg, id, timeout)?);
         Ok(Self {
             agent: Some(agent),
             owner: thread::current().id(),
@@ -372,8 +344,15 @@ impl PyAgent {
     #[pyo3(signature = (timeout = None))]
     fn wait(&mut self, py: Python<'_>, timeout: Option<f64>) -> PyResult<PyFrame> {
         let timeout = secs("timeout", timeout)?;
-        self.wait_frame(py, timeout)?
-            .ok_or_else(|| self.wait_error(py, WaitStartError::HostClosed, Duration::ZERO))
+        self.wait_frame(py, timeout)?.ok_or_else(|| {
+            wait_error(
+                py,
+                WaitStartError::HostClosed,
+                &self.session,
+                self.id,
+                Duration::ZERO,
+            )
+        })
     }
 
     /// Iterates over frames until the host closes the session (the loop then ends
@@ -425,20 +404,7 @@ impl PyAgent {
         let session = self.session.clone();
         let id = self.id;
         let agent = self.enter()?;
-        agent.stop().map_err(|e| {
-            let msg = e.to_string();
-            let base = [
-                ("session", obj(py, session.as_str())),
-                ("agent_id", obj(py, id)),
-            ];
-            match e {
-                StopError::HostClosed => error(py, "HostClosedError", msg, &base),
-                StopError::NoFrame | StopError::AlreadyStopped { .. } => {
-                    error(py, "UsageError", msg, &base)
-                }
-                _ => error(py, "TransportError", msg, &base),
-            }
-        })
+        agent.stop().map_err(|e| stop_error(py, e, &session, id))
     }
 
     /// Disconnects. Frames still held stay readable. Idempotent.
@@ -525,6 +491,14 @@ impl PyAgent {
         self.agent.as_ref().map_or(0, |a| a.0.frames_skipped())
     }
 
+    /// Frames of this agent alive now (kept alive by `Frame` objects or their image
+    /// arrays). A wait fails with `TooManyFramesHeldError` when it is already
+    /// `MAX_FRAMES_HELD`.
+    #[getter]
+    fn frames_held(&self) -> usize {
+        self.graveyard.alive()
+    }
+
     /// Whether `close()` was called.
     #[getter]
     fn closed(&self) -> bool {
@@ -542,7 +516,70 @@ impl PyAgent {
     }
 }
 
-fn send_error(py: Python<'_>, e: SendError, id: u32) -> PyErr {
+/// A wait error of agent `id` of `session` as the matching `vrsync.errors` exception.
+pub(crate) fn wait_error(
+    py: Python<'_>,
+    e: WaitStartError,
+    session: &str,
+    id: u32,
+    waited: Duration,
+) -> PyErr {
+    let msg = e.to_string();
+    let base = [("session", obj(py, session)), ("agent_id", obj(py, id))];
+    match e {
+        WaitStartError::HostClosed => error(py, "HostClosedError", msg, &base),
+        WaitStartError::HostGone { .. } => error(py, "HostGoneError", msg, &base),
+        WaitStartError::BadFrame { .. } => error(py, "ProtocolError", msg, &base),
+        WaitStartError::Timeout { last_cycle, .. } => error(
+            py,
+            "WaitTimeoutError",
+            format!(
+                "no frame from the host of session {session:?} within {:.3} s (last cycle seen: {})",
+                waited.as_secs_f64(),
+                last_cycle.map_or_else(|| "none".to_owned(), |c| c.to_string())
+            ),
+            &base,
+        ),
+        WaitStartError::TooManyFramesHeld { max } => error(
+            py,
+            "TooManyFramesHeldError",
+            too_many_held_message(id, max),
+            &[
+                ("session", obj(py, session)),
+                ("agent_id", obj(py, id)),
+                ("max", obj(py, max)),
+            ],
+        ),
+        _ => error(py, "TransportError", msg, &base),
+    }
+}
+
+/// The text of `TooManyFramesHeldError`.
+pub(crate) fn too_many_held_message(id: u32, max: usize) -> String {
+    format!(
+        "agent {id} already holds {max} frames, the most it may (the frame being read and \
+         one more): numpy arrays of earlier frames keep their frames alive; copy what you \
+         keep beyond the cycle (`arr.copy()`) or drop those arrays. With the Gymnasium or \
+         PettingZoo envs, use copy_observations=True (the default): frame-stacking \
+         wrappers such as gymnasium.wrappers.FrameStackObservation keep their last \
+         observations, which with copy_observations=False are such views"
+    )
+}
+
+/// A stop error of agent `id` of `session` as the matching `vrsync.errors` exception.
+pub(crate) fn stop_error(py: Python<'_>, e: StopError, session: &str, id: u32) -> PyErr {
+    let msg = e.to_string();
+    let base = [("session", obj(py, session)), ("agent_id", obj(py, id))];
+    match e {
+        StopError::HostClosed => error(py, "HostClosedError", msg, &base),
+        StopError::NoFrame | StopError::AlreadyStopped { .. } => {
+            error(py, "UsageError", msg, &base)
+        }
+        _ => error(py, "TransportError", msg, &base),
+    }
+}
+
+pub(crate) fn send_error(py: Python<'_>, e: SendError, id: u32) -> PyErr {
     error(
         py,
         "QueueFullError",
@@ -571,7 +608,7 @@ impl FrameIter {
 }
 
 /// Loads `config`; a failure is a `ConfigError` carrying the path.
-fn load_config(py: Python<'_>, config: &Path) -> PyResult<Config> {
+pub(crate) fn load_config(py: Python<'_>, config: &Path) -> PyResult<Config> {
     Config::load(config).map_err(|e| {
         error(
             py,

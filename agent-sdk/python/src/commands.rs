@@ -371,5 +371,83 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<GraspRelease>()?;
     m.add_class::<EnvironmentReset>()?;
     m.add_class::<TrialReset>()?;
+    m.add_class::<MoveAhead>()?;
     Ok(())
+}
+
+/// Walk `distance_m` metres towards the body's *current* heading plus
+/// `heading_offset_deg` (an entry of an action table: resolved per agent and cycle from
+/// the frame the action answers, as `Move(heading_deg=frame.pose.heading_deg +
+/// heading_offset_deg, distance_m=distance_m)`). Calling it with a frame gives that
+/// `Move`. Not a `Command`: `Agent.send` takes the resolved `Move`.
+#[pyclass(module = "vrsync._vrsync", name = "MoveAhead", frozen, get_all, eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct MoveAhead {
+    pub(crate) distance_m: f32,
+    pub(crate) heading_offset_deg: f32,
+}
+
+impl MoveAhead {
+    /// The `Move` for a body with heading `heading_deg`.
+    pub(crate) fn resolve(&self, heading_deg: f32) -> Command {
+        Command::Move {
+            heading_deg: (heading_deg + self.heading_offset_deg).rem_euclid(360.0),
+            distance: self.distance_m,
+        }
+    }
+}
+
+#[pymethods]
+impl MoveAhead {
+    #[new]
+    #[pyo3(signature = (distance_m, heading_offset_deg = 0.0))]
+    fn new(distance_m: f64, heading_offset_deg: f64) -> PyResult<Self> {
+        Ok(Self {
+            distance_m: non_negative("distance_m", distance_m)?,
+            heading_offset_deg: angle("heading_offset_deg", heading_offset_deg, MAX_ANGLE_DEG)?,
+        })
+    }
+
+    /// The `Move` this entry means for `frame` (its body's heading plus the offset).
+    fn __call__(
+        &self,
+        py: Python<'_>,
+        frame: PyRef<'_, crate::frame::PyFrame>,
+    ) -> PyResult<Py<PyAny>> {
+        let r = frame.header().pose.rotation;
+        let cmd = self.resolve(heading_deg(r));
+        let Command::Move {
+            heading_deg,
+            distance,
+        } = cmd
+        else {
+            return Err(PyValueError::new_err("MoveAhead resolves to a Move"));
+        };
+        let m = Bound::new(
+            py,
+            sub(
+                Move {
+                    heading_deg,
+                    distance_m: distance,
+                },
+                PyCommand { command: cmd },
+            ),
+        )?;
+        Ok(m.into_any().unbind())
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "MoveAhead(distance_m={}, heading_offset_deg={})",
+            self.distance_m, self.heading_offset_deg
+        )
+    }
+}
+
+/// The heading (yaw about +y, 0 ≤ h < 360, 0 faces +z) of the rotation quaternion
+/// (x, y, z, w): `Pose.heading_deg`.
+pub(crate) fn heading_deg(rotation: [f32; 4]) -> f32 {
+    (2.0 * rotation[1].atan2(rotation[3]))
+        .to_degrees()
+        .rem_euclid(360.0)
 }

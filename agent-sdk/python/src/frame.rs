@@ -101,10 +101,11 @@ unsafe impl Sync for OwnedFrame {}
 /// One sensor frame: the cycle, simulated time, pose and the other sensors, and the
 /// camera images as read-only numpy arrays that view the frame's memory without a copy.
 ///
-/// An image array keeps its frame alive. An agent can hold only a few frames at once
-/// (the one it is reading and the one being received): keep copies (`arr.copy()`) of
-/// what you need beyond the current cycle, or the next wait raises
-/// `TooManyFramesHeldError`.
+/// An image array keeps its frame alive. An agent can hold at most `MAX_FRAMES_HELD` (2)
+/// frames at once: the one it is reading and one more (each held frame is a sample of
+/// the host's per-agent pool in shared memory: 1 queued + 2 held + 1 being written, so a
+/// slow agent never blocks the host). Keep copies (`arr.copy()`) of what you need beyond
+/// the current cycle, or the next wait raises `TooManyFramesHeldError`.
 #[pyclass(module = "vrsync._vrsync", name = "Frame", frozen)]
 pub(crate) struct PyFrame {
     owned: OwnedFrame,

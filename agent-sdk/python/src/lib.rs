@@ -8,6 +8,8 @@
 //!   Ctrl-C raises `KeyboardInterrupt` at once), sends and stops.
 //! - `frame::PyFrame` holds one received frame; its images are exported through the
 //!   buffer protocol as read-only, zero-copy views whose base keeps the frame alive.
+//! - `group::AgentGroup` drives N agents of one session with one call per lock-step
+//!   cycle, writing every frame into stacked numpy arrays (the batched vector envs' core).
 //! - `commands` holds one small class per command of the catalogue, checked when built.
 //! - Errors are the exception classes of `vrsync.errors` (pure Python, so that they can
 //!   inherit from both `VrsyncError` and the matching built-in such as `TimeoutError`).
@@ -19,6 +21,7 @@ mod agent;
 mod commands;
 mod errors;
 mod frame;
+mod group;
 mod sensors;
 
 use pyo3::prelude::*;
@@ -27,11 +30,13 @@ use pyo3::prelude::*;
 #[pymodule]
 fn _vrsync(m: &Bound<'_, PyModule>) -> PyResult<()> {
     agent::register(m)?;
+    group::register(m)?;
     m.add_class::<frame::PyFrame>()?;
     m.add_class::<frame::ImageBuffer>()?;
     sensors::register(m)?;
     commands::register(m)?;
     m.add("PROTOCOL_VERSION", vrsync_bridge::PROTOCOL_VERSION)?;
+    m.add("MAX_FRAMES_HELD", vrsync_bridge::AGENT_MAX_HELD_FRAMES)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

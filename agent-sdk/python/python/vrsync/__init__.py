@@ -16,18 +16,25 @@ with motor commands and a stop::
 In sync mode the simulator advances by exactly one step per cycle, after every agent's
 stop: simulated time never depends on how long the agent computed.
 
-Also here: :mod:`vrsync.gym` (a Gymnasium env), :mod:`vrsync.pettingzoo` (a PettingZoo
-parallel env) and :mod:`vrsync.compat` (the original ``Annar4Interface`` names).
+:class:`AgentGroup` drives N agents of one session from one process with one call into
+Rust per lock-step cycle, writing every frame into stacked numpy arrays.
+
+Also here: :mod:`vrsync.gym` (a Gymnasium env), :mod:`vrsync.vector` (a batched Gymnasium
+vector env over N agents of one world), :mod:`vrsync.sb3` (a Stable-Baselines3 ``VecEnv``
+on the same core), :mod:`vrsync.pettingzoo` (a PettingZoo parallel env) and
+:mod:`vrsync.compat` (the original ``Annar4Interface`` names).
 """
 
 from __future__ import annotations
 
 from . import errors
 from ._vrsync import (
+    MAX_FRAMES_HELD,
     PROTOCOL_VERSION,
     ActionState,
     ActionStatus,
     Agent,
+    AgentGroup,
     Camera,
     CancelMove,
     Collision,
@@ -45,6 +52,7 @@ from ._vrsync import (
     InteractId,
     InteractPos,
     Move,
+    MoveAhead,
     MoveTo,
     PointId,
     PointPos,
@@ -73,10 +81,12 @@ from .errors import (
 )
 
 __all__ = [
+    "MAX_FRAMES_HELD",
     "PROTOCOL_VERSION",
     "ActionState",
     "ActionStatus",
     "Agent",
+    "AgentGroup",
     "AgentIdInUseError",
     "AgentIdNotServedError",
     "Camera",
@@ -101,6 +111,7 @@ __all__ = [
     "InteractId",
     "InteractPos",
     "Move",
+    "MoveAhead",
     "MoveTo",
     "PointId",
     "PointPos",

@@ -1,12 +1,14 @@
 """Type stubs of the extension module `vrsync._vrsync` (built from Rust with PyO3)."""
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from os import PathLike
 from typing import Any, final
 
 import numpy.typing as npt
 
 PROTOCOL_VERSION: int
+MAX_FRAMES_HELD: int
+"""Frames an agent may hold at once (2): the one it reads and one more."""
 __version__: str
 
 def config_agent_ids(config: str | PathLike[str]) -> list[int]:
@@ -369,6 +371,118 @@ class Agent:
     def last_cycle(self) -> int | None: ...
     @property
     def frames_skipped(self) -> int: ...
+    @property
+    def frames_held(self) -> int:
+        """Frames of this agent alive now (a wait fails at ``MAX_FRAMES_HELD``)."""
+    @property
+    def closed(self) -> bool: ...
+
+@final
+class MoveAhead:
+    """An action-table entry: walk ``distance_m`` towards the body's current heading plus
+    ``heading_offset_deg`` (resolved per agent and cycle into a ``Move``)."""
+
+    def __init__(self, distance_m: float, heading_offset_deg: float = 0.0) -> None: ...
+    def __call__(self, frame: Frame) -> Move:
+        """The ``Move`` this entry means for ``frame``."""
+    @property
+    def distance_m(self) -> float: ...
+    @property
+    def heading_offset_deg(self) -> float: ...
+
+_Entry = Command | MoveAhead | Sequence[Command | MoveAhead] | None
+
+@final
+class AgentGroup:
+    """N agents of one session, stepped together with one call into Rust per cycle; their
+    frames are written into stacked numpy arrays (row ``k`` = ``ids[k]``), overwritten
+    in place by every ``reset``/``step``."""
+
+    @staticmethod
+    def connect(
+        config: str | PathLike[str],
+        agent_ids: Sequence[int] | None = None,
+        *,
+        session: str | None = None,
+        connect_timeout: float | None = None,
+        step_timeout: float | None = None,
+    ) -> AgentGroup:
+        """Connects the agents (default: every ``[[agent]]``); they need equal cameras."""
+    def set_action_table(self, table: Sequence[_Entry]) -> None:
+        """The discrete actions ``step`` indexes."""
+    @property
+    def num_actions(self) -> int: ...
+    def reset(self, kind: str = "trial") -> None:
+        """Every agent's reset (``"trial"``/``"environment"``) and next frame."""
+    def step(
+        self,
+        actions: npt.ArrayLike,
+        *,
+        reset: npt.ArrayLike | None = None,
+        reset_kind: str = "trial",
+    ) -> None:
+        """One cycle: table entry ``actions[k]`` for agent ``k`` (a reset where
+        ``reset[k]``), then every agent's next frame."""
+    def step_commands(self, commands: Sequence[_Entry]) -> None:
+        """One cycle with explicit commands per agent."""
+    @property
+    def images(self) -> dict[str, npt.NDArray[Any]]:
+        """Camera name → (N, H, W[, C]) array."""
+    def image(self, name: str) -> npt.NDArray[Any]: ...
+    @property
+    def positions(self) -> npt.NDArray[Any]:
+        """(N, 3) float32."""
+    @property
+    def rotations(self) -> npt.NDArray[Any]:
+        """(N, 4) float32 quaternions (x, y, z, w)."""
+    @property
+    def rewards(self) -> npt.NDArray[Any]:
+        """(N,) float32."""
+    @property
+    def sim_time_ns(self) -> npt.NDArray[Any]:
+        """(N,) uint64."""
+    @property
+    def cycles(self) -> npt.NDArray[Any]:
+        """(N,) uint64."""
+    @property
+    def collisions(self) -> npt.NDArray[Any]:
+        """(N,) uint32: collisions each frame brings."""
+    @property
+    def previous_outcome(self) -> npt.NDArray[Any]:
+        """(N,) uint8: 0 none, 1 stopped, 2 timed out."""
+    @property
+    def previous_rejected(self) -> npt.NDArray[Any]:
+        """(N,) uint32."""
+    @property
+    def frames_skipped(self) -> npt.NDArray[Any]:
+        """(N,) uint64, since connect."""
+    @property
+    def timing(self) -> tuple[int, float, float]:
+        """(steps, seconds in the SDK excluding blocked waits, seconds blocked waiting)."""
+    def reset_timing(self) -> None: ...
+    def close(self) -> None:
+        """Disconnects every agent (idempotent)."""
+    def __enter__(self) -> AgentGroup: ...
+    def __exit__(self, *args: object) -> bool: ...
+    def __len__(self) -> int: ...
+    @property
+    def ids(self) -> list[int]: ...
+    @property
+    def session(self) -> str: ...
+    @property
+    def config_path(self) -> str: ...
+    @property
+    def sync_mode(self) -> bool: ...
+    @property
+    def stop_timeout(self) -> float: ...
+    @property
+    def step_timeout(self) -> float: ...
+    @property
+    def simulation_time_per_frame(self) -> float: ...
+    @property
+    def cameras(self) -> list[Camera]: ...
+    @property
+    def transports(self) -> list[str]: ...
     @property
     def closed(self) -> bool: ...
 

@@ -1,0 +1,962 @@
+//! `vrsync.AgentGroup`: N agents of one session, stepped together with one call.
+//!
+//! One `step` sends every agent's commands and stop, then releases the GIL once and waits
+//! for every agent's next frame, copying each frame into preallocated, stacked numpy
+//! arrays (one `memcpy` per image row block) and dropping it at once: no Python object
+//! per agent or frame, and no frame is held between steps.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use pyo3::buffer::PyUntypedBuffer;
+use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyTuple};
+use vrsync_agent::{Agent, Frame, PixelFormat, WaitStartError};
+use vrsync_bridge::{Command, Config, WireOutcome};
+
+use crate::agent::{
+    PyCamera, SameThread, cameras_of, connect_one, load_config, secs, send_error, stop_error,
+    wait_error,
+};
+use crate::commands::{MoveAhead, PyCommand, heading_deg};
+use crate::errors::{error, obj};
+
+/// The longest the GIL is released in one go while waiting: Ctrl-C is seen within this.
+const WAIT_SLICE: Duration = Duration::from_millis(50);
+
+/// The agents, used only through `&mut AgentGroup` (PyO3's borrow flag makes every use
+/// exclusive) and never holding a frame between calls.
+struct Agents(Vec<Agent>);
+// SAFETY: an agent is used by one thread at a time (PyO3's exclusive borrow of the
+// group), and no frame of it outlives a call of the group (frames are copied and dropped
+// inside `step`), which is the condition under which `vrsync.Agent` also lets an agent
+// move to another thread.
+unsafe impl Send for Agents {}
+// SAFETY: as above; there is no shared (`&`) use of the agents.
+unsafe impl Sync for Agents {}
+
+/// One command of an action-table entry.
+#[derive(Debug, Clone, Copy)]
+enum Planned {
+    Fixed(Command),
+    Ahead(MoveAhead),
+}
+
+/// A writable, C-contiguous numpy array owned by the group, with its buffer export held
+/// (numpy cannot resize or free it while exported).
+struct Out {
+    array: Py<PyAny>,
+    _export: PyUntypedBuffer,
+    ptr: usize,
+}
+
+impl Out {
+    fn new(
+        py: Python<'_>,
+        numpy: &Bound<'_, PyModule>,
+        shape: &[usize],
+        dtype: &str,
+    ) -> PyResult<Self> {
+        let array = numpy.call_method1("zeros", (PyTuple::new(py, shape)?, dtype))?;
+        let export = PyUntypedBuffer::get(&array)?;
+        if export.readonly() || !export.is_c_contiguous() {
+            return Err(PyValueError::new_err(
+                "numpy.zeros returned a read-only or non-contiguous array",
+            ));
+        }
+        let ptr = export.buf_ptr() as usize;
+        Ok(Self {
+            array: array.unbind(),
+            _export: export,
+            ptr,
+        })
+    }
+}
+
+/// Where one camera's images go: `(N, H, W[, C])`.
+#[derive(Debug, Clone)]
+struct ImageSink {
+    name: String,
+    width: u32,
+    height: u32,
+    format: PixelFormat,
+    row_bytes: usize,
+    ptr: usize,
+}
+
+/// Raw pointers into the output arrays, for writing with the GIL released.
+#[derive(Debug, Clone)]
+struct Sink {
+    images: Vec<ImageSink>,
+    positions: usize,
+    rotations: usize,
+    rewards: usize,
+    sim_time_ns: usize,
+    cycles: usize,
+    collisions: usize,
+    outcomes: usize,
+    rejected: usize,
+    skipped: usize,
+}
+
+/// What one agent's frame must look like, checked before it is copied.
+fn check_frame(sink: &Sink, frame: &Frame) -> Result<(), String> {
+    if frame.image_count() != sink.images.len() {
+        return Err(format!(
+            "the frame has {} images, the config {}",
+            frame.image_count(),
+            sink.images.len()
+        ));
+    }
+    for (img, s) in frame.images().zip(&sink.images) {
+        if img.width() != s.width || img.height() != s.height || img.format() != s.format {
+            return Err(format!(
+                "image {:?} is {}x{} {:?}, the config says {:?} {}x{} {:?}",
+                img.name(),
+                img.width(),
+                img.height(),
+                img.format(),
+                s.name,
+                s.width,
+                s.height,
+                s.format
+            ));
+        }
+    }
+    Ok(())
+}
+
+impl Sink {
+    /// Copies agent `k`'s `frame` into row `k` of every output array.
+    ///
+    /// # Safety
+    /// The pointers must point to the group's live output arrays (shapes as built in
+    /// `AgentGroup::connect`), `k` < N, and `check_frame` must have passed.
+    unsafe fn write(&self, k: usize, frame: &Frame, skipped: u64) {
+        let h = frame.header();
+        // SAFETY (whole block): row `k` of each array lies inside it (k < N, shapes as
+        // built); the arrays are C-contiguous and aligned for their dtype (numpy).
+        unsafe {
+            for (img, s) in frame.images().zip(&self.images) {
+                let dst = (s.ptr as *mut u8).add(k * s.row_bytes * s.height as usize);
+                let data = img.data();
+                let stride = img.stride();
+                if stride == s.row_bytes {
+                    let n = s.row_bytes * s.height as usize;
+                    std::ptr::copy_nonoverlapping(data.as_ptr(), dst, n.min(data.len()));
+                } else {
+                    for y in 0..s.height as usize {
+                        if let Some(row) = data.get(y * stride..y * stride + s.row_bytes) {
+                            std::ptr::copy_nonoverlapping(
+                                row.as_ptr(),
+                                dst.add(y * s.row_bytes),
+                                s.row_bytes,
+                            );
+                        }
+                    }
+                }
+            }
+            let pos = (self.positions as *mut f32).add(3 * k);
+            for (i, v) in h.pose.position.iter().enumerate() {
+                *pos.add(i) = *v;
+            }
+            let rot = (self.rotations as *mut f32).add(4 * k);
+            for (i, v) in h.pose.rotation.iter().enumerate() {
+                *rot.add(i) = v.clamp(-1.0, 1.0);
+            }
+            *(self.rewards as *mut f32).add(k) = h.reward;
+            *(self.sim_time_ns as *mut u64).add(k) = h.sim_time_ns;
+            *(self.cycles as *mut u64).add(k) = h.cycle;
+            *(self.collisions as *mut u32).add(k) = frame.collisions().len() as u32;
+            *(self.outcomes as *mut u8).add(k) = outcome_code(h.previous_outcome);
+            *(self.rejected as *mut u32).add(k) = h.previous_rejected;
+            *(self.skipped as *mut u64).add(k) = skipped;
+        }
+    }
+}
+
+/// `previous_outcome` as a small integer: 0 none, 1 stopped, 2 timed out.
+fn outcome_code(v: u32) -> u8 {
+    match v {
+        x if x == WireOutcome::Stopped as u32 => 1,
+        x if x == WireOutcome::TimedOut as u32 => 2,
+        _ => 0,
+    }
+}
+
+/// How one wait phase ended.
+enum Waited {
+    /// Every pending agent got its frame.
+    Done,
+    /// The slice ended with agents still pending.
+    Pending,
+    /// Agent `k` failed.
+    Failed(usize, WaitStartError),
+}
+
+/// N agents of one session, driven in lock-step from one process with one call per step.
+///
+/// ```python
+/// group = vrsync.AgentGroup.connect("config/default.toml")   # every [[agent]]
+/// group.set_action_table([None, vrsync.MoveAhead(0.5), vrsync.Turn(-30), vrsync.Turn(30)])
+/// group.reset()                                   # trial reset for all, waits for frames
+/// for _ in range(100):
+///     group.step(np.random.randint(0, 4, len(group)))
+///     left = group.images["left"]                  # (N, H, W, 3) uint8, overwritten per step
+/// group.close()
+/// ```
+///
+/// After `reset`/`step` the output arrays (`images`, `positions`, `rotations`, `rewards`,
+/// `sim_time_ns`, `cycles`, `collisions`, `previous_outcome`, `previous_rejected`,
+/// `frames_skipped`) hold every agent's new frame, row `k` for `ids[k]`. They are the same
+/// arrays every step, overwritten in place: copy what you keep. No frame is held between
+/// steps, so the held-frame limit never applies to a group.
+#[pyclass(module = "vrsync._vrsync", name = "AgentGroup")]
+pub(crate) struct AgentGroup {
+    agents: Option<Agents>,
+    ids: Vec<u32>,
+    session: String,
+    config_path: PathBuf,
+    sync_mode: bool,
+    stop_timeout: Duration,
+    simulation_time_per_frame: Duration,
+    step_timeout: Duration,
+    cameras: Vec<PyCamera>,
+    transports: Vec<&'static str>,
+    /// Whether each agent has received a frame (it may stop only then).
+    primed: Vec<bool>,
+    /// The rotation of each agent's newest frame (for `MoveAhead`).
+    rotations: Vec<[f32; 4]>,
+    table: Vec<Vec<Planned>>,
+    sink: Sink,
+    images: Vec<(String, Out)>,
+    outs: Vec<(&'static str, Out)>,
+    sdk_ns: u64,
+    wait_ns: u64,
+    steps: u64,
+}
+
+/// Parses one action-table entry or one agent's commands: `None`, a command, a
+/// `MoveAhead`, or a sequence of those.
+fn planned(entry: &Bound<'_, PyAny>) -> PyResult<Vec<Planned>> {
+    if entry.is_none() {
+        return Ok(Vec::new());
+    }
+    let one = |e: &Bound<'_, PyAny>| -> PyResult<Planned> {
+        if let Ok(c) = e.cast::<PyCommand>() {
+            return Ok(Planned::Fixed(c.get().command));
+        }
+        if let Ok(a) = e.cast::<MoveAhead>() {
+            return Ok(Planned::Ahead(*a.get()));
+        }
+        Err(PyTypeError::new_err(format!(
+            "expected a vrsync Command, a MoveAhead, or None, got {}: a function of the \
+             frame cannot run inside the batched step (map actions to commands in Python \
+             and use step_commands, or action_fn in the envs)",
+            e.repr().map_or_else(|_| "?".to_owned(), |r| r.to_string())
+        )))
+    };
+    if entry.cast::<PyCommand>().is_ok() || entry.cast::<MoveAhead>().is_ok() || entry.is_callable()
+    {
+        return Ok(vec![one(entry)?]);
+    }
+    let mut v = Vec::new();
+    for e in entry.try_iter().map_err(|_| {
+        PyTypeError::new_err(format!(
+            "expected a vrsync Command, a MoveAhead, a sequence of them, or None, got {}",
+            entry
+                .repr()
+                .map_or_else(|_| "?".to_owned(), |r| r.to_string())
+        ))
+    })? {
+        v.push(one(&e?)?);
+    }
+    Ok(v)
+}
+
+/// Integers from a numpy array (any integer dtype) or a sequence.
+fn indices(values: &Bound<'_, PyAny>, n: usize, what: &str) -> PyResult<Vec<i64>> {
+    let v: Vec<i64> = match pyo3::buffer::PyBuffer::<i64>::get(values) {
+        Ok(b) if b.dimensions() == 1 => b.to_vec(values.py())?,
+        _ => values.extract::<Vec<i64>>().map_err(|_| {
+            PyTypeError::new_err(format!(
+                "{what} must be {n} integers (a numpy array or a sequence)"
+            ))
+        })?,
+    };
+    if v.len() != n {
+        return Err(PyValueError::new_err(format!(
+            "{what} has {} entries for {n} agents",
+            v.len()
+        )));
+    }
+    Ok(v)
+}
+
+/// Booleans from a numpy array or a sequence (`None`: all false).
+fn mask(values: Option<&Bound<'_, PyAny>>, n: usize) -> PyResult<Vec<bool>> {
+    let Some(values) = values.filter(|v| !v.is_none()) else {
+        return Ok(vec![false; n]);
+    };
+    let v: Vec<bool> = values
+        .try_iter()?
+        .map(|x| x?.is_truthy())
+        .collect::<PyResult<_>>()?;
+    if v.len() != n {
+        return Err(PyValueError::new_err(format!(
+            "reset has {} entries for {n} agents",
+            v.len()
+        )));
+    }
+    Ok(v)
+}
+
+fn reset_command(kind: &str) -> PyResult<Command> {
+    match kind {
+        "trial" => Ok(Command::TrialReset { reset_type: 0 }),
+        "environment" => Ok(Command::EnvironmentReset { reset_type: 0 }),
+        other => Err(PyValueError::new_err(format!(
+            "reset kind must be \"trial\" or \"environment\", got {other:?}"
+        ))),
+    }
+}
+
+impl AgentGroup {
+    fn agents(&mut self) -> PyResult<&mut Vec<Agent>> {
+        match self.agents.as_mut() {
+            Some(a) => Ok(&mut a.0),
+            None => Err(pyo3::exceptions::PyRuntimeError::new_err(format!(
+                "the AgentGroup of session {:?} is closed",
+                self.session
+            ))),
+        }
+    }
+
+    fn not_primed(&self, py: Python<'_>) -> PyErr {
+        error(
+            py,
+            "UsageError",
+            format!(
+                "the agents of session {:?} have no frame yet: call reset() before step()",
+                self.session
+            ),
+            &[("session", obj(py, self.session.as_str()))],
+        )
+    }
+
+    /// Sends `commands(k)` and the stop for every agent `k`, then waits for and copies
+    /// every agent's next frame. `commands(k)` returns `None` for an agent that has no
+    /// frame yet (it only waits for its first).
+    fn run(
+        &mut self,
+        py: Python<'_>,
+        mut commands: impl FnMut(usize, [f32; 4]) -> Option<Vec<Command>>,
+    ) -> PyResult<()> {
+        let started = Instant::now();
+        let n = self.ids.len();
+        let session = self.session.clone();
+        let ids = self.ids.clone();
+        let rotations = self.rotations.clone();
+        let agents = self.agents()?;
+        // 1. every agent's commands and stop
+        for (k, agent) in agents.iter_mut().enumerate() {
+            let Some(cmds) = commands(k, rotations[k]) else {
+                continue;
+            };
+            for c in cmds {
+                agent.send(c).map_err(|e| send_error(py, e, ids[k]))?;
+            }
+            agent
+                .stop()
+                .map_err(|e| stop_error(py, e, &session, ids[k]))?;
+        }
+        // 2. every agent's next frame, copied into the outputs and dropped at once
+        let mut pending: Vec<usize> = (0..n).collect();
+        let deadline = started + self.step_timeout;
+        let sink = SameThread(self.sink.clone());
+        let mut wait_ns = 0u64;
+        let mut rotations = rotations;
+        loop {
+            let slice_end = (Instant::now() + WAIT_SLICE).min(deadline);
+            let agents = self.agents()?;
+            let job = SameThread((agents, &mut pending, &mut rotations, &sink));
+            let (outcome, waited) = py
+                .detach(move || {
+                    let job = job;
+                    let (agents, pending, rotations, sink) = job.0;
+                    let r = wait_all(agents, pending, rotations, &sink.0, slice_end);
+                    SameThread(r)
+                })
+                .0;
+            wait_ns += waited;
+            match outcome {
+                Waited::Done => break,
+                Waited::Pending => {
+                    py.check_signals()?;
+                    if Instant::now() >= deadline {
+                        let k = pending.first().copied().unwrap_or(0);
+                        let last_cycle = self
+                            .agents
+                            .as_ref()
+                            .and_then(|a| a.0.get(k))
+                            .and_then(Agent::last_cycle);
+                        let e = WaitStartError::Timeout {
+                            waited: started.elapsed(),
+                            last_cycle,
+                        };
+                        return Err(wait_error(py, e, &session, ids[k], started.elapsed()));
+                    }
+                }
+                Waited::Failed(k, e) => {
+                    return Err(wait_error(py, e, &session, ids[k], started.elapsed()));
+                }
+            }
+        }
+        self.rotations = rotations;
+        self.primed.iter_mut().for_each(|p| *p = true);
+        let total = u64::try_from(started.elapsed().as_nanos()).unwrap_or(u64::MAX);
+        self.sdk_ns += total.saturating_sub(wait_ns);
+        self.wait_ns += wait_ns;
+        self.steps += 1;
+        Ok(())
+    }
+}
+
+/// Receives the next frame of every agent in `pending` until `slice_end`, copying each
+/// into the outputs and dropping it; removes the agents done from `pending`. Returns the
+/// outcome and the nanoseconds spent blocked (waits that found no frame at once).
+fn wait_all(
+    agents: &mut [Agent],
+    pending: &mut Vec<usize>,
+    rotations: &mut [[f32; 4]],
+    sink: &Sink,
+    slice_end: Instant,
+) -> (Waited, u64) {
+    let mut blocked = 0u64;
+    let mut take = |k: usize, frame: Frame, agents: &mut [Agent]| -> Result<(), WaitStartError> {
+        check_frame(sink, &frame).map_err(|reason| WaitStartError::BadFrame {
+            cycle: frame.cycle(),
+            reason,
+        })?;
+        let skipped = agents.get(k).map_or(0, Agent::frames_skipped);
+        // SAFETY: the sink points to the group's output arrays (alive: the group holds
+        // them and is exclusively borrowed), k < N, and the frame was checked.
+        unsafe { sink.write(k, &frame, skipped) };
+        rotations[k] = frame.header().pose.rotation;
+        Ok(())
+    };
+    loop {
+        // Non-blocking pass: in sync mode most frames are already there.
+        let mut i = 0;
+        while i < pending.len() {
+            let k = pending[i];
+            let Some(agent) = agents.get_mut(k) else {
+                pending.swap_remove(i);
+                continue;
+            };
+            match agent.wait_start(Some(Duration::ZERO)) {
+                Ok(frame) => {
+                    if let Err(e) = take(k, frame, agents) {
+                        return (Waited::Failed(k, e), blocked);
+                    }
+                    pending.remove(i);
+                }
+                Err(WaitStartError::Timeout { .. }) => i += 1,
+                Err(e) => return (Waited::Failed(k, e), blocked),
+            }
+        }
+        let Some(&k) = pending.first() else {
+            return (Waited::Done, blocked);
+        };
+        let now = Instant::now();
+        if now >= slice_end {
+            return (Waited::Pending, blocked);
+        }
+        // Block on the first pending agent (its frame arrives with the others').
+        let Some(agent) = agents.get_mut(k) else {
+            pending.remove(0);
+            continue;
+        };
+        let r = agent.wait_start(Some(slice_end - now));
+        blocked += u64::try_from(now.elapsed().as_nanos()).unwrap_or(u64::MAX);
+        match r {
+            Ok(frame) => {
+                if let Err(e) = take(k, frame, agents) {
+                    return (Waited::Failed(k, e), blocked);
+                }
+                pending.remove(0);
+            }
+            Err(WaitStartError::Timeout { .. }) => return (Waited::Pending, blocked),
+            Err(e) => return (Waited::Failed(k, e), blocked),
+        }
+    }
+}
+
+#[pymethods]
+impl AgentGroup {
+    /// Connects the agents `agent_ids` (default: every `[[agent]]` of the config) of the
+    /// session in `config`, one connection each, in this process. Every agent must have
+    /// the same cameras (names, sizes, formats), so that their images stack.
+    /// `step_timeout`: seconds a step waits for all frames (default
+    /// `2 × stop_timeout + 5`).
+    ///
+    /// Raises what `Agent.connect` raises; `ConfigError` for agents with different
+    /// cameras or an id that is not in the config, `ValueError` for a repeated id.
+    #[staticmethod]
+    #[pyo3(signature = (config, agent_ids = None, *, session = None, connect_timeout = None, step_timeout = None))]
+    fn connect(
+        py: Python<'_>,
+        config: PathBuf,
+        agent_ids: Option<Vec<i64>>,
+        session: Option<String>,
+        connect_timeout: Option<f64>,
+        step_timeout: Option<f64>,
+    ) -> PyResult<Self> {
+        let mut cfg: Config = load_config(py, &config)?;
+        if let Some(s) = session {
+            cfg.session = s;
+        }
+        let ids: Vec<u32> = match agent_ids {
+            Some(ids) => ids
+                .into_iter()
+                .map(|i| {
+                    u32::try_from(i).map_err(|_| {
+                        PyValueError::new_err(format!("agent ids must be ≥ 0, got {i}"))
+                    })
+                })
+                .collect::<PyResult<_>>()?,
+            None => cfg.agents.iter().map(|a| a.id).collect(),
+        };
+        if ids.is_empty() {
+            return Err(PyValueError::new_err(
+                "an AgentGroup needs at least one agent",
+            ));
+        }
+        for (i, id) in ids.iter().enumerate() {
+            if ids[..i].contains(id) {
+                return Err(PyValueError::new_err(format!(
+                    "agent id {id} is given twice"
+                )));
+            }
+        }
+        let config_error =
+            |msg: String| error(py, "ConfigError", msg, &[("path", obj(py, config.clone()))]);
+        let mut cameras: Option<Vec<PyCamera>> = None;
+        let mut transports = Vec::with_capacity(ids.len());
+        for id in &ids {
+            let a = cfg.agents.iter().find(|a| a.id == *id).ok_or_else(|| {
+                let all: Vec<u32> = cfg.agents.iter().map(|a| a.id).collect();
+                config_error(format!(
+                    "{} has no [[agent]] with id {id} (its agents: {all:?})",
+                    config.display()
+                ))
+            })?;
+            transports.push(a.transport.as_str());
+            let c = cameras_of(a);
+            match &cameras {
+                None => cameras = Some(c),
+                Some(first) if *first != c => {
+                    return Err(config_error(format!(
+                        "{}: agent {id}'s cameras differ from agent {}'s; an AgentGroup \
+                         stacks images, so every agent needs the same cameras",
+                        config.display(),
+                        ids[0]
+                    )));
+                }
+                Some(_) => {}
+            }
+        }
+        let cameras = cameras.unwrap_or_default();
+        let n = ids.len();
+        let numpy = py.import("numpy")?;
+        let mut images = Vec::new();
+        let mut image_sinks = Vec::new();
+        for c in &cameras {
+            let format = match c.format.as_str() {
+                "rgb8" => PixelFormat::Rgb8,
+                "rgba8" => PixelFormat::Rgba8,
+                "gray8" => PixelFormat::Gray8,
+                _ => PixelFormat::Depth32f,
+            };
+            let mut shape = vec![n];
+            shape.extend(c.shape().iter().map(|&d| d as usize));
+            let out = Out::new(py, &numpy, &shape, c.dtype())?;
+            image_sinks.push(ImageSink {
+                name: c.name.clone(),
+                width: c.width,
+                height: c.height,
+                format,
+                row_bytes: c.width as usize * format.bytes_per_pixel(),
+                ptr: out.ptr,
+            });
+            images.push((c.name.clone(), out));
+        }
+        let outs = vec![
+            ("positions", Out::new(py, &numpy, &[n, 3], "float32")?),
+            ("rotations", Out::new(py, &numpy, &[n, 4], "float32")?),
+            ("rewards", Out::new(py, &numpy, &[n], "float32")?),
+            ("sim_time_ns", Out::new(py, &numpy, &[n], "uint64")?),
+            ("cycles", Out::new(py, &numpy, &[n], "uint64")?),
+            ("collisions", Out::new(py, &numpy, &[n], "uint32")?),
+            ("previous_outcome", Out::new(py, &numpy, &[n], "uint8")?),
+            ("previous_rejected", Out::new(py, &numpy, &[n], "uint32")?),
+            ("frames_skipped", Out::new(py, &numpy, &[n], "uint64")?),
+        ];
+        let sink = Sink {
+            images: image_sinks,
+            positions: outs[0].1.ptr,
+            rotations: outs[1].1.ptr,
+            rewards: outs[2].1.ptr,
+            sim_time_ns: outs[3].1.ptr,
+            cycles: outs[4].1.ptr,
+            collisions: outs[5].1.ptr,
+            outcomes: outs[6].1.ptr,
+            rejected: outs[7].1.ptr,
+            skipped: outs[8].1.ptr,
+        };
+        let timeout = secs("connect_timeout", connect_timeout)?.unwrap_or(cfg.sync.connect_timeout);
+        let step_timeout = secs("step_timeout", step_timeout)?
+            .unwrap_or(2 * cfg.sync.stop_timeout + Duration::from_secs(5));
+        let mut agents = Vec::with_capacity(n);
+        for id in &ids {
+            // On an error the agents connected so far are dropped (they leave).
+            agents.push(connect_one(py, &cfg, *id, timeout)?);
+        }
+        Ok(Self {
+            agents: Some(Agents(agents)),
+            primed: vec![false; n],
+            rotations: vec![[0.0, 0.0, 0.0, 1.0]; n],
+            ids,
+            session: cfg.session.clone(),
+            config_path: config,
+            sync_mode: cfg.sync.sync_mode,
+            stop_timeout: cfg.sync.stop_timeout,
+            simulation_time_per_frame: cfg.sync.simulation_time_per_frame,
+            step_timeout,
+            cameras,
+            transports,
+            table: Vec::new(),
+            sink,
+            images,
+            outs,
+            sdk_ns: 0,
+            wait_ns: 0,
+            steps: 0,
+        })
+    }
+
+    /// Sets the discrete action table that `step(actions)` indexes: each entry is `None`
+    /// (no command), a `Command`, a `MoveAhead`, or a sequence of those.
+    fn set_action_table(&mut self, table: &Bound<'_, PyAny>) -> PyResult<()> {
+        let mut t = Vec::new();
+        for e in table.try_iter()? {
+            t.push(planned(&e?)?);
+        }
+        self.table = t;
+        Ok(())
+    }
+
+    /// The number of entries of the action table.
+    #[getter]
+    fn num_actions(&self) -> usize {
+        self.table.len()
+    }
+
+    /// Sends every agent's reset (`kind` `"trial"` or `"environment"`) with its stop and
+    /// waits for every agent's next frame (the one in which the reset is done). Agents
+    /// that have no frame yet first wait for one.
+    #[pyo3(signature = (kind = "trial"))]
+    fn reset(&mut self, py: Python<'_>, kind: &str) -> PyResult<()> {
+        let cmd = reset_command(kind)?;
+        if self.primed.iter().any(|p| !p) {
+            let primed = self.primed.clone();
+            // First frames only: agents that have one stop without commands.
+            self.run(py, |k, _| primed[k].then(Vec::new))?;
+        }
+        self.run(py, |_, _| Some(vec![cmd]))
+    }
+
+    /// One lock-step cycle for every agent: agent `k` sends the commands of table entry
+    /// `actions[k]` and its stop (agents with `reset[k]` true send a reset of
+    /// `reset_kind` instead), then every agent's next frame is written into the output
+    /// arrays. `actions`: N integers (numpy array or sequence).
+    ///
+    /// Raises `UsageError` before the first `reset()`, `ValueError` for an index outside
+    /// the table, and the errors of `Agent.wait`/`Agent.stop`.
+    #[pyo3(signature = (actions, *, reset = None, reset_kind = "trial"))]
+    fn step(
+        &mut self,
+        py: Python<'_>,
+        actions: &Bound<'_, PyAny>,
+        reset: Option<&Bound<'_, PyAny>>,
+        reset_kind: &str,
+    ) -> PyResult<()> {
+        let n = self.ids.len();
+        let actions = indices(actions, n, "actions")?;
+        let reset = mask(reset, n)?;
+        let reset_cmd = reset_command(reset_kind)?;
+        if self.primed.iter().any(|p| !p) {
+            return Err(self.not_primed(py));
+        }
+        let table = std::mem::take(&mut self.table);
+        for (k, &a) in actions.iter().enumerate() {
+            if !reset[k] && usize::try_from(a).map_or(true, |a| a >= table.len()) {
+                self.table = table;
+                return Err(PyValueError::new_err(format!(
+                    "action {a} of agent {} is not in the action table (0..{})",
+                    self.ids[k],
+                    self.table.len()
+                )));
+            }
+        }
+        let result = self.run(py, |k, rot| {
+            if reset[k] {
+                return Some(vec![reset_cmd]);
+            }
+            let entry = usize::try_from(actions[k])
+                .ok()
+                .and_then(|a| table.get(a))?;
+            Some(
+                entry
+                    .iter()
+                    .map(|p| match p {
+                        Planned::Fixed(c) => *c,
+                        Planned::Ahead(m) => m.resolve(heading_deg(rot)),
+                    })
+                    .collect(),
+            )
+        });
+        self.table = table;
+        result
+    }
+
+    /// One lock-step cycle with explicit commands: `commands[k]` (a `Command`, a
+    /// `MoveAhead`, a sequence of them, or `None`) for agent `k`, then every agent's
+    /// next frame, as `step`.
+    fn step_commands(&mut self, py: Python<'_>, commands: &Bound<'_, PyAny>) -> PyResult<()> {
+        let n = self.ids.len();
+        let list: Vec<Vec<Planned>> = commands
+            .try_iter()?
+            .map(|e| planned(&e?))
+            .collect::<PyResult<_>>()?;
+        if list.len() != n {
+            return Err(PyValueError::new_err(format!(
+                "commands has {} entries for {n} agents",
+                list.len()
+            )));
+        }
+        if self.primed.iter().any(|p| !p) {
+            return Err(self.not_primed(py));
+        }
+        self.run(py, |k, rot| {
+            Some(
+                list[k]
+                    .iter()
+                    .map(|p| match p {
+                        Planned::Fixed(c) => *c,
+                        Planned::Ahead(m) => m.resolve(heading_deg(rot)),
+                    })
+                    .collect(),
+            )
+        })
+    }
+
+    /// Camera name → its stacked images, `(N, H, W, 3)`/`(N, H, W, 4)` `uint8` or
+    /// `(N, H, W)` `uint8`/`float32`: the same arrays every step, overwritten in place.
+    #[getter]
+    fn images<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        for (name, out) in &self.images {
+            d.set_item(name, out.array.bind(py))?;
+        }
+        Ok(d)
+    }
+
+    /// The stacked images of camera `name` (see `images`).
+    fn image<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyAny>> {
+        self.images
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, o)| o.array.bind(py).clone())
+            .ok_or_else(|| {
+                let names: Vec<&str> = self.images.iter().map(|(n, _)| n.as_str()).collect();
+                pyo3::exceptions::PyKeyError::new_err(format!(
+                    "no camera {name:?} (cameras: {names:?})"
+                ))
+            })
+    }
+
+    /// Body positions `(N, 3)` `float32`, metres.
+    #[getter]
+    fn positions<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        self.outs[0].1.array.bind(py).clone()
+    }
+
+    /// Body rotations `(N, 4)` `float32`, quaternions (x, y, z, w).
+    #[getter]
+    fn rotations<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        self.outs[1].1.array.bind(py).clone()
+    }
+
+    /// Rewards received since the previous frame, `(N,)` `float32`.
+    #[getter]
+    fn rewards<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        self.outs[2].1.array.bind(py).clone()
+    }
+
+    /// Simulated time of each frame in nanoseconds, `(N,)` `uint64`.
+    #[getter]
+    fn sim_time_ns<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        self.outs[3].1.array.bind(py).clone()
+    }
+
+    /// The cycle of each agent's frame, `(N,)` `uint64` (equal for all in sync mode).
+    #[getter]
+    fn cycles<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        self.outs[4].1.array.bind(py).clone()
+    }
+
+    /// Collisions each frame brings (each once), `(N,)` `uint32`.
+    #[getter]
+    fn collisions<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        self.outs[5].1.array.bind(py).clone()
+    }
+
+    /// How each agent's previous cycle ended, `(N,)` `uint8`: 0 none (first frame or
+    /// async mode), 1 stopped, 2 timed out (the host did not get the stop in time).
+    #[getter]
+    fn previous_outcome<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        self.outs[6].1.array.bind(py).clone()
+    }
+
+    /// Commands of each agent the host rejected in the previous cycle, `(N,)` `uint32`.
+    #[getter]
+    fn previous_rejected<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        self.outs[7].1.array.bind(py).clone()
+    }
+
+    /// Frames each agent never saw since it connected, `(N,)` `uint64`.
+    #[getter]
+    fn frames_skipped<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        self.outs[8].1.array.bind(py).clone()
+    }
+
+    /// `(steps, sdk_seconds, wait_seconds)` since connect (or `reset_timing`): calls of
+    /// `reset`/`step`/`step_commands` (a `reset` that first waits for the first frames
+    /// counts twice), the time spent inside them except blocked waiting (sending,
+    /// receiving, copying), and the time blocked waiting for frames.
+    #[getter]
+    fn timing(&self) -> (u64, f64, f64) {
+        (
+            self.steps,
+            self.sdk_ns as f64 * 1e-9,
+            self.wait_ns as f64 * 1e-9,
+        )
+    }
+
+    /// Sets `timing` back to zero.
+    fn reset_timing(&mut self) {
+        (self.steps, self.sdk_ns, self.wait_ns) = (0, 0, 0);
+    }
+
+    /// Disconnects every agent (each leaves the session). Idempotent.
+    fn close(&mut self) {
+        self.agents = None;
+    }
+
+    fn __enter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {
+        slf
+    }
+
+    #[pyo3(signature = (*_args))]
+    fn __exit__(&mut self, _args: &Bound<'_, PyTuple>) -> bool {
+        self.close();
+        false
+    }
+
+    fn __len__(&self) -> usize {
+        self.ids.len()
+    }
+
+    /// The agent ids, in row order.
+    #[getter]
+    fn ids(&self) -> Vec<u32> {
+        self.ids.clone()
+    }
+
+    /// The session name.
+    #[getter]
+    fn session(&self) -> &str {
+        &self.session
+    }
+
+    /// The config file the agents were connected with.
+    #[getter]
+    fn config_path(&self) -> PathBuf {
+        self.config_path.clone()
+    }
+
+    /// Whether the session runs in lock-step (sync) mode.
+    #[getter]
+    fn sync_mode(&self) -> bool {
+        self.sync_mode
+    }
+
+    /// Seconds the host waits for an agent's stop (see the config's `[sync]`).
+    #[getter]
+    fn stop_timeout(&self) -> f64 {
+        self.stop_timeout.as_secs_f64()
+    }
+
+    /// Seconds a step waits for every frame.
+    #[getter]
+    fn step_timeout(&self) -> f64 {
+        self.step_timeout.as_secs_f64()
+    }
+
+    /// Simulated seconds per cycle.
+    #[getter]
+    fn simulation_time_per_frame(&self) -> f64 {
+        self.simulation_time_per_frame.as_secs_f64()
+    }
+
+    /// The cameras every agent has, in image order.
+    #[getter]
+    fn cameras(&self) -> Vec<PyCamera> {
+        self.cameras.clone()
+    }
+
+    /// Each agent's transport (`"shm"`, `"tcp"` or `"zenoh"`), in row order.
+    #[getter]
+    fn transports(&self) -> Vec<&'static str> {
+        self.transports.clone()
+    }
+
+    /// Whether `close()` was called.
+    #[getter]
+    fn closed(&self) -> bool {
+        self.agents.is_none()
+    }
+
+    fn __reduce__(&self) -> PyResult<()> {
+        Err(PyTypeError::new_err(
+            "an AgentGroup holds live connections to a vrsync host and cannot be pickled or \
+             sent to another process: build it in the process that uses it",
+        ))
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "<vrsync.AgentGroup ids={:?} session={:?}{}>",
+            self.ids,
+            self.session,
+            if self.agents.is_none() { " closed" } else { "" }
+        )
+    }
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<AgentGroup>()?;
+    Ok(())
+}
