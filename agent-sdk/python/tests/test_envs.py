@@ -100,9 +100,9 @@ def test_pettingzoo_agents_act_in_the_same_cycle(tmp_path: Path, start_host) -> 
     cycles = []
     while env.agents:
         env.step({a: env.action_space(a).sample() for a in env.agents})
-        cycles.append({n: e.frame.cycle for n, e in env._envs.items()})
+        cycles.append(env.group.cycles.tolist())
     assert len(cycles) == 20
-    assert all(len(set(c.values())) == 1 for c in cycles), cycles
+    assert all(len(set(c)) == 1 for c in cycles), cycles
     env.close()
     summary = host.finish()
     assert summary["stop_timeouts"] == 0
@@ -116,7 +116,7 @@ def test_pettingzoo_over_mixed_transports_matches_the_all_shm_world(
         config, _ = write_config(tmp_path, tag, agents=2, agent_transports=per_agent)
         host = start_host(config, 41)
         env = VrsyncParallelEnv(config, connect_timeout=20)
-        assert [e.agent.transport for e in env._envs.values()] == (
+        assert env.group.transports == (
             ["shm", "shm"] if per_agent is None else ["shm", "tcp"]
         )
         env.reset(seed=0)
@@ -156,3 +156,53 @@ def test_compat_drives_the_original_loop_for_100_cycles(tmp_path: Path, start_ho
     assert cycles == 100
     assert summary["stop_timeouts"] == 0 and summary["commands_applied"] > 1
     assert iface.checkActionExecState(action)
+
+
+def test_gym_env_refuses_a_step_that_would_hold_too_many_frames_and_stays_usable(
+    tmp_path: Path, start_host
+) -> None:
+    import vrsync
+
+    assert vrsync.MAX_FRAMES_HELD == 2
+    config, _ = write_config(tmp_path, "gymheld")
+    host = start_host(config)
+    env = VrsyncEnv(config, 0, connect_timeout=20, copy_observations=False)
+    obs0, _ = env.reset()
+    obs1, *_ = env.step(0)  # holds the frames of obs0 and obs1 (views)
+    cycle = env.frame.cycle
+    with pytest.raises(vrsync.TooManyFramesHeldError, match="copy_observations=True") as info:
+        env.step(0)
+    assert "FrameStackObservation" in str(info.value) and "Nothing was sent" in str(info.value)
+    assert info.value.max == 2 and env.agent.frames_held == 2
+    assert env.frame.cycle == cycle, "the env did not move"
+    del obs0  # the fix: drop (or copy) the old observation ...
+    obs2, *_ = env.step(0)  # ... and the same step works
+    assert env.frame.cycle == cycle + 1
+    del obs1, obs2
+    for _ in range(3):
+        obs, *_ = env.step(0)  # keeping only the newest view is fine
+    assert env.frame.previous_outcome == "stopped"
+    del obs
+    env.close()
+    host.kill()
+
+
+def test_frame_stacking_needs_copies_and_works_with_them(tmp_path: Path, start_host) -> None:
+    import vrsync
+    from gymnasium.wrappers import FrameStackObservation
+
+    config, _ = write_config(tmp_path, "gymstack", stop_timeout=1.0)
+    host = start_host(config)
+    env = FrameStackObservation(VrsyncEnv(config, 0, connect_timeout=20, copy_observations=False), 4)
+    env.reset()
+    with pytest.raises(vrsync.TooManyFramesHeldError, match="FrameStackObservation"):
+        for _ in range(4):
+            env.step(0)
+    env.close()
+    env = FrameStackObservation(VrsyncEnv(config, 0, connect_timeout=20), 4)
+    obs, _ = env.reset()
+    for _ in range(6):
+        obs, *_ = env.step(1)
+    assert obs["left"].shape[0] == 4
+    env.close()
+    host.kill()

@@ -24,7 +24,7 @@ def run_example(name: str, *args: str, timeout: float = 120) -> subprocess.Compl
 
 
 def test_every_example_has_a_test() -> None:
-    assert ALL == ["gym_random.py", "pettingzoo_loop.py", "seek.py"]
+    assert ALL == ["gym_random.py", "pettingzoo_loop.py", "seek.py", "vector_loop.py"]
 
 
 def test_seek_finds_the_red_object(tmp_path: Path, start_host) -> None:
@@ -53,4 +53,15 @@ def test_pettingzoo_loop(tmp_path: Path, start_host, transport: str) -> None:
     out = run_example("pettingzoo_loop.py", "--config", str(config), "--cycles", "60")
     assert out.returncode == 0, out.stdout + out.stderr
     assert out.stdout.strip() == "agents 2 steps 60"
+    host.kill()
+
+
+def test_vector_loop(tmp_path: Path, start_host) -> None:
+    config, _ = write_config(tmp_path, "vecex", agents=4, cameras=(("left", 84, "rgb8"),))
+    host = start_host(config)
+    out = run_example("vector_loop.py", "--config", str(config), "--steps", "100", "--camera", "left")
+    assert out.returncode == 0, out.stdout + out.stderr
+    words = out.stdout.split()
+    assert words[:4] == ["agents", "4", "steps", "100"], out.stdout
+    assert float(words[5]) > 0 and float(words[7]) > 0
     host.kill()

@@ -25,6 +25,7 @@ only this env's ``np_random`` (for your sampling), as Gymnasium asks.
 
 from __future__ import annotations
 
+import sys
 import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
@@ -35,25 +36,31 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from . import Agent, Command, EnvironmentReset, Frame, Move, TrialReset, Turn
+from . import (
+    MAX_FRAMES_HELD,
+    Agent,
+    Command,
+    EnvironmentReset,
+    Frame,
+    MoveAhead,
+    TooManyFramesHeldError,
+    TrialReset,
+    Turn,
+)
 
 __all__ = ["VrsyncEnv", "DEFAULT_ACTIONS", "LateLearnerWarning"]
 
-ActionEntry = Union[Command, Callable[[Frame], Union[Command, Sequence[Command], None]], None]
-"""What a discrete action maps to: a command, a function of the current frame returning
-command(s), or ``None`` (do nothing this cycle)."""
-
-
-def _forward(distance_m: float) -> Callable[[Frame], Command]:
-    def move(frame: Frame) -> Command:
-        return Move(heading_deg=frame.pose.heading_deg, distance_m=distance_m)
-
-    return move
+ActionEntry = Union[
+    Command, MoveAhead, Callable[[Frame], Union[Command, Sequence[Command], None]], None
+]
+"""What a discrete action maps to: a command, a :class:`vrsync.MoveAhead` (a walk relative
+to the body's heading), a function of the current frame returning command(s), or ``None``
+(do nothing this cycle). The batched envs (:mod:`vrsync.vector`) take no functions."""
 
 
 DEFAULT_ACTIONS: tuple[ActionEntry, ...] = (
     None,  # 0: do nothing
-    _forward(0.5),  # 1: walk 0.5 m straight ahead
+    MoveAhead(0.5),  # 1: walk 0.5 m straight ahead (resolved per frame: a Move)
     Turn(angle_deg=-30.0),  # 2: turn 30° to the left
     Turn(angle_deg=30.0),  # 3: turn 30° to the right
 )
@@ -89,9 +96,18 @@ class VrsyncEnv(gymnasium.Env[dict[str, Any], Any]):
         action_fn: ``action_fn(action, frame) -> Command | list[Command] | None``.
         terminated_fn: ``terminated_fn(frame) -> bool``; default: never terminates
             (wrap in ``gymnasium.wrappers.TimeLimit`` for episodes).
+        observation: ``"dict"`` (default: a ``Dict`` of every camera plus ``"position"``
+            and ``"rotation"``) or ``"camera"``: one camera's images as a plain ``Box``
+            (so that e.g. SB3's ``CnnPolicy`` works); ``camera`` names it (default: the
+            first camera).
         copy_observations: observations are fresh copies (the default, as Gymnasium
             expects); ``False`` returns read-only views into shared memory — fastest,
-            but an agent can hold only a few frames: never store such views.
+            but an agent can hold at most :data:`vrsync.MAX_FRAMES_HELD` (2) frames, the
+            current one and one more: never store such views, and do not use
+            frame-stacking wrappers (``FrameStackObservation`` keeps its last
+            observations) with them. A ``step`` that would exceed the limit raises
+            :class:`vrsync.TooManyFramesHeldError` *before* it sends anything, so the
+            env stays usable: release the views and call ``step`` again.
         session: override the config's session name.
         connect_timeout: seconds to wait for the host.
         step_timeout: seconds to wait for the next frame in ``step``/``reset``
@@ -109,11 +125,17 @@ class VrsyncEnv(gymnasium.Env[dict[str, Any], Any]):
         action_space: spaces.Space[Any] | None = None,
         action_fn: Callable[[Any, Frame], Command | Sequence[Command] | None] | None = None,
         terminated_fn: Callable[[Frame], bool] | None = None,
+        observation: str = "dict",
+        camera: str | None = None,
         copy_observations: bool = True,
         session: str | None = None,
         connect_timeout: float | None = None,
         step_timeout: float | None = None,
     ) -> None:
+        if observation not in ("dict", "camera"):
+            raise ValueError(f'observation must be "dict" or "camera", got {observation!r}')
+        if camera is not None and observation != "camera":
+            raise ValueError('camera= is for observation="camera"')
         if (action_space is None) != (action_fn is None):
             raise ValueError("give action_space and action_fn together (or neither)")
         if action_space is None and not actions:
@@ -132,13 +154,24 @@ class VrsyncEnv(gymnasium.Env[dict[str, Any], Any]):
             step_timeout if step_timeout is not None else 2 * self.agent.stop_timeout + 5.0
         )
         cams = {c.name: _box_for(c) for c in self.agent.cameras}
-        self.observation_space = spaces.Dict(
-            {
-                **cams,
-                "position": spaces.Box(-_FAR_M, _FAR_M, shape=(3,), dtype=np.float32),
-                "rotation": spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32),
-            }
-        )
+        self._camera: str | None = None
+        if observation == "camera":
+            if not cams:
+                self.agent.close()
+                raise ValueError('observation="camera" needs a camera, and the agent has none')
+            self._camera = camera if camera is not None else next(iter(cams))
+            if self._camera not in cams:
+                self.agent.close()
+                raise ValueError(f"no camera {self._camera!r} (cameras: {list(cams)})")
+            self.observation_space: spaces.Space[Any] = cams[self._camera]
+        else:
+            self.observation_space = spaces.Dict(
+                {
+                    **cams,
+                    "position": spaces.Box(-_FAR_M, _FAR_M, shape=(3,), dtype=np.float32),
+                    "rotation": spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32),
+                }
+            )
         self.frame: Frame | None = None
         """The current frame (the one the last observation came from)."""
         self._frame_at = 0.0
@@ -147,7 +180,10 @@ class VrsyncEnv(gymnasium.Env[dict[str, Any], Any]):
         self._episode_skipped = 0
 
     # ---- helpers -------------------------------------------------------------------
-    def _observe(self, frame: Frame) -> dict[str, Any]:
+    def _observe(self, frame: Frame) -> Any:
+        if self._camera is not None:
+            img = frame.image(self._camera)
+            return np.array(img) if self._copy else img
         obs: dict[str, Any] = {}
         for name, img in frame.images.items():
             obs[name] = np.array(img) if self._copy else img
@@ -182,6 +218,27 @@ class VrsyncEnv(gymnasium.Env[dict[str, Any], Any]):
             return [out]
         return list(out)
 
+    def _check_frames_held(self) -> None:
+        """Raises TooManyFramesHeldError if the next wait could not receive, before
+        anything is sent (so the env stays usable once the views are released)."""
+        held = self.agent.frames_held
+        # Released before the wait unless something besides this env refers to it (its
+        # image views do): the env's attribute and getrefcount's argument are 2.
+        if self.frame is not None and sys.getrefcount(self.frame) <= 2:
+            held -= 1
+        if held >= MAX_FRAMES_HELD:
+            e = TooManyFramesHeldError(
+                f"agent {self.agent.id} would hold {held + 1} frames after this step, more "
+                f"than the {MAX_FRAMES_HELD} it may (the frame being read and one more): "
+                "observations with copy_observations=False are views that keep their "
+                "frames alive. Nothing was sent: drop the old observations (or copy what "
+                "you keep, `arr.copy()`) and call step() again, or build the env with "
+                "copy_observations=True (the default), which frame-stacking wrappers such "
+                "as gymnasium.wrappers.FrameStackObservation need"
+            )
+            e.session, e.agent_id, e.max = self.agent.session, self.agent.id, MAX_FRAMES_HELD
+            raise e
+
     def _send_stop(self, commands: list[Command]) -> None:
         """Sends `commands` and the stop for the current frame (warns if it is late)."""
         late = time.monotonic() - self._frame_at
@@ -212,6 +269,8 @@ class VrsyncEnv(gymnasium.Env[dict[str, Any], Any]):
             raise ValueError(f'options["reset"] must be "trial" or "environment", got {kind!r}')
         if self.frame is None:
             self._receive()
+        elif not self._copy:
+            self._check_frames_held()
         self._send_stop([TrialReset() if kind == "trial" else EnvironmentReset()])
 
     def _episode_begun(self, frame: Frame) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -241,7 +300,12 @@ class VrsyncEnv(gymnasium.Env[dict[str, Any], Any]):
         """Sends the action's commands with this cycle's stop and returns the next frame's
         observation, its reward, ``terminated_fn(frame)``, ``False`` and an info dict."""
         if self.frame is None:
-            raise RuntimeError("call reset() before step()")
+            raise RuntimeError(
+                "call reset() before step(): this env has no current frame (it was not "
+                "reset yet, or the last step/reset failed while waiting for its frame)"
+            )
+        if not self._copy:
+            self._check_frames_held()
         self._send_stop(self._commands(action, self.frame))
         return self._step_done(self._receive())
 
