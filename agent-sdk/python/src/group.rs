@@ -424,8 +424,11 @@ impl AgentGroup {
 }
 
 /// Receives the next frame of every agent in `pending` until `slice_end`, copying each
-/// into the outputs and dropping it; removes the agents done from `pending`. Returns the
-/// outcome and the nanoseconds spent blocked (waits that found no frame at once).
+/// into the outputs and dropping it; removes the agents done from `pending`. Agents are
+/// taken in order (the host publishes in that order): a non-blocking try first, then a
+/// blocking wait only if the frame is not there yet, so each agent costs at most two
+/// calls. Returns the outcome and the nanoseconds spent in tries that found no frame and
+/// in blocking waits (the time waited for the host, not spent in the SDK).
 fn wait_all(
     agents: &mut [Agent],
     pending: &mut Vec<usize>,
@@ -434,63 +437,52 @@ fn wait_all(
     slice_end: Instant,
 ) -> (Waited, u64) {
     let mut blocked = 0u64;
-    let mut take = |k: usize, frame: Frame, agents: &mut [Agent]| -> Result<(), WaitStartError> {
-        check_frame(sink, &frame).map_err(|reason| WaitStartError::BadFrame {
-            cycle: frame.cycle(),
-            reason,
-        })?;
-        let skipped = agents.get(k).map_or(0, Agent::frames_skipped);
-        // SAFETY: the sink points to the group's output arrays (alive: the group holds
-        // them and is exclusively borrowed), k < N, and the frame was checked.
-        unsafe { sink.write(k, &frame, skipped) };
-        rotations[k] = frame.header().pose.rotation;
-        Ok(())
-    };
-    loop {
-        // Non-blocking pass: in sync mode most frames are already there.
-        let mut i = 0;
-        while i < pending.len() {
-            let k = pending[i];
-            let Some(agent) = agents.get_mut(k) else {
-                pending.swap_remove(i);
-                continue;
-            };
-            match agent.wait_start(Some(Duration::ZERO)) {
-                Ok(frame) => {
-                    if let Err(e) = take(k, frame, agents) {
-                        return (Waited::Failed(k, e), blocked);
-                    }
-                    pending.remove(i);
-                }
-                Err(WaitStartError::Timeout { .. }) => i += 1,
-                Err(e) => return (Waited::Failed(k, e), blocked),
-            }
-        }
-        let Some(&k) = pending.first() else {
-            return (Waited::Done, blocked);
-        };
-        let now = Instant::now();
-        if now >= slice_end {
-            return (Waited::Pending, blocked);
-        }
-        // Block on the first pending agent (its frame arrives with the others').
+    let ns = |since: Instant| u64::try_from(since.elapsed().as_nanos()).unwrap_or(u64::MAX);
+    let mut done = 0;
+    let mut outcome = Waited::Done;
+    for &k in pending.iter() {
         let Some(agent) = agents.get_mut(k) else {
-            pending.remove(0);
+            done += 1;
             continue;
         };
-        let r = agent.wait_start(Some(slice_end - now));
-        blocked += u64::try_from(now.elapsed().as_nanos()).unwrap_or(u64::MAX);
+        let tried = Instant::now();
+        let mut r = agent.wait_start(Some(Duration::ZERO));
+        if matches!(r, Err(WaitStartError::Timeout { .. })) {
+            let now = Instant::now();
+            if now >= slice_end {
+                blocked += ns(tried);
+                outcome = Waited::Pending;
+                break;
+            }
+            r = agent.wait_start(Some(slice_end - now));
+            blocked += ns(tried);
+        }
         match r {
             Ok(frame) => {
-                if let Err(e) = take(k, frame, agents) {
-                    return (Waited::Failed(k, e), blocked);
+                if let Err(reason) = check_frame(sink, &frame) {
+                    let cycle = frame.cycle();
+                    outcome = Waited::Failed(k, WaitStartError::BadFrame { cycle, reason });
+                    break;
                 }
-                pending.remove(0);
+                let skipped = agent.frames_skipped();
+                // SAFETY: the sink points to the group's output arrays (alive: the group
+                // holds them and is exclusively borrowed), k < N, and the frame was checked.
+                unsafe { sink.write(k, &frame, skipped) };
+                rotations[k] = frame.header().pose.rotation;
+                done += 1;
             }
-            Err(WaitStartError::Timeout { .. }) => return (Waited::Pending, blocked),
-            Err(e) => return (Waited::Failed(k, e), blocked),
+            Err(WaitStartError::Timeout { .. }) => {
+                outcome = Waited::Pending;
+                break;
+            }
+            Err(e) => {
+                outcome = Waited::Failed(k, e);
+                break;
+            }
         }
     }
+    pending.drain(..done);
+    (outcome, blocked)
 }
 
 #[pymethods]

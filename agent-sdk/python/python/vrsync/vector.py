@@ -203,6 +203,9 @@ class VrsyncVectorEnv(VectorEnv):  # type: ignore[type-arg]
         self._episode_skipped = np.zeros(n, dtype=np.uint64)
         self._autoreset = np.zeros(n, dtype=np.bool_)
         self._all = np.ones(n, dtype=np.bool_)
+        self._all.flags.writeable = False
+        self._one_cycle = np.ones(n, dtype=np.int64)
+        self._one_cycle.flags.writeable = False
         self._started = False
 
     # ---- helpers -------------------------------------------------------------------
@@ -231,7 +234,11 @@ class VrsyncVectorEnv(VectorEnv):  # type: ignore[type-arg]
             "_previous_outcome": all_,
             "frames_skipped": (g.frames_skipped - self._episode_skipped).astype(np.int64),
             "_frames_skipped": all_,
-            "step_cycles": np.full(self.num_envs, step_cycles, dtype=np.int64),
+            "step_cycles": (
+                self._one_cycle
+                if step_cycles == 1
+                else np.full(self.num_envs, step_cycles, dtype=np.int64)
+            ),
             "_step_cycles": all_,
         }
 
