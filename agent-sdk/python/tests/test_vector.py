@@ -312,3 +312,21 @@ def test_single_env_camera_observation_is_a_plain_box(tmp_path: Path, start_host
     check_env(env, skip_render_check=True)
     env.close()
     host.kill()
+
+
+def test_bench_vector_drives_every_agent_until_the_host_closes(tmp_path: Path, start_host) -> None:
+    import subprocess
+    import sys
+
+    config, _ = write_config(tmp_path, "benchvec", agents=3, cameras=CAM84)
+    host = start_host(config, 60)
+    out = subprocess.run(
+        [sys.executable, "-m", "vrsync.bench_vector", "--config", str(config)],
+        capture_output=True, text=True, timeout=120,
+    )
+    assert out.returncode == 0, out.stdout + out.stderr
+    lines = out.stdout.split("\n")
+    assert lines[0].startswith("checksum ") and int(lines[0].split()[1]) >= 0
+    assert lines[1].startswith("sdk_us_per_agent_step ") and float(lines[1].split()[1]) > 0
+    summary = host.finish()
+    assert summary["frames"] == 60 and summary["stop_timeouts"] == 0

@@ -1,0 +1,69 @@
+"""The batched Python benchmark agent: every agent of a config from one process.
+
+    python -m vrsync.bench_vector --config FILE [--session NAME] [--ids 0,1,...]
+
+Drives the agents through :class:`vrsync.vector.VrsyncVectorEnv` (one
+:class:`vrsync.AgentGroup`: one call into Rust per cycle for all of them) and does the work
+of ``vrsync.bench_agent`` for each agent: read the first and the last byte of every row of
+every image (vectorised over the stacked ``(N, H, W, C)`` arrays), one command (turn 1°),
+stop; until the host closes the session. Then prints ``checksum <sum>`` and
+``sdk_us_per_agent_step <t>``: the time per agent-step spent inside the SDK's Rust code,
+blocked waiting for the host excluded.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+import vrsync
+from vrsync.vector import VrsyncVectorEnv
+
+
+def touch_rows(images: np.ndarray) -> int:
+    """Sum of the first and the last byte of every row of every image of the stack."""
+    rows = images.reshape(images.shape[0], images.shape[1], -1)
+    if rows.dtype != np.uint8:
+        rows = rows.view(np.uint8)
+    step = max(rows.shape[2] - 1, 1)
+    return int(rows[:, :, ::step].sum())
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        prog="python -m vrsync.bench_vector", description=__doc__.splitlines()[0]
+    )
+    parser.add_argument("--config", required=True)
+    parser.add_argument("--session")
+    parser.add_argument("--ids", help="comma-separated agent ids (default: every agent)")
+    args = parser.parse_args()
+    ids = [int(i) for i in args.ids.split(",")] if args.ids else None
+    total = 0
+    envs = VrsyncVectorEnv(
+        args.config,
+        ids,
+        actions=[vrsync.Turn(angle_deg=1.0)],
+        copy_observations=False,
+        session=args.session,
+        step_timeout=60,
+    )
+    try:
+        obs, _ = envs.reset()
+        actions = np.zeros(envs.num_envs, dtype=np.int64)
+        envs.group.reset_timing()
+        try:
+            while True:
+                total += sum(touch_rows(a) for k, a in obs.items() if k not in ("position", "rotation"))
+                obs, *_ = envs.step(actions)
+        except vrsync.HostClosedError:
+            pass  # the session ended
+        calls, sdk_s, _ = envs.group.timing
+    finally:
+        envs.close()
+    print(f"checksum {total}", flush=True)
+    per = sdk_s / (calls * envs.num_envs) * 1e6 if calls else float("nan")
+    print(f"sdk_us_per_agent_step {per:.3f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
