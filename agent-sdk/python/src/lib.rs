@@ -24,7 +24,29 @@ mod frame;
 mod group;
 mod sensors;
 
+use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
+
+/// Testing aid, not API: creates `n` iceoryx2 nodes `<prefix>.<k>` and never removes them,
+/// so they are dead nodes once this process exits (the Ctrl-C tests fill the registry with
+/// a few hundred leftovers this way).
+#[pyfunction]
+fn _leak_nodes_for_tests(prefix: &str, n: usize) -> PyResult<()> {
+    vrsync_bridge::shm::leak_nodes_for_tests(prefix, n).map_err(PyRuntimeError::new_err)
+}
+
+/// Testing aid, not API: how many dead iceoryx2 nodes have a name starting with `prefix`.
+#[pyfunction]
+fn _dead_nodes_for_tests(prefix: &str) -> u64 {
+    vrsync_bridge::shm::dead_nodes_for_tests(prefix, false)
+}
+
+/// Testing aid, not API: removes the dead iceoryx2 nodes whose name starts with `prefix`;
+/// returns how many there were.
+#[pyfunction]
+fn _remove_dead_nodes_for_tests(prefix: &str) -> u64 {
+    vrsync_bridge::shm::dead_nodes_for_tests(prefix, true)
+}
 
 /// The extension module `vrsync._vrsync`.
 #[pymodule]
@@ -35,6 +57,9 @@ fn _vrsync(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<frame::ImageBuffer>()?;
     sensors::register(m)?;
     commands::register(m)?;
+    m.add_function(wrap_pyfunction!(_leak_nodes_for_tests, m)?)?;
+    m.add_function(wrap_pyfunction!(_dead_nodes_for_tests, m)?)?;
+    m.add_function(wrap_pyfunction!(_remove_dead_nodes_for_tests, m)?)?;
     m.add("PROTOCOL_VERSION", vrsync_bridge::PROTOCOL_VERSION)?;
     m.add("MAX_FRAMES_HELD", vrsync_bridge::AGENT_MAX_HELD_FRAMES)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

@@ -91,7 +91,7 @@ fn attr(attrs: &AttributeSet, key: &str) -> String {
 fn served_agent_ids(session: &str) -> Vec<u32> {
     let prefix = service_name(session, "agent/");
     let mut ids = Vec::new();
-    let _ = Svc::list(Config2::global_config(), |info| {
+    let _ = Svc::list(iceoryx2_config(), |info| {
         let name = info.static_details.name().as_str();
         if let Some(id) = name
             .strip_prefix(prefix.as_str())

@@ -211,16 +211,66 @@ fn keep_process_signal_handlers() {
     });
 }
 
+/// The iceoryx2 config of every vrsync node: iceoryx2's own (`iceoryx2.toml` or its
+/// defaults), except that creating or dropping a node does not clean up every dead node
+/// of the machine. iceoryx2 does that by default (`cleanup-dead-nodes-on-creation` /
+/// `-on-destruction`): it removed other sessions' (and other programs') leftovers, and
+/// with a few hundred dead nodes in the registry each connect attempt and each `close()`
+/// took a second or more, during which Ctrl-C was not seen. vrsync cleans the dead nodes
+/// of its own session only ([`cleanup_dead_nodes`] when a host starts, and the host's
+/// reaping of its agents); iceoryx2 still cleans a dead node's ports from a service when
+/// the service is opened (`cleanup-dead-nodes-on-open`), i.e. within the session.
+fn iceoryx2_config() -> &'static Config2 {
+    static CONFIG: std::sync::OnceLock<Config2> = std::sync::OnceLock::new();
+    CONFIG.get_or_init(|| {
+        let mut config = Config2::global_config().clone();
+        config.global.node.cleanup_dead_nodes_on_creation = false;
+        config.global.node.cleanup_dead_nodes_on_destruction = false;
+        config
+    })
+}
+
 fn node(name: &str) -> Result<Node<Svc>, String> {
     keep_process_signal_handlers();
     let node_name =
         NodeName::new(name).map_err(|e| format!("invalid node name {name:?}: {e:?}"))?;
     NodeBuilder::new()
         .name(&node_name)
+        .config(iceoryx2_config())
         // Signals are handled by `crate::signal` (or left to the embedding process).
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<Svc>()
         .map_err(|e| format!("cannot create iceoryx2 node {name:?}: {e:?}"))
+}
+
+/// Testing aid: creates `n` iceoryx2 nodes named `<prefix>.<k>` and never removes them,
+/// so that they are dead nodes once this process exits (tests of Ctrl-C, connect and
+/// close with a registry full of other programs' leftovers).
+///
+/// # Errors
+/// The iceoryx2 failure, as text.
+#[doc(hidden)]
+pub fn leak_nodes_for_tests(prefix: &str, n: usize) -> Result<(), String> {
+    for k in 0..n {
+        std::mem::forget(node(&format!("{prefix}.{k}"))?);
+    }
+    Ok(())
+}
+
+/// Testing aid: counts the dead iceoryx2 nodes whose name starts with `prefix` (those of
+/// [`leak_nodes_for_tests`]) and, with `remove`, removes them.
+#[doc(hidden)]
+pub fn dead_nodes_for_tests(prefix: &str, remove: bool) -> u64 {
+    let mut n = 0;
+    for_each_dead_node(|view, name| {
+        if name.starts_with(prefix) {
+            n += 1;
+            if remove {
+                let _ = view.try_remove_stale_resources();
+            }
+        }
+    });
+    n
 }
 
 /// What became of a session's host process, as iceoryx2's node registry tells.
@@ -240,7 +290,7 @@ fn find_host(session: &str) -> (HostState, Option<i32>) {
     use iceoryx2::node::NodeView;
     let wanted = host_node_name(session);
     let mut found = (HostState::Absent, None);
-    let _ = Node::<Svc>::list(Config2::global_config(), |node| {
+    let _ = Node::<Svc>::list(iceoryx2_config(), |node| {
         let (state, details) = match &node {
             NodeState::Alive(view) => (HostState::Alive, view.details()),
             NodeState::Dead(view) => (HostState::Dead, view.details()),
@@ -303,7 +353,7 @@ pub fn cleanup_dead_nodes(session: &str) -> u64 {
 /// reaping of dead agents.
 fn for_each_dead_node(mut f: impl FnMut(iceoryx2::node::DeadNodeView<Svc>, &str)) {
     use iceoryx2::node::NodeView;
-    let _ = Node::<Svc>::list(Config2::global_config(), |state| {
+    let _ = Node::<Svc>::list(iceoryx2_config(), |state| {
         if let NodeState::Dead(view) = state
             && let Some(name) = view
                 .details()
