@@ -193,7 +193,8 @@ pub(crate) fn connect_one(
     let started = Instant::now();
     loop {
         let left = timeout.saturating_sub(started.elapsed());
-        let slice = left.min(Duration::from_millis(200));
+        // Slices as short as a wait's: Ctrl-C is seen between two attempts.
+        let slice = left.min(WAIT_SLICE);
         let attempt = py.detach(|| {
             SameThread(
                 AgentBuilder::new(cfg, id)
