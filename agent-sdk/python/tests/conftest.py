@@ -56,13 +56,13 @@ def write_config(
     sync_mode: bool = True,
     stop_timeout: float = 5.0,
     connect_timeout: float = 20.0,
-    cameras: Sequence[tuple[str, int, str]] = CAMERAS_SMALL,
+    cameras: Sequence[tuple[str, int, str] | tuple[str, int, str, int]] = CAMERAS_SMALL,
     tcp_port: int = 0,
     agent_transports: dict[int, str] | None = None,
     zenoh_endpoint: str | None = None,
 ) -> tuple[Path, str]:
-    """Writes a config for `agents` agents with `cameras` ((name, width, format); height
-    from a 120°×90° field of view) and returns (path, session). `agent_transports` gives
+    """Writes a config for `agents` agents with `cameras` ((name, width, format), height
+    from a 120°×90° field of view, or (name, width, format, height)) and returns (path, session). `agent_transports` gives
     agents a transport of their own (default: `transport`). TCP hosts bind port 0
     unless `tcp_port` is given; `start_host` puts the bound port into the file.
     `zenoh_endpoint` (e.g. ``"tcp/10.0.0.1:7447"``) is where a zenoh host listens and
@@ -92,11 +92,12 @@ def write_config(
         lines += ["[[agent]]", f"id = {i}"]
         if agent_transports and i in agent_transports:
             lines.append(f'transport = "{agent_transports[i]}"')
-        for cam, width, fmt in cameras:
+        for cam, width, fmt, *height in cameras:
             lines += [
                 "[[agent.camera]]",
                 f'name = "{cam}"',
                 f"width = {width}",
+                *(f"height = {h}" for h in height),
                 f'format = "{fmt}"',
                 "fov_horizontal_deg = 120.0",
                 "fov_vertical_deg = 90.0",

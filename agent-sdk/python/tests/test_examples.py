@@ -24,7 +24,13 @@ def run_example(name: str, *args: str, timeout: float = 120) -> subprocess.Compl
 
 
 def test_every_example_has_a_test() -> None:
-    assert ALL == ["gym_random.py", "pettingzoo_loop.py", "seek.py", "vector_loop.py"]
+    assert ALL == [
+        "gym_random.py",
+        "pettingzoo_loop.py",
+        "seek.py",
+        "train_ppo.py",
+        "vector_loop.py",
+    ]
 
 
 def test_seek_finds_the_red_object(tmp_path: Path, start_host) -> None:
@@ -64,4 +70,20 @@ def test_vector_loop(tmp_path: Path, start_host) -> None:
     words = out.stdout.split()
     assert words[:4] == ["agents", "4", "steps", "100"], out.stdout
     assert float(words[5]) > 0 and float(words[7]) > 0
+    host.kill()
+
+
+def test_train_ppo(tmp_path: Path, start_host) -> None:
+    config, _ = write_config(tmp_path, "ppoex", agents=2, cameras=(("left", 84, "rgb8", 84),))
+    host = start_host(config)
+    model = tmp_path / "ppo.zip"
+    out = run_example(
+        "train_ppo.py", "--config", str(config), "--camera", "left", "--steps", "512",
+        "--n-steps", "64", "--episode", "50", "--save", str(model), timeout=300,
+    )
+    assert out.returncode == 0, out.stdout + out.stderr
+    words = out.stdout.split()
+    assert words[:4] == ["agents", "2", "steps", "512"], out.stdout
+    assert words[4] == "mean-episode-reward" and words[6] == "agent-steps/s", out.stdout
+    assert model.stat().st_size > 0
     host.kill()

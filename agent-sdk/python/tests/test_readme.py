@@ -34,7 +34,8 @@ def test_the_readmes_have_python_blocks() -> None:
 def test_readme_block_runs(tmp_path: Path, start_host, name: str, code: str) -> None:
     assert "config/default.toml" in code, "blocks name the default config"
     # A block that drives one agent gets a world of one (the host waits for every agent).
-    agents = 2 if "VrsyncParallelEnv" in code else 1
+    many = ("VrsyncParallelEnv", "VrsyncVecEnv", "VrsyncVectorEnv")
+    agents = 2 if any(name in code for name in many) else 1
     config, _ = write_config(tmp_path, "readme", agents=agents)
     # The loop blocks run until the host closes the session: give them a short run.
     host = start_host(config, 600)
