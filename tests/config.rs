@@ -36,6 +36,7 @@ fn default_toml_documents_every_key() {
         "SimulationTimePerFrame",
         "stop_timeout",
         "connect_timeout",
+        "wait_for_stop",
         "kind",
         "tcp_listen",
         "max_commands_per_cycle",

@@ -11,8 +11,8 @@ use std::time::Duration;
 use vrsync_agent::policy::STATUS_WAIT_CYCLES;
 
 use crate::util::{
-    CycleLine, EVENT_DEADLINE, Events, Proc, RUN_DEADLINE, TestConfig, Transport, bin, cycle_log,
-    record, spawn_host, wait_for_cycle_line,
+    CycleLine, EVENT_DEADLINE, Events, Proc, RUN_DEADLINE, TestConfig, Transport,
+    WAIT_FOR_STOP_TIMEOUT, bin, cycle_log, record, spawn_host, wait_for_cycle_line,
 };
 
 /// `Finished` and `Aborted`, as the wire encodes them.
@@ -206,6 +206,7 @@ const SLOW_WORLD: &str = "[world]\nmovement_speed = 0.25\n";
 fn a_stopped_agent_gets_every_event_once(t: Transport) {
     let mut cfg = TestConfig::with_transport("ev-sigstop", 1, t);
     cfg.stop_timeout_s = 0.3;
+    cfg.sync_extra = WAIT_FOR_STOP_TIMEOUT.into();
     cfg.extra = SLOW_WORLD.into();
     every_event_once(&mut cfg, 100, "circle", &[], |events, agent, log| {
         sigstop_for_three_cycles(events, agent, log, 30)
@@ -215,6 +216,7 @@ fn a_stopped_agent_gets_every_event_once(t: Transport) {
 fn a_late_agent_gets_every_event_once(t: Transport) {
     let mut cfg = TestConfig::with_transport("ev-late", 1, t);
     cfg.stop_timeout_s = 0.3;
+    cfg.sync_extra = WAIT_FOR_STOP_TIMEOUT.into();
     cfg.extra = SLOW_WORLD.into();
     // Late by three cycles at cycle 20: its batch comes too late, and the frames of the two
     // cycles after are skipped.
@@ -239,6 +241,7 @@ fn a_slow_async_agent_gets_every_event_once(t: Transport) {
 fn wander_keeps_its_command_rate_after_a_stall(t: Transport) {
     let mut cfg = TestConfig::with_transport("ev-rate", 1, t);
     cfg.stop_timeout_s = 0.3;
+    cfg.sync_extra = WAIT_FOR_STOP_TIMEOUT.into();
     let stalls = [30, 53, 76, 99];
     let cycles = every_event_once(&mut cfg, 160, "wander", &[], |events, agent, log| {
         for at in stalls {

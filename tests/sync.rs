@@ -108,6 +108,7 @@ fn a_late_stop_times_out_its_cycle_and_never_completes_the_next(t: Transport) {
     let dir = tempfile::tempdir().unwrap();
     let mut cfg = TestConfig::with_transport("late", 2, t);
     cfg.stop_timeout_s = 0.3;
+    cfg.sync_extra = util::WAIT_FOR_STOP_TIMEOUT.into();
     let rec = dir.path().join("record.jsonl");
     let run = HostRun::start_in(
         dir,
@@ -317,6 +318,7 @@ fn an_agent_without_a_host_fails_with_a_clear_error(t: Transport) {
             let addr = format!("at 127.0.0.1:{}", cfg.tcp_port);
             assert!(out.stderr.contains(&addr), "{}", out.stderr);
         }
+        Transport::Zenoh => unreachable!("run over shm and tcp only"),
     }
 }
 

@@ -14,6 +14,7 @@ mod examples;
 mod faults;
 mod hostile;
 mod legacy;
+mod liveness;
 mod logs;
 mod netns;
 mod sync;

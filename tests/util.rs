@@ -120,11 +120,26 @@ macro_rules! for_both_transports {
     };
 }
 
+/// `for_live_transports!(a, b)` makes tests `shm::a`, `tcp::a`, `zenoh::a`, … : for tests
+/// of liveness (eviction, waiting for a live agent), over every transport that can tell
+/// whether an agent is alive.
+macro_rules! for_live_transports {
+    ($($name:ident),* $(,)?) => {
+        for_both_transports!($($name),*);
+        mod zenoh {
+            $( #[test] fn $name() { super::$name(crate::util::Transport::Zenoh) } )*
+        }
+    };
+}
+
 /// Which transport a test runs over.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Transport {
     Shm,
     Tcp,
+    /// zenoh over loopback, on a port free when the config was made (zenoh cannot report
+    /// a port-0 listener's port through its stable API).
+    Zenoh,
 }
 
 /// A loopback port that was free a moment ago (bind port 0, read it, release it). Only for
@@ -137,11 +152,18 @@ pub fn free_tcp_port() -> u16 {
         .port()
 }
 
+/// A `[sync]` line (for [`TestConfig::sync_extra`]) for tests of the stop timeout's own
+/// semantics: the cycle ends without a live but late agent (the default, `"alive"`,
+/// waits for it).
+pub const WAIT_FOR_STOP_TIMEOUT: &str = "wait_for_stop = \"timeout\"\n";
+
 /// Options of a generated test config.
 #[derive(Debug, Clone)]
 pub struct TestConfig {
     pub transport: Transport,
     pub tcp_port: u16,
+    /// The zenoh endpoint's port ([`Transport::Zenoh`]).
+    pub zenoh_port: u16,
     pub session: String,
     pub agents: u32,
     pub sync_mode: bool,
@@ -164,6 +186,11 @@ impl TestConfig {
         Self {
             transport,
             tcp_port: 0,
+            zenoh_port: if transport == Transport::Zenoh {
+                free_tcp_port()
+            } else {
+                0
+            },
             session: session(tag),
             agents,
             sync_mode: true,
@@ -192,6 +219,13 @@ impl TestConfig {
             s += &format!(
                 "\n[transport]\nkind = \"tcp\"\ntcp_listen = \"127.0.0.1:{}\"\n",
                 self.tcp_port
+            );
+        }
+        if self.transport == Transport::Zenoh {
+            s += &format!(
+                "\n[transport]\nkind = \"zenoh\"\n[transport.zenoh]\n\
+                 listen = [\"tcp/127.0.0.1:{}\"]\nlease = 2.0\n",
+                self.zenoh_port
             );
         }
         for id in 0..self.agents {

@@ -15,7 +15,7 @@ use vrsync_bridge::{
     AgentFrame, AgentReceiveError, AgentSendError, AgentTransport, AgentWaitError,
     wait_for_newer_frame,
 };
-use vrsync_bridge::{Config, TransportKind};
+use vrsync_bridge::{Config, TransportKind, WaitForStop};
 
 /// Why [`Agent::wait_start`] returned without a frame.
 #[derive(Debug, thiserror::Error)]
@@ -401,6 +401,9 @@ impl<'c> AgentBuilder<'c> {
         Ok(Agent {
             id: self.id,
             session: self.config.session.clone(),
+            wait_for_stop: self.config.wait_for_stop(self.id),
+            sync_mode: self.config.sync.sync_mode,
+            host_waits_without_limit: self.config.waits_for_live_agents(),
             backend,
             queue: Vec::with_capacity(max),
             max_commands: max,
@@ -427,6 +430,9 @@ enum Backend {
 pub struct Agent {
     id: u32,
     session: String,
+    wait_for_stop: WaitForStop,
+    sync_mode: bool,
+    host_waits_without_limit: bool,
     backend: Backend,
     queue: Vec<MotorCommand>,
     max_commands: usize,
@@ -501,6 +507,30 @@ impl Agent {
     /// This agent's id.
     pub fn id(&self) -> u32 {
         self.id
+    }
+
+    /// How long the host waits for this agent's stop (its `[[agent]] wait_for_stop`, else
+    /// `[sync] wait_for_stop`): with [`WaitForStop::Alive`] (the default) a busy agent never
+    /// costs a stop timeout in sync mode, however long it computes between
+    /// [`Agent::wait_start`] and [`Agent::stop`]; with [`WaitForStop::Timeout`] the cycle
+    /// ends without it after `stop_timeout`.
+    pub fn wait_for_stop(&self) -> WaitForStop {
+        self.wait_for_stop
+    }
+
+    /// Whether the host never ends a cycle without this agent while it is alive (sync
+    /// mode and [`WaitForStop::Alive`]): then its stop is never late and no frame is
+    /// skipped, however long it computes.
+    pub fn host_waits_for_me(&self) -> bool {
+        self.sync_mode && self.wait_for_stop == WaitForStop::Alive
+    }
+
+    /// Whether the host may wait without limit for some agent of the session (sync mode and
+    /// an agent with [`WaitForStop::Alive`]): a wait for the next frame should then not
+    /// give up after a time derived from `stop_timeout` (pass `None` to
+    /// [`Agent::wait_start`]; a dead host is detected anyway).
+    pub fn host_may_wait_without_limit(&self) -> bool {
+        self.host_waits_without_limit
     }
 
     /// The cycle of the newest frame received.

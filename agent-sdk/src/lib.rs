@@ -40,7 +40,7 @@ pub use agent::{
 /// The [glam](https://docs.rs/glam) this SDK uses for poses and targets ([`Pose::position`],
 /// [`Command::MoveTo`]): use `vrsync_agent::glam` instead of pinning the same version.
 pub use glam;
-pub use vrsync_bridge::Config;
 pub use vrsync_bridge::{
     ActionState, ActionStatus, Collision, Command, PixelFormat, Pose, SensorHeader,
 };
+pub use vrsync_bridge::{Config, WaitForStop};

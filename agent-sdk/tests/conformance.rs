@@ -191,7 +191,10 @@ fn an_agent_that_goes_away_is_evicted_without_a_timeout(kind: &str) {
 fn a_late_stop_never_completes_the_next_cycle(kind: &'static str) {
     let (published_tx, published_rx): (Sender<()>, Receiver<()>) = channel();
     let (sent_tx, sent_rx): (Sender<()>, Receiver<()>) = channel();
-    let (config, host) = with_host(config_with(kind, true, 2.0, 256), move |host| {
+    // The stop timeout's own semantics (the default waits for a live agent).
+    let mut config = config_with(kind, true, 2.0, 256);
+    config.agents[0].wait_for_stop = vrsync_bridge::WaitForStop::Timeout;
+    let (config, host) = with_host(config, move |host| {
         publish(host);
         let report = host.collect().unwrap();
         assert_eq!(report.agents()[0].outcome, AgentOutcome::TimedOut);

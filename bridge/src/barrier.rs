@@ -5,7 +5,8 @@
 //!   *late* and never completes `f` (the "wrong frame" bug of lock-step systems);
 //! - a batch naming a future cycle is a protocol violation and is dropped;
 //! - a batch after the agent's stop of the same cycle is late too;
-//! - the cycle is complete when every awaited agent stopped.
+//! - the cycle is complete when every awaited agent stopped, was given up (its stop
+//!   timeout passed: `wait_for_stop = "timeout"`) or was evicted.
 
 /// How one agent's part of a cycle ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -59,6 +60,10 @@ pub struct CycleBarrier {
     awaited: Vec<bool>,
     stopped: Vec<bool>,
     evicted: Vec<bool>,
+    /// Given up at the stop timeout while the cycle went on (waiting for others).
+    given_up: Vec<bool>,
+    /// Reported as slow (waited for past the stop timeout).
+    slow: Vec<bool>,
     pending: usize,
 }
 
@@ -70,6 +75,8 @@ impl CycleBarrier {
             awaited: vec![false; slots],
             stopped: vec![false; slots],
             evicted: vec![false; slots],
+            given_up: vec![false; slots],
+            slow: vec![false; slots],
             pending: 0,
         }
     }
@@ -80,6 +87,8 @@ impl CycleBarrier {
         self.awaited.fill(false);
         self.stopped.fill(false);
         self.evicted.fill(false);
+        self.given_up.fill(false);
+        self.slow.fill(false);
         self.pending = 0;
     }
 
@@ -100,6 +109,11 @@ impl CycleBarrier {
         }
         if batch_cycle > self.cycle {
             return BatchVerdict::Future;
+        }
+        if self.given_up.get(slot) == Some(&true) {
+            // Its cycle ended at the stop timeout: what comes now is late, as it would be
+            // in the next cycle.
+            return BatchVerdict::Late;
         }
         match (self.awaited.get(slot), self.stopped.get(slot)) {
             (Some(true), Some(true)) => BatchVerdict::Late,
@@ -127,9 +141,50 @@ impl CycleBarrier {
         }
         if pending {
             self.awaited[slot] = false;
+            if self.given_up[slot] {
+                // No longer counted as pending since it was given up.
+                self.given_up[slot] = false;
+            } else {
+                self.pending -= 1;
+            }
+        }
+        pending
+    }
+
+    /// Stops waiting for `slot` this cycle because its stop timeout passed while the cycle
+    /// goes on for others: its outcome is [`AgentOutcome::TimedOut`] and its batches for
+    /// this cycle are late from now on. Returns whether it was pending.
+    pub fn give_up(&mut self, slot: usize) -> bool {
+        let pending = self.is_pending(slot);
+        if pending {
+            self.given_up[slot] = true;
             self.pending -= 1;
         }
         pending
+    }
+
+    /// Marks `slot` as slow this cycle (waited for past the stop timeout). Returns whether
+    /// it was not marked yet.
+    pub fn mark_slow(&mut self, slot: usize) -> bool {
+        match self.slow.get_mut(slot) {
+            Some(s) if !*s => {
+                *s = true;
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// Whether `slot` was waited for past the stop timeout this cycle.
+    pub fn is_slow(&self, slot: usize) -> bool {
+        self.slow.get(slot) == Some(&true)
+    }
+
+    /// Whether `slot` is awaited and has neither stopped nor been given up or evicted.
+    pub fn is_pending(&self, slot: usize) -> bool {
+        self.awaited.get(slot) == Some(&true)
+            && self.stopped.get(slot) == Some(&false)
+            && self.given_up.get(slot) == Some(&false)
     }
 
     /// Whether every awaited agent stopped.
@@ -143,10 +198,10 @@ impl CycleBarrier {
         self.pending
     }
 
-    /// Slots still awaited.
+    /// Slots still awaited (neither stopped, given up nor evicted).
     #[cfg(test)]
     pub fn pending_slots(&self) -> impl Iterator<Item = usize> + '_ {
-        (0..self.awaited.len()).filter(|&s| self.awaited[s] && !self.stopped[s])
+        (0..self.awaited.len()).filter(|&s| self.is_pending(s))
     }
 
     /// Outcome of `slot` if the cycle ended now.
@@ -227,6 +282,31 @@ mod tests {
         assert!(!b.evict(0), "an agent that stopped keeps its stop");
         assert_eq!(b.outcome(0), AgentOutcome::Stopped);
         assert_eq!(b.on_batch(1, 3, true), BatchVerdict::NotAwaited);
+    }
+
+    #[test]
+    fn a_slot_given_up_at_its_timeout_stops_holding_the_cycle_and_its_stop_is_late() {
+        let mut b = CycleBarrier::new(3);
+        b.begin(4);
+        for slot in 0..3 {
+            b.await_slot(slot);
+        }
+        assert!(b.give_up(0));
+        assert!(!b.give_up(0), "once");
+        assert_eq!(b.pending(), 2);
+        assert_eq!(b.pending_slots().collect::<Vec<_>>(), [1, 2]);
+        assert_eq!(b.outcome(0), AgentOutcome::TimedOut);
+        assert_eq!(b.on_batch(0, 4, true), BatchVerdict::Late);
+        assert!(b.mark_slow(1) && !b.mark_slow(1) && b.is_slow(1));
+        // Evicting a slot given up does not count it twice.
+        assert!(b.evict(0));
+        assert_eq!(b.pending(), 2);
+        assert_eq!(b.outcome(0), AgentOutcome::Evicted);
+        assert_eq!(b.on_batch(1, 4, true), BatchVerdict::Accept { stop: true });
+        assert!(b.evict(2));
+        assert!(b.is_complete());
+        b.begin(5);
+        assert!(!b.is_slow(1));
     }
 
     #[test]

@@ -79,6 +79,44 @@ pub enum AgentLostPolicy {
     Abort,
 }
 
+/// How long the host waits for an agent's stop in sync mode (`[sync] wait_for_stop`,
+/// per agent `[[agent]] wait_for_stop`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum WaitForStop {
+    /// Wait as long as the agent is alive (its transport still has it connected): a busy
+    /// agent (a learner updating, a debugger) never costs a stop timeout. Past
+    /// `stop_timeout` it is reported as slow (a warning with back-off, counted in
+    /// `HostStats::slow_stops`); a dead one is evicted by liveness (default).
+    #[default]
+    Alive,
+    /// End the cycle without the agent after `stop_timeout` (the original system's
+    /// behaviour): counted as a stop timeout, its late stop is dropped.
+    Timeout,
+}
+
+impl WaitForStop {
+    /// The policy of an agent on `transport` that does not choose its own, given
+    /// `[sync] wait_for_stop` (`None`: not set): `[sync]`'s, else `Alive`, except on the
+    /// legacy transport, whose clients (written for the original system) may block on an
+    /// action's end before they stop and so rely on the stop timeout: `Timeout` there.
+    pub fn default_for(sync: Option<WaitForStop>, transport: TransportKind) -> Self {
+        match (sync, transport) {
+            (Some(w), _) => w,
+            (None, TransportKind::Legacy) => Self::Timeout,
+            (None, _) => Self::Alive,
+        }
+    }
+
+    /// The config spelling.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Alive => "alive",
+            Self::Timeout => "timeout",
+        }
+    }
+}
+
 /// One camera of an agent.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CameraConfig {
@@ -115,6 +153,9 @@ pub struct AgentConfig {
     pub id: u32,
     /// The transport this agent uses (`[[agent]] transport`, default `[transport] kind`).
     pub transport: TransportKind,
+    /// How long the host waits for this agent's stop (`[[agent]] wait_for_stop`, default
+    /// `[sync] wait_for_stop`): resolved, so this is the agent's effective policy.
+    pub wait_for_stop: WaitForStop,
     /// Cameras, in image order.
     pub cameras: Vec<CameraConfig>,
 }
@@ -153,6 +194,9 @@ pub struct SyncConfig {
     pub spin_before_block: Duration,
     /// What to do when an agent is lost (`on_agent_lost`).
     pub on_agent_lost: AgentLostPolicy,
+    /// How long to wait for a stop, for agents that do not choose (`wait_for_stop`;
+    /// `None`: not set, see [`WaitForStop::default_for`]).
+    pub wait_for_stop: Option<WaitForStop>,
 }
 
 impl SyncConfig {
@@ -389,6 +433,7 @@ struct RawSync {
     wait: Option<WaitMode>,
     spin_before_block_us: Option<Spanned<i64>>,
     on_agent_lost: Option<AgentLostPolicy>,
+    wait_for_stop: Option<WaitForStop>,
 }
 
 #[derive(Deserialize)]
@@ -429,6 +474,7 @@ struct RawZenoh {
 struct RawAgent {
     id: Spanned<i64>,
     transport: Option<TransportKind>,
+    wait_for_stop: Option<WaitForStop>,
     #[serde(default)]
     camera: Vec<Spanned<RawCamera>>,
 }
@@ -714,6 +760,7 @@ impl Config {
             wait: None,
             spin_before_block_us: None,
             on_agent_lost: None,
+            wait_for_stop: None,
         });
         let sync = SyncConfig {
             sync_mode: rs.sync_mode.unwrap_or(true),
@@ -740,6 +787,7 @@ impl Config {
                 }
             },
             on_agent_lost: rs.on_agent_lost.unwrap_or_default(),
+            wait_for_stop: rs.wait_for_stop,
         };
 
         let rt = raw.transport.unwrap_or(RawTransport {
@@ -856,6 +904,12 @@ impl Config {
             agents.push(AgentConfig {
                 id,
                 transport: a.transport.unwrap_or(transport.kind),
+                wait_for_stop: a.wait_for_stop.unwrap_or_else(|| {
+                    WaitForStop::default_for(
+                        sync.wait_for_stop,
+                        a.transport.unwrap_or(transport.kind),
+                    )
+                }),
                 cameras,
             });
         }
@@ -876,6 +930,29 @@ impl Config {
     /// The agent with this id.
     pub fn agent(&self, id: u32) -> Option<&AgentConfig> {
         self.agents.iter().find(|a| a.id == id)
+    }
+
+    /// The effective `wait_for_stop` of agent `id`: its `[[agent]] wait_for_stop`, else
+    /// `[sync] wait_for_stop`, else `"alive"` (`"timeout"` for legacy agents; see
+    /// [`WaitForStop::default_for`]); for an id not in the config, what an agent on
+    /// `[transport] kind` would get.
+    pub fn wait_for_stop(&self, id: u32) -> WaitForStop {
+        self.agent(id).map_or_else(
+            || WaitForStop::default_for(self.sync.wait_for_stop, self.transport.kind),
+            |a| a.wait_for_stop,
+        )
+    }
+
+    /// Whether the host may wait for a stop without limit in this session (sync mode and
+    /// some agent's `wait_for_stop = "alive"`): then an agent waiting for its next frame
+    /// must not give up after a time derived from `stop_timeout`, since another agent may
+    /// be busy for longer (host death is detected by liveness instead).
+    pub fn waits_for_live_agents(&self) -> bool {
+        self.sync.sync_mode
+            && self
+                .agents
+                .iter()
+                .any(|a| a.wait_for_stop == WaitForStop::Alive)
     }
 
     /// Resizes the agent list to `count` agents with ids `0..count`: existing entries keep
@@ -903,13 +980,20 @@ impl Config {
             .unwrap_or_default();
         let mut agents = Vec::with_capacity(count as usize);
         for id in 0..count {
-            let (cameras, transport) = self.agent(id).map_or_else(
-                || (template.clone(), self.transport.kind),
-                |a| (a.cameras.clone(), a.transport),
+            let (cameras, transport, wait_for_stop) = self.agent(id).map_or_else(
+                || {
+                    (
+                        template.clone(),
+                        self.transport.kind,
+                        WaitForStop::default_for(self.sync.wait_for_stop, self.transport.kind),
+                    )
+                },
+                |a| (a.cameras.clone(), a.transport, a.wait_for_stop),
             );
             agents.push(AgentConfig {
                 id,
                 transport,
+                wait_for_stop,
                 cameras,
             });
         }
@@ -963,6 +1047,9 @@ impl Config {
                 AgentLostPolicy::Abort => "abort",
             }
         );
+        if let Some(w) = self.sync.wait_for_stop {
+            let _ = writeln!(s, "wait_for_stop = {:?}", w.as_str());
+        }
         let _ = writeln!(
             s,
             "\n[transport]\nkind = {:?}\ntcp_listen = \"{}\"\nmax_commands_per_cycle = {}",
@@ -1005,9 +1092,10 @@ impl Config {
         for a in &self.agents {
             let _ = writeln!(
                 s,
-                "\n[[agent]]\nid = {}\ntransport = {:?}",
+                "\n[[agent]]\nid = {}\ntransport = {:?}\nwait_for_stop = {:?}",
                 a.id,
-                a.transport.as_str()
+                a.transport.as_str(),
+                a.wait_for_stop.as_str()
             );
             for c in &a.cameras {
                 let _ = writeln!(
@@ -1233,6 +1321,51 @@ mod tests {
         );
         let err = parse("[[agent]]\nid = 0\ntransport = \"carrier-pigeon\"\n").unwrap_err();
         assert!(err.to_string().contains("transport"), "{err}");
+    }
+
+    #[test]
+    fn wait_for_stop_defaults_to_alive_and_each_agent_may_override_it() {
+        let c = parse(MINIMAL).unwrap();
+        assert_eq!(c.sync.wait_for_stop, None);
+        assert_eq!(c.wait_for_stop(0), WaitForStop::Alive);
+        assert!(c.waits_for_live_agents());
+        let text = "session = \"t\"\n[sync]\nwait_for_stop = \"timeout\"\n[[agent]]\nid = 0\n\
+                    [[agent]]\nid = 1\nwait_for_stop = \"alive\"\n";
+        let c = parse(text).unwrap();
+        assert_eq!(c.sync.wait_for_stop, Some(WaitForStop::Timeout));
+        assert_eq!(c.wait_for_stop(0), WaitForStop::Timeout);
+        assert_eq!(c.wait_for_stop(1), WaitForStop::Alive);
+        assert_eq!(
+            c.wait_for_stop(9),
+            WaitForStop::Timeout,
+            "not an agent: the default"
+        );
+        assert!(c.waits_for_live_agents());
+        // Round trip, and agents added by a count take the [sync] default.
+        let again = parse(&c.to_toml_string()).unwrap();
+        assert_eq!(again.wait_for_stop(1), WaitForStop::Alive);
+        let grown = c.with_agent_count(3).unwrap();
+        assert_eq!(grown.wait_for_stop(2), WaitForStop::Timeout);
+        let all_timeout = parse(&text.replace("\"alive\"", "\"timeout\"")).unwrap();
+        assert!(!all_timeout.waits_for_live_agents());
+        // Legacy agents (original clients may block on an action's end before stopping)
+        // default to "timeout", unless [sync] or the agent says otherwise.
+        let legacy =
+            "session = \"t\"\n[[agent]]\nid = 0\ntransport = \"legacy\"\n[[agent]]\nid = 1\n";
+        let c = parse(legacy).unwrap();
+        assert_eq!(c.wait_for_stop(0), WaitForStop::Timeout);
+        assert_eq!(c.wait_for_stop(1), WaitForStop::Alive);
+        let c = parse(&legacy.replace(
+            "session = \"t\"\n",
+            "session = \"t\"\n[sync]\nwait_for_stop = \"alive\"\n",
+        ))
+        .unwrap();
+        assert_eq!(c.wait_for_stop(0), WaitForStop::Alive);
+        expect_err(
+            "[sync]\nwait_for_stop = \"forever\"\n[[agent]]\nid = 0\n",
+            2,
+            "sync.wait_for_stop",
+        );
     }
 
     #[test]

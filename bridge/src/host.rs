@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 use tracing::{debug, info, warn};
 
 use crate::barrier::{AgentOutcome, BatchVerdict, CycleBarrier};
-use crate::config::{AgentLostPolicy, Config};
+use crate::config::{AgentLostPolicy, Config, WaitForStop};
 use crate::events::PendingEvents;
 use crate::rounded::Rounded;
 use crate::signal::SignalHandling;
@@ -128,6 +128,9 @@ pub struct AgentReport {
     pub evicted: bool,
     /// The agent rejoined in this cycle: its first frame since an eviction reached it.
     pub rejoined: bool,
+    /// The host waited for its stop past `stop_timeout` (its `wait_for_stop` is `"alive"`
+    /// and it stayed connected): a slow agent, reported, not timed out.
+    pub slow: bool,
     commands: Vec<MotorCommand>,
 }
 
@@ -177,6 +180,11 @@ impl CycleReport {
             .map(|a| a.agent_id)
     }
 
+    /// Ids of agents waited for past `stop_timeout` this cycle ([`AgentReport::slow`]).
+    pub fn slow_agents(&self) -> impl Iterator<Item = u32> + '_ {
+        self.agents.iter().filter(|a| a.slow).map(|a| a.agent_id)
+    }
+
     /// Ids of agents that timed out this cycle.
     pub fn timed_out_agents(&self) -> impl Iterator<Item = u32> + '_ {
         self.agents
@@ -195,6 +203,9 @@ pub struct HostStats {
     pub stop_timeouts: u64,
     /// Agent-cycles that timed out (one cycle with two missing agents counts 2).
     pub agent_timeouts: u64,
+    /// Cycles in which the host waited past `stop_timeout` for an agent whose
+    /// `wait_for_stop` is `"alive"` (it was busy, not lost: nothing was dropped).
+    pub slow_stops: u64,
     /// Batches dropped because they named an earlier cycle or followed the stop.
     pub late_batches: u64,
     /// Batches dropped because they named a cycle that had not started.
@@ -425,6 +436,7 @@ impl<T: HostTransport> Host<T> {
                     evicted_in: None,
                     rejoined_in: None,
                     connected_once: false,
+                    wait_for_stop: a.wait_for_stop,
                 }
             })
             .collect();
@@ -437,6 +449,7 @@ impl<T: HostTransport> Host<T> {
                 read_cycle: None,
                 evicted: false,
                 rejoined: false,
+                slow: false,
                 commands: Vec::with_capacity(cap),
             })
             .collect();
@@ -467,6 +480,7 @@ impl<T: HostTransport> Host<T> {
             lost_this_cycle: Vec::with_capacity(n),
             evicted_hook: None,
             refused_hook: None,
+            slow_hook: None,
             wait_started: None,
             config,
         }
@@ -494,6 +508,8 @@ struct SlotState {
     rejoined_in: Option<u64>,
     /// Seen connected while the host waited for its agents.
     connected_once: bool,
+    /// Its effective `wait_for_stop`.
+    wait_for_stop: WaitForStop,
 }
 
 /// How often the host looks for dead agent processes while it waits.
@@ -515,12 +531,16 @@ pub struct Host<T: HostTransport = Transports> {
     lost_this_cycle: Vec<usize>,
     evicted_hook: Option<Box<dyn FnMut(u32, u64)>>,
     refused_hook: Option<RefusedHook>,
+    slow_hook: Option<SlowHook>,
     /// When the current wait for agents began (a caller may wait in slices).
     wait_started: Option<Instant>,
 }
 
 /// What [`Host::on_peer_refused`] installs.
 type RefusedHook = Box<dyn FnMut(&PeerRefusal)>;
+
+/// What [`Host::on_slow`] installs.
+type SlowHook = Box<dyn FnMut(u32, u64, Duration)>;
 
 impl<T: HostTransport> core::fmt::Debug for Host<T> {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
@@ -585,6 +605,14 @@ impl<T: HostTransport> Host<T> {
     /// [`Host::collect`] blocks (e.g. when `on_agent_lost = "wait"` pauses for the agent).
     pub fn on_evicted(&mut self, hook: impl FnMut(u32, u64) + 'static) {
         self.evicted_hook = Some(Box::new(hook));
+    }
+
+    /// Calls `hook(agent, cycle, waited)` while [`Host::collect`] waits past `stop_timeout`
+    /// for a live agent whose `wait_for_stop` is `"alive"`: at 1×, 2×, 4×, … `stop_timeout`
+    /// into the cycle, as it happens (so a stuck but alive agent is visible while the
+    /// host waits for it).
+    pub fn on_slow(&mut self, hook: impl FnMut(u32, u64, Duration) + 'static) {
+        self.slow_hook = Some(Box::new(hook));
     }
 
     /// Calls `hook(refusal)` for each peer a transport refused or dropped before admitting
@@ -819,6 +847,9 @@ impl<T: HostTransport> Host<T> {
             a.evicted = s.evicted_in == Some(cycle);
             a.rejoined = s.rejoined_in == Some(cycle);
         }
+        for (slot, a) in self.report.agents.iter_mut().enumerate() {
+            a.slow = self.barrier.is_slow(slot);
+        }
         self.stats.cycles += 1;
         self.cycle += 1;
         self.barrier.begin(self.cycle);
@@ -948,9 +979,17 @@ impl<T: HostTransport> Host<T> {
     }
 
     /// Drains batches and watches for lost agents until `until` — in sync mode only until
-    /// every awaited agent stopped — then applies `on_agent_lost`.
+    /// every awaited agent stopped; there `until` is the stop timeout, after which agents
+    /// with `wait_for_stop = "timeout"` are given up and the others waited for as long as
+    /// they are connected (reported as slow) — then applies `on_agent_lost`.
     fn wait_cycle(&mut self, sync: bool, until: Instant) -> Result<(), HostCycleError> {
-        let mut next_reap = Instant::now() + REAP_PERIOD;
+        let started = Instant::now();
+        let timeout = until.saturating_duration_since(started);
+        let mut next_reap = started + REAP_PERIOD;
+        // Past the stop timeout (sync mode): when the next slow report is due.
+        let mut past_timeout = false;
+        let mut next_report = until;
+        let mut reports = 0u32;
         self.lost_this_cycle.clear();
         loop {
             self.drain(sync)?;
@@ -960,13 +999,62 @@ impl<T: HostTransport> Host<T> {
                 next_reap = now + REAP_PERIOD;
             }
             self.check_lost(reap);
-            if (sync && self.barrier.is_complete()) || now >= until {
+            if sync && self.barrier.is_complete() {
                 break;
             }
+            let mut wake = until;
+            if now >= until {
+                if !sync {
+                    break;
+                }
+                if !past_timeout {
+                    past_timeout = true;
+                    for slot in 0..self.slots.len() {
+                        if self.slots[slot].wait_for_stop == WaitForStop::Timeout {
+                            self.barrier.give_up(slot);
+                        }
+                    }
+                    if self.barrier.is_complete() {
+                        break;
+                    }
+                }
+                if now >= next_report {
+                    self.report_slow(now.saturating_duration_since(started));
+                    reports = reports.saturating_add(1);
+                    // 1×, 2×, 4×, … the stop timeout into the cycle.
+                    next_report = started + timeout.saturating_mul(1u32 << reports.min(20));
+                }
+                wake = next_report;
+            }
             self.backend
-                .wait_activity(until.min(next_reap).saturating_duration_since(now))?;
+                .wait_activity(wake.min(next_reap).saturating_duration_since(now))?;
         }
         self.handle_lost()
+    }
+
+    /// Reports every agent still awaited past the stop timeout (all have `wait_for_stop =
+    /// "alive"` and are connected: the lost ones were evicted) as slow.
+    fn report_slow(&mut self, waited: Duration) {
+        if (0..self.slots.len()).all(|slot| !self.barrier.is_slow(slot)) {
+            self.stats.slow_stops += 1;
+        }
+        for slot in 0..self.slots.len() {
+            if !self.barrier.is_pending(slot) {
+                continue;
+            }
+            self.barrier.mark_slow(slot);
+            let agent = self.slots[slot].id;
+            warn!(
+                agent,
+                cycle = self.cycle,
+                waited_s = waited.as_secs_f64(),
+                "agent is slow: still waiting for its stop past stop_timeout (it is alive; \
+                 wait_for_stop = \"alive\")"
+            );
+            if let Some(hook) = &mut self.slow_hook {
+                hook(agent, self.cycle, waited);
+            }
+        }
     }
 
     fn collect_sync(&mut self) -> Result<(), HostCycleError> {
@@ -1079,6 +1167,8 @@ mod tests {
         answers: Vec<bool>,
         /// Slots that reconnect at the next wait.
         reconnect: Vec<usize>,
+        /// Slots that answer only from this instant on (a busy agent), if any.
+        busy_until: Vec<Option<Instant>>,
         /// Frames delivered and not answered yet: (slot, cycle).
         delivered: Vec<(usize, u64)>,
         /// Batches waiting for the host's next drain.
@@ -1161,6 +1251,16 @@ mod tests {
             }
             let delivered = std::mem::take(&mut a.delivered);
             for (slot, cycle) in delivered {
+                let busy = a
+                    .busy_until
+                    .get(slot)
+                    .copied()
+                    .flatten()
+                    .is_some_and(|t| Instant::now() < t);
+                if busy {
+                    a.delivered.push((slot, cycle));
+                    continue;
+                }
                 if a.answers[slot] && a.connected[slot] {
                     let command = Command::Turn { angle_deg: 1.0 }.encode(cycle as u32);
                     a.batch(slot, cycle, true, vec![command]);
@@ -1190,11 +1290,21 @@ mod tests {
     }
 
     /// A host of agents 3 and 7 (ids are not slots) over the fake, both connected and
-    /// answering.
+    /// answering, with `wait_for_stop = "timeout"` (the original semantics).
     fn host(policy: &str) -> (Host<Fake>, Rc<RefCell<Agents>>) {
+        host_waiting(policy, "timeout", 0.2)
+    }
+
+    /// [`host`] with `wait_for_stop = wait` and `stop_timeout = stop_timeout_s`.
+    fn host_waiting(
+        policy: &str,
+        wait: &str,
+        stop_timeout_s: f64,
+    ) -> (Host<Fake>, Rc<RefCell<Agents>>) {
         let text = format!(
-            "session = \"fake\"\n[sync]\nstop_timeout = 0.2\nconnect_timeout = 0.2\n\
-             on_agent_lost = {policy:?}\n[[agent]]\nid = 3\n[[agent]]\nid = 7\n"
+            "session = \"fake\"\n[sync]\nstop_timeout = {stop_timeout_s}\nconnect_timeout = 0.2\n\
+             on_agent_lost = {policy:?}\nwait_for_stop = {wait:?}\n[[agent]]\nid = 3\n\
+             [[agent]]\nid = 7\n"
         );
         let config = Config::from_toml_str(&text, Path::new("fake.toml")).unwrap();
         let agents = Rc::new(RefCell::new(Agents {
@@ -1266,6 +1376,108 @@ mod tests {
         let stats = host.stats();
         assert_eq!((stats.late_batches, stats.future_batches), (1, 1));
         assert_eq!((stats.stop_timeouts, stats.agent_timeouts), (1, 1));
+    }
+
+    /// The slow reports a test's `on_slow` hook recorded: (agent, cycle, waited).
+    type SlowReports = Rc<RefCell<Vec<(u32, u64, Duration)>>>;
+
+    /// A host with `wait_for_stop = "alive"` (stop_timeout 50 ms) whose agent 3 is busy
+    /// for `busy`, recording the slow reports.
+    fn busy_agent_3(busy: Duration) -> (Host<Fake>, Rc<RefCell<Agents>>, SlowReports) {
+        let (mut host, agents) = host_waiting("evict", "alive", 0.05);
+        let slow = Rc::new(RefCell::new(Vec::new()));
+        let seen = slow.clone();
+        host.on_slow(move |agent, cycle, waited| seen.borrow_mut().push((agent, cycle, waited)));
+        publish_all(&mut host);
+        host.collect().unwrap();
+        agents.borrow_mut().busy_until = vec![Some(Instant::now() + busy), None];
+        (host, agents, slow)
+    }
+
+    #[test]
+    fn a_live_busy_agent_is_waited_for_and_reported_slow_not_timed_out() {
+        let (mut host, _agents, slow) = busy_agent_3(Duration::from_millis(260));
+        publish_all(&mut host);
+        let report = host.collect().unwrap();
+        assert!(!report.timed_out);
+        assert_eq!(
+            outcomes(report),
+            [(3, AgentOutcome::Stopped), (7, AgentOutcome::Stopped)]
+        );
+        assert!(report.agents().iter().all(|a| a.commands().len() == 1));
+        assert_eq!(report.slow_agents().collect::<Vec<_>>(), [3]);
+        assert!(report.agent(3).unwrap().slow && !report.agent(7).unwrap().slow);
+        // Reported at 1×, 2× and 4× the stop timeout (0.05, 0.1, 0.2 s) as it waited.
+        let slow = slow.borrow();
+        assert!(slow.len() >= 3, "{slow:?}");
+        assert!(
+            slow.iter()
+                .all(|&(agent, cycle, _)| (agent, cycle) == (3, 1))
+        );
+        assert!(slow[0].2 >= Duration::from_millis(50), "{slow:?}");
+        assert!(slow[2].2 >= Duration::from_millis(200), "{slow:?}");
+        let stats = host.stats();
+        assert_eq!((stats.stop_timeouts, stats.agent_timeouts), (0, 0));
+        assert_eq!((stats.slow_stops, stats.late_batches), (1, 0));
+        // The next cycle is an ordinary one again.
+        publish_all(&mut host);
+        let report = host.collect().unwrap();
+        assert_eq!(report.slow_agents().count(), 0);
+        assert_eq!(host.stats().slow_stops, 1);
+    }
+
+    #[test]
+    fn a_busy_agent_that_dies_is_evicted_and_the_others_go_on() {
+        let (mut host, agents, slow) = busy_agent_3(Duration::from_secs(3600));
+        publish_all(&mut host);
+        // The fake's agent 3 dies after the host reported it slow once.
+        let dying = agents.clone();
+        let seen = slow.clone();
+        host.on_slow(move |agent, cycle, waited| {
+            seen.borrow_mut().push((agent, cycle, waited));
+            dying.borrow_mut().dead.push(0);
+        });
+        let report = host.collect().unwrap();
+        assert_eq!(
+            outcomes(report),
+            [(3, AgentOutcome::Evicted), (7, AgentOutcome::Stopped)]
+        );
+        assert!(!report.timed_out);
+        // Evicted at the next reap (100 ms), not waited for on.
+        assert!(slow.borrow().len() <= 2, "{:?}", slow.borrow());
+        assert_eq!(host.stats().evicted_agents, [3]);
+        assert_eq!(host.stats().stop_timeouts, 0);
+    }
+
+    #[test]
+    fn per_agent_policies_a_timeout_agent_times_out_while_the_cycle_waits_for_a_live_one() {
+        let text = "session = \"fake\"\n[sync]\nstop_timeout = 0.05\nconnect_timeout = 0.2\n\
+                    [[agent]]\nid = 3\nwait_for_stop = \"timeout\"\n[[agent]]\nid = 7\n";
+        let config = Config::from_toml_str(text, Path::new("fake.toml")).unwrap();
+        let agents = Rc::new(RefCell::new(Agents {
+            connected: vec![true, true],
+            answers: vec![false, true],
+            busy_until: vec![None, Some(Instant::now() + Duration::from_millis(200))],
+            ..Agents::default()
+        }));
+        let mut host = Host::over(&config, Fake(agents.clone()));
+        host.wait_for_agents(Duration::from_secs(1)).unwrap();
+        publish_all(&mut host);
+        // Agent 3's stop comes after its timeout, while the cycle still waits for 7.
+        agents.borrow_mut().busy_until[0] = Some(Instant::now() + Duration::from_millis(100));
+        agents.borrow_mut().answers[0] = true;
+        let report = host.collect().unwrap();
+        assert_eq!(
+            outcomes(report),
+            [(3, AgentOutcome::TimedOut), (7, AgentOutcome::Stopped)]
+        );
+        assert!(report.timed_out);
+        assert_eq!(report.slow_agents().collect::<Vec<_>>(), [7]);
+        assert!(report.agent(3).unwrap().commands().is_empty());
+        assert_eq!(report.late_batches, 1, "its stop came after its timeout");
+        let stats = host.stats();
+        assert_eq!((stats.stop_timeouts, stats.agent_timeouts), (1, 1));
+        assert_eq!(stats.slow_stops, 1);
     }
 
     #[test]

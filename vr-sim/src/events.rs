@@ -13,15 +13,16 @@
 //! | `agent_left` | `agent`, `cycle`: its connection is gone (seen at a cycle boundary) |
 //! | `agent_evicted` | `agent`, `cycle`, `reason`: written as the host evicts it (also while a cycle waits for it) |
 //! | `agent_rejoined` | `agent`, `cycle` (the first cycle it takes part in again) |
+//! | `agent_slow` | `agent`, `cycle`, `waited_s`: the host still waits for this live agent's stop past `stop_timeout` (`wait_for_stop = "alive"`); written as it happens, at 1×, 2×, 4×, … `stop_timeout` into the cycle |
 //! | `peer_refused` | `kind` (`malformed`, `version`, `token`, `unknown_agent`, `id_in_use`, `silent`, `too_many`), `agent` (the id it claimed, or `null`), `peer` (its address), `reason`: a connection the host refused or dropped before admitting it as an agent (at most 256 per wait are itemised; the summary counts all) |
 //! | `command_rejected` | `agent`, `cycle`, `kind`, `reason`: the first rejection per agent and command kind (later ones are only counted in the summary) |
-//! | `cycle` | `cycle`, `timed_out_agents`, `late_batches`: sampled, see below |
+//! | `cycle` | `cycle`, `timed_out_agents`, `slow_agents`, `late_batches`: sampled, see below |
 //! | `finished` | `frames`, `interrupted`, `trajectory_hash`, `summary` (the `--summary-json` path or `null`) |
 //! | `error` | `message`: the run failed (exit 1 or 2); nothing follows |
 //!
 //! `cycle` lines are sampled to keep the file small on long runs: cycle 0, every 1000th
 //! cycle, and every cycle in which something happened (a stop timeout, late batches
-//! dropped, an agent evicted or rejoined).
+//! dropped, an agent slow, evicted or rejoined).
 
 use std::cell::RefCell;
 use std::fs::File;
@@ -89,6 +90,15 @@ pub enum Event<'a> {
         /// The first cycle it takes part in again.
         cycle: u64,
     },
+    /// The host still waits for a live agent's stop past `stop_timeout`.
+    AgentSlow {
+        /// Agent id.
+        agent: u32,
+        /// The cycle.
+        cycle: u64,
+        /// Seconds waited in this cycle so far.
+        waited_s: f64,
+    },
     /// The host refused or dropped a peer before admitting it as an agent.
     PeerRefused {
         /// Why, as a category (`RefusalKind::as_str`).
@@ -117,6 +127,8 @@ pub enum Event<'a> {
         cycle: u64,
         /// Agents whose stop did not arrive within `stop_timeout`.
         timed_out_agents: Vec<u32>,
+        /// Agents waited for past `stop_timeout` (alive and busy).
+        slow_agents: Vec<u32>,
         /// Late batches dropped during this cycle.
         late_batches: u32,
     },

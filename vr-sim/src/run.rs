@@ -65,6 +65,9 @@ pub struct Summary {
     pub agent_timeouts: u64,
     /// Late batches (stops for an earlier cycle) dropped.
     pub late_stops: u64,
+    /// Cycles in which the host waited past `stop_timeout` for a live agent
+    /// (`wait_for_stop = "alive"`): slow, not timed out.
+    pub slow_stops: u64,
     /// Agents evicted (dead).
     pub evicted_agents: Vec<u32>,
     /// Connections refused or dropped before they were admitted as agents.
@@ -149,6 +152,19 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
                 agent,
                 cycle,
                 reason: "lost: process died or disconnected".into(),
+            };
+            if let Err(e) = hook_events.emit(event) {
+                warn!("{e:#}");
+            }
+        });
+    }
+    if events.enabled() {
+        let mut hook_events = events.clone();
+        host.on_slow(move |agent, cycle, waited| {
+            let event = Event::AgentSlow {
+                agent,
+                cycle,
+                waited_s: waited.as_secs_f64(),
             };
             if let Err(e) = hook_events.emit(event) {
                 warn!("{e:#}");
@@ -383,6 +399,7 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
         };
         let cycle = report.cycle;
         let timed_out_agents: Vec<u32> = report.timed_out_agents().collect();
+        let slow_agents: Vec<u32> = report.slow_agents().collect();
         let late_batches = report.late_batches;
         let mut per_agent = Vec::with_capacity(if record.is_some() { ids.len() } else { 0 });
         rejected_per_agent.clear();
@@ -440,11 +457,13 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
             && (notable
                 || cycle % CYCLE_EVENT_EVERY == 0
                 || late_batches > 0
-                || !timed_out_agents.is_empty())
+                || !timed_out_agents.is_empty()
+                || !slow_agents.is_empty())
         {
             events.emit(Event::Cycle {
                 cycle,
                 timed_out_agents,
+                slow_agents,
                 late_batches,
             })?;
         }
@@ -547,6 +566,7 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
         stop_timeouts: stats.stop_timeouts,
         agent_timeouts: stats.agent_timeouts,
         late_stops: stats.late_batches,
+        slow_stops: stats.slow_stops,
         evicted_agents: stats.evicted_agents.clone(),
         peers_refused: stats.peers_refused,
         evictions: stats.evictions,
@@ -575,7 +595,7 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
 
 /// Prints the summary as a table.
 pub fn print_summary(s: &Summary) {
-    let rows: [(&str, String); 21] = [
+    let rows: [(&str, String); 22] = [
         ("mode", s.mode.clone()),
         ("transport", s.transport.clone()),
         ("agents", s.agents.to_string()),
@@ -585,6 +605,7 @@ pub fn print_summary(s: &Summary) {
         ("cycles per second", format!("{:.1}", s.frames_per_s)),
         ("stop timeouts", s.stop_timeouts.to_string()),
         ("late stops dropped", s.late_stops.to_string()),
+        ("slow stops waited", s.slow_stops.to_string()),
         ("future stops dropped", s.future_stops.to_string()),
         ("evicted agents", format!("{:?}", s.evicted_agents)),
         (

@@ -29,7 +29,9 @@ int main(int argc, char **argv) {
     int code = 0;
     for (;;) {
         vrs_frame_t frame;
-        st = vrs_agent_wait_start(agent, 10000, &frame);
+        /* No time limit: the host may wait for another agent that is busy (its default
+           wait_for_stop = "alive"); a dead host is still detected (VRS_ERROR_HOST_GONE). */
+        st = vrs_agent_wait_start(agent, -1, &frame);
         if (st == VRS_SESSION_CLOSED) break;
         if (st != VRS_OK) {
             code = fail("wait_start", st);

@@ -12,8 +12,6 @@
 
 #include <vrsync/agent.hpp>
 
-using namespace std::chrono_literals;
-
 namespace {
 
 // Mean of the first channel over the image, read in place in shared memory.
@@ -42,7 +40,9 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "cpp_agent %u: connected (vrsync %s)\n", id, vrsync::version());
         std::uint64_t cycles = 0, commands = 0;
         float heading = 45.0f * static_cast<float>(id);
-        while (vrsync::Frame frame = agent.wait_start(10s)) {
+        // No time limit: the host may wait for another agent that is busy (its default
+        // wait_for_stop = "alive"); a dead host is still detected (throws).
+        while (vrsync::Frame frame = agent.wait_start()) {
             const vrsync::Image* left = frame.find_image("left");
             const vrsync::Image* right = frame.find_image("right");
             const double l = left ? brightness(*left) : 0.0;

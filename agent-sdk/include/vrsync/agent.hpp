@@ -4,7 +4,7 @@
 //     using namespace std::chrono_literals;
 //
 //     vrsync::Agent agent("config.toml", 0);        // connects (throws vrsync::Error)
-//     while (vrsync::Frame frame = agent.wait_start(10s)) {   // empty frame: run over
+//     while (vrsync::Frame frame = agent.wait_start()) {      // empty frame: run over
 //         const vrsync::Image& left = frame.image("left");     // a view into shared memory
 //         ... left.data(), left.width(), left.height(), left.stride() ...
 //         agent.send_move(90.0f, 1.0f);

@@ -60,13 +60,15 @@ def write_config(
     tcp_port: int = 0,
     agent_transports: dict[int, str] | None = None,
     zenoh_endpoint: str | None = None,
+    wait_for_stop: str | None = None,
 ) -> tuple[Path, str]:
     """Writes a config for `agents` agents with `cameras` ((name, width, format), height
     from a 120°×90° field of view, or (name, width, format, height)) and returns (path, session). `agent_transports` gives
     agents a transport of their own (default: `transport`). TCP hosts bind port 0
     unless `tcp_port` is given; `start_host` puts the bound port into the file.
     `zenoh_endpoint` (e.g. ``"tcp/10.0.0.1:7447"``) is where a zenoh host listens and
-    its agents connect (lease 1 s)."""
+    its agents connect (lease 1 s). `wait_for_stop` (``"alive"``/``"timeout"``) sets
+    `[sync] wait_for_stop` (default: not written, i.e. ``"alive"``)."""
     name = session(tag)
     port = tcp_port
     lines = [
@@ -77,6 +79,7 @@ def write_config(
         "simulation_time_per_frame = 0.1",
         f"stop_timeout = {stop_timeout}",
         f"connect_timeout = {connect_timeout}",
+        *([f'wait_for_stop = "{wait_for_stop}"'] if wait_for_stop else []),
         "[transport]",
         f'kind = "{transport}"',
         f'tcp_listen = "127.0.0.1:{port}"',

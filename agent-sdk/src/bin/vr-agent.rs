@@ -47,8 +47,10 @@ struct Args {
     /// Leave after this many cycles (default: run until the host closes the session).
     #[arg(long, value_name = "N")]
     frames: Option<u64>,
-    /// Give up when no start arrives for this many seconds (default: stop_timeout +
-    /// connect_timeout of the config).
+    /// Give up when no start arrives for this many seconds. Default: no limit when the
+    /// host may wait for a busy agent (sync mode with some agent's `wait_for_stop =
+    /// "alive"`, the default: another agent may compute for longer than any fixed limit;
+    /// a dead host is still noticed), else stop_timeout + connect_timeout of the config.
     #[arg(long, value_name = "SECONDS")]
     start_timeout: Option<f64>,
     /// Write one line per cycle to FILE: `cycle sim_time_ns skipped action_ids` (action ids
@@ -68,12 +70,14 @@ struct Args {
     #[arg(long, hide = true)]
     bad_commands: bool,
     /// Testing aid: in this cycle, compute for 1.5 × the config's stop_timeout before
-    /// stopping, so the host times out and the stop arrives late, with half a timeout left
-    /// to answer the next cycle in time.
+    /// stopping. With `wait_for_stop = "timeout"` the host times out and the stop arrives
+    /// late, with half a timeout left to answer the next cycle in time; with `"alive"` the
+    /// host waits and reports the agent slow.
     #[arg(long, value_name = "CYCLE", hide = true)]
     late_stop_at: Option<u64>,
     /// Testing aid: with --late-stop-at, be late for N cycles instead of one (compute for
-    /// N + 0.5 stop timeouts), so the frames of N - 1 cycles are skipped.
+    /// N + 0.5 stop timeouts), so with `wait_for_stop = "timeout"` the frames of N - 1
+    /// cycles are skipped.
     #[arg(long, value_name = "N", hide = true, default_value_t = 1)]
     late_stop_cycles: u32,
 }
@@ -116,7 +120,7 @@ fn run(args: &Args) -> anyhow::Result<ExitCode> {
         }
     };
     let start_timeout = match args.start_timeout {
-        Some(s) if s.is_finite() && s > 0.0 => Duration::from_secs_f64(s),
+        Some(s) if s.is_finite() && s > 0.0 => Some(Duration::from_secs_f64(s)),
         Some(s) => {
             eprintln!(
                 "vr-agent {}: error: --start-timeout must be > 0, got {s}",
@@ -124,7 +128,8 @@ fn run(args: &Args) -> anyhow::Result<ExitCode> {
             );
             return Ok(ExitCode::from(2));
         }
-        None => config.sync.stop_timeout + config.sync.connect_timeout,
+        None if config.waits_for_live_agents() => None,
+        None => Some(config.sync.stop_timeout + config.sync.connect_timeout),
     };
     let connected = AgentBuilder::new(&config, args.id)
         .signal_handling(SignalHandling::Install)
@@ -156,7 +161,7 @@ fn run(args: &Args) -> anyhow::Result<ExitCode> {
         if args.frames.is_some_and(|n| cycles >= n) {
             break Ok(());
         }
-        let frame = match agent.wait_start(Some(start_timeout)) {
+        let frame = match agent.wait_start(start_timeout) {
             Ok(f) => f,
             Err(WaitStartError::HostClosed) => break Ok(()),
             Err(WaitStartError::Terminated) => {

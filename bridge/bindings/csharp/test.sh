@@ -70,12 +70,13 @@ timeout 120 mcs "${mcs_flags[@]}" -r:"$work/Vrsync.dll" -out:"$work/VrsyncConsol
 timeout 120 mcs "${mcs_flags[@]}" -r:"$work/Vrsync.dll" -out:"$work/VrsyncTests.exe" \
     "$here"/tests/Tests.cs
 
-# write_config FILE SESSION STOP_TIMEOUT_S: agents 0 and 1, small cameras.
+# write_config FILE SESSION STOP_TIMEOUT_S [WAIT_FOR_STOP]: agents 0 and 1, small cameras.
 write_config() {
     cat >"$1" <<EOF
 session = "$2"
 [sync]
 stop_timeout = $3
+wait_for_stop = "${4:-alive}"
 connect_timeout = 20.0
 [[agent]]
 id = 0
@@ -211,7 +212,8 @@ done
 echo "TCP: 50 cycles, 0 timeouts, port $port; $(tcp_value cycles_per_s) cycles/s"
 
 step "5. stop timeout: agent 1 stops late in cycle 2"
-write_config "$work/late.toml" "$session_base-late" 0.4
+# wait_for_stop = "timeout": the original semantics (the default waits for a live agent).
+write_config "$work/late.toml" "$session_base-late" 0.4 timeout
 agent late "$work/late.toml" 0
 late_agent0=$agent_pid
 agent late "$work/late.toml" 1 --late-stop-at 2

@@ -585,6 +585,13 @@ fn cycles_through_the_c_abi_with_a_real_agent() {
 fn missing_agents_and_stop_timeouts_are_outcomes_not_errors() {
     let dir = tempfile::tempdir().unwrap();
     let path = write_config(dir.path(), "timeout", 2, 0.2);
+    // The original semantics: a cycle ends without a live agent after stop_timeout.
+    let text = std::fs::read_to_string(&path).unwrap();
+    std::fs::write(
+        &path,
+        text.replace("[sync]\n", "[sync]\nwait_for_stop = \"timeout\"\n"),
+    )
+    .unwrap();
     let host = create(&path);
     // Agent 0 answers every cycle; agent 1 connects but never stops.
     let agent_path = path.clone();
