@@ -381,8 +381,11 @@ vrs_status_t vrs_agent_connect(const char *config_path,
                                int64_t timeout_ms,
                                struct vrs_agent_t **out_agent);
 
-// Disconnects and releases the agent. The handle is invalid afterwards: using it again,
-// including a second disconnect, returns `VRS_ERROR_INVALID_HANDLE`.
+// Disconnects and releases the agent, leaving the session gracefully: the host is told at
+// once (it stops waiting for this agent, counts a leave, not a timeout or an eviction, and
+// a new connection of the same id takes part from the next cycle). The handle is invalid
+// afterwards: using it again, including a second disconnect, returns
+// `VRS_ERROR_INVALID_HANDLE`.
 //
 // # Safety
 // Any value may be passed: the handle is looked up, never dereferenced.

@@ -7,8 +7,8 @@ use vrsync_bridge::shm::{ShmAgent, ShmFrame};
 use vrsync_bridge::tcp::{TcpAgent, TcpFrame};
 use vrsync_bridge::zenoh::{ZenohAgent, ZenohFrame};
 use vrsync_bridge::{
-    ActionState, ActionStatus, Collision, Command, ImageDesc, MOTOR_FLAG_ACK, MOTOR_FLAG_STOP,
-    MotorCommand, MotorHeader, PROTOCOL_VERSION, PixelFormat, Pose, SensorHeader,
+    ActionState, ActionStatus, Collision, Command, ImageDesc, MOTOR_FLAG_ACK, MOTOR_FLAG_LEAVE,
+    MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION, PixelFormat, Pose, SensorHeader,
 };
 pub use vrsync_bridge::{AgentConnectError, SignalHandling};
 use vrsync_bridge::{
@@ -342,14 +342,36 @@ impl<'c> AgentBuilder<'c> {
         self
     }
 
-    /// Connects, waiting for the host's services until the connect timeout.
+    /// Connects, waiting for the host's services until the connect timeout. Right after
+    /// an agent of the same id and session left in this process ([`Agent::close`]), an
+    /// "id in use" answer is retried for up to [`REJOIN_GRACE`]: the host may not have
+    /// read that leave yet.
     ///
     /// # Errors
     /// [`AgentConnectError`]: no host, protocol mismatch, id already in use.
     pub fn connect(self) -> Result<Agent, AgentConnectError> {
+        let started = Instant::now();
         let timeout = self
             .connect_timeout
             .unwrap_or(self.config.sync.connect_timeout);
+        let mut backoff = Duration::from_millis(2);
+        loop {
+            let left = timeout.saturating_sub(started.elapsed());
+            match self.connect_once(left) {
+                Err(AgentConnectError::IdInUse { session, agent })
+                    if left_recently(&session, agent)
+                        .is_some_and(|at| at.elapsed() < REJOIN_GRACE)
+                        && started.elapsed() + backoff < timeout =>
+                {
+                    std::thread::sleep(backoff);
+                    backoff = (backoff * 2).min(Duration::from_millis(50));
+                }
+                other => return other,
+            }
+        }
+    }
+
+    fn connect_once(&self, timeout: Duration) -> Result<Agent, AgentConnectError> {
         // The agent's own transport (`[[agent]] transport`), else `[transport] kind`.
         let kind = self
             .config
@@ -414,8 +436,41 @@ impl<'c> AgentBuilder<'c> {
             next_liveness: Instant::now() + HOST_LIVENESS_PERIOD,
             last_event_seq: 0,
             action_states: ActionStates::new(),
+            closed: false,
         })
     }
+}
+
+/// How long after an agent left ([`Agent::close`]) a new connection of the same id and
+/// session in the same process retries when the host still calls the id in use (the host
+/// reads the leave at its next wait).
+pub const REJOIN_GRACE: Duration = Duration::from_secs(5);
+
+/// (session, agent id, when it left) of agents that left in this process, newest last;
+/// bounded (the oldest entries go).
+static LEFT: std::sync::Mutex<Vec<(String, u32, Instant)>> = std::sync::Mutex::new(Vec::new());
+
+/// How many entries [`LEFT`] keeps.
+const LEFT_KEPT: usize = 64;
+
+fn note_left(session: &str, agent: u32) {
+    let mut left = LEFT
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    left.retain(|(s, a, _)| !(s == session && *a == agent));
+    if left.len() >= LEFT_KEPT {
+        left.remove(0);
+    }
+    left.push((session.to_owned(), agent, Instant::now()));
+}
+
+fn left_recently(session: &str, agent: u32) -> Option<Instant> {
+    let left = LEFT
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    left.iter()
+        .find(|(s, a, _)| s == session && *a == agent)
+        .map(|e| e.2)
 }
 
 #[derive(Debug)]
@@ -444,6 +499,8 @@ pub struct Agent {
     /// The highest event sequence number handed out.
     last_event_seq: u64,
     action_states: ActionStates,
+    /// The leave was sent ([`Agent::close`]).
+    closed: bool,
 }
 
 /// How many actions [`Agent::action_state`] remembers; beyond, the one whose status came
@@ -693,6 +750,48 @@ impl Agent {
         self.queue.clear();
         self.stopped_cycle = Some(cycle);
         Ok(())
+    }
+
+    /// Leaves the session now, gracefully: tells the host (best effort) that this agent is
+    /// gone, so it stops waiting for it at once — no stop timeout, no eviction — counts a
+    /// leave, and frees the id: a new connection of the same id (in this process or
+    /// another) takes part from the next cycle. Commands queued and not stopped are
+    /// dropped. Dropping the agent does the same; `close` only makes it explicit.
+    pub fn close(mut self) {
+        self.leave();
+    }
+
+    /// Sends the leave batch once (errors ignored: a host that is gone needs no goodbye).
+    fn leave(&mut self) {
+        if core::mem::replace(&mut self.closed, true) {
+            return;
+        }
+        let header = MotorHeader {
+            protocol_version: PROTOCOL_VERSION,
+            agent_id: self.id,
+            cycle: self.last_cycle.unwrap_or(0),
+            flags: MOTOR_FLAG_LEAVE
+                | if self.last_cycle.is_some() {
+                    MOTOR_FLAG_ACK
+                } else {
+                    0
+                },
+            command_count: 0,
+            ack_cycle: self.last_cycle.unwrap_or(0),
+        };
+        let _ = match &mut self.backend {
+            Backend::Shm(shm) => AgentTransport::send_batch(&mut **shm, &header, &[]),
+            Backend::Tcp(tcp) => AgentTransport::send_batch(tcp, &header, &[]),
+            Backend::Zenoh(z) => AgentTransport::send_batch(&mut **z, &header, &[]),
+        };
+        note_left(&self.session, self.id);
+    }
+}
+
+impl Drop for Agent {
+    /// Leaves gracefully ([`Agent::close`]).
+    fn drop(&mut self) {
+        self.leave();
     }
 }
 

@@ -1069,8 +1069,11 @@ pub unsafe extern "C" fn vrs_agent_connect(
     boundary(|| connect_impl(config_path, agent_id, timeout_ms, out_agent))
 }
 
-/// Disconnects and releases the agent. The handle is invalid afterwards: using it again,
-/// including a second disconnect, returns `VRS_ERROR_INVALID_HANDLE`.
+/// Disconnects and releases the agent, leaving the session gracefully: the host is told at
+/// once (it stops waiting for this agent, counts a leave, not a timeout or an eviction, and
+/// a new connection of the same id takes part from the next cycle). The handle is invalid
+/// afterwards: using it again, including a second disconnect, returns
+/// `VRS_ERROR_INVALID_HANDLE`.
 ///
 /// # Safety
 /// Any value may be passed: the handle is looked up, never dereferenced.

@@ -35,7 +35,7 @@ pub mod policy;
 
 pub use agent::{
     ACTION_STATES_CAPACITY, Agent, AgentBuilder, AgentConnectError, Frame, HOST_LIVENESS_PERIOD,
-    Image, SendError, SignalHandling, StopError, WaitStartError,
+    Image, REJOIN_GRACE, SendError, SignalHandling, StopError, WaitStartError,
 };
 /// The [glam](https://docs.rs/glam) this SDK uses for poses and targets ([`Pose::position`],
 /// [`Command::MoveTo`]): use `vrsync_agent::glam` instead of pinning the same version.

@@ -168,23 +168,82 @@ fn a_slow_agent_gets_the_newest_frame(kind: &str) {
     host.join().unwrap();
 }
 
-fn an_agent_that_goes_away_is_evicted_without_a_timeout(kind: &str) {
+/// An agent dropped between cycles leaves gracefully: not waited for, not evicted.
+fn an_agent_that_goes_away_leaves_without_a_timeout(kind: &'static str) {
     let (gone_tx, gone_rx): (Sender<()>, Receiver<()>) = channel();
     let (config, host) = with_host(config(kind, true), move |host| {
         publish(host);
-        host.collect().unwrap();
+        // The leave may come with the stop, in the same cycle.
+        let mut left = host.collect().unwrap().agents()[0].left;
         gone_rx.recv_timeout(WAIT).unwrap();
         publish(host);
         let report = host.collect().unwrap();
-        assert!(!report.timed_out, "a lost agent is evicted, not waited for");
+        assert!(!report.timed_out, "a gone agent is not waited for");
         assert_ne!(report.agents()[0].outcome, AgentOutcome::Stopped);
-        assert_eq!(host.stats().evicted_agents, [4]);
+        left |= report.agents()[0].left;
+        assert!(left, "{kind}: {:?}", report.agents()[0]);
+        let stats = host.stats();
+        assert_eq!((stats.leaves, stats.evictions), (1, 0), "{kind}: {stats:?}");
+        assert!(stats.evicted_agents.is_empty(), "{kind}: {stats:?}");
     });
     let mut agent = AgentBuilder::new(&config, 4).connect().unwrap();
     drop(agent.wait_start(Some(WAIT)).unwrap());
     agent.stop().unwrap();
     drop(agent);
     gone_tx.send(()).unwrap();
+    host.join().unwrap();
+}
+
+/// `close()` in the middle of a cycle, then a new connection of the same id in the same
+/// process: the host stops waiting at once (no stop timeout: it is 60 s here, and the
+/// default `wait_for_stop = "alive"` would wait for ever), counts a leave, and the new
+/// connection takes part from the next cycle.
+fn a_closed_agent_leaves_and_its_id_reconnects_at_the_next_cycle(kind: &'static str) {
+    let (config, host) = with_host(config_with(kind, true, 60.0, 256), move |host| {
+        publish(host);
+        let report = host.collect().unwrap();
+        assert_eq!(report.agents()[0].outcome, AgentOutcome::Stopped);
+        publish(host);
+        // The agent reads cycle 1 and closes without stopping it.
+        let report = host.collect().unwrap();
+        let a = &report.agents()[0];
+        assert_eq!((report.cycle, a.outcome), (1, AgentOutcome::Left), "{kind}");
+        assert!(a.left && !a.evicted, "{kind}: {a:?}");
+        assert_eq!(report.left_agents().collect::<Vec<_>>(), [4]);
+        host.wait_for_agents(WAIT).unwrap();
+        publish(host);
+        let report = host.collect().unwrap();
+        let a = &report.agents()[0];
+        assert_eq!(
+            (report.cycle, a.outcome),
+            (2, AgentOutcome::Stopped),
+            "{kind}"
+        );
+        assert!(a.rejoined && !a.left, "{kind}: {a:?}");
+        let stats = host.stats();
+        assert_eq!(
+            (stats.stop_timeouts, stats.slow_stops, stats.late_batches),
+            (0, 0, 0),
+            "{kind}: {stats:?}"
+        );
+        assert_eq!(
+            (stats.leaves, stats.evictions, stats.rejoins),
+            (1, 0, 1),
+            "{kind}: {stats:?}"
+        );
+    });
+    let mut agent = AgentBuilder::new(&config, 4).connect().unwrap();
+    drop(agent.wait_start(Some(WAIT)).unwrap());
+    agent.stop().unwrap();
+    let frame = agent.wait_start(Some(WAIT)).unwrap();
+    assert_eq!(frame.cycle(), 1);
+    drop(frame);
+    agent.close();
+    let mut again = AgentBuilder::new(&config, 4).connect().unwrap();
+    let frame = again.wait_start(Some(WAIT)).unwrap();
+    assert_eq!(frame.cycle(), 2, "{kind}: the next cycle");
+    drop(frame);
+    again.stop().unwrap();
     host.join().unwrap();
 }
 
@@ -506,8 +565,14 @@ macro_rules! conformance {
                 super::a_slow_agent_gets_the_newest_frame(stringify!($kind));
             }
             #[test]
-            fn an_agent_that_goes_away_is_evicted_without_a_timeout() {
-                super::an_agent_that_goes_away_is_evicted_without_a_timeout(stringify!($kind));
+            fn an_agent_that_goes_away_leaves_without_a_timeout() {
+                super::an_agent_that_goes_away_leaves_without_a_timeout(stringify!($kind));
+            }
+            #[test]
+            fn a_closed_agent_leaves_and_its_id_reconnects_at_the_next_cycle() {
+                super::a_closed_agent_leaves_and_its_id_reconnects_at_the_next_cycle(
+                    stringify!($kind),
+                );
             }
             #[test]
             fn a_late_stop_never_completes_the_next_cycle() {

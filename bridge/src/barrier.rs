@@ -22,6 +22,9 @@ pub enum AgentOutcome {
     Async,
     /// The agent was lost during the cycle (process died or disconnected) and evicted.
     Evicted,
+    /// The agent left the session during the cycle, gracefully (it said so: `close()` or
+    /// drop of its SDK handle), before its stop.
+    Left,
 }
 
 impl AgentOutcome {
@@ -33,6 +36,7 @@ impl AgentOutcome {
             Self::NotAwaited => "not_awaited",
             Self::Async => "async",
             Self::Evicted => "evicted",
+            Self::Left => "left",
         }
     }
 }
@@ -62,6 +66,8 @@ pub struct CycleBarrier {
     evicted: Vec<bool>,
     /// Given up at the stop timeout while the cycle went on (waiting for others).
     given_up: Vec<bool>,
+    /// Left gracefully before its stop.
+    left: Vec<bool>,
     /// Reported as slow (waited for past the stop timeout).
     slow: Vec<bool>,
     pending: usize,
@@ -76,6 +82,7 @@ impl CycleBarrier {
             stopped: vec![false; slots],
             evicted: vec![false; slots],
             given_up: vec![false; slots],
+            left: vec![false; slots],
             slow: vec![false; slots],
             pending: 0,
         }
@@ -88,6 +95,7 @@ impl CycleBarrier {
         self.stopped.fill(false);
         self.evicted.fill(false);
         self.given_up.fill(false);
+        self.left.fill(false);
         self.slow.fill(false);
         self.pending = 0;
     }
@@ -151,6 +159,20 @@ impl CycleBarrier {
         pending
     }
 
+    /// Stops waiting for `slot` this cycle because it left gracefully: as
+    /// [`CycleBarrier::evict`], with the outcome [`AgentOutcome::Left`] if it was awaited
+    /// (an agent that stopped first keeps its stop). Returns whether it was pending.
+    pub fn leave(&mut self, slot: usize) -> bool {
+        if self.stopped.get(slot) == Some(&true) || self.awaited.get(slot) != Some(&true) {
+            return false;
+        }
+        let pending = self.evict(slot);
+        if let Some(l) = self.left.get_mut(slot) {
+            *l = true;
+        }
+        pending
+    }
+
     /// Stops waiting for `slot` this cycle because its stop timeout passed while the cycle
     /// goes on for others: its outcome is [`AgentOutcome::TimedOut`] and its batches for
     /// this cycle are late from now on. Returns whether it was pending.
@@ -206,6 +228,9 @@ impl CycleBarrier {
 
     /// Outcome of `slot` if the cycle ended now.
     pub fn outcome(&self, slot: usize) -> AgentOutcome {
+        if self.left.get(slot) == Some(&true) {
+            return AgentOutcome::Left;
+        }
         if self.evicted.get(slot) == Some(&true) {
             return AgentOutcome::Evicted;
         }
@@ -307,6 +332,23 @@ mod tests {
         assert!(b.is_complete());
         b.begin(5);
         assert!(!b.is_slow(1));
+    }
+
+    #[test]
+    fn a_slot_that_leaves_stops_holding_the_cycle_unless_it_stopped_first() {
+        let mut b = CycleBarrier::new(2);
+        b.begin(1);
+        b.await_slot(0);
+        b.await_slot(1);
+        assert_eq!(b.on_batch(0, 1, true), BatchVerdict::Accept { stop: true });
+        assert!(!b.leave(0), "it stopped first");
+        assert_eq!(b.outcome(0), AgentOutcome::Stopped);
+        assert!(b.leave(1));
+        assert!(b.is_complete());
+        assert_eq!(b.outcome(1), AgentOutcome::Left);
+        b.begin(2);
+        assert!(!b.leave(1), "not awaited");
+        assert_eq!(b.outcome(1), AgentOutcome::NotAwaited);
     }
 
     #[test]

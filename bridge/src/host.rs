@@ -126,8 +126,14 @@ pub struct AgentReport {
     /// disconnected), also when its stop had arrived first (then `outcome` stays
     /// [`AgentOutcome::Stopped`]).
     pub evicted: bool,
-    /// The agent rejoined in this cycle: its first frame since an eviction reached it.
+    /// The agent rejoined in this cycle: its first frame since an eviction or a leave
+    /// reached it.
     pub rejoined: bool,
+    /// The agent left the session gracefully during this cycle (its SDK's `close()` or
+    /// drop said so): not a fault, not evicted; its id is free for a new connection, which
+    /// takes part from the next cycle. If its stop had arrived first, `outcome` stays
+    /// [`AgentOutcome::Stopped`].
+    pub left: bool,
     /// The host waited for its stop past `stop_timeout` (its `wait_for_stop` is `"alive"`
     /// and it stayed connected): a slow agent, reported, not timed out.
     pub slow: bool,
@@ -178,6 +184,11 @@ impl CycleReport {
             .iter()
             .filter(|a| a.rejoined)
             .map(|a| a.agent_id)
+    }
+
+    /// Ids of agents that left gracefully during this cycle ([`AgentReport::left`]).
+    pub fn left_agents(&self) -> impl Iterator<Item = u32> + '_ {
+        self.agents.iter().filter(|a| a.left).map(|a| a.agent_id)
     }
 
     /// Ids of agents waited for past `stop_timeout` this cycle ([`AgentReport::slow`]).
@@ -232,8 +243,10 @@ pub struct HostStats {
     pub collisions_dropped: u64,
     /// Agents evicted at least once (process died or disconnected), ascending.
     pub evicted_agents: Vec<u32>,
-    /// Times an evicted agent came back.
+    /// Times an evicted agent, or one that left, came back.
     pub rejoins: u64,
+    /// Graceful leaves: an agent's SDK said it leaves (`close()`, drop). Not evictions.
+    pub leaves: u64,
     /// Evictions (an agent evicted twice counts 2).
     pub evictions: u64,
     /// Peers refused or dropped before they were admitted as agents (see
@@ -437,6 +450,8 @@ impl<T: HostTransport> Host<T> {
                     rejoined_in: None,
                     connected_once: false,
                     wait_for_stop: a.wait_for_stop,
+                    left: false,
+                    left_in: None,
                 }
             })
             .collect();
@@ -449,6 +464,7 @@ impl<T: HostTransport> Host<T> {
                 read_cycle: None,
                 evicted: false,
                 rejoined: false,
+                left: false,
                 slow: false,
                 commands: Vec::with_capacity(cap),
             })
@@ -477,6 +493,7 @@ impl<T: HostTransport> Host<T> {
             stats: HostStats::default(),
             next_tick: None,
             dead: Vec::with_capacity(n),
+            leaving: Vec::with_capacity(n),
             lost_this_cycle: Vec::with_capacity(n),
             evicted_hook: None,
             refused_hook: None,
@@ -510,6 +527,11 @@ struct SlotState {
     connected_once: bool,
     /// Its effective `wait_for_stop`.
     wait_for_stop: WaitForStop,
+    /// Out because it left gracefully (with `evicted` set: out until a frame reaches a
+    /// new connection).
+    left: bool,
+    /// The cycle of its latest graceful leave.
+    left_in: Option<u64>,
 }
 
 /// How often the host looks for dead agent processes while it waits.
@@ -528,6 +550,8 @@ pub struct Host<T: HostTransport = Transports> {
     stats: HostStats,
     next_tick: Option<Instant>,
     dead: Vec<usize>,
+    /// Slots whose leave batch the last drain brought.
+    leaving: Vec<usize>,
     lost_this_cycle: Vec<usize>,
     evicted_hook: Option<Box<dyn FnMut(u32, u64)>>,
     refused_hook: Option<RefusedHook>,
@@ -598,7 +622,15 @@ impl<T: HostTransport> Host<T> {
     /// Whether agent `id` is evicted: it was lost (process died or disconnected) and no
     /// frame has reached it since. It rejoins when one does (see [`Host::publish`]).
     pub fn is_evicted(&self, id: u32) -> bool {
-        self.slot_of(id).is_some_and(|s| self.slots[s].evicted)
+        self.slot_of(id)
+            .is_some_and(|s| self.slots[s].evicted && !self.slots[s].left)
+    }
+
+    /// Whether agent `id` left the session gracefully and no frame has reached a new
+    /// connection of that id since (it rejoins when one does, as an evicted agent).
+    pub fn has_left(&self, id: u32) -> bool {
+        self.slot_of(id)
+            .is_some_and(|s| self.slots[s].evicted && self.slots[s].left)
     }
 
     /// Calls `hook(agent, cycle)` each time an agent is evicted, as it happens: also while
@@ -796,6 +828,7 @@ impl<T: HostTransport> Host<T> {
             self.slots[slot].seen = true;
             if self.slots[slot].evicted {
                 self.slots[slot].evicted = false;
+                self.slots[slot].left = false;
                 self.slots[slot].rejoined_in = Some(self.cycle);
                 self.stats.rejoins += 1;
                 info!(agent = frame.agent_id, cycle = self.cycle, "agent rejoined");
@@ -846,6 +879,7 @@ impl<T: HostTransport> Host<T> {
             a.read_cycle = s.read_cycle;
             a.evicted = s.evicted_in == Some(cycle);
             a.rejoined = s.rejoined_in == Some(cycle);
+            a.left = s.left_in == Some(cycle);
         }
         for (slot, a) in self.report.agents.iter_mut().enumerate() {
             a.slow = self.barrier.is_slow(slot);
@@ -861,6 +895,7 @@ impl<T: HostTransport> Host<T> {
         let report = &mut self.report;
         let stats = &mut self.stats;
         let slots = &mut self.slots;
+        let leaving = &mut self.leaving;
         let cycle = self.cycle;
         self.backend.drain(&mut |slot, header, commands| {
             // Any batch may acknowledge a frame, a late one too; never one not yet sent.
@@ -871,6 +906,13 @@ impl<T: HostTransport> Host<T> {
                 s.read_cycle = Some(read);
                 s.events.acknowledge(read);
                 stats.frames_read += 1;
+            }
+            if header.is_leave() {
+                // Not part of any cycle: the agent is gone (see `check_lost`).
+                if !leaving.contains(&slot) {
+                    leaving.push(slot);
+                }
+                return;
             }
             let verdict = if sync {
                 barrier.on_batch(slot, header.cycle, header.is_stop())
@@ -935,26 +977,64 @@ impl<T: HostTransport> Host<T> {
         Ok(())
     }
 
-    /// Evicts awaited agents that disconnected or whose process died.
-    fn check_lost(&mut self, reap: bool) {
+    /// Lets agents that said they leave go (see [`AgentReport::left`]).
+    fn handle_leaves(&mut self) {
+        for i in 0..self.leaving.len() {
+            let slot = self.leaving[i];
+            let s = &self.slots[slot];
+            let id = s.id;
+            self.backend.forget_connection(slot);
+            // An agent that never took part (or is out already) has nothing to leave.
+            let pending = self.barrier.leave(slot);
+            if !pending && (!s.seen || s.evicted) {
+                continue;
+            }
+            info!(agent = id, cycle = self.cycle, "agent left the session");
+            let s = &mut self.slots[slot];
+            s.evicted = true;
+            s.left = true;
+            s.left_in = Some(self.cycle);
+            s.seen = false;
+            // A new connection starts afresh, as after an eviction.
+            s.events.clear();
+            s.read_cycle = None;
+            self.stats.leaves += 1;
+        }
+        self.leaving.clear();
+    }
+
+    /// Evicts awaited agents that disconnected or whose process died; lets those that said
+    /// they leave go.
+    fn check_lost(&mut self, sync: bool, reap: bool) -> Result<(), HostCycleError> {
         self.take_refusals();
+        self.handle_leaves();
         self.dead.clear();
         if reap {
             self.backend.reap_dead_agents(&mut self.dead);
         }
         // Awaited agents that disconnected, and agents that left between cycles.
+        let mut disconnected = false;
         for slot in 0..self.slots.len() {
             let pending = self.barrier.outcome(slot) == AgentOutcome::TimedOut;
             let known = pending || (self.slots[slot].seen && !self.slots[slot].evicted);
             if known && !self.backend.is_connected(slot) && !self.dead.contains(&slot) {
                 self.dead.push(slot);
+                disconnected = true;
             }
+        }
+        if disconnected {
+            // An agent that leaves sends its leave batch, then closes: the batch may have
+            // come in since the last drain. A leave is not a loss (a slot that left is out
+            // already, so the loop below passes it by).
+            self.drain(sync)?;
+            self.handle_leaves();
         }
         for i in 0..self.dead.len() {
             let slot = self.dead[i];
             let pending = self.barrier.evict(slot);
             if pending || !self.slots[slot].evicted {
                 let id = self.slots[slot].id;
+                self.backend.forget_connection(slot);
                 warn!(
                     agent = id,
                     cycle = self.cycle,
@@ -976,6 +1056,7 @@ impl<T: HostTransport> Host<T> {
                 }
             }
         }
+        Ok(())
     }
 
     /// Drains batches and watches for lost agents until `until` — in sync mode only until
@@ -998,7 +1079,7 @@ impl<T: HostTransport> Host<T> {
             if reap {
                 next_reap = now + REAP_PERIOD;
             }
-            self.check_lost(reap);
+            self.check_lost(sync, reap)?;
             if sync && self.barrier.is_complete() {
                 break;
             }
@@ -1478,6 +1559,60 @@ mod tests {
         let stats = host.stats();
         assert_eq!((stats.stop_timeouts, stats.agent_timeouts), (1, 1));
         assert_eq!(stats.slow_stops, 1);
+    }
+
+    #[test]
+    fn a_leaving_agent_is_not_waited_for_counts_a_leave_and_its_id_takes_part_again() {
+        let (mut host, agents) = host_waiting("abort", "alive", 0.05);
+        publish_all(&mut host);
+        host.collect().unwrap();
+        // Cycle 1: agent 7 reads its frame and leaves without a stop.
+        {
+            let mut a = agents.borrow_mut();
+            a.answers[1] = false;
+            a.inbox.push((
+                1,
+                MotorHeader {
+                    protocol_version: PROTOCOL_VERSION,
+                    agent_id: 7,
+                    cycle: 1,
+                    flags: crate::wire::MOTOR_FLAG_LEAVE,
+                    command_count: 0,
+                    ack_cycle: 0,
+                },
+                Vec::new(),
+            ));
+        }
+        publish_all(&mut host);
+        let report = host.collect().unwrap();
+        assert_eq!(
+            outcomes(report),
+            [(3, AgentOutcome::Stopped), (7, AgentOutcome::Left)]
+        );
+        assert_eq!(report.left_agents().collect::<Vec<_>>(), [7]);
+        assert_eq!(report.evicted_agents().count(), 0);
+        assert!(!report.timed_out && report.slow_agents().count() == 0);
+        assert!(host.has_left(7) && !host.is_evicted(7));
+        // Not lost: on_agent_lost = "abort" does not apply. Cycle 2: a new connection
+        // of id 7 answers again.
+        {
+            let mut a = agents.borrow_mut();
+            a.answers[1] = true;
+            // The new connection never saw cycle 1's frame.
+            a.delivered.retain(|&(slot, _)| slot != 1);
+        }
+        publish_all(&mut host);
+        let report = host.collect().unwrap();
+        assert_eq!(
+            outcomes(report),
+            [(3, AgentOutcome::Stopped), (7, AgentOutcome::Stopped)]
+        );
+        assert_eq!(report.rejoined_agents().collect::<Vec<_>>(), [7]);
+        assert!(!host.has_left(7));
+        let stats = host.stats();
+        assert_eq!((stats.leaves, stats.rejoins, stats.evictions), (1, 1, 0));
+        assert!(stats.evicted_agents.is_empty());
+        assert_eq!((stats.stop_timeouts, stats.late_batches), (0, 0));
     }
 
     #[test]

@@ -85,9 +85,9 @@ pub use transport::{
 pub use wire::{
     ActionState, ActionStatus, CAMERA_NAME_LEN, Collision, Command, CommandDecodeError,
     EyePosition, GridPosition, HeadMotion, IMAGE_ALIGN, ImageDesc, LAYOUT_HASH, MAX_CAMERAS,
-    MAX_COLLISIONS, MAX_STATUSES, MAX_TOKEN, MOTOR_FLAG_ACK, MOTOR_FLAG_STOP, MotorCommand,
-    MotorHeader, PROTOCOL_VERSION, PixelFormat, Pose, SENSOR_FLAG_SYNC_MODE, SensorHeader,
-    WireOutcome, image_layout, kind as command_kind, kind_name,
+    MAX_COLLISIONS, MAX_STATUSES, MAX_TOKEN, MOTOR_FLAG_ACK, MOTOR_FLAG_LEAVE, MOTOR_FLAG_STOP,
+    MotorCommand, MotorHeader, PROTOCOL_VERSION, PixelFormat, Pose, SENSOR_FLAG_SYNC_MODE,
+    SensorHeader, WireOutcome, image_layout, kind as command_kind, kind_name,
 };
 
 /// The shared-memory transport (iceoryx2): agents on this machine, zero copy.

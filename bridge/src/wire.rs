@@ -512,6 +512,12 @@ impl SensorHeader {
 pub const MOTOR_FLAG_STOP: u32 = 1;
 /// Motor header flag: [`MotorHeader::ack_cycle`] is valid.
 pub const MOTOR_FLAG_ACK: u32 = 2;
+/// Motor header flag: the agent leaves the session now (a graceful leave: `Agent::close`
+/// or drop). The batch carries no commands; its `cycle` is the newest the agent saw. The
+/// host stops waiting for it at once and frees its id for a new connection. (Hosts that
+/// predate the flag ignore it and notice the closed connection instead: no protocol
+/// version change.)
+pub const MOTOR_FLAG_LEAVE: u32 = 4;
 
 /// Header of a motor batch: the iceoryx2 user header of an `agent/<id>/motor` sample whose
 /// payload is `[MotorCommand]`.
@@ -551,6 +557,11 @@ impl MotorHeader {
     /// Whether this batch carries the stop.
     pub fn is_stop(&self) -> bool {
         self.flags & MOTOR_FLAG_STOP != 0
+    }
+
+    /// Whether the agent leaves with this batch ([`MOTOR_FLAG_LEAVE`]).
+    pub fn is_leave(&self) -> bool {
+        self.flags & MOTOR_FLAG_LEAVE != 0
     }
 
     /// The acknowledged cycle, if the batch carries one.

@@ -10,7 +10,7 @@
 //! | `waiting_for_agents` | `agents` (the ids not connected yet) |
 //! | `agent_connected` | `agent`, `cycle` (`null` before cycle 0) |
 //! | `all_agents_connected` | `agents` (how many) |
-//! | `agent_left` | `agent`, `cycle`: its connection is gone (seen at a cycle boundary) |
+//! | `agent_left` | `agent`, `cycle`, `graceful`: `true`: the agent said it leaves (its SDK's `close()` or drop), written when the host read that (the cycle it left in); `false`: its connection was seen gone at a cycle boundary (the cycle about to start) |
 //! | `agent_evicted` | `agent`, `cycle`, `reason`: written as the host evicts it (also while a cycle waits for it) |
 //! | `agent_rejoined` | `agent`, `cycle` (the first cycle it takes part in again) |
 //! | `agent_slow` | `agent`, `cycle`, `waited_s`: the host still waits for this live agent's stop past `stop_timeout` (`wait_for_stop = "alive"`); written as it happens, at 1×, 2×, 4×, … `stop_timeout` into the cycle |
@@ -71,8 +71,11 @@ pub enum Event<'a> {
     AgentLeft {
         /// Agent id.
         agent: u32,
-        /// The cycle about to start.
+        /// Graceful: the cycle it left in; else the cycle about to start.
         cycle: u64,
+        /// The agent said it leaves (a graceful leave), rather than its connection being
+        /// seen gone.
+        graceful: bool,
     },
     /// The host evicted an agent.
     AgentEvicted {

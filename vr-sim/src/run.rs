@@ -74,8 +74,10 @@ pub struct Summary {
     pub peers_refused: u64,
     /// Evictions (an agent evicted twice counts 2).
     pub evictions: u64,
-    /// Times an evicted agent came back.
+    /// Times an evicted agent, or one that left, came back.
     pub rejoins: u64,
+    /// Graceful leaves (an agent's SDK said it leaves): not evictions, not timeouts.
+    pub leaves: u64,
     /// Frames delivered to an agent (one per agent and cycle when nothing goes wrong).
     pub frames_delivered: u64,
     /// Frames an agent acknowledged having read; `frames_delivered - frames_read` were
@@ -357,7 +359,11 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
                         cycle: Some(cycle),
                     }
                 } else {
-                    Event::AgentLeft { agent: id, cycle }
+                    Event::AgentLeft {
+                        agent: id,
+                        cycle,
+                        graceful: false,
+                    }
                 })?;
             }
             if !now_connected {
@@ -378,7 +384,7 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
                 }
             }
             host.publish(frame)?;
-            if evicted[i] && !host.is_evicted(id) {
+            if evicted[i] && !host.is_evicted(id) && !host.has_left(id) {
                 evicted[i] = false;
                 notable = true;
                 events.emit(Event::AgentRejoined { agent: id, cycle })?;
@@ -400,6 +406,20 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
         let cycle = report.cycle;
         let timed_out_agents: Vec<u32> = report.timed_out_agents().collect();
         let slow_agents: Vec<u32> = report.slow_agents().collect();
+        for (i, &id) in ids.iter().enumerate() {
+            if report.agent(id).is_some_and(|a| a.left) {
+                // Reported here, not again at the next cycle boundary; a new connection
+                // of the id shows as connected, then rejoined.
+                connected[i] = false;
+                evicted[i] = true;
+                notable = true;
+                events.emit(Event::AgentLeft {
+                    agent: id,
+                    cycle,
+                    graceful: true,
+                })?;
+            }
+        }
         let late_batches = report.late_batches;
         let mut per_agent = Vec::with_capacity(if record.is_some() { ids.len() } else { 0 });
         rejected_per_agent.clear();
@@ -571,6 +591,7 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
         peers_refused: stats.peers_refused,
         evictions: stats.evictions,
         rejoins: stats.rejoins,
+        leaves: stats.leaves,
         frames_delivered: stats.frames_delivered,
         frames_read: stats.frames_read,
         frames_undelivered: stats.frames_undelivered,
@@ -609,8 +630,8 @@ pub fn print_summary(s: &Summary) {
         ("future stops dropped", s.future_stops.to_string()),
         ("evicted agents", format!("{:?}", s.evicted_agents)),
         (
-            "evictions, rejoins",
-            format!("{}, {}", s.evictions, s.rejoins),
+            "evictions, leaves, rejoins",
+            format!("{}, {}, {}", s.evictions, s.leaves, s.rejoins),
         ),
         ("peers refused", s.peers_refused.to_string()),
         (

@@ -224,6 +224,7 @@ public:
                                         detail::to_ms(connect_timeout), &handle_),
                       "vrs_agent_connect");
     }
+    /// Leaves the session gracefully (vrs_agent_disconnect): the host is told at once.
     ~Agent() { reset(); }
     Agent(const Agent&) = delete;
     Agent& operator=(const Agent&) = delete;

@@ -155,6 +155,9 @@ enum vrs_host_outcome_t
   VRS_HOST_OUTCOME_ASYNC = 3,
   // The agent was lost during the cycle (process died or disconnected).
   VRS_HOST_OUTCOME_EVICTED = 4,
+  // The agent left the session gracefully during the cycle (it closed its connection
+  // and said so) before its stop.
+  VRS_HOST_OUTCOME_LEFT = 5,
   // An outcome this version of the ABI does not know.
   VRS_HOST_OUTCOME_OTHER = 255,
 };

@@ -383,6 +383,7 @@ pub(crate) fn outcome(o: AgentOutcome) -> vrs_host_outcome_t {
         AgentOutcome::NotAwaited => VRS_HOST_OUTCOME_NOT_AWAITED,
         AgentOutcome::Async => VRS_HOST_OUTCOME_ASYNC,
         AgentOutcome::Evicted => VRS_HOST_OUTCOME_EVICTED,
+        AgentOutcome::Left => VRS_HOST_OUTCOME_LEFT,
     }
 }
 

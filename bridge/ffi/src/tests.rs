@@ -758,7 +758,7 @@ fn panics_become_a_status() {
 #[test]
 fn every_outcome_has_its_own_abi_code() {
     use vrsync_bridge::AgentOutcome::*;
-    let all = [Stopped, TimedOut, NotAwaited, Async, Evicted];
+    let all = [Stopped, TimedOut, NotAwaited, Async, Evicted, Left];
     let codes: std::collections::HashSet<u32> = all
         .iter()
         .map(|&o| crate::state::outcome(o) as u32)

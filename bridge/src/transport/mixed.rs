@@ -457,6 +457,34 @@ impl HostTransport for Transports {
         unkept
     }
 
+    fn forget_connection(&mut self, slot: usize) {
+        let Ok(r) = self.route(slot) else {
+            return;
+        };
+        match r.kind {
+            TransportKind::Shm => {
+                if let Some(t) = &mut self.shm {
+                    t.forget_connection(r.local);
+                }
+            }
+            TransportKind::Tcp => {
+                if let Some(t) = &mut self.tcp {
+                    t.forget_connection(r.local);
+                }
+            }
+            TransportKind::Legacy => {
+                if let Some(t) = &mut self.legacy {
+                    t.forget_connection(r.local);
+                }
+            }
+            TransportKind::Zenoh => {
+                if let Some(t) = &mut self.zenoh {
+                    t.forget_connection(r.local);
+                }
+            }
+        }
+    }
+
     fn reap_dead_agents(&mut self, dead: &mut Vec<usize>) {
         if let Some(t) = &mut self.shm {
             self.scratch.clear();

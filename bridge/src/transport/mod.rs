@@ -279,7 +279,12 @@ pub type BatchSink<'a> = dyn FnMut(usize, &MotorHeader, &[MotorCommand]) + 'a;
 ///   Notifications merge, so callers never count wake-ups — they read cycle numbers from
 ///   the batches.
 /// - [`HostTransport::is_connected`] tells whether an agent's receiving side is attached, so
-///   the host can refuse to start cycle 0 before every agent can see it.
+///   the host can refuse to start cycle 0 before every agent can see it. A new connection
+///   that replaced the one the last frame went to is not the same agent: until the host
+///   [forgets](HostTransport::forget_connection) the old one it is not connected.
+/// - A batch with [`crate::wire::MOTOR_FLAG_LEAVE`] is handed to the sink like any other;
+///   a network transport then drops that connection at once, so the id is free for a new
+///   one.
 /// - Each transport has its own loan type ([`HostTransport::Loan`]); a host serving agents
 ///   over several transports routes each agent's slot to its transport and waits for all
 ///   of them at once ([`HostTransport::activity_fd`]): one wait, whoever answers.
@@ -335,6 +340,17 @@ pub trait HostTransport {
     /// while the host waits; transports that see disconnects directly (TCP) need nothing.
     fn reap_dead_agents(&mut self, dead: &mut Vec<usize>) {
         let _ = dead;
+    }
+
+    /// The host stopped serving agent `slot`'s connection: it left (a batch with
+    /// [`crate::wire::MOTOR_FLAG_LEAVE`]) or was evicted. A transport that tells an agent's
+    /// connections apart by identity (shared memory: the subscriber that got the last
+    /// frame) forgets the old one, so the next connection for the id counts as connected.
+    /// It must not drop a connection admitted after the one the host served. Network
+    /// transports close a leaving agent's connection themselves when they read its leave
+    /// batch, and need nothing here.
+    fn forget_connection(&mut self, slot: usize) {
+        let _ = slot;
     }
 
     /// The network address agents connect to, for network transports.

@@ -75,6 +75,9 @@ namespace Vrsync
         Async = 3,
         /// <summary>The agent's process died or disconnected during the cycle.</summary>
         Evicted = 4,
+        /// <summary>The agent left the session gracefully during the cycle (it closed its
+        /// connection and said so) before its stop.</summary>
+        Left = 5,
         /// <summary>An outcome this binding does not know.</summary>
         Other = 255,
     }

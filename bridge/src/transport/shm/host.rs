@@ -2,6 +2,7 @@
 //! sensor samples, drains motor batches, waits on the stop event.
 
 use super::*;
+use iceoryx2::identifiers::UniqueSubscriberId;
 // ---------------------------------------------------------------------------------------
 // Host side
 // ---------------------------------------------------------------------------------------
@@ -46,6 +47,10 @@ struct HostAgentPorts {
     sensor_service: ps_factory::PortFactory<Svc, [u8], SensorHeader>,
     /// Addresses of pool chunks already written once: their bytes are initialised.
     initialised: Vec<usize>,
+    /// The agent's sensor subscriber that got the last frame, until the host forgets it:
+    /// another subscriber (the agent left and a new one connected before the host looked)
+    /// is not this connection.
+    served: Option<UniqueSubscriberId>,
 }
 
 /// The host side of the shared-memory transport.
@@ -214,6 +219,7 @@ impl ShmHost {
                 motor_service,
                 motor_sub,
                 initialised: Vec::with_capacity(SENSOR_POOL_SAMPLES * 2),
+                served: None,
             });
         }
         // `start` is created last: agents open it first, so once it exists every other
@@ -272,6 +278,18 @@ fn is_dyn_connected(p: &HostAgentPorts) -> bool {
     use iceoryx2::service::port_factory::PortFactory as _;
     p.sensor_service.dynamic_config().number_of_subscribers() > 0
         && p.motor_service.dynamic_config().number_of_publishers() > 0
+        && p.served.is_none_or(|s| sensor_subscriber(p) == Some(s))
+}
+
+/// The agent's sensor subscriber, if one is attached.
+fn sensor_subscriber(p: &HostAgentPorts) -> Option<UniqueSubscriberId> {
+    use iceoryx2::service::port_factory::PortFactory as _;
+    let mut found = None;
+    p.sensor_service.dynamic_config().list_subscribers(|d| {
+        found = Some(d.subscriber_id);
+        CallbackProgression::Stop
+    });
+    found
 }
 
 impl HostTransport for ShmHost {
@@ -314,14 +332,24 @@ impl HostTransport for ShmHost {
 
     fn publish(&mut self, slot: usize, frame: ShmFrameLoan) -> Result<bool, HostTransportError> {
         let id = self.agent(slot)?.id;
-        frame
+        let delivered = frame
             .sample
             .send()
             .map(|receivers| receivers > 0)
             .map_err(|e| HostTransportError::Send {
                 what: format!("the sensor frame of agent {id}"),
                 reason: format!("{e:?}"),
-            })
+            })?;
+        if delivered && let Some(p) = self.agents.get_mut(slot) {
+            p.served = sensor_subscriber(p);
+        }
+        Ok(delivered)
+    }
+
+    fn forget_connection(&mut self, slot: usize) {
+        if let Some(p) = self.agents.get_mut(slot) {
+            p.served = None;
+        }
     }
 
     fn signal_start(&mut self) -> Result<(), HostTransportError> {

@@ -90,6 +90,9 @@ pub(super) struct TcpSlot {
     pub(super) body_len: usize,
 }
 
+/// What `drain_conn` reports for a leave batch (not a failure: the connection ends).
+const LEFT: &str = "left the session";
+
 /// The host side of the TCP transport.
 #[derive(Debug)]
 pub struct TcpHost {
@@ -269,6 +272,7 @@ impl TcpHost {
     }
 
     fn drop_conn(&mut self, slot: usize, why: &str) {
+        // (A leave is not a failure: see `drain`.)
         if let Some(c) = self.slots[slot].conn.take() {
             warn!(agent = self.slots[slot].id, peer = %c.peer, "TCP agent dropped: {why}");
         }
@@ -538,7 +542,8 @@ impl TcpHost {
     }
 
     /// Reads what has arrived from `c`, handing complete motor batches to `sink`.
-    /// `Err(why)` drops the connection.
+    /// `Err(why)` drops the connection, and so does a leave batch (`Err` with
+    /// [`LEFT`]).
     fn drain_conn(
         c: &mut Conn,
         slot: usize,
@@ -552,6 +557,10 @@ impl TcpHost {
                     let (header, commands) =
                         decode_motor(c.reader.body()).map_err(|e| e.to_string())?;
                     sink(slot, &header, commands);
+                    if header.is_leave() {
+                        // The agent is gone: free its id for a new connection now.
+                        return Err(LEFT.into());
+                    }
                 }
                 Ok(ReadProgress::Record(k)) => {
                     return Err(format!("sent record kind {k}, expected motor batches"));
@@ -732,8 +741,14 @@ impl HostTransport for TcpHost {
                 Some(c) => Self::drain_conn(c, slot, stall_timeout, sink).err(),
                 None => None,
             };
-            if let Some(why) = failure {
-                self.drop_conn(slot, &why);
+            match failure {
+                Some(why) if why == LEFT => {
+                    if let Some(c) = self.slots[slot].conn.take() {
+                        debug!(agent = self.slots[slot].id, peer = %c.peer, "TCP agent left");
+                    }
+                }
+                Some(why) => self.drop_conn(slot, &why),
+                None => {}
             }
         }
         Ok(())

@@ -2,7 +2,7 @@
 //! and matching, one publisher per agent, one subscriber for every agent's batches.
 
 use std::collections::VecDeque;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use ::zenoh::Wait;
 use ::zenoh::liveliness::LivelinessToken;
@@ -71,6 +71,10 @@ pub struct ZenohHostStats {
     pub frames_sent: u64,
 }
 
+/// How long after an agent's token vanished its leave batch is still taken (the two travel
+/// on different zenoh channels, so the deletion may overtake the batch).
+const LEAVE_AFTER_TOKEN: Duration = Duration::from_secs(2);
+
 #[derive(Debug)]
 struct SlotState {
     id: u32,
@@ -81,6 +85,11 @@ struct SlotState {
     /// The sensor publisher matches a subscriber.
     matched: bool,
     queue: VecDeque<AlignedBuf>,
+    /// A leave batch waits in `queue`: a token deletion keeps the queue for the host.
+    leave_queued: bool,
+    /// When the admitted connection's token vanished: its leave batch, racing the deletion
+    /// on another zenoh channel, is still taken for [`LEAVE_AFTER_TOKEN`].
+    gone_at: Option<Instant>,
 }
 
 impl SlotState {
@@ -198,6 +207,7 @@ impl Shared {
         let s = &mut st.slots[slot];
         s.admitted = Some((nonce, Instant::now()));
         s.alive = false;
+        s.gone_at = None;
         let body_len = self.frame_bodies.get(slot).copied().unwrap_or(HEADER);
         Ok((nonce, body_len))
     }
@@ -261,8 +271,13 @@ impl Shared {
                 let s = &mut st.slots[slot];
                 s.admitted = None;
                 s.alive = false;
-                let dropped: Vec<AlignedBuf> = s.queue.drain(..).collect();
-                st.free.extend(dropped);
+                s.gone_at = Some(Instant::now());
+                // A leave batch in the queue is for the host still (the agent left
+                // gracefully); anything else of a vanished agent is not.
+                if !s.leave_queued {
+                    let dropped: Vec<AlignedBuf> = s.queue.drain(..).collect();
+                    st.free.extend(dropped);
+                }
                 drop(st);
                 warn!(
                     agent = id,
@@ -281,7 +296,13 @@ impl Shared {
         let parsed = self.keys.parse_agent(sample.key_expr().as_str());
         let mut st = lock(&self.state);
         let slot = parsed.and_then(|(id, _)| Self::slot_of(&st, id));
-        let Some(slot) = slot.filter(|&s| st.slots[s].connected()) else {
+        // Not connected any more, but its token vanished just now: only a leave batch is
+        // taken (checked below).
+        let just_gone = |s: &SlotState| {
+            !s.connected() && s.gone_at.is_some_and(|t| t.elapsed() < LEAVE_AFTER_TOKEN)
+        };
+        let Some(slot) = slot.filter(|&s| st.slots[s].connected() || just_gone(&st.slots[s]))
+        else {
             st.stats.dropped_not_connected += 1;
             let n = st.stats.dropped_not_connected;
             drop(st);
@@ -309,8 +330,15 @@ impl Shared {
             .pop()
             .unwrap_or_else(|| AlignedBuf::with_capacity(self.max_motor_body));
         buf.fill_from(payload);
-        let stop = match super::super::tcp::decode_motor(buf.bytes()) {
-            Ok((h, _)) if h.agent_id == id => h.is_stop(),
+        let (stop, leave) = match super::super::tcp::decode_motor(buf.bytes()) {
+            Ok((h, _)) if h.agent_id == id && (h.is_leave() || st.slots[slot].connected()) => {
+                (h.is_stop(), h.is_leave())
+            }
+            Ok((h, _)) if h.agent_id == id => {
+                st.free.push(buf);
+                st.stats.dropped_not_connected += 1;
+                return;
+            }
             Ok((h, _)) => {
                 st.free.push(buf);
                 return self.malformed(st, id, format!("names agent {}", h.agent_id));
@@ -322,7 +350,7 @@ impl Shared {
         };
         // A flood fills the queue; batches that end a cycle keep room of their own, so
         // the agent's stop still arrives after a flood of its own batches.
-        let limit = if stop {
+        let limit = if stop || leave {
             2 * MAX_QUEUED_BATCHES
         } else {
             MAX_QUEUED_BATCHES
@@ -342,6 +370,18 @@ impl Shared {
             return;
         }
         st.slots[slot].queue.push_back(buf);
+        if leave {
+            // A graceful leave: the id is free for a new connection at once (its token's
+            // deletion may come later); the host reads the batch at its next drain.
+            let s = &mut st.slots[slot];
+            s.admitted = None;
+            s.alive = false;
+            s.leave_queued = true;
+            drop(st);
+            info!(agent = id, "zenoh agent left");
+            self.wake.wake();
+            return;
+        }
         drop(st);
         self.wake.wake();
     }
@@ -482,6 +522,8 @@ impl ZenohHost {
                         alive: false,
                         matched: false,
                         queue: VecDeque::with_capacity(MAX_QUEUED_BATCHES),
+                        leave_queued: false,
+                        gone_at: None,
                     })
                     .collect(),
                 next_nonce: 1,
@@ -663,6 +705,9 @@ impl HostTransport for ZenohHost {
                         Some(b) => self.scratch.push((slot, b)),
                         None => break,
                     }
+                }
+                if s.queue.is_empty() {
+                    s.leave_queued = false;
                 }
             }
         }
