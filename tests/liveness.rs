@@ -138,7 +138,75 @@ fn an_agent_killed_while_the_host_waits_for_it_is_evicted_at_once(t: Transport) 
     assert_eq!(sum["evicted_agents"], serde_json::json!([1]), "{sum}");
 }
 
+/// Every agent left (gracefully, `vr-agent --frames`): the host pauses — no cycle runs and
+/// no frame goes nowhere — until an agent of the id connects again, then goes on.
+fn with_nobody_attached_the_host_pauses_until_agents_are_back(t: Transport) {
+    let cfg = TestConfig::with_transport("idle", 1, t);
+    let run = HostRun::start(cfg, &["--frames", "40"]);
+    let events = &run.events;
+    let (first, _) = run.agent(0, "first.log", &["--policy", "circle", "--frames", "10"]);
+    assert_eq!(first.wait(RUN_DEADLINE).code(), Some(0));
+    let left = events.wait_for_match("agent_left", |e| e["graceful"] == true, EVENT_DEADLINE);
+    assert_eq!(left["agent"], 0, "{left}");
+    // The second `waiting_for_agents` (the first was before cycle 0).
+    events.wait_for_match(
+        "waiting_for_agents",
+        |_| events.of("waiting_for_agents").len() >= 2,
+        EVENT_DEADLINE,
+    );
+    let (again, log) = run.agent(0, "again.log", &["--policy", "circle"]);
+    let out = run.host.wait(RUN_DEADLINE);
+    assert_eq!(out.code(), Some(0), "{t:?}: stderr:\n{}", out.stderr);
+    assert_eq!(again.wait(Duration::from_secs(10)).code(), Some(0));
+    let sum = summary(&run.summary);
+    assert_eq!(sum["frames"], 40, "{sum}");
+    assert_eq!(
+        (sum["leaves"].as_u64(), sum["rejoins"].as_u64()),
+        (Some(1), Some(1)),
+        "{sum}"
+    );
+    assert_eq!(sum["evictions"], 0, "{sum}");
+    assert_eq!(sum["stop_timeouts"], 0, "{sum}");
+    // Paused, not racing: no frame was published to nobody (racing, the host would have
+    // published ~29; one may go to a TCP socket the agent closed as it left).
+    assert!(
+        sum["frames_undelivered"].as_u64().unwrap() <= 1,
+        "{t:?}: {sum}"
+    );
+    // The cycles of the first agent, perhaps the one it left in, then the new agent's.
+    let cycles: Vec<u64> = cycle_log(&log).iter().map(|l| l.cycle).collect();
+    let resumed = cycles[0];
+    assert!((10..=11).contains(&resumed), "{cycles:?}");
+    assert_eq!(cycles, (resumed..40).collect::<Vec<_>>());
+}
+
+/// Nobody comes back: the host gives up after `connect_timeout` with exit 1 and an error
+/// naming the session and the wait; the summary is still written.
+fn with_nobody_back_in_time_the_host_gives_up(t: Transport) {
+    let mut cfg = TestConfig::with_transport("idle-give-up", 1, t);
+    cfg.connect_timeout_s = 3.0;
+    let session = cfg.session.clone();
+    let run = HostRun::start(cfg, &["--frames", "100"]);
+    let (agent, _) = run.agent(0, "a0.log", &["--policy", "circle", "--frames", "5"]);
+    assert_eq!(agent.wait(RUN_DEADLINE).code(), Some(0));
+    let out = run.host.wait(RUN_DEADLINE);
+    assert_eq!(out.code(), Some(1), "{t:?}: stderr:\n{}", out.stderr);
+    assert!(out.stderr.contains(&session), "{}", out.stderr);
+    assert!(out.stderr.contains("gives up"), "{}", out.stderr);
+    let sum = summary(&run.summary);
+    let frames = sum["frames"].as_u64().unwrap();
+    assert!((5..=6).contains(&frames), "{sum}");
+    assert!(sum["error"].as_str().unwrap().contains("waited "), "{sum}");
+    let error = run.events.wait_for("error", EVENT_DEADLINE);
+    assert!(
+        error["message"].as_str().unwrap().contains(&session),
+        "{error}"
+    );
+}
+
 for_live_transports!(
     a_busy_agent_costs_nothing_and_is_reported_slow,
     an_agent_killed_while_the_host_waits_for_it_is_evicted_at_once,
+    with_nobody_attached_the_host_pauses_until_agents_are_back,
+    with_nobody_back_in_time_the_host_gives_up,
 );

@@ -128,6 +128,9 @@ fn demo(args: DemoArgs) -> anyhow::Result<ExitCode> {
     )?;
     print_summary(&summary);
     write_summary(&args.out.join("summary.json"), &summary)?;
+    if let Some(error) = &summary.error {
+        anyhow::bail!("{error}");
+    }
     println!("\n  outputs: {}", args.out.display());
     println!("    map         {}", map.display());
     println!("    frames      {}", frames_dir.display());
@@ -199,6 +202,10 @@ fn run_with_events(args: &RunArgs, events: &mut events::Events) -> anyhow::Resul
     print_summary(&summary);
     if let Some(path) = &args.summary_json {
         write_summary(path, &summary)?;
+    }
+    if let Some(error) = &summary.error {
+        // The summary is written; the run still failed (exit 1, an `error` event).
+        anyhow::bail!("{error}");
     }
     events.emit(events::Event::Finished {
         frames: summary.frames,

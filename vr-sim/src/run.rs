@@ -105,6 +105,10 @@ pub struct Summary {
     pub render_threads: usize,
     /// Whether the run ended early by SIGINT/SIGTERM.
     pub interrupted: bool,
+    /// Why the run failed after it started, `null` when it did not: no agent was connected
+    /// any more and none came back within `sync.connect_timeout` (vr-sim then exits 1,
+    /// after writing this summary).
+    pub error: Option<String>,
 }
 
 #[derive(Serialize)]
@@ -344,8 +348,64 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
     let mut evicted: Vec<bool> = vec![false; ids.len()];
     let loop_started = Instant::now();
     let mut done = 0u64;
+    // Set when the host paused with nobody attached and nobody came back in time.
+    let mut error = None;
 
-    while opts.frames.is_none_or(|n| done < n) {
+    'cycles: while opts.frames.is_none_or(|n| done < n) {
+        // Nobody attached any more (every agent left or was evicted): no cycles, no world
+        // advance, until the agents are back, as at the start.
+        if ids.iter().all(|&id| !host.is_connected(id)) {
+            let cycle = host.cycle();
+            for (i, &agent) in ids.iter().enumerate() {
+                if connected[i] {
+                    connected[i] = false;
+                    events.emit(Event::AgentLeft {
+                        agent,
+                        cycle,
+                        graceful: false,
+                    })?;
+                }
+            }
+            events.emit(Event::WaitingForAgents {
+                agents: ids.clone(),
+            })?;
+            let timeout = config.sync.connect_timeout;
+            warn!(
+                session = %config.session,
+                cycle,
+                "no agent is connected: paused, waiting up to {} (sync.connect_timeout) for \
+                 every agent to connect again",
+                vrsync_agent::log::Rounded(timeout)
+            );
+            let paused = Instant::now();
+            loop {
+                let left = timeout.saturating_sub(paused.elapsed());
+                match host.wait_for_agents(left.min(Duration::from_millis(500))) {
+                    Ok(()) => {
+                        events.emit(Event::AllAgentsConnected { agents: ids.len() })?;
+                        info!(cycle, "agents back: the run goes on");
+                        break;
+                    }
+                    Err(HostWaitError::AgentsMissing { missing, .. }) => {
+                        if left.is_zero() {
+                            error = Some(format!(
+                                "session {:?}: no agent connected after cycle {cycle}; the \
+                                 host waited {} (sync.connect_timeout) for agents {missing:?} to \
+                                 connect again and gives up",
+                                config.session,
+                                vrsync_agent::log::Rounded(paused.elapsed())
+                            ));
+                            break 'cycles;
+                        }
+                    }
+                    Err(HostWaitError::Terminated) => {
+                        interrupted = true;
+                        break 'cycles;
+                    }
+                    Err(e) => return Err(e).context("waiting for agents to come back"),
+                }
+            }
+        }
         // Frame 1: every connected agent's sensors, written in place, then one start.
         let mut notable = false;
         for (i, &id) in ids.iter().enumerate() {
@@ -609,6 +669,7 @@ pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
         },
         render_threads: renderer.threads(),
         interrupted,
+        error,
     };
     info!(frames = done, wall_s, "run finished");
     Ok(summary)
