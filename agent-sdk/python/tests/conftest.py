@@ -166,10 +166,32 @@ class Host:
                 pytest.fail(f"vr-sim wrote no {kind!r} event within {timeout} s")
             time.sleep(0.02)  # polling a file, with a deadline
 
+    def paused_without_agents(self) -> bool:
+        """Whether the host paused because no agent is connected any more: a
+        `waiting_for_agents` event after the first `all_agents_connected`."""
+        if not self.events_path.exists():
+            return False
+        kinds = [
+            json.loads(line).get("event")
+            for line in self.events_path.read_text().splitlines()
+            if line.strip()
+        ]
+        if "all_agents_connected" not in kinds:
+            return False
+        return "waiting_for_agents" in kinds[kinds.index("all_agents_connected") :]
+
     def finish(self, timeout: float = 60.0) -> dict[str, Any]:
-        """Waits for the host to exit 0 and returns its summary."""
+        """Waits for the host to exit 0 and returns its summary. A host whose agents all
+        left before its --frames were done pauses for them (up to connect_timeout):
+        it is ended with SIGINT then (exit 0, `interrupted` in the summary)."""
+        deadline = time.monotonic() + timeout
+        while self.proc.poll() is None and time.monotonic() < deadline:
+            if self.paused_without_agents():
+                self.proc.send_signal(signal.SIGINT)
+                break
+            time.sleep(0.05)  # polling a process and a file, with a deadline
         try:
-            out, err = self.proc.communicate(timeout=timeout)
+            out, err = self.proc.communicate(timeout=max(deadline - time.monotonic(), 1.0))
         except subprocess.TimeoutExpired:
             self.kill()
             pytest.fail(f"vr-sim did not finish within {timeout} s")
