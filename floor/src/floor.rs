@@ -92,6 +92,7 @@ impl ShmFloorHost {
     ) -> Result<Self, FloorError> {
         vrsync_bridge::shm::init_iceoryx2_logging();
         let node = NodeBuilder::new()
+            .config(vrsync_bridge::shm::iceoryx2_config())
             .create::<Svc>()
             .map_err(|e| ice("node", e))?;
         let n = agents as usize;
@@ -274,6 +275,7 @@ pub fn shm_floor_agent(
     } = *options;
     vrsync_bridge::shm::init_iceoryx2_logging();
     let node = NodeBuilder::new()
+        .config(vrsync_bridge::shm::iceoryx2_config())
         .create::<Svc>()
         .map_err(|e| ice("node", e))?;
     let deadline = Instant::now() + timeout;

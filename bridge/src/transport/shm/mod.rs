@@ -220,7 +220,10 @@ fn keep_process_signal_handlers() {
 /// of its own session only ([`cleanup_dead_nodes`] when a host starts, and the host's
 /// reaping of its agents); iceoryx2 still cleans a dead node's ports from a service when
 /// the service is opened (`cleanup-dead-nodes-on-open`), i.e. within the session.
-fn iceoryx2_config() -> &'static Config2 {
+///
+/// Public so that the benchmark's raw iceoryx2 floor (`vrsync-floor`) creates its nodes the
+/// same way.
+pub fn iceoryx2_config() -> &'static Config2 {
     static CONFIG: std::sync::OnceLock<Config2> = std::sync::OnceLock::new();
     CONFIG.get_or_init(|| {
         let mut config = Config2::global_config().clone();
