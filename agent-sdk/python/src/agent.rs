@@ -10,7 +10,7 @@ use pyo3::prelude::*;
 use vrsync_agent::{
     Agent, AgentBuilder, AgentConnectError, SendError, SignalHandling, StopError, WaitStartError,
 };
-use vrsync_bridge::Config;
+use vrsync_bridge::{Config, WaitForStop};
 
 use crate::commands::PyCommand;
 use crate::errors::{error, obj};
@@ -117,9 +117,20 @@ pub(crate) struct PyAgent {
     transport: &'static str,
     sync_mode: bool,
     stop_timeout: Duration,
+    wait_for_stop: WaitForStop,
+    frame_wait: Option<Duration>,
     simulation_time_per_frame: Duration,
     max_commands: u32,
     cameras: Vec<PyCamera>,
+}
+
+/// How long an env waits for its next frame by default. Without limit when the host may
+/// wait for a live agent's stop without limit ([`Config::waits_for_live_agents`]): a
+/// learner updating in another process holds the cycle for as long as it takes, and a
+/// dead host ends the wait anyway (liveness). Otherwise the host ends every cycle within
+/// `stop_timeout`: `2 × stop_timeout + 5 s`.
+pub(crate) fn default_frame_wait(cfg: &Config) -> Option<Duration> {
+    (!cfg.waits_for_live_agents()).then(|| 2 * cfg.sync.stop_timeout + Duration::from_secs(5))
 }
 
 pub(crate) fn secs(name: &str, v: Option<f64>) -> PyResult<Option<Duration>> {
@@ -317,6 +328,7 @@ impl PyAgent {
             )
         })?;
         let agent_transport = agent_cfg.transport;
+        let wait_for_stop = agent_cfg.wait_for_stop;
         let cameras = cameras_of(agent_cfg);
         let agent = AgentCell(connect_one(py, &cfg, id, timeout)?);
         Ok(Self {
@@ -329,6 +341,8 @@ impl PyAgent {
             transport: agent_transport.as_str(),
             sync_mode: cfg.sync.sync_mode,
             stop_timeout: cfg.sync.stop_timeout,
+            wait_for_stop,
+            frame_wait: default_frame_wait(&cfg),
             simulation_time_per_frame: cfg.sync.simulation_time_per_frame,
             max_commands: cfg.transport.max_commands_per_cycle,
             cameras,
@@ -456,10 +470,26 @@ impl PyAgent {
         self.sync_mode
     }
 
-    /// Seconds the host waits for this agent's stop before counting it late.
+    /// Seconds after which the host reports this agent's missing stop (`"alive"`) or
+    /// ends the cycle without it (`"timeout"`): see `wait_for_stop`.
     #[getter]
     fn stop_timeout(&self) -> f64 {
         self.stop_timeout.as_secs_f64()
+    }
+
+    /// How the host waits for this agent's stop in sync mode: `"alive"` (as long as this
+    /// agent lives; past `stop_timeout` it is reported as slow) or `"timeout"` (the cycle
+    /// ends without it after `stop_timeout`).
+    #[getter]
+    fn wait_for_stop(&self) -> &'static str {
+        self.wait_for_stop.as_str()
+    }
+
+    /// How long the envs wait for the next frame by default, in seconds; `None`: without
+    /// limit, because the host waits for live agents (a dead host still ends the wait).
+    #[getter]
+    fn frame_wait(&self) -> Option<f64> {
+        self.frame_wait.map(|t| t.as_secs_f64())
     }
 
     /// Simulated seconds per cycle.

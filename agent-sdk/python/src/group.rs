@@ -16,8 +16,8 @@ use vrsync_agent::{Agent, Frame, PixelFormat, WaitStartError};
 use vrsync_bridge::{Command, Config, WireOutcome};
 
 use crate::agent::{
-    PyCamera, SameThread, cameras_of, connect_one, load_config, secs, send_error, stop_error,
-    wait_error,
+    PyCamera, SameThread, cameras_of, connect_one, default_frame_wait, load_config, secs,
+    send_error, stop_error, wait_error,
 };
 use crate::commands::{MoveAhead, PyCommand, heading_deg};
 use crate::errors::{error, obj};
@@ -221,7 +221,7 @@ pub(crate) struct AgentGroup {
     sync_mode: bool,
     stop_timeout: Duration,
     simulation_time_per_frame: Duration,
-    step_timeout: Duration,
+    step_timeout: Option<Duration>,
     cameras: Vec<PyCamera>,
     transports: Vec<&'static str>,
     /// Whether each agent has received a frame (it may stop only then).
@@ -373,12 +373,14 @@ impl AgentGroup {
         }
         // 2. every agent's next frame, copied into the outputs and dropped at once
         let mut pending: Vec<usize> = (0..n).collect();
-        let deadline = started + self.step_timeout;
+        let deadline = self.step_timeout.map(|t| started + t);
         let sink = SameThread(self.sink.clone());
         let mut wait_ns = 0u64;
         let mut rotations = rotations;
         loop {
-            let slice_end = (Instant::now() + WAIT_SLICE).min(deadline);
+            let slice_end = deadline.map_or(Instant::now() + WAIT_SLICE, |d| {
+                (Instant::now() + WAIT_SLICE).min(d)
+            });
             let agents = self.agents()?;
             let job = SameThread((agents, &mut pending, &mut rotations, &sink));
             let (outcome, waited) = py
@@ -394,7 +396,7 @@ impl AgentGroup {
                 Waited::Done => break,
                 Waited::Pending => {
                     py.check_signals()?;
-                    if Instant::now() >= deadline {
+                    if deadline.is_some_and(|d| Instant::now() >= d) {
                         let k = pending.first().copied().unwrap_or(0);
                         let last_cycle = self
                             .agents
@@ -490,8 +492,9 @@ impl AgentGroup {
     /// Connects the agents `agent_ids` (default: every `[[agent]]` of the config) of the
     /// session in `config`, one connection each, in this process. Every agent must have
     /// the same cameras (names, sizes, formats), so that their images stack.
-    /// `step_timeout`: seconds a step waits for all frames (default
-    /// `2 × stop_timeout + 5`).
+    /// `step_timeout`: seconds a step waits for all frames (default: without limit when
+    /// the host waits for live agents' stops, `[sync] wait_for_stop = "alive"`; else
+    /// `2 × stop_timeout + 5`; the host's death ends a wait either way).
     ///
     /// Raises what `Agent.connect` raises; `ConfigError` for agents with different
     /// cameras or an id that is not in the config, `ValueError` for a repeated id.
@@ -608,8 +611,10 @@ impl AgentGroup {
             skipped: outs[8].1.ptr,
         };
         let timeout = secs("connect_timeout", connect_timeout)?.unwrap_or(cfg.sync.connect_timeout);
-        let step_timeout = secs("step_timeout", step_timeout)?
-            .unwrap_or(2 * cfg.sync.stop_timeout + Duration::from_secs(5));
+        let step_timeout = match step_timeout {
+            Some(_) => secs("step_timeout", step_timeout)?,
+            None => default_frame_wait(&cfg),
+        };
         let mut agents = Vec::with_capacity(n);
         for id in &ids {
             // On an error the agents connected so far are dropped (they leave).
@@ -901,10 +906,10 @@ impl AgentGroup {
         self.stop_timeout.as_secs_f64()
     }
 
-    /// Seconds a step waits for every frame.
+    /// Seconds a step waits for every frame; `None`: without limit (see `connect`).
     #[getter]
-    fn step_timeout(&self) -> f64 {
-        self.step_timeout.as_secs_f64()
+    fn step_timeout(&self) -> Option<f64> {
+        self.step_timeout.map(|t| t.as_secs_f64())
     }
 
     /// Simulated seconds per cycle.

@@ -66,9 +66,10 @@ def test_gym_zero_copy_observations_are_views(tmp_path: Path, start_host) -> Non
 def test_gym_warns_when_the_learner_is_slower_than_the_stop_timeout(
     tmp_path: Path, start_host
 ) -> None:
-    config, _ = write_config(tmp_path, "gymlate", stop_timeout=0.2)
+    config, _ = write_config(tmp_path, "gymlate", stop_timeout=0.2, wait_for_stop="timeout")
     host = start_host(config)
     env = VrsyncEnv(config, 0, connect_timeout=20)
+    assert env.agent.wait_for_stop == "timeout" and env._step_timeout == pytest.approx(5.4)
     env.reset()
     env._frame_at -= 1.0  # as if the learner had spent a second since the last frame
     with pytest.warns(LateLearnerWarning, match="stop_timeout"):
@@ -79,6 +80,21 @@ def test_gym_warns_when_the_learner_is_slower_than_the_stop_timeout(
     env.close()
     host.kill()
 
+
+def test_gym_waits_for_a_slow_learner_by_default(tmp_path: Path, start_host) -> None:
+    # wait_for_stop = "alive" (the default): the host waits for the live learner, so a
+    # step after a long pause warns of nothing, and the env waits for frames without limit.
+    config, _ = write_config(tmp_path, "gymalive", stop_timeout=0.2)
+    host = start_host(config)
+    env = VrsyncEnv(config, 0, connect_timeout=20)
+    assert env.agent.wait_for_stop == "alive" and env.agent.frame_wait is None
+    env.reset()
+    env._frame_at -= 1.0  # as if the learner had spent a second since the last frame
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", LateLearnerWarning)
+        env.step(0)
+    env.close()
+    host.kill()
 
 def test_pettingzoo_env_passes_parallel_api_test(tmp_path: Path, start_host) -> None:
     config, _ = write_config(tmp_path, "pz", agents=2)

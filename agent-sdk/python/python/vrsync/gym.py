@@ -69,8 +69,9 @@ turn right 30°."""
 
 
 class LateLearnerWarning(RuntimeWarning):
-    """The learner took longer between two steps than the host's stop timeout, so the
-    host went on without this agent's commands for that cycle."""
+    """The learner took longer between two steps than the host's stop timeout, and this
+    agent's ``wait_for_stop`` is ``"timeout"``, so the host went on without its commands
+    for that cycle. (With ``"alive"``, the default, the host waits for a live learner.)"""
 
 
 # Bounds of positions and depths in metres: finite (Gymnasium warns about infinite
@@ -111,7 +112,10 @@ class VrsyncEnv(gymnasium.Env[dict[str, Any], Any]):
         session: override the config's session name.
         connect_timeout: seconds to wait for the host.
         step_timeout: seconds to wait for the next frame in ``step``/``reset``
-            (default: ``2 × stop_timeout + 5``).
+            (default ``agent.frame_wait``: without limit when the host waits for live
+            agents, ``[sync] wait_for_stop = "alive"``, as a learner updating in another
+            process holds the cycle; else ``2 × stop_timeout + 5``. A dead host ends the
+            wait either way).
     """
 
     metadata = {"render_modes": []}
@@ -151,7 +155,7 @@ class VrsyncEnv(gymnasium.Env[dict[str, Any], Any]):
         self._terminated_fn = terminated_fn
         self._copy = copy_observations
         self._step_timeout = (
-            step_timeout if step_timeout is not None else 2 * self.agent.stop_timeout + 5.0
+            step_timeout if step_timeout is not None else self.agent.frame_wait
         )
         cams = {c.name: _box_for(c) for c in self.agent.cameras}
         self._camera: str | None = None
@@ -242,7 +246,12 @@ class VrsyncEnv(gymnasium.Env[dict[str, Any], Any]):
     def _send_stop(self, commands: list[Command]) -> None:
         """Sends `commands` and the stop for the current frame (warns if it is late)."""
         late = time.monotonic() - self._frame_at
-        if self.agent.sync_mode and late > self.agent.stop_timeout:
+        # With wait_for_stop = "alive" the host waits for this (live) learner: nothing lost.
+        if (
+            self.agent.sync_mode
+            and self.agent.wait_for_stop == "timeout"
+            and late > self.agent.stop_timeout
+        ):
             warnings.warn(
                 f"agent {self.agent.id}: the learner took {late:.2f} s between steps, more "
                 f"than the host's stop_timeout of {self.agent.stop_timeout:g} s, so the host "
