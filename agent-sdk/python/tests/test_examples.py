@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -14,12 +15,17 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 ALL = sorted(p.name for p in EXAMPLES.glob("*.py"))
 
 
+# The host and the example share two cores in CI: torch gets one thread.
+ONE_THREAD = {**os.environ, "OMP_NUM_THREADS": "1"}
+
+
 def run_example(name: str, *args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, str(EXAMPLES / name), *args],
         capture_output=True,
         text=True,
         timeout=timeout,
+        env=ONE_THREAD,
     )
 
 

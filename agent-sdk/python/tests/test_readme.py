@@ -3,6 +3,7 @@ for a test config of the same shape)."""
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -41,7 +42,12 @@ def test_readme_block_runs(tmp_path: Path, start_host, name: str, code: str) -> 
     host = start_host(config, 600)
     script = code.replace("config/default.toml", str(config))
     out = subprocess.run(
-        [sys.executable, "-c", script], capture_output=True, text=True, timeout=180
+        [sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        timeout=180,
+        # The host and the block share two cores in CI: torch gets one thread.
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
     )
     assert out.returncode == 0, f"{name}:\n{out.stderr}"
     host.kill()
