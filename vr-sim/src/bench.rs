@@ -33,7 +33,8 @@ pub struct BenchOptions {
     /// SVG plot.
     pub plot: Option<PathBuf>,
     /// Python interpreter for the `python` rows (the agent is `python -m
-    /// vrsync.bench_agent`); `None`: no Python rows.
+    /// vrsync.bench_agent`) and the vector-env rows (`python -m vrsync.bench_vector`);
+    /// `None`: no Python rows.
     pub python: Option<PathBuf>,
 }
 
@@ -41,7 +42,7 @@ pub struct BenchOptions {
 #[derive(Debug, Clone, Serialize)]
 pub struct Row {
     /// `shm`, `shm-spin`, `tcp`, `zenoh`, `floor-shm`, `floor-shm-spin`, `floor-tcp`,
-    /// `floor-zenoh`, `legacy`.
+    /// `floor-zenoh`, `legacy`, `python`, `python-vec`.
     pub transport: String,
     /// Agents.
     pub agents: u32,
@@ -73,9 +74,17 @@ pub struct Row {
     /// `legacy` rows: time to PNG-encode one of these images at the fastest level, µs
     /// (measured separately; `null` elsewhere).
     pub png_us: f64,
+    /// `python-vec` rows: the time per agent-step spent inside the Python SDK's Rust code
+    /// (`AgentGroup.step`: sends, stops, receives, copies; blocked waits for the host
+    /// excluded), µs, as the agent process reports it (median of the rounds; `null`
+    /// elsewhere).
+    pub sdk_us_per_agent_step: f64,
 }
 
 const CAMERAS: u32 = 3;
+/// The vector-env rows: one camera of this size (rgb8) per agent, at these agent counts.
+const VEC_SIZE: u32 = 84;
+const VEC_AGENTS: [u32; 2] = [4, 16];
 /// Interleaved rounds per case (the row's p50 is the median of the rounds' p50s).
 const ROUNDS: u64 = 5;
 const BPP: usize = 3;
@@ -83,7 +92,7 @@ const BPP: usize = 3;
 struct Case {
     transport: &'static str,
     agents: u32,
-    /// Images per agent (3, or 2 for the original's stereo pair).
+    /// Images per agent (3; 2 for the original's stereo pair; 1 for the vector-env rows).
     cameras: u32,
     width: u32,
     height: u32,
@@ -139,28 +148,60 @@ impl Agents {
         Ok(Self(children))
     }
 
-    /// Waits for every agent (they leave when the host closes) and averages their
-    /// allocations per cycle.
-    fn finish(mut self) -> anyhow::Result<f64> {
-        let mut total = 0.0;
+    /// Waits for every agent (they leave when the host closes) and averages what they
+    /// report (NaN for a figure an agent does not report).
+    fn finish(mut self) -> anyhow::Result<Reported> {
+        let mut allocs_total = 0.0;
+        let mut sdk_total = 0.0;
         let n = self.0.len().max(1) as f64;
         for child in &mut self.0 {
-            let mut allocs = None;
+            let mut report = Reported::default();
             if let Some(out) = child.stdout.take() {
                 for line in BufReader::new(out).lines().map_while(Result::ok) {
-                    if let Some(v) = line.strip_prefix("allocs_per_cycle ") {
-                        allocs = v.trim().parse::<f64>().ok();
-                    }
+                    report.parse_line(&line);
                 }
             }
             let status = child.wait().context("wait for a bench agent")?;
             if !status.success() {
                 bail!("a bench agent failed ({status})");
             }
-            total += allocs.unwrap_or(f64::NAN);
+            allocs_total += report.allocs_per_cycle;
+            sdk_total += report.sdk_us_per_agent_step;
         }
         self.0.clear();
-        Ok(total / n)
+        Ok(Reported {
+            allocs_per_cycle: allocs_total / n,
+            sdk_us_per_agent_step: sdk_total / n,
+        })
+    }
+}
+
+/// What a bench agent prints at its end: `allocs_per_cycle X` (the Rust agent),
+/// `sdk_us_per_agent_step X` (`vrsync.bench_vector`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Reported {
+    allocs_per_cycle: f64,
+    sdk_us_per_agent_step: f64,
+}
+
+impl Default for Reported {
+    fn default() -> Self {
+        Self {
+            allocs_per_cycle: f64::NAN,
+            sdk_us_per_agent_step: f64::NAN,
+        }
+    }
+}
+
+impl Reported {
+    /// Takes the figure of one output line, if it carries one.
+    fn parse_line(&mut self, line: &str) {
+        let value = |rest: &str| rest.trim().parse::<f64>().unwrap_or(f64::NAN);
+        if let Some(v) = line.strip_prefix("allocs_per_cycle ") {
+            self.allocs_per_cycle = value(v);
+        } else if let Some(v) = line.strip_prefix("sdk_us_per_agent_step ") {
+            self.sdk_us_per_agent_step = value(v);
+        }
     }
 }
 
@@ -182,6 +223,8 @@ struct Measured {
     hist: Histogram<u64>,
     /// p50 of each round, µs.
     round_p50s_us: Vec<f64>,
+    /// The agent's SDK time per agent-step of each round that reports it, µs.
+    round_sdk_us: Vec<f64>,
     allocs: f64,
     agent_allocs: f64,
     render_us: f64,
@@ -192,6 +235,7 @@ impl Measured {
     fn new(hist: Histogram<u64>, allocs: f64, agent_allocs: f64) -> Self {
         Self {
             round_p50s_us: vec![hist.value_at_quantile(0.5) as f64 / 1000.0],
+            round_sdk_us: Vec::new(),
             hist,
             allocs,
             agent_allocs,
@@ -204,6 +248,7 @@ impl Measured {
     fn merge(&mut self, other: Measured) -> anyhow::Result<()> {
         self.hist.add(&other.hist).context("merge histograms")?;
         self.round_p50s_us.extend(other.round_p50s_us);
+        self.round_sdk_us.extend(other.round_sdk_us);
         self.allocs = self.allocs.max(other.allocs);
         self.agent_allocs = self.agent_allocs.max(other.agent_allocs);
         if self.render_us.is_nan() {
@@ -246,6 +291,7 @@ fn row(case: &Case, m: &Measured) -> Row {
         agent_allocs_per_cycle: m.agent_allocs,
         render_us: m.render_us,
         png_us: m.png_us,
+        sdk_us_per_agent_step: median(&m.round_sdk_us),
     }
 }
 
@@ -301,7 +347,7 @@ fn config_text(case: &Case, session: &str) -> String {
 fn python_agent(python: Option<&Path>) -> Option<PathBuf> {
     let python = python?;
     let ok = Command::new(python)
-        .args(["-c", "import vrsync.bench_agent"])
+        .args(["-c", "import vrsync.bench_agent, vrsync.bench_vector"])
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .status()
@@ -348,6 +394,22 @@ fn bench_vrsync(
     let agents = match python {
         // The Python agent does the Rust agent's work (first and last byte of every row,
         // one command, stop) through the Python SDK.
+        // One Python process drives every agent through the batched vector env, doing
+        // the same work per agent.
+        Some(python) if case.transport == "python-vec" => Agents::spawn_program(
+            python,
+            |_| {
+                vec![
+                    "-m".into(),
+                    "vrsync.bench_vector".into(),
+                    "--config".into(),
+                    config_arg.clone(),
+                    "--warmup".into(),
+                    warmup.to_string(),
+                ]
+            },
+            1,
+        )?,
         Some(python) if case.transport == "python" => Agents::spawn_program(
             python,
             |id| {
@@ -378,7 +440,9 @@ fn bench_vrsync(
             case.agents,
         )?,
     };
-    host.wait_for_agents(Duration::from_secs(30))?;
+    // The agents' start-up (a Python interpreter importing numpy, 16 processes on 2
+    // cores) happens here, before cycle 0; the warm-up cycles follow.
+    host.wait_for_agents(Duration::from_secs(60))?;
     let ids: Vec<u32> = host.agent_ids().collect();
     let mut hist = histogram()?;
     let mut allocs_start = 0;
@@ -416,10 +480,13 @@ fn bench_vrsync(
     }
     let host_allocs = (allocations() - allocs_start) as f64 / case.cycles as f64;
     drop(host);
-    let agent_allocs = agents.finish()?;
+    let reported = agents.finish()?;
     let _ = std::fs::remove_file(&path);
-    let mut m = Measured::new(hist, host_allocs, agent_allocs);
+    let mut m = Measured::new(hist, host_allocs, reported.allocs_per_cycle);
     m.render_us = render_us;
+    if !reported.sdk_us_per_agent_step.is_nan() {
+        m.round_sdk_us.push(reported.sdk_us_per_agent_step);
+    }
     Ok(m)
 }
 
@@ -477,7 +544,7 @@ fn bench_floor_shm(case: &Case, session: &str, spin: bool) -> anyhow::Result<Mea
         }
     }
     let host_allocs = (allocations() - allocs_start) as f64 / case.cycles as f64;
-    let agent_allocs = agents.finish()?;
+    let agent_allocs = agents.finish()?.allocs_per_cycle;
     drop(host);
     Ok(Measured::new(hist, host_allocs, agent_allocs))
 }
@@ -535,7 +602,7 @@ fn bench_floor_zenoh(case: &Case, session: &str) -> anyhow::Result<Measured> {
     }
     let host_allocs = (allocations() - allocs_start) as f64 / case.cycles as f64;
     drop(host);
-    let agent_allocs = agents.finish()?;
+    let agent_allocs = agents.finish()?.allocs_per_cycle;
     Ok(Measured::new(hist, host_allocs, agent_allocs))
 }
 
@@ -580,7 +647,7 @@ fn bench_floor_tcp(case: &Case) -> anyhow::Result<Measured> {
         }
     }
     let host_allocs = (allocations() - allocs_start) as f64 / case.cycles as f64;
-    let agent_allocs = agents.finish()?;
+    let agent_allocs = agents.finish()?.allocs_per_cycle;
     Ok(Measured::new(hist, host_allocs, agent_allocs))
 }
 
@@ -622,7 +689,8 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
     };
     let shm_cycles = if opts.quick { 400 } else { 3000 };
     println!(
-        "vr-sim bench{}: 3 rgb8 images per agent; cycle = host publish -> every agent stopped",
+        "vr-sim bench{}: 3 rgb8 images per agent (vector-env rows: one 84x84); cycle = host \
+         publish -> every agent stopped",
         if opts.quick { " --quick" } else { "" }
     );
     print_header();
@@ -675,6 +743,51 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
                             &session(&mut n),
                             dir.path(),
                             round == 0,
+                            python.as_deref(),
+                        )?,
+                    };
+                    match acc {
+                        Some(a) => a.merge(m)?,
+                        None => *acc = Some(m),
+                    }
+                }
+            }
+            for (case, m) in cases.iter().zip(measured) {
+                let Some(m) = m else { continue };
+                let r = row(case, &m);
+                print_row(&r);
+                rows.push(r);
+            }
+        }
+    }
+    // The batched Python vector env (one process for every agent) against the same
+    // fan-out of Rust bench agents and of the raw iceoryx2 floor: one 84x84 rgb8 camera
+    // per agent (an RL observation), 4 and 16 agents.
+    if python.is_some() {
+        let vec_cycles = if opts.quick { 600 } else { 3000 };
+        for agents in VEC_AGENTS {
+            let mk = |transport: &'static str| Case {
+                transport,
+                agents,
+                cameras: 1,
+                width: VEC_SIZE,
+                height: VEC_SIZE,
+                // Enough for the Python process to reach its steady state (first-touch
+                // page faults, numpy's caches) before the host measures.
+                warmup: (vec_cycles / ROUNDS / 10).max(20),
+                cycles: (vec_cycles / ROUNDS).max(10),
+            };
+            let cases = [mk("python-vec"), mk("shm"), mk("floor-shm")];
+            let mut measured: Vec<Option<Measured>> = cases.iter().map(|_| None).collect();
+            for _ in 0..ROUNDS {
+                for (case, acc) in cases.iter().zip(measured.iter_mut()) {
+                    let m = match case.transport {
+                        "floor-shm" => bench_floor_shm(case, &session(&mut n), false)?,
+                        _ => bench_vrsync(
+                            case,
+                            &session(&mut n),
+                            dir.path(),
+                            false,
                             python.as_deref(),
                         )?,
                     };
@@ -748,7 +861,7 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
 
 fn print_header() {
     println!(
-        "{:<15} {:>6} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}",
+        "{:<15} {:>6} {:>12} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}",
         "transport",
         "agents",
         "image",
@@ -757,17 +870,19 @@ fn print_header() {
         "p99 µs",
         "mean µs",
         "allocs/c",
-        "agent a/c"
+        "agent a/c",
+        "render µs",
+        "sdk µs/step"
     );
 }
 
 fn print_row(r: &Row) {
     let mb = f64::from(r.cameras) * f64::from(r.width) * f64::from(r.height) * BPP as f64 / 1e6;
     println!(
-        "{:<15} {:>6} {:>10} {:>10.2} {:>10.1} {:>10.1} {:>10.1} {:>10.2} {:>10.2} {:>10}",
+        "{:<15} {:>6} {:>12} {:>10.3} {:>10.1} {:>10.1} {:>10.1} {:>10.2} {:>10.2} {:>10} {:>10}",
         r.transport,
         r.agents,
-        format!("{}x{}", r.width, r.height),
+        format!("{}x{}x{}", r.cameras, r.width, r.height),
         mb,
         r.p50_us,
         r.p99_us,
@@ -778,6 +893,11 @@ fn print_row(r: &Row) {
             "-".to_string()
         } else {
             format!("{:.0}", r.render_us)
+        },
+        if r.sdk_us_per_agent_step.is_nan() {
+            "-".to_string()
+        } else {
+            format!("{:.2}", r.sdk_us_per_agent_step)
         }
     );
     let _ = std::io::stdout().flush();
@@ -922,6 +1042,32 @@ fn print_ratios(rows: &[Row]) {
             );
         }
     }
+    // The batched Python vector env: one process, one wake-up per cycle, against N Rust
+    // agent processes (DESIGN §9).
+    for agents in VEC_AGENTS {
+        let target = |at16: &'static str| if agents == 16 { at16 } else { "report" };
+        line(
+            &format!("python-vec / shm (Rust agents), {agents} agents, 1x84x84"),
+            ratio(
+                find(rows, "python-vec", agents, VEC_SIZE),
+                find(rows, "shm", agents, VEC_SIZE),
+            ),
+            target("<= 1.0"),
+        );
+        line(
+            &format!("python-vec SDK µs per agent-step, {agents} agents"),
+            find(rows, "python-vec", agents, VEC_SIZE).map(|r| r.sdk_us_per_agent_step),
+            target("<= 5"),
+        );
+        line(
+            &format!("shm / floor-shm, {agents} agents, 1x84x84"),
+            ratio(
+                find(rows, "shm", agents, VEC_SIZE),
+                find(rows, "floor-shm", agents, VEC_SIZE),
+            ),
+            "report",
+        );
+    }
     let max_allocs = rows
         .iter()
         .filter(|r| r.transport.starts_with("shm"))
@@ -935,11 +1081,11 @@ fn print_ratios(rows: &[Row]) {
 
 fn write_csv(path: &Path, rows: &[Row]) -> anyhow::Result<()> {
     let mut s = String::from(
-        "transport,agents,cameras,width,height,format,frames,p50_us,p99_us,mean_us,frames_per_s,allocs_per_cycle,agent_allocs_per_cycle,render_us\n",
+        "transport,agents,cameras,width,height,format,frames,p50_us,p99_us,mean_us,frames_per_s,allocs_per_cycle,agent_allocs_per_cycle,render_us,sdk_us_per_agent_step\n",
     );
     for r in rows {
         s += &format!(
-            "{},{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.1}\n",
+            "{},{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.1},{:.3}\n",
             r.transport,
             r.agents,
             r.cameras,
@@ -953,7 +1099,8 @@ fn write_csv(path: &Path, rows: &[Row]) -> anyhow::Result<()> {
             r.frames_per_s,
             r.allocs_per_cycle,
             r.agent_allocs_per_cycle,
-            r.render_us
+            r.render_us,
+            r.sdk_us_per_agent_step
         );
     }
     std::fs::write(path, s).with_context(|| format!("write {}", path.display()))
@@ -990,7 +1137,7 @@ fn plot(path: &Path, rows: &[Row]) -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
     chart
         .configure_mesh()
-        .x_desc("bytes per agent and cycle (3 rgb8 images)")
+        .x_desc("image bytes per agent and cycle (rgb8)")
         .y_desc("p50 cycle time (µs)")
         .draw()
         .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
@@ -1070,5 +1217,90 @@ mod tests {
         let r = row(&case, &m);
         assert!((r.p50_us - 11.0).abs() < 0.1, "{}", r.p50_us);
         assert_eq!(r.frames, 120);
+    }
+
+    #[test]
+    fn agent_reports_are_parsed_and_missing_figures_stay_nan() {
+        let mut r = Reported::default();
+        for line in ["checksum 123", "sdk_us_per_agent_step 3.250"] {
+            r.parse_line(line);
+        }
+        assert_eq!(r.sdk_us_per_agent_step, 3.25);
+        assert!(r.allocs_per_cycle.is_nan());
+        let mut r = Reported::default();
+        r.parse_line("allocs_per_cycle 1.00");
+        r.parse_line("sdk_us_per_agent_step nan");
+        assert_eq!(r.allocs_per_cycle, 1.0);
+        assert!(r.sdk_us_per_agent_step.is_nan());
+    }
+
+    #[test]
+    fn a_vector_env_row_carries_the_median_sdk_time_and_json_null_elsewhere() {
+        let mut h = histogram().unwrap();
+        h.record(100_000).unwrap();
+        let case = Case {
+            transport: "python-vec",
+            agents: 16,
+            cameras: 1,
+            width: VEC_SIZE,
+            height: VEC_SIZE,
+            warmup: 1,
+            cycles: 1,
+        };
+        let mut m = Measured::new(h.clone(), 0.0, f64::NAN);
+        m.round_sdk_us = vec![4.0];
+        for sdk in [40.0, 3.0] {
+            let mut other = Measured::new(h.clone(), 0.0, f64::NAN);
+            other.round_sdk_us = vec![sdk];
+            m.merge(other).unwrap();
+        }
+        let r = row(&case, &m);
+        assert_eq!(r.sdk_us_per_agent_step, 4.0);
+        assert_eq!(r.cameras, 1);
+        let json = serde_json::to_value(&r).unwrap();
+        assert_eq!(json["sdk_us_per_agent_step"], 4.0);
+        let shm = row(
+            &Case {
+                transport: "shm",
+                ..case
+            },
+            &Measured::new(h, 0.0, 0.0),
+        );
+        let json = serde_json::to_value(&shm).unwrap();
+        assert!(json["sdk_us_per_agent_step"].is_null());
+        // DESIGN §8: the contract's keys are all there.
+        for key in [
+            "transport",
+            "agents",
+            "cameras",
+            "width",
+            "height",
+            "format",
+            "frames",
+            "p50_us",
+            "p99_us",
+            "mean_us",
+            "frames_per_s",
+        ] {
+            assert!(json.get(key).is_some(), "{key}");
+        }
+    }
+
+    #[test]
+    fn a_vector_env_case_configures_one_camera_per_agent() {
+        let case = Case {
+            transport: "python-vec",
+            agents: 16,
+            cameras: 1,
+            width: VEC_SIZE,
+            height: VEC_SIZE,
+            warmup: 1,
+            cycles: 1,
+        };
+        let text = config_text(&case, "bench-test-vec");
+        let config = Config::from_toml_str(&text, Path::new("<test>")).unwrap();
+        assert_eq!(config.agents.len(), 16);
+        assert!(config.agents.iter().all(|a| a.cameras.len() == 1));
+        assert_eq!(case.frame_bytes(), 84 * 84 * 3);
     }
 }

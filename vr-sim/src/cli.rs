@@ -26,7 +26,9 @@ pub enum Command {
     Run(RunArgs),
     /// Benchmark full sync cycles over shared memory, TCP and zenoh against the raw
     /// transport floors (3 rgb8 images per agent; 1/2/4 agents; 320x240 up to 1920x1080),
-    /// plus the original protocol and the Python agent. Build with --release: it spawns
+    /// plus the original protocol, the Python agent and the batched Python vector env
+    /// (`python-vec`: one process for 4 and 16 agents of one 84x84 camera, against as many
+    /// Rust agent processes and the raw floor). Build with --release: it spawns
     /// `vr-bench-agent` from the same folder.
     Bench(BenchArgs),
 }
@@ -47,8 +49,10 @@ pub struct BenchArgs {
     #[arg(long, value_name = "FILE.svg")]
     pub plot: Option<PathBuf>,
     /// Python interpreter for the `python` rows (`python -m vrsync.bench_agent`, the
-    /// Python SDK doing the Rust bench agent's work); rows are left out, saying why, when
-    /// it cannot import vrsync (`pip install ./agent-sdk/python`).
+    /// Python SDK doing the Rust bench agent's work) and the vector-env rows (`python -m
+    /// vrsync.bench_vector`: one process steps every agent through one `AgentGroup`; the
+    /// row also reports the SDK's time per agent-step); rows are left out, saying why,
+    /// when it cannot import vrsync (`pip install ./agent-sdk/python`).
     #[arg(
         long,
         value_name = "PYTHON",
@@ -56,7 +60,8 @@ pub struct BenchArgs {
         default_value = "python3"
     )]
     pub python: PathBuf,
-    /// Leave out the Python rows.
+    /// Leave out the Python rows (`python`, and the vector-env section: `python-vec` with
+    /// its `shm` and `floor-shm` rows at 1x84x84).
     #[arg(long)]
     pub no_python: bool,
 }

@@ -1,6 +1,6 @@
 """The batched Python benchmark agent: every agent of a config from one process.
 
-    python -m vrsync.bench_vector --config FILE [--session NAME] [--ids 0,1,...]
+    python -m vrsync.bench_vector --config FILE [--session NAME] [--ids 0,1,...] [--warmup N]
 
 Drives the agents through :class:`vrsync.vector.VrsyncVectorEnv` (one
 :class:`vrsync.AgentGroup`: one call into Rust per cycle for all of them) and does the work
@@ -8,7 +8,8 @@ of ``vrsync.bench_agent`` for each agent: read the first and the last byte of ev
 every image (vectorised over the stacked ``(N, H, W, C)`` arrays), one command (turn 1°),
 stop; until the host closes the session. Then prints ``checksum <sum>`` and
 ``sdk_us_per_agent_step <t>``: the time per agent-step spent inside the SDK's Rust code,
-blocked waiting for the host excluded.
+blocked waiting for the host excluded, over the steps after the first ``--warmup`` (the
+host's warm-up cycles; default 0).
 """
 
 from __future__ import annotations
@@ -36,6 +37,9 @@ def main() -> None:
     parser.add_argument("--config", required=True)
     parser.add_argument("--session")
     parser.add_argument("--ids", help="comma-separated agent ids (default: every agent)")
+    parser.add_argument(
+        "--warmup", type=int, default=0, help="steps before the SDK time is measured (default 0)"
+    )
     args = parser.parse_args()
     ids = [int(i) for i in args.ids.split(",")] if args.ids else None
     total = 0
@@ -51,13 +55,18 @@ def main() -> None:
         obs, _ = envs.reset()
         actions = np.zeros(envs.num_envs, dtype=np.int64)
         envs.group.reset_timing()
+        steps = 0
         try:
             while True:
                 total += sum(touch_rows(a) for k, a in obs.items() if k not in ("position", "rotation"))
                 obs, *_ = envs.step(actions)
+                steps += 1
+                if steps == args.warmup:
+                    envs.group.reset_timing()
         except vrsync.HostClosedError:
             pass  # the session ended
-        calls, sdk_s, _ = envs.group.timing
+        # Nothing measured if the session ended within the warm-up.
+        calls, sdk_s, _ = envs.group.timing if steps >= args.warmup else (0, 0.0, 0.0)
     finally:
         envs.close()
     print(f"checksum {total}", flush=True)
