@@ -730,34 +730,19 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
             // Rounds interleave the cases, so a change of the machine's state (other load,
             // CPU idle states) hits vrsync and its floor alike; each round measures a third
             // of the cycles and the histograms are merged.
-            let mut measured: Vec<Option<Measured>> = cases.iter().map(|_| None).collect();
-            for round in 0..ROUNDS {
-                for (case, acc) in cases.iter().zip(measured.iter_mut()) {
-                    let m = match case.transport {
-                        "floor-shm" => bench_floor_shm(case, &session(&mut n), false)?,
-                        "floor-shm-spin" => bench_floor_shm(case, &session(&mut n), true)?,
-                        "floor-tcp" => bench_floor_tcp(case)?,
-                        "floor-zenoh" => bench_floor_zenoh(case, &session(&mut n))?,
-                        _ => bench_vrsync(
-                            case,
-                            &session(&mut n),
-                            dir.path(),
-                            round == 0,
-                            python.as_deref(),
-                        )?,
-                    };
-                    match acc {
-                        Some(a) => a.merge(m)?,
-                        None => *acc = Some(m),
-                    }
-                }
-            }
-            for (case, m) in cases.iter().zip(measured) {
-                let Some(m) = m else { continue };
-                let r = row(case, &m);
-                print_row(&r);
-                rows.push(r);
-            }
+            measure_interleaved(&cases, &mut rows, |case, round| match case.transport {
+                "floor-shm" => bench_floor_shm(case, &session(&mut n), false),
+                "floor-shm-spin" => bench_floor_shm(case, &session(&mut n), true),
+                "floor-tcp" => bench_floor_tcp(case),
+                "floor-zenoh" => bench_floor_zenoh(case, &session(&mut n)),
+                _ => bench_vrsync(
+                    case,
+                    &session(&mut n),
+                    dir.path(),
+                    round == 0,
+                    python.as_deref(),
+                ),
+            })?;
         }
     }
     // The batched Python vector env (one process for every agent) against the same
@@ -778,31 +763,10 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
                 cycles: (vec_cycles / ROUNDS).max(10),
             };
             let cases = [mk("python-vec"), mk("shm"), mk("floor-shm")];
-            let mut measured: Vec<Option<Measured>> = cases.iter().map(|_| None).collect();
-            for _ in 0..ROUNDS {
-                for (case, acc) in cases.iter().zip(measured.iter_mut()) {
-                    let m = match case.transport {
-                        "floor-shm" => bench_floor_shm(case, &session(&mut n), false)?,
-                        _ => bench_vrsync(
-                            case,
-                            &session(&mut n),
-                            dir.path(),
-                            false,
-                            python.as_deref(),
-                        )?,
-                    };
-                    match acc {
-                        Some(a) => a.merge(m)?,
-                        None => *acc = Some(m),
-                    }
-                }
-            }
-            for (case, m) in cases.iter().zip(measured) {
-                let Some(m) = m else { continue };
-                let r = row(case, &m);
-                print_row(&r);
-                rows.push(r);
-            }
+            measure_interleaved(&cases, &mut rows, |case, _round| match case.transport {
+                "floor-shm" => bench_floor_shm(case, &session(&mut n), false),
+                _ => bench_vrsync(case, &session(&mut n), dir.path(), false, python.as_deref()),
+            })?;
         }
     }
     // The original protocol (1 agent): PNG over TCP, one socket per agent, at the
@@ -874,6 +838,33 @@ fn print_header() {
         "render µs",
         "sdk µs/step"
     );
+}
+
+/// Measures every case in [`ROUNDS`] interleaved rounds (`measure(case, round)`), so a
+/// change of the machine's state (other load, CPU idle states) hits vrsync and its floor
+/// alike, merges each case's rounds, and prints and appends its row.
+fn measure_interleaved(
+    cases: &[Case],
+    rows: &mut Vec<Row>,
+    mut measure: impl FnMut(&Case, u64) -> anyhow::Result<Measured>,
+) -> anyhow::Result<()> {
+    let mut measured: Vec<Option<Measured>> = cases.iter().map(|_| None).collect();
+    for round in 0..ROUNDS {
+        for (case, acc) in cases.iter().zip(measured.iter_mut()) {
+            let m = measure(case, round)?;
+            match acc {
+                Some(a) => a.merge(m)?,
+                None => *acc = Some(m),
+            }
+        }
+    }
+    for (case, m) in cases.iter().zip(measured) {
+        let Some(m) = m else { continue };
+        let r = row(case, &m);
+        print_row(&r);
+        rows.push(r);
+    }
+    Ok(())
 }
 
 fn print_row(r: &Row) {
