@@ -789,25 +789,10 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
         if w == 256 {
             cases.push(mk("shm", shm_cycles));
         }
-        let mut measured: Vec<Option<Measured>> = cases.iter().map(|_| None).collect();
-        for round in 0..ROUNDS {
-            for (case, acc) in cases.iter().zip(measured.iter_mut()) {
-                let m = match case.transport {
-                    "legacy" => legacy::bench_legacy(case, &session(&mut n), round == 0)?,
-                    _ => bench_vrsync(case, &session(&mut n), dir.path(), round == 0, None)?,
-                };
-                match acc {
-                    Some(a) => a.merge(m)?,
-                    None => *acc = Some(m),
-                }
-            }
-        }
-        for (case, m) in cases.iter().zip(measured) {
-            let Some(m) = m else { continue };
-            let r = row(case, &m);
-            print_row(&r);
-            rows.push(r);
-        }
+        measure_interleaved(&cases, &mut rows, |case, round| match case.transport {
+            "legacy" => legacy::bench_legacy(case, &session(&mut n), round == 0),
+            _ => bench_vrsync(case, &session(&mut n), dir.path(), round == 0, None),
+        })?;
     }
     print_ratios(&rows);
     if let Some(p) = &opts.json {
