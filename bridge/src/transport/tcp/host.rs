@@ -79,6 +79,9 @@ pub(super) struct Pending {
     pub(super) peer: SocketAddr,
     pub(super) since: Instant,
     pub(super) reader: RecordReader,
+    /// Its hello, when it is in but the id's previous connection (closed by its peer)
+    /// still has to be read to its end (see [`TcpHost::handle_pending`]).
+    pub(super) hello: Option<Hello>,
 }
 
 #[derive(Debug)]
@@ -202,13 +205,16 @@ impl TcpHost {
         // without draining (for agents to connect, for a lost one to come back) would
         // spin. Until the next drain they are only watched for errors and hang-ups.
         let agent_events = if self.unread { 0 } else { libc::POLLIN };
+        // A deferred hello whose predecessor the host has let go since is admitted now,
+        // and the caller sees the new connection without waiting.
+        let admitted = self.admit_deferred();
         self.fds.clear();
         self.fds.push((self.listener.as_raw_fd(), libc::POLLIN));
-        self.fds.extend(
-            self.pending
-                .iter()
-                .map(|p| (p.stream.as_raw_fd(), libc::POLLIN)),
-        );
+        // A deferred hello waits for the host's next drain, not for its socket.
+        self.fds.extend(self.pending.iter().map(|p| {
+            let events = if p.hello.is_some() { 0 } else { libc::POLLIN };
+            (p.stream.as_raw_fd(), events)
+        }));
         self.fds.extend(self.slots.iter().filter_map(|s| {
             s.conn
                 .as_ref()
@@ -224,6 +230,7 @@ impl TcpHost {
             Some(d) => timeout.min(d.saturating_duration_since(Instant::now())),
             None => timeout,
         };
+        let timeout = if admitted { Duration::ZERO } else { timeout };
         let mut ready = std::mem::take(&mut self.ready);
         let mut pfds = std::mem::take(&mut self.pfds);
         let result = poll_readable(&self.fds, timeout, &mut pfds, &mut ready);
@@ -299,6 +306,7 @@ impl TcpHost {
                         peer,
                         since: Instant::now(),
                         reader: RecordReader::new(MAX_HELLO),
+                        hello: None,
                     });
                 }
                 Err(e) if e.kind() == ErrorKind::WouldBlock => break,
@@ -317,10 +325,59 @@ impl TcpHost {
         }
     }
 
-    /// Reads pending hellos; admits, rejects or times out each connection.
-    fn handle_pending(&mut self) {
+    /// Whether a complete hello must wait before it is admitted: its id's connection is
+    /// closed by its peer (the agent left, died or reconnects) but not read to its end. Its
+    /// last records (a stop, a leave batch) and its loss belong to the cycle the host
+    /// waits for, and the host must see the old connection go before a new one of the
+    /// same id counts as connected: else it would wait for a stop the new connection
+    /// never got a frame for. The host's next drain reads the old connection to its end;
+    /// the wait after it admits the new one. A host that does not drain within
+    /// [`HELLO_TIMEOUT`] (it waits for agents, not for stops) gets the new connection
+    /// anyway, the old one dropped with what it still held.
+    fn must_defer(&self, hello: &Hello) -> bool {
+        self.slots
+            .iter()
+            .find(|s| s.id == hello.agent_id)
+            .and_then(|s| s.conn.as_ref())
+            .is_some_and(|c| peer_closed(&c.stream))
+    }
+
+    /// Admits the deferred hellos whose id's old connection is gone, or that waited
+    /// [`HELLO_TIMEOUT`]. Returns whether one was admitted.
+    fn admit_deferred(&mut self) -> bool {
+        let mut admitted = false;
         let mut i = 0;
         while i < self.pending.len() {
+            let Some(hello) = &self.pending[i].hello else {
+                i += 1;
+                continue;
+            };
+            let gone = !self
+                .slots
+                .iter()
+                .any(|s| s.id == hello.agent_id && s.conn.is_some());
+            if gone || self.pending[i].since.elapsed() >= HELLO_TIMEOUT {
+                let mut p = self.pending.swap_remove(i);
+                if let Some(hello) = p.hello.take() {
+                    self.admit(p, hello);
+                    admitted = true;
+                }
+            } else {
+                i += 1;
+            }
+        }
+        admitted
+    }
+
+    /// Reads pending hellos; admits, rejects or times out each connection.
+    fn handle_pending(&mut self) {
+        self.admit_deferred();
+        let mut i = 0;
+        while i < self.pending.len() {
+            if self.pending[i].hello.is_some() {
+                i += 1;
+                continue;
+            }
             match self.progress_hello(i) {
                 Ok(None) => {
                     let p = &self.pending[i];
@@ -342,6 +399,10 @@ impl TcpHost {
                     } else {
                         i += 1;
                     }
+                }
+                Ok(Some(hello)) if self.must_defer(&hello) => {
+                    self.pending[i].hello = Some(hello);
+                    i += 1;
                 }
                 Ok(Some(hello)) => {
                     let p = self.pending.swap_remove(i);

@@ -876,12 +876,52 @@ mod tests {
         let (k, body) = read_reply_pumping(&mut host, &mut twin);
         assert_eq!(k, kind::REJECT);
         assert_eq!(decode_reject(&body).unwrap().0, reject::ID_IN_USE);
-        // Once it closed (no drain has seen that yet), a new one takes its place.
+        // Once it closed, a new one takes its place, even when the host does not drain
+        // (it waits for agents, not for stops): after the hello timeout at the latest.
         drop(a0);
         let mut again = say_hello(&host, 0);
         let (k, _) = read_reply_pumping(&mut host, &mut again);
         assert_eq!(k, kind::WELCOME);
         assert!(host.is_connected(0));
+    }
+
+    #[test]
+    fn a_closed_connections_last_batch_is_read_before_its_successor_is_admitted() {
+        let mut host = tcp_host(5.0);
+        let mut a0 = say_hello(&host, 0);
+        pump(&mut host, false, "agent 0", |h| h.is_connected(0));
+        assert_eq!(read_reply(&mut a0).0, kind::WELCOME);
+        // The agent stops its cycle and closes; a new connection of its id says hello
+        // before the host drained the old one (an agent that leaves and reconnects at once).
+        a0.write_all(&motor_record(0)).unwrap();
+        drop(a0);
+        let again = say_hello(&host, 0);
+        pump(&mut host, false, "the new hello", |h| {
+            h.pending.first().is_some_and(|p| p.hello.is_some())
+        });
+        // It waits: the host has not seen the old connection go.
+        assert!(host.slots[0].conn.is_some());
+        // The drain delivers the old connection's stop and sees it closed...
+        let got = std::cell::Cell::new(0);
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while host.is_connected(0) {
+            assert!(
+                Instant::now() < deadline,
+                "the old connection is never let go"
+            );
+            host.drain(&mut |slot, h, _| {
+                assert_eq!((slot, h.cycle), (0, 0));
+                got.set(got.get() + 1);
+            })
+            .unwrap();
+        }
+        assert_eq!(got.get(), 1, "the old connection's stop arrives");
+        // ...and the next wait admits the new one at once.
+        host.wait_activity(Duration::from_secs(20)).unwrap();
+        assert!(host.is_connected(0));
+        assert!(host.pending.is_empty());
+        let mut again = again;
+        assert_eq!(read_reply(&mut again).0, kind::WELCOME);
     }
 
     #[test]
