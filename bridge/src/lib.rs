@@ -95,8 +95,13 @@ pub mod shm {
     pub use crate::transport::shm::*;
 }
 
-/// The TCP transport (the measured baseline), with its record codec (what the fuzz target
-/// and the hostile-peer tests drive).
+/// The record codec both network transports speak (hello, welcome, reject, motor batch,
+/// TCP's record framing): what the fuzz target and the hostile-peer tests drive.
+pub mod record {
+    pub use crate::transport::record::*;
+}
+
+/// The TCP transport (the measured baseline). Re-exports the [`record`] codec it frames.
 pub mod tcp {
     pub use crate::transport::tcp::*;
 }

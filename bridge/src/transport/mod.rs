@@ -15,6 +15,7 @@
 
 pub mod legacy;
 pub(crate) mod mixed;
+pub mod record;
 pub mod shm;
 pub mod tcp;
 pub mod zenoh;

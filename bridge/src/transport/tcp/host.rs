@@ -30,40 +30,6 @@ impl FrameLoanMut for TcpFrameLoan {
     }
 }
 
-/// REJECT reason codes.
-pub mod reject {
-    /// Protocol version or layout differ.
-    pub const VERSION: u32 = 1;
-    /// The agent id is not part of the session.
-    pub const UNKNOWN_AGENT: u32 = 2;
-    /// Another connection is this agent already.
-    pub const ID_IN_USE: u32 = 3;
-    /// The token does not match `tcp_token`.
-    pub const TOKEN: u32 = 4;
-    /// The hello could not be decoded.
-    pub const MALFORMED: u32 = 5;
-}
-
-/// Encodes a REJECT body: code, host protocol, host layout, message.
-pub fn encode_reject(code: u32, message: &str) -> Vec<u8> {
-    let mut b = Vec::with_capacity(16 + message.len());
-    b.extend_from_slice(&code.to_le_bytes());
-    b.extend_from_slice(&PROTOCOL_VERSION.to_le_bytes());
-    b.extend_from_slice(&LAYOUT_HASH.to_le_bytes());
-    b.extend_from_slice(message.as_bytes());
-    b
-}
-
-/// Decodes a REJECT body into `(code, host protocol, host layout, message)`.
-pub fn decode_reject(body: &[u8]) -> Option<(u32, u32, u64, String)> {
-    Some((
-        le_u32(body, 0)?,
-        le_u32(body, 4)?,
-        le_u64(body, 8)?,
-        String::from_utf8_lossy(body.get(16..)?).into_owned(),
-    ))
-}
-
 #[derive(Debug)]
 pub(super) struct Conn {
     pub(super) stream: TcpStream,
@@ -710,15 +676,6 @@ fn peer_closed(stream: &TcpStream) -> bool {
     // SAFETY: one valid pollfd for the duration of the call.
     let n = unsafe { libc::poll(&mut pfd, 1, 0) };
     n == 1 && pfd.revents & (libc::POLLRDHUP | libc::POLLHUP | libc::POLLERR) != 0
-}
-
-/// Compares two byte strings in time independent of where they differ.
-pub fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
-    let mut diff = (a.len() ^ b.len()) as u8 | u8::from(a.len() != b.len());
-    for i in 0..a.len().max(b.len()) {
-        diff |= a.get(i).copied().unwrap_or(0) ^ b.get(i).copied().unwrap_or(0);
-    }
-    diff == 0
 }
 
 impl Drop for TcpHost {

@@ -11,7 +11,7 @@ use ::zenoh::sample::{Sample, SampleKind};
 use tracing::{debug, warn};
 use zerocopy::{FromBytes, IntoBytes};
 
-use super::super::tcp::{Hello, decode_reject, encode_hello, reject};
+use super::super::record::{Hello, decode_reject, encode_hello, reject};
 use super::super::{
     AGENT_MAX_HELD_FRAMES, AgentConnectError, AgentFrame, AgentReceiveError, AgentSendError,
     AgentTransport, Attempt, HostLiveness, retry_until,

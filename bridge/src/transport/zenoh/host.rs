@@ -14,7 +14,7 @@ use ::zenoh::sample::{Sample, SampleKind};
 use tracing::{info, warn};
 use zerocopy::IntoBytes;
 
-use super::super::tcp::{Hello, constant_time_eq, decode_hello, encode_reject, reject};
+use super::super::record::{Hello, constant_time_eq, decode_hello, encode_reject, reject};
 use super::super::{
     BatchSink, FrameLoanMut, HostTransport, HostTransportError, PeerRefusal, RefusalKind, Refusals,
 };
@@ -128,7 +128,7 @@ impl Shared {
         // Bounded before it is made contiguous (zenoh's own reassembly is bounded too).
         let payload = query
             .payload()
-            .filter(|p| p.len() <= super::super::tcp::MAX_HELLO)
+            .filter(|p| p.len() <= super::super::record::MAX_HELLO)
             .map(|p| p.to_bytes());
         let hello = match payload.as_deref().map(decode_hello) {
             Some(Ok(h)) => h,
@@ -330,7 +330,7 @@ impl Shared {
             .pop()
             .unwrap_or_else(|| AlignedBuf::with_capacity(self.max_motor_body));
         buf.fill_from(payload);
-        let (stop, leave) = match super::super::tcp::decode_motor(buf.bytes()) {
+        let (stop, leave) = match super::super::record::decode_motor(buf.bytes()) {
             Ok((h, _)) if h.agent_id == id && (h.is_leave() || st.slots[slot].connected()) => {
                 (h.is_stop(), h.is_leave())
             }
@@ -713,7 +713,7 @@ impl HostTransport for ZenohHost {
         }
         for (slot, buf) in &self.scratch {
             // Validated on receipt.
-            if let Ok((header, commands)) = super::super::tcp::decode_motor(buf.bytes()) {
+            if let Ok((header, commands)) = super::super::record::decode_motor(buf.bytes()) {
                 sink(*slot, &header, commands);
             }
         }

@@ -5,7 +5,7 @@
 //!
 //! | key | what | writer → reader |
 //! |---|---|---|
-//! | `hello` | queryable: the hello ([`super::tcp::encode_hello`]) as the query's payload; the reply is a welcome or a refusal | agent → host → agent |
+//! | `hello` | queryable: the hello ([`super::record::encode_hello`]) as the query's payload; the reply is a welcome or a refusal | agent → host → agent |
 //! | `host/alive` | liveliness token: the host is there | host |
 //! | `host/closed` | liveliness token declared when the host closes the session cleanly | host |
 //! | `agent/<id>/alive/<nonce>` | liveliness token of an admitted agent (`nonce` from its welcome) | agent |
@@ -71,7 +71,7 @@ pub const WELCOME_LEN: usize = 4 + 8 + 4 + 8;
 pub mod reply {
     /// Welcome: protocol version u32, layout hash u64, largest frame body u32, nonce u64.
     pub const WELCOME: u32 = 2;
-    /// Refusal: the TCP transport's reject body ([`super::super::tcp::encode_reject`]).
+    /// Refusal: the TCP transport's reject body ([`super::super::record::encode_reject`]).
     pub const REJECT: u32 = 3;
 }
 

@@ -36,7 +36,7 @@ use std::time::Instant;
 use ::zenoh::Wait;
 use zerocopy::IntoBytes;
 
-use super::super::tcp::{Hello, decode_reject, encode_hello, reject};
+use super::super::record::{Hello, decode_reject, encode_hello, reject};
 use super::super::{AgentConnectError, AgentTransport, HostTransport};
 use crate::signal::SignalHandling;
 use crate::wire::{LAYOUT_HASH, MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION};
