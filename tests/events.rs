@@ -266,7 +266,7 @@ fn wander_keeps_its_command_rate_after_a_stall(t: Transport) {
     );
 }
 
-for_both_transports!(
+for_each_transport!(
     a_stopped_agent_gets_every_event_once,
     a_late_agent_gets_every_event_once,
     a_slow_async_agent_gets_every_event_once,

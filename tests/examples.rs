@@ -76,4 +76,4 @@ fn minimal_agent_runs_against_vr_sim(transport: Transport) {
     );
 }
 
-for_both_transports!(minimal_agent_runs_against_vr_sim);
+for_each_transport!(minimal_agent_runs_against_vr_sim);

@@ -410,7 +410,7 @@ fn sigterm(t: Transport) {
     a_signal_ends_the_run_cleanly(t, libc::SIGTERM);
 }
 
-for_both_transports!(
+for_each_transport!(
     a_killed_agent_is_evicted_and_can_rejoin,
     a_killed_host_is_noticed_and_a_new_host_starts,
     bad_commands_are_rejected_and_leave_the_world_untouched,

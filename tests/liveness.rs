@@ -204,7 +204,7 @@ fn with_nobody_back_in_time_the_host_gives_up(t: Transport) {
     );
 }
 
-for_live_transports!(
+for_each_transport!(
     a_busy_agent_costs_nothing_and_is_reported_slow,
     an_agent_killed_while_the_host_waits_for_it_is_evicted_at_once,
     with_nobody_attached_the_host_pauses_until_agents_are_back,

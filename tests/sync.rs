@@ -56,10 +56,7 @@ fn three_agents_500_cycles_see_every_cycle_once_in_order(t: Transport) {
     assert_eq!(sum["frames"], 500);
     assert_eq!(sum["agents"], 3);
     assert_eq!(sum["mode"], "sync");
-    assert_eq!(
-        sum["transport"],
-        if t == Transport::Tcp { "tcp" } else { "shm" }
-    );
+    assert_eq!(sum["transport"], t.as_str());
     assert_eq!(sum["stop_timeouts"], 0);
     assert_eq!(sum["late_stops"], 0);
     // Every agent got and read every frame; nobody left.
@@ -318,7 +315,12 @@ fn an_agent_without_a_host_fails_with_a_clear_error(t: Transport) {
             let addr = format!("at 127.0.0.1:{}", cfg.tcp_port);
             assert!(out.stderr.contains(&addr), "{}", out.stderr);
         }
-        Transport::Zenoh => unreachable!("run over shm and tcp only"),
+        Transport::Zenoh => {
+            assert!(out.stderr.contains("no host for session"), "{}", out.stderr);
+            assert!(out.stderr.contains(&cfg.session), "{}", out.stderr);
+            let endpoint = format!("tcp/127.0.0.1:{}", cfg.zenoh_port);
+            assert!(out.stderr.contains(&endpoint), "{}", out.stderr);
+        }
     }
 }
 
@@ -383,7 +385,7 @@ fn a_protocol_mismatch_is_refused_at_connect_with_both_versions_tcp() {
 }
 
 // The barrier tests, written once, run over both transports (same assertions).
-for_both_transports!(
+for_each_transport!(
     three_agents_500_cycles_see_every_cycle_once_in_order,
     a_late_stop_times_out_its_cycle_and_never_completes_the_next,
     async_mode_a_slow_agent_always_reads_the_newest_frame,

@@ -107,9 +107,10 @@ pub fn session(tag: &str) -> String {
     )
 }
 
-/// `for_both_transports!(a, b)` makes tests `shm::a`, `tcp::a`, `shm::b`, `tcp::b` that call
-/// `a(Transport::Shm)` … : one test body, the same assertions, over both transports.
-macro_rules! for_both_transports {
+/// `for_each_transport!(a, b)` makes tests `shm::a`, `tcp::a`, `zenoh::a`, `shm::b`, … that
+/// call `a(Transport::Shm)` … : one test body, the same assertions, over every transport of
+/// [`Transport::ALL`] (the multi-process suites take their transports from here only).
+macro_rules! for_each_transport {
     ($($name:ident),* $(,)?) => {
         mod shm {
             $( #[test] fn $name() { super::$name(crate::util::Transport::Shm) } )*
@@ -117,22 +118,24 @@ macro_rules! for_both_transports {
         mod tcp {
             $( #[test] fn $name() { super::$name(crate::util::Transport::Tcp) } )*
         }
-    };
-}
-
-/// `for_live_transports!(a, b)` makes tests `shm::a`, `tcp::a`, `zenoh::a`, … : for tests
-/// of liveness (eviction, waiting for a live agent), over every transport that can tell
-/// whether an agent is alive.
-macro_rules! for_live_transports {
-    ($($name:ident),* $(,)?) => {
-        for_both_transports!($($name),*);
         mod zenoh {
             $( #[test] fn $name() { super::$name(crate::util::Transport::Zenoh) } )*
+        }
+        /// Fails to compile when [`crate::util::Transport`] gains a transport this macro
+        /// makes no tests for.
+        #[allow(dead_code)]
+        fn every_transport_has_its_module(t: crate::util::Transport) {
+            match t {
+                crate::util::Transport::Shm
+                | crate::util::Transport::Tcp
+                | crate::util::Transport::Zenoh => {}
+            }
         }
     };
 }
 
-/// Which transport a test runs over.
+/// Which transport a test runs over: every transport of the bridge's registry
+/// ([`vrsync_bridge::TransportKind::ALL`]) that serves the SDK's agents.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Transport {
     Shm,
@@ -140,6 +143,45 @@ pub enum Transport {
     /// zenoh over loopback, on a port free when the config was made (zenoh cannot report
     /// a port-0 listener's port through its stable API).
     Zenoh,
+}
+
+impl Transport {
+    /// Every transport the multi-process suites run over ([`for_each_transport!`]).
+    pub const ALL: [Transport; 3] = [Transport::Shm, Transport::Tcp, Transport::Zenoh];
+
+    /// The suites' transport for a transport of the bridge, `None` for one they do not run
+    /// over. The match is exhaustive: a transport added to the bridge does not compile here
+    /// until it is in the suites or says why not.
+    pub fn of_kind(kind: vrsync_bridge::TransportKind) -> Option<Self> {
+        use vrsync_bridge::TransportKind as K;
+        match kind {
+            K::Shm => Some(Self::Shm),
+            K::Tcp => Some(Self::Tcp),
+            K::Zenoh => Some(Self::Zenoh),
+            // Serves agents of the original protocol (the original Python clients), not
+            // the SDK's agents these suites start: its own suite is `legacy.rs`, which runs
+            // the original clients through the same host loop.
+            K::Legacy => None,
+        }
+    }
+
+    /// The `[transport] kind` spelling (also the run summary's `transport`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Shm => "shm",
+            Self::Tcp => "tcp",
+            Self::Zenoh => "zenoh",
+        }
+    }
+}
+
+#[test]
+fn the_suites_run_over_every_transport_of_the_bridge() {
+    let expected: Vec<Transport> = vrsync_bridge::TransportKind::ALL
+        .into_iter()
+        .filter_map(Transport::of_kind)
+        .collect();
+    assert_eq!(expected, Transport::ALL);
 }
 
 /// A loopback port that was free a moment ago (bind port 0, read it, release it). Only for

@@ -43,6 +43,10 @@ pub enum TransportKind {
 }
 
 impl TransportKind {
+    /// Every transport, in the order above (the test matrix and the docs take it from
+    /// here; a unit test with an exhaustive match keeps it complete).
+    pub const ALL: [TransportKind; 4] = [Self::Shm, Self::Tcp, Self::Legacy, Self::Zenoh];
+
     /// The config spelling.
     pub fn as_str(self) -> &'static str {
         match self {
@@ -1255,6 +1259,19 @@ mod tests {
     }
 
     const MINIMAL: &str = "session = \"t\"\n[[agent]]\nid = 0\n";
+
+    #[test]
+    fn transport_kind_all_lists_every_transport_once() {
+        // Exhaustive: a new variant does not compile here until it is counted.
+        let index = |k: TransportKind| match k {
+            TransportKind::Shm => 0,
+            TransportKind::Tcp => 1,
+            TransportKind::Legacy => 2,
+            TransportKind::Zenoh => 3,
+        };
+        let found: Vec<usize> = TransportKind::ALL.into_iter().map(index).collect();
+        assert_eq!(found, (0..TransportKind::ALL.len()).collect::<Vec<_>>());
+    }
 
     #[test]
     fn embedded_default_matches_the_documented_defaults() {
