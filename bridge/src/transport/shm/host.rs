@@ -3,6 +3,7 @@
 
 use super::*;
 use iceoryx2::identifiers::UniqueSubscriberId;
+use std::cell::Cell;
 // ---------------------------------------------------------------------------------------
 // Host side
 // ---------------------------------------------------------------------------------------
@@ -48,10 +49,20 @@ struct HostAgentPorts {
     /// Addresses of pool chunks already written once: their bytes are initialised.
     initialised: Vec<usize>,
     /// The agent's sensor subscriber that got the last frame, until the host forgets it:
-    /// another subscriber (the agent left and a new one connected before the host looked)
-    /// is not this connection.
+    /// once it is detached, another subscriber (the agent left and a new one connected
+    /// before the host looked) is not this connection. `None` while the connection is not
+    /// known by identity (none served yet, or several subscribers attached).
     served: Option<UniqueSubscriberId>,
+    /// When `served` was last found attached. Listing subscribers allocates (iceoryx2
+    /// copies its container state), so the check runs at most every
+    /// [`IDENTITY_CHECK_PERIOD`], not at every look of the host's wait loop.
+    verified: Cell<Option<Instant>>,
 }
+
+/// How often the host checks that the subscriber it serves is still the one attached:
+/// a replaced connection (the agent left, its leave batch lost, and a new connection of the
+/// id attached before the host looked) is seen within this.
+const IDENTITY_CHECK_PERIOD: Duration = Duration::from_millis(20);
 
 /// The host side of the shared-memory transport.
 pub struct ShmHost {
@@ -220,6 +231,7 @@ impl ShmHost {
                 motor_sub,
                 initialised: Vec::with_capacity(SENSOR_POOL_SAMPLES * 2),
                 served: None,
+                verified: Cell::new(None),
             });
         }
         // `start` is created last: agents open it first, so once it exists every other
@@ -276,20 +288,60 @@ impl Drop for ShmHost {
 
 fn is_dyn_connected(p: &HostAgentPorts) -> bool {
     use iceoryx2::service::port_factory::PortFactory as _;
-    p.sensor_service.dynamic_config().number_of_subscribers() > 0
-        && p.motor_service.dynamic_config().number_of_publishers() > 0
-        && p.served.is_none_or(|s| sensor_subscriber(p) == Some(s))
+    let attached = p.sensor_service.dynamic_config().number_of_subscribers() > 0
+        && p.motor_service.dynamic_config().number_of_publishers() > 0;
+    let Some(served) = p.served else {
+        return attached;
+    };
+    if !attached {
+        return false;
+    }
+    let now = Instant::now();
+    if p.verified
+        .get()
+        .is_some_and(|t| now.saturating_duration_since(t) < IDENTITY_CHECK_PERIOD)
+    {
+        return true;
+    }
+    let same = is_attached(p, served);
+    if same {
+        p.verified.set(Some(now));
+    }
+    same
 }
 
-/// The agent's sensor subscriber, if one is attached.
-fn sensor_subscriber(p: &HostAgentPorts) -> Option<UniqueSubscriberId> {
+/// Whether subscriber `id` is attached to the agent's sensor service.
+fn is_attached(p: &HostAgentPorts, id: UniqueSubscriberId) -> bool {
     use iceoryx2::service::port_factory::PortFactory as _;
-    let mut found = None;
+    let mut found = false;
     p.sensor_service.dynamic_config().list_subscribers(|d| {
-        found = Some(d.subscriber_id);
-        CallbackProgression::Stop
+        found = d.subscriber_id == id;
+        if found {
+            CallbackProgression::Stop
+        } else {
+            CallbackProgression::Continue
+        }
     });
     found
+}
+
+/// The agent's sensor subscriber when exactly one is attached. With more (a killed
+/// agent's port stays until its dead node is cleaned up, next to its successor's) the
+/// connection is not told apart by identity until one is left.
+fn sole_subscriber(p: &HostAgentPorts) -> Option<UniqueSubscriberId> {
+    use iceoryx2::service::port_factory::PortFactory as _;
+    let mut found = None;
+    let mut count = 0usize;
+    p.sensor_service.dynamic_config().list_subscribers(|d| {
+        count += 1;
+        found = Some(d.subscriber_id);
+        if count > 1 {
+            CallbackProgression::Stop
+        } else {
+            CallbackProgression::Continue
+        }
+    });
+    if count == 1 { found } else { None }
 }
 
 impl HostTransport for ShmHost {
@@ -340,8 +392,18 @@ impl HostTransport for ShmHost {
                 what: format!("the sensor frame of agent {id}"),
                 reason: format!("{e:?}"),
             })?;
+        // The frame went to the subscriber attached now: it is the connection served (as
+        // listing allocates, looked up again only when the identity check is due).
         if delivered && let Some(p) = self.agents.get_mut(slot) {
-            p.served = sensor_subscriber(p);
+            let now = Instant::now();
+            let due = p
+                .verified
+                .get()
+                .is_none_or(|t| now.saturating_duration_since(t) >= IDENTITY_CHECK_PERIOD);
+            if p.served.is_none() || due {
+                p.served = sole_subscriber(p);
+                p.verified.set(Some(now));
+            }
         }
         Ok(delivered)
     }
@@ -349,6 +411,7 @@ impl HostTransport for ShmHost {
     fn forget_connection(&mut self, slot: usize) {
         if let Some(p) = self.agents.get_mut(slot) {
             p.served = None;
+            p.verified.set(None);
         }
     }
 
