@@ -46,6 +46,21 @@ def session(tag: str) -> str:
 
 CAMERAS_SMALL = (("left", 64, "rgb8"), ("right", 64, "rgb8"))
 
+# Every transport that serves the SDK's agents: the suites parametrized over transports
+# take them from here (tests/util.rs `Transport::ALL` is the Rust suites' list; the
+# original protocol's transport, legacy, serves only the original clients).
+TRANSPORTS = ("shm", "tcp", "zenoh")
+
+
+def free_tcp_port() -> int:
+    """A loopback port that was free a moment ago (for zenoh, whose host cannot report a
+    port-0 listener's port)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
 
 def write_config(
     directory: Path,
@@ -67,7 +82,7 @@ def write_config(
     agents a transport of their own (default: `transport`). TCP hosts bind port 0
     unless `tcp_port` is given; `start_host` puts the bound port into the file.
     `zenoh_endpoint` (e.g. ``"tcp/10.0.0.1:7447"``) is where a zenoh host listens and
-    its agents connect (lease 1 s). `wait_for_stop` (``"alive"``/``"timeout"``) sets
+    its agents connect (lease 1 s; default for a zenoh session: a free loopback port). `wait_for_stop` (``"alive"``/``"timeout"``) sets
     `[sync] wait_for_stop` (default: not written, i.e. ``"alive"``)."""
     name = session(tag)
     port = tcp_port
@@ -84,6 +99,9 @@ def write_config(
         f'kind = "{transport}"',
         f'tcp_listen = "127.0.0.1:{port}"',
     ]
+    uses_zenoh = transport == "zenoh" or "zenoh" in (agent_transports or {}).values()
+    if zenoh_endpoint is None and uses_zenoh:
+        zenoh_endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     if zenoh_endpoint is not None:
         lines += [
             "[transport.zenoh]",

@@ -1,4 +1,4 @@
-"""The loop API against real `vr-sim` hosts, over shared memory and TCP."""
+"""The loop API against real `vr-sim` hosts, over every transport (conftest.TRANSPORTS)."""
 
 from __future__ import annotations
 
@@ -14,9 +14,7 @@ import numpy as np
 import pytest
 import vrsync
 
-from conftest import binary, run_python, write_config
-
-TRANSPORTS = ["shm", "tcp"]
+from conftest import TRANSPORTS, binary, run_python, write_config
 
 
 def circle(frame: vrsync.Frame) -> vrsync.Command:

@@ -13,10 +13,10 @@ from vrsync.compat import Annar4Interface
 from vrsync.gym import LateLearnerWarning, VrsyncEnv
 from vrsync.pettingzoo import VrsyncParallelEnv
 
-from conftest import write_config
+from conftest import TRANSPORTS, write_config
 
 
-@pytest.mark.parametrize("transport", ["shm", "tcp"])
+@pytest.mark.parametrize("transport", TRANSPORTS)
 def test_gym_env_passes_check_env(tmp_path: Path, start_host, transport: str) -> None:
     config, _ = write_config(tmp_path, "gym", transport=transport)
     host = start_host(config)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import write_config
+from conftest import TRANSPORTS, write_config
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 ALL = sorted(p.name for p in EXAMPLES.glob("*.py"))
@@ -58,7 +58,7 @@ def test_gym_random(tmp_path: Path, start_host) -> None:
     host.kill()
 
 
-@pytest.mark.parametrize("transport", ["shm", "tcp"])
+@pytest.mark.parametrize("transport", TRANSPORTS)
 def test_pettingzoo_loop(tmp_path: Path, start_host, transport: str) -> None:
     config, _ = write_config(tmp_path, "pzex", agents=2, transport=transport)
     host = start_host(config)
