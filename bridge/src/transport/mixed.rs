@@ -15,7 +15,8 @@ use std::time::Duration;
 use super::legacy::{LegacyFrameLoan, LegacyHost, LegacyHostCreateError};
 use super::shm::{ShmFrameLoan, ShmHost, ShmHostCreateError};
 use super::tcp::{TcpFrameLoan, TcpHost, TcpHostCreateError};
-use super::zenoh::{ZenohFrameLoan, ZenohHost, ZenohHostCreateError, poll_fds};
+use super::wait::{EpollSet, readable_any};
+use super::zenoh::{ZenohFrameLoan, ZenohHost, ZenohHostCreateError};
 use super::{BatchSink, FrameLoanMut, HostTransport, HostTransportError, PeerRefusal};
 use crate::config::{Config, TransportKind};
 use crate::signal::SignalHandling;
@@ -87,7 +88,7 @@ pub struct Transports {
     zenoh: Option<ZenohHost>,
     /// Without legacy, with TCP, shm and zenoh: an epoll set of the shm and zenoh
     /// descriptors (TCP's wait takes one extra descriptor).
-    epoll: Option<std::os::fd::OwnedFd>,
+    epoll: Option<EpollSet>,
     routes: Vec<Route>,
     /// Host slot of each shm slot / tcp slot.
     shm_slots: Vec<usize>,
@@ -385,7 +386,7 @@ impl HostTransport for Transports {
                         .into_iter()
                         .flatten()
                         .collect();
-                    poll_fds(&fds, timeout).map_err(|e| HostTransportError::Wait {
+                    readable_any(&fds, timeout).map_err(|e| HostTransportError::Wait {
                         reason: format!("poll: {e}"),
                     })?;
                     shm.clear_activity();
@@ -395,7 +396,7 @@ impl HostTransport for Transports {
                     // TCP polls its sockets plus one more descriptor: zenoh's eventfd, or
                     // the epoll set of shm's listener and zenoh's eventfd.
                     let extra = match &self.epoll {
-                        Some(e) => Some(std::os::fd::AsRawFd::as_raw_fd(e)),
+                        Some(e) => Some(e.raw()),
                         None => zenoh.activity_fd(),
                     };
                     if tcp.wait_activity_with(timeout, extra)? {
@@ -518,24 +519,10 @@ impl HostTransport for Transports {
 }
 
 /// An epoll set of `fds` (the `None`s skipped): readable whenever one of them is.
-fn epoll_of(fds: &[Option<std::os::fd::RawFd>]) -> std::io::Result<std::os::fd::OwnedFd> {
-    use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
-    // SAFETY: plain syscall; the result is checked before use.
-    let ep = unsafe { libc::epoll_create1(libc::EPOLL_CLOEXEC) };
-    if ep < 0 {
-        return Err(std::io::Error::last_os_error());
-    }
-    // SAFETY: `ep` is a fresh descriptor nobody else owns.
-    let ep = unsafe { OwnedFd::from_raw_fd(ep) };
+fn epoll_of(fds: &[Option<std::os::fd::RawFd>]) -> std::io::Result<EpollSet> {
+    let set = EpollSet::new(fds.len())?;
     for &fd in fds.iter().flatten() {
-        let mut ev = libc::epoll_event {
-            events: libc::EPOLLIN as u32,
-            u64: fd as u64,
-        };
-        // SAFETY: `ev` is a valid epoll_event for the call; both descriptors are open.
-        if unsafe { libc::epoll_ctl(ep.as_raw_fd(), libc::EPOLL_CTL_ADD, fd, &mut ev) } < 0 {
-            return Err(std::io::Error::last_os_error());
-        }
+        set.add(fd, fd as u64)?;
     }
-    Ok(ep)
+    Ok(set)
 }

@@ -18,6 +18,7 @@ pub(crate) mod mixed;
 pub mod record;
 pub mod shm;
 pub mod tcp;
+pub(crate) mod wait;
 pub mod zenoh;
 
 use std::time::{Duration, Instant};

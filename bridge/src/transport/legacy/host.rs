@@ -2,9 +2,9 @@
 //! agent that turns the original client's messages into motor batches, and the
 //! per-cycle messages written at publish.
 
-use std::io::{self, ErrorKind, Write};
+use std::io::{self, ErrorKind};
 use std::net::{IpAddr, SocketAddr, TcpListener, TcpStream};
-use std::os::fd::{AsRawFd, FromRawFd, OwnedFd, RawFd};
+use std::os::fd::{AsRawFd, RawFd};
 use std::time::{Duration, Instant};
 
 use tracing::{debug, info, warn};
@@ -16,6 +16,7 @@ use super::codec::{
 use crate::config::{Config, LegacyDialect, PngCompression, TransportKind};
 use crate::rounded::Rounded;
 use crate::signal::SignalHandling;
+use crate::transport::wait::{EpollSet, write_all_until};
 use crate::transport::{
     BatchSink, FrameLoanMut, HostTransport, HostTransportError, PeerRefusal, RefusalKind, Refusals,
 };
@@ -179,7 +180,7 @@ struct EnvConn {
 /// The host side of the legacy transport.
 #[derive(Debug)]
 pub struct LegacyHost {
-    epoll: OwnedFd,
+    epoll: EpollSet,
     env_listener: TcpListener,
     env_conns: Vec<EnvConn>,
     slots: Vec<Slot>,
@@ -192,7 +193,6 @@ pub struct LegacyHost {
     write_timeout: Duration,
     stats: LegacyStats,
     signals: SignalHandling,
-    events: Vec<libc::epoll_event>,
     /// Resets from the environment socket waiting for an agent to carry them.
     resets: Vec<MotorCommand>,
     /// How long a new connection may take to send its version check.
@@ -221,13 +221,7 @@ impl LegacyHost {
     pub fn create(config: &Config, signals: SignalHandling) -> Result<Self, LegacyHostCreateError> {
         signals.apply();
         let lc = &config.transport.legacy;
-        // SAFETY: plain syscall; the result is checked.
-        let fd = unsafe { libc::epoll_create1(libc::EPOLL_CLOEXEC) };
-        if fd < 0 {
-            return Err(LegacyHostCreateError::Epoll(io::Error::last_os_error()));
-        }
-        // SAFETY: `fd` is a new descriptor owned by nobody else.
-        let epoll = unsafe { OwnedFd::from_raw_fd(fd) };
+        let epoll = EpollSet::new(64).map_err(LegacyHostCreateError::Epoll)?;
         let ip: IpAddr = lc.bind;
         if !ip.is_loopback() {
             warn!(%ip, "legacy transport listens beyond loopback: any host that can reach it may connect");
@@ -292,7 +286,6 @@ impl LegacyHost {
             write_timeout: config.sync.stop_timeout.max(Duration::from_secs(1)),
             stats: LegacyStats::default(),
             signals,
-            events: vec![libc::epoll_event { events: 0, u64: 0 }; 64],
             resets: Vec::new(),
             hello_timeout: HELLO_TIMEOUT,
             refusals: Refusals::default(),
@@ -315,17 +308,7 @@ impl LegacyHost {
     /// Adds `fd` to the epoll set (level-triggered, readable). Closing the descriptor
     /// removes it again.
     fn watch(&self, fd: RawFd) -> io::Result<()> {
-        let mut ev = libc::epoll_event {
-            events: libc::EPOLLIN as u32,
-            u64: fd as u64,
-        };
-        // SAFETY: valid epoll descriptor and event struct for the call.
-        let r =
-            unsafe { libc::epoll_ctl(self.epoll.as_raw_fd(), libc::EPOLL_CTL_ADD, fd, &mut ev) };
-        if r < 0 {
-            return Err(io::Error::last_os_error());
-        }
-        Ok(())
+        self.epoll.add(fd, fd as u64)
     }
 
     /// Also wakes [`HostTransport::wait_activity`] (and makes [`HostTransport::activity_fd`]
@@ -821,27 +804,13 @@ impl LegacyHost {
             Some(d) => timeout.min(d.saturating_duration_since(Instant::now())),
             None => timeout,
         };
-        let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
-        let ms = if ms == 0 && !timeout.is_zero() { 1 } else { ms };
-        // SAFETY: `events` is a valid buffer of `events.len()` entries for the call.
-        let n = unsafe {
-            libc::epoll_wait(
-                self.epoll.as_raw_fd(),
-                self.events.as_mut_ptr(),
-                self.events.len() as i32,
-                ms,
-            )
-        };
-        if n < 0 {
-            let e = io::Error::last_os_error();
-            if e.kind() == ErrorKind::Interrupted {
-                return Ok(false);
-            }
-            return Err(HostTransportError::Wait {
+        let ready = self
+            .epoll
+            .wait(timeout)
+            .map_err(|e| HostTransportError::Wait {
                 reason: format!("epoll_wait: {e}"),
-            });
-        }
-        Ok(n > 0)
+            })?;
+        Ok(ready.count() > 0)
     }
 
     fn encode_png(&mut self, slot: usize, which: usize, desc: &ImageDesc, payload: &[u8]) {
@@ -1038,33 +1007,8 @@ fn push_status(out: &mut Vec<u8>, action_id: u32, state: ActionState) {
 
 /// Writes all of `data` to a non-blocking socket, waiting for writability until
 /// `deadline` (whole frames only: the clients desynchronise on a partial one).
-fn send_all(stream: &mut TcpStream, mut data: &[u8], deadline: Instant) -> io::Result<()> {
-    while !data.is_empty() {
-        match stream.write(data) {
-            Ok(0) => return Err(io::Error::new(ErrorKind::WriteZero, "connection closed")),
-            Ok(n) => data = &data[n..],
-            Err(e) if e.kind() == ErrorKind::Interrupted => {}
-            Err(e) if e.kind() == ErrorKind::WouldBlock => {
-                let left = deadline.saturating_duration_since(Instant::now());
-                if left.is_zero() {
-                    return Err(io::Error::new(
-                        ErrorKind::TimedOut,
-                        "the client does not read",
-                    ));
-                }
-                let mut pfd = libc::pollfd {
-                    fd: stream.as_raw_fd(),
-                    events: libc::POLLOUT,
-                    revents: 0,
-                };
-                let ms = left.as_millis().clamp(1, i32::MAX as u128) as i32;
-                // SAFETY: one valid pollfd for the duration of the call.
-                unsafe { libc::poll(&mut pfd, 1, ms) };
-            }
-            Err(e) => return Err(e),
-        }
-    }
-    Ok(())
+fn send_all(stream: &mut TcpStream, data: &[u8], deadline: Instant) -> io::Result<()> {
+    write_all_until(stream, data, deadline, "the client does not read")
 }
 
 impl HostTransport for LegacyHost {
@@ -1208,7 +1152,7 @@ impl HostTransport for LegacyHost {
     }
 
     fn activity_fd(&self) -> Option<RawFd> {
-        Some(self.epoll.as_raw_fd())
+        Some(self.epoll.raw())
     }
 
     fn take_refusals(&mut self, sink: &mut dyn FnMut(&PeerRefusal)) -> u64 {
@@ -1227,7 +1171,7 @@ mod tests {
     //! The legacy host over real loopback sockets, driven through the host contract; the
     //! "clients" are raw byte streams. Bad input of every kind (issue 14 item 5).
 
-    use std::io::Read;
+    use std::io::{Read, Write};
     use std::path::Path;
     use std::sync::atomic::{AtomicU32, Ordering};
 

@@ -275,13 +275,7 @@ impl TcpAgent {
     }
 
     fn readable_now(&self) -> bool {
-        let mut pfd = libc::pollfd {
-            fd: self.stream.as_raw_fd(),
-            events: libc::POLLIN,
-            revents: 0,
-        };
-        // SAFETY: one valid pollfd for the duration of the call.
-        unsafe { libc::poll(&mut pfd, 1, 0) == 1 }
+        crate::transport::wait::readable_now(self.stream.as_raw_fd())
     }
 
     /// Sends a motor batch (the stop flag in the header ends the agent's cycle).
@@ -370,17 +364,9 @@ impl AgentTransport for TcpAgent {
         if self.closed || self.gone.is_some() {
             return;
         }
-        let mut pfd = libc::pollfd {
-            fd: self.stream.as_raw_fd(),
-            events: libc::POLLIN,
-            revents: 0,
-        };
-        let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
-        // Round sub-millisecond timeouts up so a short wait does not spin.
-        let ms = if ms == 0 && !timeout.is_zero() { 1 } else { ms };
-        // SAFETY: one valid pollfd for the duration of the call. A failed or interrupted
-        // poll ends the wait early; the next read reports what broke.
-        unsafe { libc::poll(&mut pfd, 1, ms) };
+        // A failed or interrupted poll ends the wait early; the next read reports what
+        // broke.
+        let _ = crate::transport::wait::poll_one(self.stream.as_raw_fd(), libc::POLLIN, timeout);
     }
 
     fn discard_wakeups(&mut self) {}

@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::rounded::Rounded;
+use crate::transport::wait;
 use crate::transport::{PeerRefusal, RefusalKind, Refusals};
 
 // ---------------------------------------------------------------------------------------
@@ -199,7 +200,7 @@ impl TcpHost {
         let timeout = if admitted { Duration::ZERO } else { timeout };
         let mut ready = std::mem::take(&mut self.ready);
         let mut pfds = std::mem::take(&mut self.pfds);
-        let result = poll_readable(&self.fds, timeout, &mut pfds, &mut ready);
+        let result = wait::poll_many(&self.fds, timeout, &mut pfds, &mut ready);
         self.ready = ready;
         self.pfds = pfds;
         result.map_err(|e| HostTransportError::Wait {
@@ -305,7 +306,7 @@ impl TcpHost {
             .iter()
             .find(|s| s.id == hello.agent_id)
             .and_then(|s| s.conn.as_ref())
-            .is_some_and(|c| peer_closed(&c.stream))
+            .is_some_and(|c| wait::peer_closed(c.stream.as_raw_fd()))
     }
 
     /// Admits the deferred hellos whose id's old connection is gone, or that waited
@@ -504,7 +505,7 @@ impl TcpHost {
             );
         };
         if let Some(old) = &self.slots[slot].conn
-            && peer_closed(&old.stream)
+            && wait::peer_closed(old.stream.as_raw_fd())
         {
             // The agent died or reconnects; its old connection is gone already.
             self.drop_conn(slot, "connection closed (a new connection takes its place)");
@@ -542,30 +543,8 @@ impl TcpHost {
 
     /// Writes a whole record to a non-blocking socket, waiting for writability with a
     /// deadline (a stalled agent cannot hold the host forever).
-    fn send_all(stream: &mut TcpStream, mut data: &[u8], deadline: Instant) -> io::Result<()> {
-        while !data.is_empty() {
-            match stream.write(data) {
-                Ok(0) => return Err(io::Error::new(ErrorKind::WriteZero, "connection closed")),
-                Ok(n) => data = &data[n..],
-                Err(e) if e.kind() == ErrorKind::Interrupted => {}
-                Err(e) if e.kind() == ErrorKind::WouldBlock => {
-                    let left = deadline.saturating_duration_since(Instant::now());
-                    if left.is_zero() {
-                        return Err(io::Error::new(ErrorKind::TimedOut, "agent does not read"));
-                    }
-                    let mut pfd = libc::pollfd {
-                        fd: stream.as_raw_fd(),
-                        events: libc::POLLOUT,
-                        revents: 0,
-                    };
-                    let ms = left.as_millis().clamp(1, i32::MAX as u128) as i32;
-                    // SAFETY: one valid pollfd for the duration of the call.
-                    unsafe { libc::poll(&mut pfd, 1, ms) };
-                }
-                Err(e) => return Err(e),
-            }
-        }
-        Ok(())
+    fn send_all(stream: &mut TcpStream, data: &[u8], deadline: Instant) -> io::Result<()> {
+        wait::write_all_until(stream, data, deadline, "agent does not read")
     }
 
     /// Reads what has arrived from `c`, handing complete motor batches to `sink`.
@@ -638,13 +617,7 @@ impl TcpHost {
     }
 
     fn writable_now(stream: &TcpStream) -> bool {
-        let mut pfd = libc::pollfd {
-            fd: stream.as_raw_fd(),
-            events: libc::POLLOUT,
-            revents: 0,
-        };
-        // SAFETY: one valid pollfd for the duration of the call.
-        unsafe { libc::poll(&mut pfd, 1, 0) == 1 && pfd.revents & libc::POLLOUT != 0 }
+        wait::writable_now(stream.as_raw_fd())
     }
 
     /// Sets the shared secret agents must present.
@@ -664,18 +637,6 @@ fn stall_reason(reader: &RecordReader, stall_timeout: Duration) -> String {
         reader.progress(),
         Rounded(stall_timeout)
     )
-}
-
-/// Whether the peer closed or reset the connection (without reading anything).
-fn peer_closed(stream: &TcpStream) -> bool {
-    let mut pfd = libc::pollfd {
-        fd: stream.as_raw_fd(),
-        events: libc::POLLRDHUP,
-        revents: 0,
-    };
-    // SAFETY: one valid pollfd for the duration of the call.
-    let n = unsafe { libc::poll(&mut pfd, 1, 0) };
-    n == 1 && pfd.revents & (libc::POLLRDHUP | libc::POLLHUP | libc::POLLERR) != 0
 }
 
 impl Drop for TcpHost {

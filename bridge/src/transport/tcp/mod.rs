@@ -117,40 +117,6 @@ fn read_exact_deadline(
     Ok(())
 }
 
-/// Waits until one of `fds` has one of its `(fd, events)` (or a hang-up or error) or
-/// `timeout` passes; marks which are ready. `pfds` is scratch space reused across calls
-/// (no allocation in steady state).
-fn poll_readable(
-    fds: &[(i32, i16)],
-    timeout: Duration,
-    pfds: &mut Vec<libc::pollfd>,
-    ready: &mut Vec<bool>,
-) -> io::Result<usize> {
-    pfds.clear();
-    pfds.extend(fds.iter().map(|&(fd, events)| libc::pollfd {
-        fd,
-        events,
-        revents: 0,
-    }));
-    let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
-    // Round sub-millisecond timeouts up so a short wait does not spin.
-    let ms = if ms == 0 && !timeout.is_zero() { 1 } else { ms };
-    // SAFETY: `pfds` is a valid array of `pfds.len()` pollfd structs for the whole call.
-    let n = unsafe { libc::poll(pfds.as_mut_ptr(), pfds.len() as libc::nfds_t, ms) };
-    if n < 0 {
-        let e = io::Error::last_os_error();
-        if e.kind() == ErrorKind::Interrupted {
-            ready.clear();
-            ready.resize(fds.len(), false);
-            return Ok(0);
-        }
-        return Err(e);
-    }
-    ready.clear();
-    ready.extend(pfds.iter().map(|p| p.revents != 0));
-    Ok(n as usize)
-}
-
 /// Size of the sensor header at the start of a frame record.
 const HEADER: usize = core::mem::size_of::<SensorHeader>();
 

@@ -43,8 +43,7 @@
 //! agent's) wait polls: no polling loop, and a host serving shm and zenoh agents waits for
 //! both in one `poll(2)` ([`super::HostTransport::activity_fd`]).
 
-use std::io;
-use std::os::fd::{AsRawFd, FromRawFd, OwnedFd, RawFd};
+use std::os::fd::RawFd;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
@@ -218,76 +217,7 @@ pub(crate) fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
-/// An `eventfd`: written by zenoh's callbacks, polled by the waiting side.
-#[derive(Debug)]
-pub(crate) struct WakeFd(OwnedFd);
-
-impl WakeFd {
-    pub(crate) fn new() -> io::Result<Self> {
-        // SAFETY: plain syscall; the result is checked before use.
-        let fd = unsafe { libc::eventfd(0, libc::EFD_NONBLOCK | libc::EFD_CLOEXEC) };
-        if fd < 0 {
-            return Err(io::Error::last_os_error());
-        }
-        // SAFETY: `fd` is a fresh descriptor nobody else owns.
-        Ok(Self(unsafe { OwnedFd::from_raw_fd(fd) }))
-    }
-
-    /// Makes the descriptor readable (wake-ups merge).
-    pub(crate) fn wake(&self) {
-        let one: u64 = 1;
-        // SAFETY: writes 8 bytes from a valid u64. A full counter (EAGAIN) is readable
-        // already, which is all a wake-up needs.
-        unsafe { libc::write(self.0.as_raw_fd(), (&raw const one).cast(), 8) };
-    }
-
-    /// Forgets pending wake-ups.
-    pub(crate) fn clear(&self) {
-        let mut n: u64 = 0;
-        // SAFETY: reads at most 8 bytes into a valid u64; non-blocking.
-        unsafe { libc::read(self.0.as_raw_fd(), (&raw mut n).cast(), 8) };
-    }
-
-    /// Waits until woken or `timeout` passed; returns whether it was woken (the wake-up
-    /// stays pending until [`WakeFd::clear`]).
-    pub(crate) fn wait(&self, timeout: Duration) -> bool {
-        poll_fds(&[self.0.as_raw_fd()], timeout).unwrap_or(false)
-    }
-
-    pub(crate) fn raw(&self) -> RawFd {
-        self.0.as_raw_fd()
-    }
-}
-
-/// Waits until one of `fds` is readable or `timeout` passed; returns whether one is.
-///
-/// # Errors
-/// `poll(2)`'s error (an interruption is a return without readiness).
-pub(crate) fn poll_fds(fds: &[RawFd], timeout: Duration) -> io::Result<bool> {
-    let mut pfds = [libc::pollfd {
-        fd: -1,
-        events: 0,
-        revents: 0,
-    }; 4];
-    let n = fds.len().min(pfds.len());
-    for (p, &fd) in pfds.iter_mut().zip(fds) {
-        p.fd = fd;
-        p.events = libc::POLLIN;
-    }
-    let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
-    // Round sub-millisecond timeouts up so a short wait does not spin.
-    let ms = if ms == 0 && !timeout.is_zero() { 1 } else { ms };
-    // SAFETY: `pfds` holds `n` valid pollfd structs for the whole call.
-    let r = unsafe { libc::poll(pfds.as_mut_ptr(), n as libc::nfds_t, ms) };
-    if r < 0 {
-        let e = io::Error::last_os_error();
-        if e.kind() == io::ErrorKind::Interrupted {
-            return Ok(false);
-        }
-        return Err(e);
-    }
-    Ok(r > 0)
-}
+pub(crate) use super::wait::WakeFd;
 
 /// An 8-byte aligned byte buffer of a fixed capacity (so headers and commands can be
 /// viewed in place), reused through a pool.
