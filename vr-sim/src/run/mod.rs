@@ -1,0 +1,684 @@
+//! The host run loop: frame 1 (sensors + start), frame 2 (collect, apply, advance).
+
+use std::collections::BTreeSet;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::ops::ControlFlow;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use serde::Serialize;
+use tracing::{info, warn};
+use vrsync_bridge::{Config, CycleReport, Host, HostCycleError, HostWaitError, SignalHandling};
+
+use crate::events::{CYCLE_EVENT_EVERY, Event, Events};
+use crate::picture::{Trails, dump_image, write_map};
+use crate::render::Renderer;
+use crate::spawn::{Agents, PrivateConfig};
+use crate::world::World;
+
+mod setup;
+mod summary;
+
+use setup::{
+    bound_config_for_spawn, install_event_hooks, progress_bar, spawn_agents, wait_for_agents,
+};
+pub use summary::{Summary, print_summary};
+
+/// What to run.
+#[derive(Debug)]
+pub struct RunOptions {
+    /// The validated config.
+    pub config: Config,
+    /// The file spawned agents are given.
+    pub agent_config_path: PathBuf,
+    /// Cycles to run (`None`: until Ctrl-C).
+    pub frames: Option<u64>,
+    /// Spawn `vr-agent` for every configured agent.
+    pub spawn: bool,
+    /// Extra arguments for spawned agents.
+    pub agent_args: Vec<String>,
+    /// JSON-lines recording.
+    pub record: Option<PathBuf>,
+    /// Show a progress bar.
+    pub progress: bool,
+    /// Top-down map with every agent's trajectory, written at the end.
+    pub map: Option<PathBuf>,
+    /// Write every agent's camera images as PNG into this folder every `.1` cycles.
+    pub dump_frames: Option<(PathBuf, u64)>,
+    /// Threads shading image rows (1: the host thread only; 0: one per core).
+    pub render_threads: usize,
+}
+
+#[derive(Serialize)]
+struct RecordLine<'a> {
+    cycle: u64,
+    sim_time_s: f64,
+    agent: u32,
+    outcome: &'a str,
+    position: [f32; 3],
+    rotation: [f32; 4],
+    heading_deg: f32,
+    eyes_deg: [f32; 3],
+    held: Option<u32>,
+    commands: Vec<(&'static str, u32)>,
+    rejected: u32,
+    statuses: Vec<(u32, u32)>,
+    collisions: Vec<(u32, u32)>,
+    reward: f32,
+}
+
+/// Runs the world until `frames` cycles are done (or Ctrl-C).
+///
+/// One cycle is [`Run::frame1`] (sensors, images, start) then [`Run::frame2`] (collect,
+/// apply, advance); when every agent is gone the run pauses in [`Run::wait_for_return`].
+///
+/// # Errors
+/// Host creation, agents missing, transport failures, a spawned agent failing.
+pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
+    let mut run = Run::new(opts, events)?;
+    while run.wants_another_cycle() {
+        if run.nobody_connected() && run.wait_for_return()?.is_break() {
+            break;
+        }
+        let notable = run.frame1()?;
+        if run.frame2(notable)?.is_break() {
+            break;
+        }
+    }
+    run.finish()
+}
+
+/// One run of the host loop: what it set up, what it writes, what it counts.
+///
+/// Fields drop in declaration order: on an error the outputs are flushed, spawned agents
+/// killed, their private config removed, then the host closed, as the locals of the one
+/// function this was did.
+struct Run {
+    bar: Option<indicatif::ProgressBar>,
+    /// JSON-lines recording (`--record`).
+    record: Option<BufWriter<File>>,
+    /// Trajectories for the map (`--map`).
+    trails: Option<Trails>,
+    agents: Agents,
+    /// The config spawned agents read when `tcp_listen` asked for any free port.
+    _bound_config: Option<PrivateConfig>,
+    host: Host,
+    renderer: Renderer,
+    world: World,
+    opts: RunOptions,
+    events: Events,
+    roster: Roster,
+    commands: CommandTally,
+    /// Every agent's pose and status after every cycle.
+    hasher: blake3::Hasher,
+    /// Writing sensors and rendering images, summed over the cycles.
+    render_time: Duration,
+    loop_started: Instant,
+    /// Cycles completed.
+    done: u64,
+    interrupted: bool,
+    /// Set when the host paused with nobody attached and nobody came back in time.
+    error: Option<String>,
+}
+
+/// The agents of the run and what the events last said about each (index = position in
+/// `ids`).
+struct Roster {
+    ids: Vec<u32>,
+    /// Connected as last reported (all connected after the first wait).
+    connected: Vec<bool>,
+    /// Evicted or left, remembered to report a rejoin.
+    evicted: Vec<bool>,
+}
+
+/// Applies the agents' commands to the world and counts them.
+struct CommandTally {
+    applied: u64,
+    rejected: u64,
+    /// (agent, command kind) rejections already logged: further ones are counted only.
+    logged: BTreeSet<(u32, &'static str)>,
+    /// Reused every cycle: no allocation per cycle in the steady state.
+    rejected_per_agent: Vec<(u32, u32)>,
+}
+
+/// One agent's cycle as the recording writes it.
+struct AgentCommands {
+    agent: u32,
+    outcome: vrsync_bridge::AgentOutcome,
+    /// Applied commands: name and action id, in the order sent.
+    applied: Vec<(&'static str, u32)>,
+    rejected: u32,
+}
+
+impl Run {
+    /// Checks the config, builds the world and the host, spawns the agents (`--spawn`),
+    /// waits for every agent, then opens the outputs.
+    fn new(opts: RunOptions, events: &mut Events) -> anyhow::Result<Self> {
+        let config = &opts.config;
+        // Pre-flight: a session that does not fit /dev/shm is a configuration error (exit 2),
+        // found before anything starts rather than as a SIGBUS later.
+        vrsync_bridge::check_shm_budget(config)?;
+        // The world first: a bad [world] section is a config error, reported before anything
+        // is started.
+        let world = World::from_config(config)?;
+        let renderer = Renderer::new(opts.render_threads)?;
+        if let Some((dir, _)) = &opts.dump_frames {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("cannot create {}", dir.display()))?;
+        }
+        let mut host = Host::builder(config)
+            .signal_handling(SignalHandling::Install)
+            .create()
+            .context("cannot create the host")?;
+        let ids: Vec<u32> = host.agent_ids().collect();
+        if events.enabled() {
+            install_event_hooks(&mut host, events);
+        }
+        events.emit(Event::Listening {
+            session: &config.session,
+            transport: config.transport.kind.as_str(),
+            address: host.tcp_local_addr().map(|a| a.to_string()),
+        })?;
+        let bound_config = bound_config_for_spawn(&opts, &host)?;
+        let mut agents = if opts.spawn {
+            let path = bound_config
+                .as_ref()
+                .map_or(opts.agent_config_path.as_path(), |p| p.path());
+            spawn_agents(config, path, &opts.agent_args)?
+        } else {
+            Agents::default()
+        };
+        wait_for_agents(&mut host, &mut agents, &ids, events, &opts)?;
+
+        let trails = opts.map.as_ref().map(|_| Trails::new(&world));
+        let record = match &opts.record {
+            Some(p) => Some(BufWriter::new(
+                File::create(p).with_context(|| format!("cannot create {}", p.display()))?,
+            )),
+            None => None,
+        };
+        let bar = opts.progress.then(|| progress_bar(opts.frames));
+        let agent_count = ids.len();
+        Ok(Self {
+            bar,
+            record,
+            trails,
+            agents,
+            _bound_config: bound_config,
+            host,
+            renderer,
+            world,
+            opts,
+            events: events.clone(),
+            roster: Roster {
+                ids,
+                connected: vec![true; agent_count],
+                evicted: vec![false; agent_count],
+            },
+            commands: CommandTally {
+                applied: 0,
+                rejected: 0,
+                logged: BTreeSet::new(),
+                rejected_per_agent: Vec::with_capacity(agent_count),
+            },
+            hasher: blake3::Hasher::new(),
+            render_time: Duration::ZERO,
+            loop_started: Instant::now(),
+            done: 0,
+            interrupted: false,
+            error: None,
+        })
+    }
+
+    /// Whether `--frames` cycles are not done yet (always, without `--frames`).
+    fn wants_another_cycle(&self) -> bool {
+        self.opts.frames.is_none_or(|n| self.done < n)
+    }
+
+    /// Every agent left or was evicted.
+    fn nobody_connected(&self) -> bool {
+        self.roster
+            .ids
+            .iter()
+            .all(|&id| !self.host.is_connected(id))
+    }
+
+    /// Nobody attached any more: no cycles, no world advance, until the agents are back,
+    /// as at the start. Breaks when nobody came back within `sync.connect_timeout` (the
+    /// summary then carries the error) or on SIGINT/SIGTERM.
+    fn wait_for_return(&mut self) -> anyhow::Result<ControlFlow<()>> {
+        let config = &self.opts.config;
+        let cycle = self.host.cycle();
+        for (i, &agent) in self.roster.ids.iter().enumerate() {
+            if self.roster.connected[i] {
+                self.roster.connected[i] = false;
+                self.events.emit(Event::AgentLeft {
+                    agent,
+                    cycle,
+                    graceful: false,
+                })?;
+            }
+        }
+        self.events.emit(Event::WaitingForAgents {
+            agents: self.roster.ids.clone(),
+        })?;
+        let timeout = config.sync.connect_timeout;
+        warn!(
+            session = %config.session,
+            cycle,
+            "no agent is connected: paused, waiting up to {} (sync.connect_timeout) for \
+             every agent to connect again",
+            vrsync_agent::log::Rounded(timeout)
+        );
+        let paused = Instant::now();
+        loop {
+            let left = timeout.saturating_sub(paused.elapsed());
+            match self
+                .host
+                .wait_for_agents(left.min(Duration::from_millis(500)))
+            {
+                Ok(()) => {
+                    self.events.emit(Event::AllAgentsConnected {
+                        agents: self.roster.ids.len(),
+                    })?;
+                    info!(cycle, "agents back: the run goes on");
+                    return Ok(ControlFlow::Continue(()));
+                }
+                Err(HostWaitError::AgentsMissing { missing, .. }) => {
+                    if left.is_zero() {
+                        self.error = Some(format!(
+                            "session {:?}: no agent connected after cycle {cycle}; the \
+                             host waited {} (sync.connect_timeout) for agents {missing:?} to \
+                             connect again and gives up",
+                            config.session,
+                            vrsync_agent::log::Rounded(paused.elapsed())
+                        ));
+                        return Ok(ControlFlow::Break(()));
+                    }
+                }
+                Err(HostWaitError::Terminated) => {
+                    self.interrupted = true;
+                    return Ok(ControlFlow::Break(()));
+                }
+                Err(e) => return Err(e).context("waiting for agents to come back"),
+            }
+        }
+    }
+
+    /// Frame 1: every connected agent's sensors and images, written in place, then one
+    /// start. Returns whether an agent rejoined (the cycle is then reported whatever its
+    /// number).
+    fn frame1(&mut self) -> anyhow::Result<bool> {
+        let mut notable = false;
+        for i in 0..self.roster.ids.len() {
+            let id = self.roster.ids[i];
+            if !self.note_connection(i)? {
+                continue;
+            }
+            let cycle = self.render_and_publish(id)?;
+            if self.roster.evicted[i] && !self.host.is_evicted(id) && !self.host.has_left(id) {
+                self.roster.evicted[i] = false;
+                notable = true;
+                self.events
+                    .emit(Event::AgentRejoined { agent: id, cycle })?;
+            }
+        }
+        self.host.start()?;
+        Ok(notable)
+    }
+
+    /// Reports agent `ids[i]` connecting or leaving since the last report; returns whether
+    /// it is connected now.
+    fn note_connection(&mut self, i: usize) -> anyhow::Result<bool> {
+        let id = self.roster.ids[i];
+        let now_connected = self.host.is_connected(id);
+        if now_connected != self.roster.connected[i] {
+            self.roster.connected[i] = now_connected;
+            let cycle = self.host.cycle();
+            self.events.emit(if now_connected {
+                Event::AgentConnected {
+                    agent: id,
+                    cycle: Some(cycle),
+                }
+            } else {
+                Event::AgentLeft {
+                    agent: id,
+                    cycle,
+                    graceful: false,
+                }
+            })?;
+        }
+        Ok(now_connected)
+    }
+
+    /// Writes agent `id`'s sensors and renders its images into a loaned frame (dumping
+    /// them as PNG every `--dump-frames` cycles), then publishes it. Returns the cycle.
+    fn render_and_publish(&mut self, id: u32) -> anyhow::Result<u64> {
+        let mut frame = self.host.loan_frame(id)?;
+        let cycle = frame.header().cycle;
+        let t = Instant::now();
+        let (header, images) = frame.parts_mut();
+        self.world.write_sensors(id, header);
+        self.renderer.render_agent(&self.world, id, images);
+        self.render_time += t.elapsed();
+        if let Some((dir, every)) = &self.opts.dump_frames
+            && cycle % every == 0
+        {
+            for image in frame.images_mut() {
+                dump_image(dir, cycle, id, &image)?;
+            }
+        }
+        self.host.publish(frame)?;
+        Ok(cycle)
+    }
+
+    /// Frame 2: collect, apply in (agent id, order sent) order, report, advance the world,
+    /// record. Breaks on SIGINT/SIGTERM.
+    fn frame2(&mut self, mut notable: bool) -> anyhow::Result<ControlFlow<()>> {
+        let report = match self.host.collect() {
+            Ok(r) => r,
+            Err(HostCycleError::Terminated) => {
+                self.interrupted = true;
+                return Ok(ControlFlow::Break(()));
+            }
+            Err(e) => {
+                return Err(e).context("cycle failed");
+            }
+        };
+        let cycle = report.cycle;
+        let timed_out_agents: Vec<u32> = report.timed_out_agents().collect();
+        let slow_agents: Vec<u32> = report.slow_agents().collect();
+        let late_batches = report.late_batches;
+        notable |= self.roster.note_leaves(report, &mut self.events)?;
+        let per_agent = self.commands.apply(
+            report,
+            &mut self.world,
+            &mut self.events,
+            self.record.is_some(),
+        )?;
+        for &(id, n) in &self.commands.rejected_per_agent {
+            self.host.set_rejected(id, n);
+        }
+        notable |= self.roster.note_evictions(&self.host);
+        if self.events.enabled()
+            && (notable
+                || cycle % CYCLE_EVENT_EVERY == 0
+                || late_batches > 0
+                || !timed_out_agents.is_empty()
+                || !slow_agents.is_empty())
+        {
+            self.events.emit(Event::Cycle {
+                cycle,
+                timed_out_agents,
+                slow_agents,
+                late_batches,
+            })?;
+        }
+        self.world.step();
+        self.hasher.update(&cycle.to_le_bytes());
+        self.world.hash_into(&mut self.hasher);
+        if let Some(t) = &mut self.trails {
+            t.push(&self.world);
+        }
+        self.write_record(cycle, per_agent)?;
+        self.done += 1;
+        if let Some(bar) = &self.bar {
+            bar.inc(1);
+        }
+        self.end_of_cycle(cycle)
+    }
+
+    /// Appends one line per agent of `cycle` to the recording (`--record`).
+    fn write_record(&mut self, cycle: u64, per_agent: Vec<AgentCommands>) -> anyhow::Result<()> {
+        let Some(out) = &mut self.record else {
+            return Ok(());
+        };
+        let dt = self.opts.config.sync.simulation_time_per_frame;
+        let sim_time_s = (cycle as f64 + 1.0) * dt.as_secs_f64();
+        for agent in per_agent {
+            let Some(body) = self.world.bodies().iter().find(|b| b.id == agent.agent) else {
+                continue;
+            };
+            let pose = body.pose();
+            let line = RecordLine {
+                cycle,
+                sim_time_s,
+                agent: agent.agent,
+                outcome: agent.outcome.as_str(),
+                position: pose.position,
+                rotation: pose.rotation,
+                heading_deg: body.heading_deg,
+                eyes_deg: [
+                    body.eyes.pan_left_deg,
+                    body.eyes.pan_right_deg,
+                    body.eyes.tilt_deg,
+                ],
+                held: body.held,
+                commands: agent.applied,
+                rejected: agent.rejected,
+                statuses: body
+                    .pending_statuses()
+                    .iter()
+                    .map(|&(a, s)| (a, s as u32))
+                    .collect(),
+                collisions: body.pending_collisions().to_vec(),
+                reward: body.pending_reward(),
+            };
+            serde_json::to_writer(&mut *out, &line).context("write record")?;
+            out.write_all(b"\n").context("write record")?;
+        }
+        Ok(())
+    }
+
+    /// After a cycle: a spawned agent that exited fails the run (unless evicted under
+    /// `on_agent_lost = "evict"`); SIGINT/SIGTERM ends it.
+    fn end_of_cycle(&mut self, cycle: u64) -> anyhow::Result<ControlFlow<()>> {
+        if let Some((id, status)) = self.agents.failed()
+            && !self.host.stats().evicted_agents.contains(&id)
+            && self.opts.config.sync.on_agent_lost != vrsync_bridge::AgentLostPolicy::Evict
+        {
+            bail!("agent {id} exited during cycle {cycle} ({status})");
+        }
+        if self.host.termination_requested() {
+            self.interrupted = true;
+            return Ok(ControlFlow::Break(()));
+        }
+        Ok(ControlFlow::Continue(()))
+    }
+
+    /// Flushes the outputs, closes the session, waits for spawned agents and sums up.
+    fn finish(self) -> anyhow::Result<Summary> {
+        let Self {
+            bar,
+            record,
+            trails,
+            agents,
+            _bound_config,
+            host,
+            renderer,
+            world,
+            opts,
+            events: _,
+            roster,
+            commands,
+            hasher,
+            render_time,
+            loop_started,
+            done,
+            interrupted,
+            error,
+        } = self;
+        let config = &opts.config;
+        let wall = loop_started.elapsed();
+        if let Some(bar) = bar {
+            bar.finish_and_clear();
+        }
+        if let Some(mut out) = record {
+            out.flush().context("write record")?;
+        }
+        if let (Some(path), Some(trails)) = (&opts.map, &trails) {
+            write_map(path, &world, trails)?;
+        }
+        let stats = host.stats().clone();
+        let sync_mode = config.sync.sync_mode;
+        drop(host); // tells the agents the session is closed
+        let failures = agents.finish(Duration::from_secs(5));
+        for (id, why) in &failures {
+            warn!(agent = id, "agent did not end cleanly: {why}");
+        }
+        // An evicted agent's failure was handled by on_agent_lost = "evict"; any other failure
+        // of a spawned agent fails the run.
+        let unhandled: Vec<_> = failures
+            .iter()
+            .filter(|(id, _)| !stats.evicted_agents.contains(id))
+            .collect();
+        if !interrupted && !unhandled.is_empty() {
+            bail!("spawned agents failed: {unhandled:?}");
+        }
+        let dt = config.sync.simulation_time_per_frame;
+        let wall_s = wall.as_secs_f64();
+        let summary = Summary {
+            mode: if sync_mode { "sync" } else { "async" }.into(),
+            transport: config.transport.kind.as_str().into(),
+            agents: roster.ids.len(),
+            frames: done,
+            sim_time_s: done as f64 * dt.as_secs_f64(),
+            wall_s,
+            frames_per_s: if wall_s > 0.0 {
+                done as f64 / wall_s
+            } else {
+                0.0
+            },
+            stop_timeouts: stats.stop_timeouts,
+            agent_timeouts: stats.agent_timeouts,
+            late_stops: stats.late_batches,
+            slow_stops: stats.slow_stops,
+            evicted_agents: stats.evicted_agents.clone(),
+            peers_refused: stats.peers_refused,
+            evictions: stats.evictions,
+            rejoins: stats.rejoins,
+            leaves: stats.leaves,
+            frames_delivered: stats.frames_delivered,
+            frames_read: stats.frames_read,
+            frames_undelivered: stats.frames_undelivered,
+            future_stops: stats.future_batches,
+            commands_overflowed: stats.commands_overflowed,
+            statuses_dropped: stats.statuses_dropped,
+            collisions_dropped: stats.collisions_dropped,
+            commands_applied: commands.applied,
+            commands_rejected: commands.rejected,
+            trajectory_hash: hasher.finalize().to_hex().to_string(),
+            render_us: if done > 0 {
+                render_time.as_secs_f64() * 1e6 / done as f64
+            } else {
+                0.0
+            },
+            render_threads: renderer.threads(),
+            interrupted,
+            error,
+        };
+        info!(frames = done, wall_s, "run finished");
+        Ok(summary)
+    }
+}
+
+impl Roster {
+    /// Reports the agents that left gracefully during the report's cycle; returns whether
+    /// one did.
+    fn note_leaves(&mut self, report: &CycleReport, events: &mut Events) -> anyhow::Result<bool> {
+        let mut notable = false;
+        for (i, &id) in self.ids.iter().enumerate() {
+            if report.agent(id).is_some_and(|a| a.left) {
+                // Reported here, not again at the next cycle boundary; a new connection
+                // of the id shows as connected, then rejoined.
+                self.connected[i] = false;
+                self.evicted[i] = true;
+                notable = true;
+                events.emit(Event::AgentLeft {
+                    agent: id,
+                    cycle: report.cycle,
+                    graceful: true,
+                })?;
+            }
+        }
+        Ok(notable)
+    }
+
+    /// Remembers the agents the host evicted (its on_evicted hook reported them) for their
+    /// rejoin; returns whether there was a new one.
+    fn note_evictions(&mut self, host: &Host) -> bool {
+        let mut notable = false;
+        for (i, &id) in self.ids.iter().enumerate() {
+            if !self.evicted[i] && host.is_evicted(id) {
+                self.evicted[i] = true;
+                notable = true;
+            }
+        }
+        notable
+    }
+}
+
+impl CommandTally {
+    /// Applies every agent's commands of `report` to the world in (agent id, order sent)
+    /// order, counting and reporting rejections (each (agent, kind) logged once); fills
+    /// `rejected_per_agent`. Returns what the recording needs (nothing when `recording`
+    /// is off).
+    fn apply(
+        &mut self,
+        report: &CycleReport,
+        world: &mut World,
+        events: &mut Events,
+        recording: bool,
+    ) -> anyhow::Result<Vec<AgentCommands>> {
+        let mut per_agent = Vec::with_capacity(if recording { report.agents().len() } else { 0 });
+        self.rejected_per_agent.clear();
+        for a in report.agents() {
+            let mut rejected = 0u32;
+            let mut names = Vec::new();
+            for wire in a.commands() {
+                let result = wire
+                    .decode()
+                    .map_err(crate::world::CommandRejected::from)
+                    .and_then(|cmd| world.apply(a.agent_id, wire.action_id, cmd).map(|()| cmd));
+                match result {
+                    Ok(cmd) => {
+                        self.applied += 1;
+                        if recording {
+                            names.push((cmd.name(), wire.action_id));
+                        }
+                    }
+                    Err(e) => {
+                        rejected += 1;
+                        let kind = vrsync_bridge::kind_name(wire.kind);
+                        if self.logged.insert((a.agent_id, kind)) {
+                            events.emit(Event::CommandRejected {
+                                agent: a.agent_id,
+                                cycle: report.cycle,
+                                kind,
+                                reason: e.to_string(),
+                            })?;
+                            warn!(
+                                agent = a.agent_id,
+                                cycle = report.cycle,
+                                "command rejected: {e} (further `{kind}` rejections of this agent are counted, not logged)"
+                            );
+                        }
+                    }
+                }
+            }
+            self.rejected += u64::from(rejected);
+            self.rejected_per_agent.push((a.agent_id, rejected));
+            if recording {
+                per_agent.push(AgentCommands {
+                    agent: a.agent_id,
+                    outcome: a.outcome,
+                    applied: names,
+                    rejected,
+                });
+            }
+        }
+        Ok(per_agent)
+    }
+}
