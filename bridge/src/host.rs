@@ -270,6 +270,9 @@ pub enum HostCreateError {
     /// The zenoh transport failed.
     #[error(transparent)]
     Zenoh(#[from] crate::transport::zenoh::ZenohHostCreateError),
+    /// The one wait over several transports could not be set up (an epoll set).
+    #[error("cannot wait on several transports at once: epoll: {0}")]
+    Wait(std::io::Error),
 }
 
 /// Why waiting for agents failed.
@@ -420,6 +423,7 @@ impl<'c> HostBuilder<'c> {
             TransportsCreateError::Tcp(e) => HostCreateError::Tcp(e),
             TransportsCreateError::Legacy(e) => HostCreateError::Legacy(e),
             TransportsCreateError::Zenoh(e) => HostCreateError::Zenoh(e),
+            TransportsCreateError::Wait(e) => HostCreateError::Wait(e),
         })?;
         Ok(Host::over(self.config, backend))
     }
@@ -1325,6 +1329,11 @@ mod tests {
             }
             Ok(())
         }
+        fn activity_fd(&self) -> std::os::fd::RawFd {
+            // Never polled: the fake's wait is its own (below).
+            -1
+        }
+
         fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
             let mut a = self.0.borrow_mut();
             for slot in std::mem::take(&mut a.reconnect) {

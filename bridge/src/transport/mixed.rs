@@ -2,20 +2,20 @@
 //! its config names (`[[agent]] transport`), and one wait covers them all.
 //!
 //! Each transport is created for its own agents only (a sub-config with those agents);
-//! slots inside a transport are its own, this module maps them to the host's. The shm
-//! transport's wake-up descriptor joins the TCP transport's `poll(2)`, so a stop over
-//! shared memory and a batch over TCP end the same wait. zenoh's callbacks write an
-//! `eventfd` that joins the same wait (in the legacy epoll set when there is one, else in
-//! the `poll(2)`, or an epoll set of its own next to shm's). The legacy transport waits on an
-//! `epoll` set: the shm descriptor joins that set, and the set's descriptor joins the TCP
-//! poll.
+//! slots inside a transport are its own, this module maps them to the host's. Every
+//! transport's readiness is one descriptor ([`HostTransport::activity_fd`]); with more
+//! than one transport they join one epoll set, and the host waits on it like on a single
+//! transport's ([`super::wait_for_activity`]): bounded by the earliest of their deadlines,
+//! then each transport's [`HostTransport::after_wait`]. Whatever the mix, there is no case
+//! per combination. A host with one transport uses that transport's own wait (shared
+//! memory may spin before it blocks).
 
 use std::time::Duration;
 
 use super::legacy::{LegacyFrameLoan, LegacyHost, LegacyHostCreateError};
 use super::shm::{ShmFrameLoan, ShmHost, ShmHostCreateError};
 use super::tcp::{TcpFrameLoan, TcpHost, TcpHostCreateError};
-use super::wait::{EpollSet, readable_any};
+use super::wait::EpollSet;
 use super::zenoh::{ZenohFrameLoan, ZenohHost, ZenohHostCreateError};
 use super::{BatchSink, FrameLoanMut, HostTransport, HostTransportError, PeerRefusal};
 use crate::config::{Config, TransportKind};
@@ -38,6 +38,9 @@ pub enum TransportsCreateError {
     /// The zenoh transport failed.
     #[error(transparent)]
     Zenoh(#[from] ZenohHostCreateError),
+    /// The epoll set of the transports' activity descriptors could not be made.
+    #[error("cannot wait on several transports at once: epoll: {0}")]
+    Wait(std::io::Error),
 }
 
 /// A loan of whichever transport serves the agent.
@@ -86,8 +89,7 @@ pub struct Transports {
     tcp: Option<TcpHost>,
     legacy: Option<LegacyHost>,
     zenoh: Option<ZenohHost>,
-    /// Without legacy, with TCP, shm and zenoh: an epoll set of the shm and zenoh
-    /// descriptors (TCP's wait takes one extra descriptor).
+    /// The transports' activity descriptors, when there are several.
     epoll: Option<EpollSet>,
     routes: Vec<Route>,
     /// Host slot of each shm slot / tcp slot.
@@ -147,35 +149,27 @@ impl Transports {
         } else {
             Some(TcpHost::create(&only(TransportKind::Tcp), signals)?)
         };
-        let mut legacy = if legacy_slots.is_empty() {
+        let legacy = if legacy_slots.is_empty() {
             None
         } else {
             Some(LegacyHost::create(&only(TransportKind::Legacy), signals)?)
         };
-        // One wait for all: the shm wake-up joins the legacy epoll set.
-        if let (Some(l), Some(fd)) = (&mut legacy, shm.as_ref().and_then(|s| s.activity_fd())) {
-            l.watch_extra(fd)
-                .map_err(|e| TransportsCreateError::Legacy(LegacyHostCreateError::Epoll(e)))?;
-        }
         let zenoh = if zenoh_slots.is_empty() {
             None
         } else {
             Some(ZenohHost::create(&only(TransportKind::Zenoh), signals)?)
         };
-        let zenoh_fd = zenoh.as_ref().and_then(|z| z.activity_fd());
-        let mut epoll = None;
-        if let (Some(l), Some(fd)) = (&mut legacy, zenoh_fd) {
-            // zenoh's eventfd joins the legacy epoll set too.
-            l.watch_extra(fd)
-                .map_err(|e| TransportsCreateError::Legacy(LegacyHostCreateError::Epoll(e)))?;
-        } else if let (Some(s), Some(_), Some(_)) = (&shm, &tcp, &zenoh) {
-            epoll = Some(epoll_of(&[s.activity_fd(), zenoh_fd]).map_err(|e| {
-                ZenohHostCreateError::Declare {
-                    what: "an epoll set for the shm and zenoh wake-ups".into(),
-                    reason: e.to_string(),
-                }
-            })?);
-        }
+        let fds = [
+            shm.as_ref().map(HostTransport::activity_fd),
+            tcp.as_ref().map(HostTransport::activity_fd),
+            legacy.as_ref().map(HostTransport::activity_fd),
+            zenoh.as_ref().map(HostTransport::activity_fd),
+        ];
+        let epoll = if fds.iter().flatten().count() > 1 {
+            Some(epoll_of(&fds).map_err(TransportsCreateError::Wait)?)
+        } else {
+            None
+        };
         Ok(Self {
             shm,
             tcp,
@@ -203,51 +197,6 @@ impl Transports {
             .get(slot)
             .copied()
             .ok_or(HostTransportError::NoSuchSlot { slot })
-    }
-
-    /// The wait of the shm, TCP and legacy transports (zenoh's eventfd, if any, is in
-    /// the legacy epoll set).
-    fn wait_without_zenoh(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
-        match (&mut self.shm, &mut self.tcp, &mut self.legacy) {
-            (Some(shm), None, None) => shm.wait_activity(timeout),
-            (None, Some(tcp), None) => tcp.wait_activity(timeout),
-            (shm, None, Some(legacy)) => {
-                // The shm wake-up is in the legacy epoll set.
-                legacy.wait_activity(timeout)?;
-                if let Some(shm) = shm {
-                    shm.clear_activity();
-                }
-                Ok(())
-            }
-            (shm, Some(tcp), Some(legacy)) => {
-                // One poll(2) over the TCP sockets and the legacy epoll set (which holds
-                // the shm wake-up); the legacy transport's own deadlines bound it.
-                let timeout = match legacy.next_deadline() {
-                    Some(d) => timeout.min(d.saturating_duration_since(std::time::Instant::now())),
-                    None => timeout,
-                };
-                tcp.wait_activity_with(timeout, legacy.activity_fd())?;
-                legacy.clear_activity();
-                if let Some(shm) = shm {
-                    shm.clear_activity();
-                }
-                if self.signals.termination_requested() {
-                    return Err(HostTransportError::Terminated);
-                }
-                Ok(())
-            }
-            (Some(shm), Some(tcp), None) => {
-                // One poll(2) over the TCP sockets and the shm stop listener.
-                if tcp.wait_activity_with(timeout, shm.activity_fd())? {
-                    shm.clear_activity();
-                }
-                if self.signals.termination_requested() {
-                    return Err(HostTransportError::Terminated);
-                }
-                Ok(())
-            }
-            (None, None, None) => Ok(()),
-        }
     }
 
     fn missing(kind: TransportKind) -> HostTransportError {
@@ -377,48 +326,67 @@ impl HostTransport for Transports {
     }
 
     fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
-        if let (Some(zenoh), None) = (&mut self.zenoh, &self.legacy) {
-            match (&mut self.shm, &mut self.tcp) {
-                (None, None) => return zenoh.wait_activity(timeout),
-                (Some(shm), None) => {
-                    // One poll(2) over the shm stop listener and zenoh's eventfd.
-                    let fds: Vec<_> = [shm.activity_fd(), zenoh.activity_fd()]
-                        .into_iter()
-                        .flatten()
-                        .collect();
-                    readable_any(&fds, timeout).map_err(|e| HostTransportError::Wait {
-                        reason: format!("poll: {e}"),
-                    })?;
-                    shm.clear_activity();
-                    zenoh.clear_activity();
-                }
-                (shm, Some(tcp)) => {
-                    // TCP polls its sockets plus one more descriptor: zenoh's eventfd, or
-                    // the epoll set of shm's listener and zenoh's eventfd.
-                    let extra = match &self.epoll {
-                        Some(e) => Some(e.raw()),
-                        None => zenoh.activity_fd(),
-                    };
-                    if tcp.wait_activity_with(timeout, extra)? {
-                        if let Some(shm) = shm {
-                            shm.clear_activity();
-                        }
-                        zenoh.clear_activity();
-                    }
-                }
-            }
-            if self.signals.termination_requested() {
-                return Err(HostTransportError::Terminated);
-            }
-            return Ok(());
+        if self.epoll.is_some() {
+            return super::wait_for_activity(self, timeout);
         }
-        // With legacy, zenoh's eventfd is in the legacy epoll set: forget its wake-ups
-        // once the wait is over (the batches are read by the next drain).
-        let waited = self.wait_without_zenoh(timeout);
-        if let Some(z) = &mut self.zenoh {
-            z.clear_activity();
+        // One transport: its own wait.
+        match (
+            &mut self.shm,
+            &mut self.tcp,
+            &mut self.legacy,
+            &mut self.zenoh,
+        ) {
+            (Some(t), _, _, _) => t.wait_activity(timeout),
+            (_, Some(t), _, _) => t.wait_activity(timeout),
+            (_, _, Some(t), _) => t.wait_activity(timeout),
+            (_, _, _, Some(t)) => t.wait_activity(timeout),
+            (None, None, None, None) => Ok(()),
         }
-        waited
+    }
+
+    fn activity_fd(&self) -> std::os::fd::RawFd {
+        match (&self.epoll, &self.shm, &self.tcp, &self.legacy, &self.zenoh) {
+            (Some(e), ..) => e.raw(),
+            (None, Some(t), ..) => t.activity_fd(),
+            (None, _, Some(t), ..) => t.activity_fd(),
+            (None, _, _, Some(t), _) => t.activity_fd(),
+            (None, _, _, _, Some(t)) => t.activity_fd(),
+            (None, None, None, None, None) => -1,
+        }
+    }
+
+    fn next_deadline(&self) -> Option<std::time::Instant> {
+        [
+            self.shm.as_ref().and_then(HostTransport::next_deadline),
+            self.tcp.as_ref().and_then(HostTransport::next_deadline),
+            self.legacy.as_ref().and_then(HostTransport::next_deadline),
+            self.zenoh.as_ref().and_then(HostTransport::next_deadline),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    fn has_work(&self) -> bool {
+        self.shm.as_ref().is_some_and(HostTransport::has_work)
+            || self.tcp.as_ref().is_some_and(HostTransport::has_work)
+            || self.legacy.as_ref().is_some_and(HostTransport::has_work)
+            || self.zenoh.as_ref().is_some_and(HostTransport::has_work)
+    }
+
+    fn after_wait(&mut self) {
+        if let Some(t) = &mut self.shm {
+            t.after_wait();
+        }
+        if let Some(t) = &mut self.tcp {
+            t.after_wait();
+        }
+        if let Some(t) = &mut self.legacy {
+            t.after_wait();
+        }
+        if let Some(t) = &mut self.zenoh {
+            t.after_wait();
+        }
     }
 
     fn update_connections(&mut self) -> Result<(), HostTransportError> {

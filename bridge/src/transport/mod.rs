@@ -318,11 +318,19 @@ pub trait HostTransport {
     /// # Errors
     /// [`HostTransportError::Receive`].
     fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError>;
-    /// Blocks until a batch may have arrived, or `timeout` passed.
+    /// Blocks until a batch may have arrived, or `timeout` passed. The default is the one
+    /// wait every transport shares: its [`activity_fd`] until readable, bounded by its
+    /// [`next_deadline`], then [`after_wait`].
     ///
     /// # Errors
     /// [`HostTransportError::Terminated`] on SIGINT/SIGTERM.
-    fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError>;
+    ///
+    /// [`activity_fd`]: HostTransport::activity_fd
+    /// [`next_deadline`]: HostTransport::next_deadline
+    /// [`after_wait`]: HostTransport::after_wait
+    fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
+        wait_for_activity(self, timeout)
+    }
     /// Re-establishes connections after agents joined.
     ///
     /// # Errors
@@ -360,17 +368,69 @@ pub trait HostTransport {
         None
     }
 
-    /// A file descriptor that is readable whenever [`HostTransport::wait_activity`] would
-    /// return at once, so that a host serving agents over several transports waits for
-    /// all of them in one `poll(2)`; after such a wait, [`HostTransport::clear_activity`]
-    /// is called. `None`: the transport cannot be waited on that way.
-    fn activity_fd(&self) -> Option<std::os::fd::RawFd> {
+    /// The transport's readiness: a descriptor that is readable whenever something may
+    /// have arrived (a batch, a connection, a hello) — an epoll set of its sockets, an
+    /// iceoryx2 listener, an eventfd its callbacks write. Level-triggered: it stays
+    /// readable until [`HostTransport::after_wait`] or a drain consumed what it stands
+    /// for. A host serving agents over several transports waits once on all of theirs.
+    fn activity_fd(&self) -> std::os::fd::RawFd;
+
+    /// When the transport next needs [`HostTransport::after_wait`] although its descriptor
+    /// stays quiet (a hello or a record that must complete by then, a keep-alive due):
+    /// every wait ends by then.
+    fn next_deadline(&self) -> Option<std::time::Instant> {
         None
     }
 
-    /// Forgets pending wake-ups of [`HostTransport::activity_fd`] (a batch that arrives
-    /// later makes it readable again).
-    fn clear_activity(&mut self) {}
+    /// Whether there is work a wait must not sleep over although the descriptor is quiet
+    /// (batches already read from the sockets, a connection ready to admit).
+    fn has_work(&self) -> bool {
+        false
+    }
+
+    /// Called after every wait (whether the descriptor was readable or the time passed):
+    /// services what the wake-up means without blocking (accepts, hellos, timers) and
+    /// forgets wake-ups already seen. Batches are left for the next drain.
+    fn after_wait(&mut self) {}
+}
+
+/// The wait of one transport: its [`HostTransport::activity_fd`] until readable or
+/// `timeout` (shortened to its [`HostTransport::next_deadline`], zero when it
+/// [has work](HostTransport::has_work)), then [`HostTransport::after_wait`].
+///
+/// # Errors
+/// [`HostTransportError::Wait`] when waiting fails; [`HostTransportError::Terminated`] on
+/// SIGINT/SIGTERM.
+pub fn wait_for_activity<T: HostTransport + ?Sized>(
+    t: &mut T,
+    timeout: Duration,
+) -> Result<(), HostTransportError> {
+    let timeout = bounded_timeout(timeout, t.has_work(), t.next_deadline());
+    wait::poll_one(t.activity_fd(), libc::POLLIN, timeout).map_err(|e| {
+        HostTransportError::Wait {
+            reason: format!("poll: {e}"),
+        }
+    })?;
+    t.after_wait();
+    if t.termination_requested() {
+        return Err(HostTransportError::Terminated);
+    }
+    Ok(())
+}
+
+/// `timeout`, zero with work to do, and no later than `deadline`.
+pub(crate) fn bounded_timeout(
+    timeout: Duration,
+    has_work: bool,
+    deadline: Option<std::time::Instant>,
+) -> Duration {
+    if has_work {
+        return Duration::ZERO;
+    }
+    match deadline {
+        Some(d) => timeout.min(d.saturating_duration_since(std::time::Instant::now())),
+        None => timeout,
+    }
 }
 
 // ---------------------------------------------------------------------------------------

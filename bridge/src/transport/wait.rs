@@ -95,45 +95,6 @@ pub(crate) fn write_all_until<S: Write + AsRawFd>(
     Ok(())
 }
 
-/// Waits until one of `fds` has one of its `(fd, events)` (or a hang-up or error) or
-/// `timeout` passes; marks which are ready in `ready`. `pfds` is scratch space reused
-/// across calls (no allocation in steady state).
-///
-/// # Errors
-/// `poll(2)`'s error other than an interruption (which marks nothing ready).
-pub(crate) fn poll_many(
-    fds: &[(RawFd, i16)],
-    timeout: Duration,
-    pfds: &mut Vec<libc::pollfd>,
-    ready: &mut Vec<bool>,
-) -> io::Result<usize> {
-    pfds.clear();
-    pfds.extend(fds.iter().map(|&(fd, events)| libc::pollfd {
-        fd,
-        events,
-        revents: 0,
-    }));
-    // SAFETY: `pfds` is a valid array of `pfds.len()` pollfd structs for the whole call.
-    let n = unsafe {
-        libc::poll(
-            pfds.as_mut_ptr(),
-            pfds.len() as libc::nfds_t,
-            timeout_ms(timeout),
-        )
-    };
-    ready.clear();
-    if n < 0 {
-        let e = io::Error::last_os_error();
-        if e.kind() == ErrorKind::Interrupted {
-            ready.resize(fds.len(), false);
-            return Ok(0);
-        }
-        return Err(e);
-    }
-    ready.extend(pfds.iter().map(|p| p.revents != 0));
-    Ok(n as usize)
-}
-
 /// Waits until one of `fds` (at most 4) is readable or `timeout` passed; returns whether
 /// one is.
 ///
@@ -200,6 +161,24 @@ impl EpollSet {
         };
         // SAFETY: valid epoll descriptor and event struct for the call.
         let r = unsafe { libc::epoll_ctl(self.fd.as_raw_fd(), libc::EPOLL_CTL_ADD, fd, &mut ev) };
+        if r < 0 {
+            return Err(io::Error::last_os_error());
+        }
+        Ok(())
+    }
+
+    /// Watches member `fd` for readability again (`true`), or only for errors and
+    /// hang-ups (`false`: its unread input no longer makes the set ready).
+    ///
+    /// # Errors
+    /// `epoll_ctl(2)`'s error.
+    pub(crate) fn set_readable(&self, fd: RawFd, token: u64, readable: bool) -> io::Result<()> {
+        let mut ev = libc::epoll_event {
+            events: if readable { libc::EPOLLIN as u32 } else { 0 },
+            u64: token,
+        };
+        // SAFETY: valid epoll descriptor and event struct for the call.
+        let r = unsafe { libc::epoll_ctl(self.fd.as_raw_fd(), libc::EPOLL_CTL_MOD, fd, &mut ev) };
         if r < 0 {
             return Err(io::Error::last_os_error());
         }

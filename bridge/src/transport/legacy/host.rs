@@ -311,15 +311,6 @@ impl LegacyHost {
         self.epoll.add(fd, fd as u64)
     }
 
-    /// Also wakes [`HostTransport::wait_activity`] (and makes [`HostTransport::activity_fd`]
-    /// readable) when `fd` (another transport's activity descriptor) is readable.
-    ///
-    /// # Errors
-    /// The `epoll_ctl` error.
-    pub fn watch_extra(&mut self, fd: RawFd) -> io::Result<()> {
-        self.watch(fd)
-    }
-
     /// The transport's counters.
     pub fn stats(&self) -> &LegacyStats {
         &self.stats
@@ -796,23 +787,6 @@ impl LegacyHost {
         }
     }
 
-    /// Waits on the epoll set (and so on any extra descriptor watched) for at most
-    /// `timeout`, bounded by [`LegacyHost::next_deadline`]; returns whether something is
-    /// ready. Does not service.
-    fn epoll_wait(&mut self, timeout: Duration) -> Result<bool, HostTransportError> {
-        let timeout = match self.next_deadline() {
-            Some(d) => timeout.min(d.saturating_duration_since(Instant::now())),
-            None => timeout,
-        };
-        let ready = self
-            .epoll
-            .wait(timeout)
-            .map_err(|e| HostTransportError::Wait {
-                reason: format!("epoll_wait: {e}"),
-            })?;
-        Ok(ready.count() > 0)
-    }
-
     fn encode_png(&mut self, slot: usize, which: usize, desc: &ImageDesc, payload: &[u8]) {
         let started = Instant::now();
         let out = &mut self.slots[slot].png[which];
@@ -1126,21 +1100,16 @@ impl HostTransport for LegacyHost {
         Ok(())
     }
 
-    fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
+    fn has_work(&self) -> bool {
         // Batches already read (at publish, or by a service of another transport's wait)
         // are activity too.
-        let ready = self
-            .slots
+        self.slots
             .iter()
-            .any(|s| s.cycle.is_some() && (!s.batch.is_empty() || s.batch_stop));
-        if !ready {
-            self.epoll_wait(timeout)?;
-        }
-        self.service();
-        if self.signals.termination_requested() {
-            return Err(HostTransportError::Terminated);
-        }
-        Ok(())
+            .any(|s| s.cycle.is_some() && (!s.batch.is_empty() || s.batch_stop))
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        LegacyHost::next_deadline(self)
     }
 
     fn update_connections(&mut self) -> Result<(), HostTransportError> {
@@ -1151,15 +1120,15 @@ impl HostTransport for LegacyHost {
         self.signals.termination_requested()
     }
 
-    fn activity_fd(&self) -> Option<RawFd> {
-        Some(self.epoll.raw())
+    fn activity_fd(&self) -> RawFd {
+        self.epoll.raw()
     }
 
     fn take_refusals(&mut self, sink: &mut dyn FnMut(&PeerRefusal)) -> u64 {
         self.refusals.take(sink)
     }
 
-    fn clear_activity(&mut self) {
+    fn after_wait(&mut self) {
         // Level-triggered: the set is readable while a socket has unread input. Reading
         // it is the clearing.
         self.service();

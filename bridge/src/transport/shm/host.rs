@@ -524,12 +524,12 @@ impl HostTransport for ShmHost {
         self.signals.termination_requested()
     }
 
-    fn activity_fd(&self) -> Option<std::os::fd::RawFd> {
+    fn activity_fd(&self) -> std::os::fd::RawFd {
         // SAFETY: the descriptor stays owned by the listener; it is only polled.
-        Some(unsafe { self.stop.file_descriptor().native_handle() })
+        unsafe { self.stop.file_descriptor().native_handle() }
     }
 
-    fn clear_activity(&mut self) {
+    fn after_wait(&mut self) {
         let _ = self.stop.try_wait(|_| {});
     }
 }

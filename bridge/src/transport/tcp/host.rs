@@ -3,8 +3,9 @@
 
 use super::*;
 use crate::rounded::Rounded;
-use crate::transport::wait;
+use crate::transport::wait::{self, EpollSet};
 use crate::transport::{PeerRefusal, RefusalKind, Refusals};
+use std::os::fd::RawFd;
 
 // ---------------------------------------------------------------------------------------
 // Host side
@@ -78,9 +79,14 @@ pub struct TcpHost {
     pub(super) token: Option<Vec<u8>>,
     /// An agent socket was readable at the last wait and no drain has read it since.
     pub(super) unread: bool,
-    pub(super) fds: Vec<(i32, i16)>,
-    pub(super) pfds: Vec<libc::pollfd>,
-    pub(super) ready: Vec<bool>,
+    /// Agent sockets are watched for errors and hang-ups only (see
+    /// [`TcpHost::after_wait`]), until the next drain.
+    pub(super) muted: bool,
+    /// The listener, the connections waiting for their hello and the agents' sockets;
+    /// each reported by its descriptor.
+    pub(super) poll: EpollSet,
+    /// Tokens of the last wait's ready sockets (reused).
+    pub(super) ready: Vec<u64>,
     pub(super) signals: SignalHandling,
     /// Peers refused since the host last took them.
     pub(super) refusals: Refusals,
@@ -98,6 +104,9 @@ pub enum TcpHostCreateError {
         /// The error.
         source: io::Error,
     },
+    /// The epoll set of the transport's sockets could not be created.
+    #[error("cannot create the TCP transport's epoll set: {0}")]
+    Poll(io::Error),
 }
 
 impl TcpHost {
@@ -113,6 +122,9 @@ impl TcpHost {
         let listener = TcpListener::bind(addr).map_err(bind)?;
         listener.set_nonblocking(true).map_err(bind)?;
         let local_addr = listener.local_addr().map_err(bind)?;
+        let poll = EpollSet::new(64).map_err(TcpHostCreateError::Poll)?;
+        poll.add(listener.as_raw_fd(), listener.as_raw_fd() as u64)
+            .map_err(TcpHostCreateError::Poll)?;
         if !local_addr.ip().is_loopback() {
             warn!(%local_addr, "TCP transport listens beyond loopback: any host that can reach it may connect");
         }
@@ -148,79 +160,38 @@ impl TcpHost {
             stall_timeout: config.sync.stop_timeout.min(STALL_TIMEOUT),
             token: config.transport.tcp_token.clone().map(String::into_bytes),
             unread: false,
-            fds: Vec::new(),
-            pfds: Vec::new(),
-            ready: Vec::new(),
+            muted: false,
+            poll,
+            ready: Vec::with_capacity(64),
             signals,
             refusals: Refusals::default(),
         })
     }
 
-    /// [`HostTransport::wait_activity`] that also wakes when `extra` (another transport's
-    /// [`HostTransport::activity_fd`]) becomes readable: one wait for a host that serves
-    /// agents over several transports. Returns whether `extra` was readable.
-    ///
-    /// # Errors
-    /// As [`HostTransport::wait_activity`].
-    pub fn wait_activity_with(
-        &mut self,
-        timeout: Duration,
-        extra: Option<std::os::fd::RawFd>,
-    ) -> Result<bool, HostTransportError> {
-        // Agent sockets whose data the caller has not drained since the last wait stay
-        // readable: waiting on them again would return at once, and a caller that waits
-        // without draining (for agents to connect, for a lost one to come back) would
-        // spin. Until the next drain they are only watched for errors and hang-ups.
-        let agent_events = if self.unread { 0 } else { libc::POLLIN };
-        // A deferred hello whose predecessor the host has let go since is admitted now,
-        // and the caller sees the new connection without waiting.
-        let admitted = self.admit_deferred();
-        self.fds.clear();
-        self.fds.push((self.listener.as_raw_fd(), libc::POLLIN));
-        // A deferred hello waits for the host's next drain, not for its socket.
-        self.fds.extend(self.pending.iter().map(|p| {
-            let events = if p.hello.is_some() { 0 } else { libc::POLLIN };
-            (p.stream.as_raw_fd(), events)
-        }));
-        self.fds.extend(self.slots.iter().filter_map(|s| {
-            s.conn
-                .as_ref()
-                .map(|c| (c.stream.as_raw_fd(), agent_events))
-        }));
-        let extra_index = self.fds.len();
-        if let Some(fd) = extra {
-            self.fds.push((fd, libc::POLLIN));
+    /// Services the sockets the last wait found ready (see [`HostTransport::after_wait`]).
+    fn service(&mut self) {
+        // A deferred hello whose predecessor the host has let go since is admitted now.
+        self.admit_deferred();
+        self.ready.clear();
+        // A failed look finds nothing ready: the next wait looks again.
+        if let Ok(tokens) = self.poll.wait(Duration::ZERO) {
+            self.ready.extend(tokens);
         }
-        // Pending hellos and incomplete records have their own deadlines: wake for them
-        // (the host's next drain drops a stalled agent).
-        let timeout = match self.next_deadline() {
-            Some(d) => timeout.min(d.saturating_duration_since(Instant::now())),
-            None => timeout,
-        };
-        let timeout = if admitted { Duration::ZERO } else { timeout };
-        let mut ready = std::mem::take(&mut self.ready);
-        let mut pfds = std::mem::take(&mut self.pfds);
-        let result = wait::poll_many(&self.fds, timeout, &mut pfds, &mut ready);
-        self.ready = ready;
-        self.pfds = pfds;
-        result.map_err(|e| HostTransportError::Wait {
-            reason: format!("poll: {e}"),
-        })?;
+        let listener = self.listener.as_raw_fd() as u64;
+        let listener_ready = self.ready.contains(&listener);
         // An incomplete record past its deadline on a socket with nothing more to read is
         // a stall: drop it here too, so a caller that only waits makes progress as well.
-        // (Not when readability was not asked for: unread bytes may complete it.)
+        // (Not while agent sockets are muted: unread bytes may complete it.)
         let now = Instant::now();
-        let watched_reads = agent_events != 0;
-        let mut fd_index = 1 + self.pending.len();
+        let mut agent_ready = false;
         for slot in 0..self.slots.len() {
             let Some(c) = &self.slots[slot].conn else {
                 continue;
             };
-            let readable = self.ready.get(fd_index).copied().unwrap_or(true);
-            fd_index += 1;
-            self.unread |= readable;
+            let readable = self.ready.contains(&(c.stream.as_raw_fd() as u64));
+            agent_ready |= readable;
             if let Some(since) = c.partial_since
-                && watched_reads
+                && !self.muted
                 && !readable
                 && now.duration_since(since) >= self.stall_timeout
             {
@@ -228,16 +199,37 @@ impl TcpHost {
                 self.drop_conn(slot, &why);
             }
         }
-        if self.ready.first().copied().unwrap_or(false) {
+        if agent_ready {
+            // Agent sockets whose data the caller has not drained since the last wait stay
+            // readable: waiting on them again would return at once, and a caller that
+            // waits without draining (for agents to connect, for a lost one to come back)
+            // would spin. From the second such wait on they are only watched for errors
+            // and hang-ups, until the next drain.
+            if self.unread {
+                self.set_agents_readable(false);
+            }
+            self.unread = true;
+        }
+        if listener_ready {
             self.accept_new();
         }
         if !self.pending.is_empty() {
             self.handle_pending();
         }
-        if self.signals.termination_requested() {
-            return Err(HostTransportError::Terminated);
+    }
+
+    /// Watches every agent socket for input (`true`) or only for errors and hang-ups.
+    fn set_agents_readable(&mut self, readable: bool) {
+        if self.muted != readable {
+            return;
         }
-        Ok(extra.is_some() && self.ready.get(extra_index).copied().unwrap_or(false))
+        self.muted = !readable;
+        for c in self.slots.iter().filter_map(|s| s.conn.as_ref()) {
+            let fd = c.stream.as_raw_fd();
+            if let Err(e) = self.poll.set_readable(fd, fd as u64, readable) {
+                warn!(peer = %c.peer, "TCP agent socket: epoll: {e}");
+            }
+        }
     }
 
     /// The address actually bound (resolves port 0).
@@ -264,7 +256,13 @@ impl TcpHost {
                         turned_away += 1;
                         continue;
                     }
-                    if stream.set_nonblocking(true).is_err() || set_nodelay(&stream).is_err() {
+                    if stream.set_nonblocking(true).is_err()
+                        || set_nodelay(&stream).is_err()
+                        || self
+                            .poll
+                            .add(stream.as_raw_fd(), stream.as_raw_fd() as u64)
+                            .is_err()
+                    {
                         continue;
                     }
                     debug!(%peer, "TCP connection");
@@ -368,6 +366,9 @@ impl TcpHost {
                     }
                 }
                 Ok(Some(hello)) if self.must_defer(&hello) => {
+                    // It waits for the host's next drain, not for its socket.
+                    let fd = self.pending[i].stream.as_raw_fd();
+                    let _ = self.poll.set_readable(fd, fd as u64, false);
                     self.pending[i].hello = Some(hello);
                     i += 1;
                 }
@@ -532,6 +533,12 @@ impl TcpHost {
             warn!(peer = %p.peer, "TCP agent lost during welcome: {e}");
             return;
         }
+        // Watched like the other agents' sockets (a deferred hello's socket was muted).
+        let fd = stream.as_raw_fd();
+        if let Err(e) = self.poll.set_readable(fd, fd as u64, !self.muted) {
+            warn!(peer = %p.peer, "TCP agent lost during welcome: epoll: {e}");
+            return;
+        }
         info!(agent = hello.agent_id, peer = %p.peer, "TCP agent connected");
         self.slots[slot].conn = Some(Conn {
             stream,
@@ -606,7 +613,7 @@ impl TcpHost {
     }
 
     /// The earliest moment a pending hello or an incomplete record runs out of time.
-    fn next_deadline(&self) -> Option<Instant> {
+    fn deadline(&self) -> Option<Instant> {
         let hellos = self.pending.iter().map(|p| p.since + HELLO_TIMEOUT);
         let stalls = self
             .slots
@@ -714,6 +721,7 @@ impl HostTransport for TcpHost {
 
     fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError> {
         self.unread = false;
+        self.set_agents_readable(true);
         let stall_timeout = self.stall_timeout;
         for slot in 0..self.slots.len() {
             let failure = match &mut self.slots[slot].conn {
@@ -733,8 +741,29 @@ impl HostTransport for TcpHost {
         Ok(())
     }
 
-    fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
-        self.wait_activity_with(timeout, None).map(|_| ())
+    fn activity_fd(&self) -> RawFd {
+        self.poll.raw()
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        self.deadline()
+    }
+
+    fn has_work(&self) -> bool {
+        // A deferred hello whose id's old connection is gone is admitted by the next
+        // `after_wait`.
+        self.pending.iter().any(|p| {
+            p.hello.as_ref().is_some_and(|h| {
+                !self
+                    .slots
+                    .iter()
+                    .any(|s| s.id == h.agent_id && s.conn.is_some())
+            })
+        })
+    }
+
+    fn after_wait(&mut self) {
+        self.service();
     }
 
     fn update_connections(&mut self) -> Result<(), HostTransportError> {

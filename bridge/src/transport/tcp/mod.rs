@@ -129,6 +129,7 @@ pub use host::*;
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::transport::wait;
     use std::io::Read;
 
     // --- TcpHost against raw sockets (no simulator) ------------------------------------
@@ -336,24 +337,22 @@ mod tests {
         // Bytes the host does not read while it waits for agent 1 to connect.
         a0.write_all(&motor_record(0)).unwrap();
         pump(&mut host, false, "agent 0's bytes", |h| h.unread);
-        // The next wait no longer asks for agent 0's readability (it would return at
-        // once, forever) but still for the listener's.
+        // The next wait returns at once (the bytes are still there) and mutes the agent
+        // sockets: the one after it sleeps its whole timeout instead of spinning, while
+        // the listener is still watched.
         host.wait_activity(Duration::from_millis(1)).unwrap();
-        let a0_fd = a0_fd(&host);
-        let events = host.pfds.iter().find(|p| p.fd == a0_fd).unwrap().events;
-        assert_eq!(events, 0);
-        assert_eq!(host.pfds[0].events, libc::POLLIN);
-        // A drain reads the bytes and the socket is watched again.
+        assert!(host.muted);
+        assert!(!wait::readable_now(host.activity_fd()), "still ready");
+        let mut a1 = say_hello(&host, 1);
+        pump(&mut host, false, "agent 1", |h| h.is_connected(1));
+        assert_eq!(read_reply(&mut a1).0, kind::WELCOME);
+        // A drain reads the bytes and the sockets are watched again.
         let got = std::cell::Cell::new(0);
         host.drain(&mut |_, _, _| got.set(got.get() + 1)).unwrap();
         assert_eq!(got.get(), 1);
-        host.wait_activity(Duration::from_millis(1)).unwrap();
-        let events = host.pfds.iter().find(|p| p.fd == a0_fd).unwrap().events;
-        assert_eq!(events, libc::POLLIN);
-    }
-
-    fn a0_fd(host: &TcpHost) -> i32 {
-        host.slots[0].conn.as_ref().unwrap().stream.as_raw_fd()
+        assert!(!host.muted);
+        a0.write_all(&motor_record(1)).unwrap();
+        pump(&mut host, false, "agent 0's next bytes", |h| h.unread);
     }
 
     fn read_reply_pumping(host: &mut TcpHost, s: &mut TcpStream) -> (u32, Vec<u8>) {

@@ -724,16 +724,6 @@ impl HostTransport for ZenohHost {
         Ok(())
     }
 
-    fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
-        if self.shared.wake.wait(timeout) {
-            self.shared.wake.clear();
-        }
-        if self.signals.termination_requested() {
-            return Err(HostTransportError::Terminated);
-        }
-        Ok(())
-    }
-
     fn update_connections(&mut self) -> Result<(), HostTransportError> {
         Ok(())
     }
@@ -746,11 +736,11 @@ impl HostTransport for ZenohHost {
         lock(&self.shared.state).refusals.take(sink)
     }
 
-    fn activity_fd(&self) -> Option<RawFd> {
-        Some(self.shared.wake.raw())
+    fn activity_fd(&self) -> RawFd {
+        self.shared.wake.raw()
     }
 
-    fn clear_activity(&mut self) {
+    fn after_wait(&mut self) {
         self.shared.wake.clear();
     }
 }
