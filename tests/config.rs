@@ -548,6 +548,60 @@ fn bad_usage_exits_2() {
     assert!(out.stderr.contains("/nonexistent/x.toml"), "{}", out.stderr);
 }
 
+/// Each cause is printed once: an error whose message shows an I/O error must not also
+/// hand it on as its `source()`, or `{:#}` prints it twice (issue 22: "No such file or
+/// directory (os error 2): No such file or directory (os error 2)").
+#[test]
+fn a_missing_file_is_named_with_its_cause_once() {
+    let once = |out: &util::Output, path: &str| {
+        assert!(out.stderr.contains(path), "{}", out.stderr);
+        assert_eq!(
+            out.stderr.matches("os error 2").count(),
+            1,
+            "the cause once:\n{}",
+            out.stderr
+        );
+    };
+    let out = util::run(
+        "vr-sim",
+        &["run", "--config", "/nonexistent/x.toml", "--frames", "1"],
+        Duration::from_secs(30),
+    );
+    assert_eq!(out.code(), Some(2), "{}", out.stderr);
+    once(&out, "/nonexistent/x.toml");
+    let out = util::run(
+        "vr-agent",
+        &["--config", "/nonexistent/x.toml", "--id", "0"],
+        Duration::from_secs(30),
+    );
+    once(&out, "/nonexistent/x.toml");
+    // An output path in a missing directory (the map is written through the picture
+    // writer's error type, the other outputs through anyhow context).
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("one.toml");
+    std::fs::write(&config, TestConfig::new("missing-path", 1).toml()).unwrap();
+    for flag in ["--map", "--events", "--summary-json"] {
+        let out = util::run(
+            "vr-sim",
+            &[
+                "run",
+                "--config",
+                config.to_str().unwrap(),
+                "--frames",
+                "1",
+                "--spawn-agents",
+                "1",
+                "--quiet",
+                flag,
+                "/nonexistent/out",
+            ],
+            Duration::from_secs(60),
+        );
+        assert_eq!(out.code(), Some(1), "{flag}: {}", out.stderr);
+        once(&out, "/nonexistent/out");
+    }
+}
+
 #[test]
 fn tcp_listens_on_loopback_unless_told_otherwise() {
     let c = Config::from_toml_str(

@@ -373,12 +373,12 @@ pub struct Config {
 #[non_exhaustive]
 pub enum ConfigLoadError {
     /// The file could not be read.
-    #[error("cannot read config file {path}: {source}")]
+    #[error("cannot read config file {path}: {error}")]
     Read {
         /// The file.
         path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
+        /// The I/O error (in the message, so not also a `source()`: printed once).
+        error: std::io::Error,
     },
     /// TOML syntax error, unknown key or wrong type.
     #[error("{path}:{line}:{column}: {message} (at key `{key}`)")]
@@ -684,9 +684,9 @@ impl Config {
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ConfigLoadError> {
         use std::io::Read;
         let path = path.as_ref();
-        let read = |source| ConfigLoadError::Read {
+        let read = |error| ConfigLoadError::Read {
             path: path.to_path_buf(),
-            source,
+            error,
         };
         // Bounded: a wrong path (a device, a huge file) fails at once instead of filling
         // memory.

@@ -19,20 +19,20 @@ use crate::world_config::{GoalKind, Shape};
 #[non_exhaustive]
 pub enum PictureWriteError {
     /// The file could not be created or written.
-    #[error("cannot write {path}: {source}")]
+    #[error("cannot write {path}: {error}")]
     Io {
         /// The file.
         path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
+        /// The I/O error (in the message, so not also a `source()`: printed once).
+        error: std::io::Error,
     },
     /// PNG encoding failed.
-    #[error("cannot encode {path}: {source}")]
+    #[error("cannot encode {path}: {error}")]
     Png {
         /// The file.
         path: PathBuf,
-        /// The encoder's error.
-        source: png::EncodingError,
+        /// The encoder's error (in the message, so not also a `source()`).
+        error: png::EncodingError,
     },
 }
 
@@ -48,16 +48,16 @@ pub fn write_png(
     depth: png::BitDepth,
     data: &[u8],
 ) -> Result<(), PictureWriteError> {
-    let file = File::create(path).map_err(|source| PictureWriteError::Io {
+    let file = File::create(path).map_err(|error| PictureWriteError::Io {
         path: path.to_path_buf(),
-        source,
+        error,
     })?;
     let mut encoder = png::Encoder::new(BufWriter::new(file), width, height);
     encoder.set_color(color);
     encoder.set_depth(depth);
-    let png_err = |source| PictureWriteError::Png {
+    let png_err = |error| PictureWriteError::Png {
         path: path.to_path_buf(),
-        source,
+        error,
     };
     let mut writer = encoder.write_header().map_err(png_err)?;
     writer.write_image_data(data).map_err(png_err)?;

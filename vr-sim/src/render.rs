@@ -40,12 +40,12 @@ const LIGHT: Vec3 = Vec3::new(0.298, 0.795, -0.497);
 #[non_exhaustive]
 pub enum RendererCreateError {
     /// The thread pool could not be built.
-    #[error("cannot start {threads} render threads: {source}")]
+    #[error("cannot start {threads} render threads: {error}")]
     Pool {
         /// Threads asked for.
         threads: usize,
-        /// The pool error.
-        source: rayon::ThreadPoolBuildError,
+        /// The pool error (in the message, so not also a `source()`).
+        error: rayon::ThreadPoolBuildError,
     },
 }
 
@@ -119,7 +119,7 @@ impl Renderer {
                     .num_threads(threads)
                     .thread_name(|i| format!("vr-sim-render-{i}"))
                     .build()
-                    .map_err(|source| RendererCreateError::Pool { threads, source })?,
+                    .map_err(|error| RendererCreateError::Pool { threads, error })?,
             )
         };
         Ok(Self {

@@ -40,7 +40,7 @@ pub const AGENT_COLLIDER_BASE: u32 = 2000;
 #[non_exhaustive]
 pub enum CommandRejected {
     /// The command cannot be decoded.
-    #[error("{0}")]
+    #[error(transparent)]
     Decode(#[from] vrsync_bridge::CommandDecodeError),
     /// An argument is outside what this world accepts.
     #[error("{command}: {reason}")]

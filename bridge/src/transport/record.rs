@@ -243,7 +243,7 @@ pub enum RecordReadError {
     #[error(transparent)]
     Decode(#[from] DecodeError),
     /// Reading failed.
-    #[error("{0}")]
+    #[error(transparent)]
     Io(#[from] io::Error),
 }
 

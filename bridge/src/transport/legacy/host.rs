@@ -65,7 +65,7 @@ impl FrameLoanMut for LegacyFrameLoan {
 pub enum LegacyHostCreateError {
     /// A port could not be bound.
     #[error(
-        "cannot listen on {addr} for {what}: {source} (set [transport.legacy] local_port to a \
+        "cannot listen on {addr} for {what}: {error} (set [transport.legacy] local_port to a \
          free range: the environment socket and local_port + 1 + id for each legacy agent)"
     )]
     Bind {
@@ -73,8 +73,8 @@ pub enum LegacyHostCreateError {
         addr: SocketAddr,
         /// Which socket.
         what: String,
-        /// The error.
-        source: io::Error,
+        /// The error (in the message, so not also a `source()`: printed once).
+        error: io::Error,
     },
     /// An agent's port would be beyond 65535.
     #[error("agent {agent}'s legacy port local_port + 1 + {agent} is beyond 65535")]
@@ -202,10 +202,10 @@ pub struct LegacyHost {
 }
 
 fn bind(addr: SocketAddr, what: String) -> Result<TcpListener, LegacyHostCreateError> {
-    let err = |source| LegacyHostCreateError::Bind {
+    let err = |error| LegacyHostCreateError::Bind {
         addr,
         what: what.clone(),
-        source,
+        error,
     };
     let l = TcpListener::bind(addr).map_err(err)?;
     l.set_nonblocking(true).map_err(err)?;

@@ -97,12 +97,12 @@ pub struct TcpHost {
 #[non_exhaustive]
 pub enum TcpHostCreateError {
     /// Binding the listen address failed.
-    #[error("cannot listen on {addr}: {source} (set [transport] tcp_listen to a free address)")]
+    #[error("cannot listen on {addr}: {error} (set [transport] tcp_listen to a free address)")]
     Bind {
         /// The address.
         addr: SocketAddr,
-        /// The error.
-        source: io::Error,
+        /// The error (in the message, so not also a `source()`: printed once).
+        error: io::Error,
     },
     /// The epoll set of the transport's sockets could not be created.
     #[error("cannot create the TCP transport's epoll set: {0}")]
@@ -118,7 +118,7 @@ impl TcpHost {
     pub fn create(config: &Config, signals: SignalHandling) -> Result<Self, TcpHostCreateError> {
         signals.apply();
         let addr = config.transport.tcp_listen;
-        let bind = |source| TcpHostCreateError::Bind { addr, source };
+        let bind = |error| TcpHostCreateError::Bind { addr, error };
         let listener = TcpListener::bind(addr).map_err(bind)?;
         listener.set_nonblocking(true).map_err(bind)?;
         let local_addr = listener.local_addr().map_err(bind)?;
