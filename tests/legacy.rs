@@ -738,6 +738,73 @@ fn legacy_and_shm_or_tcp_agents_in_one_world_give_the_all_shm_trajectory() {
     }
 }
 
+/// Two legacy agents, two clients (each with its environment and agent connection): each
+/// client resets its own trial once, at a different cycle, and each reset is applied to
+/// its own agent's body (issue 22: agent 1's reset used to reset agent 0).
+#[test]
+fn two_legacy_clients_each_reset_their_own_agent() {
+    let session = util::session("legacy-two-resets");
+    let run = start_host(
+        &[0, 1],
+        |base| config(&session, base, &[0, 1], &[], ""),
+        &[
+            "--frames",
+            "30",
+            "--record",
+            "{dir}/record.jsonl",
+            "--summary-json",
+            "{dir}/summary.json",
+        ],
+    );
+    let (record, summary) = (
+        run.dir.path().join("record.jsonl"),
+        run.dir.path().join("summary.json"),
+    );
+    let mut a = Client::start(run.base, 0, Dialect::Vrnew, false);
+    let mut b = Client::start(run.base, 1, Dialect::Burkhardt, false);
+    let reset = |t| MsgVrnew {
+        trial_reset: Some(ResetMsg {
+            reset_type: Some(t),
+        }),
+        ..Default::default()
+    };
+    for n in 0..30u64 {
+        let (ca, cb) = (a.cycle(), b.cycle());
+        assert_eq!(ca.map(|c| c.number), Some(n));
+        assert_eq!(cb.map(|c| c.number), Some(n));
+        match n {
+            5 => b.send_env(&reset(0)),
+            15 => a.send_env(&reset(0)),
+            _ => {}
+        }
+        a.stop_zero_length();
+        b.stop_sync();
+    }
+    let out = run.host.wait(RUN_DEADLINE);
+    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    assert_eq!(util::summary(&summary)["stop_timeouts"], 0);
+    // The cycles in which each agent's body applied a trial reset.
+    let mut resets: [Vec<u64>; 2] = Default::default();
+    for line in util::record(&record) {
+        let agent = line["agent"].as_u64().unwrap() as usize;
+        for c in line["commands"].as_array().unwrap() {
+            if c[0] == "trial_reset" {
+                resets[agent].push(line["cycle"].as_u64().unwrap());
+            }
+        }
+    }
+    assert_eq!(resets[1].len(), 1, "{resets:?}\n{}", out.stderr);
+    assert_eq!(resets[0].len(), 1, "{resets:?}");
+    assert!(
+        (5..15).contains(&resets[1][0]),
+        "agent 1's reset: {resets:?}"
+    );
+    assert!(
+        (15..30).contains(&resets[0][0]),
+        "agent 0's reset: {resets:?}"
+    );
+}
+
 /// The README's legacy config block is a valid config (with the default port and the agent
 /// on the legacy transport).
 #[test]

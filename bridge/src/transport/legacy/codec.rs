@@ -592,6 +592,11 @@ impl FrameReader {
         !self.done && (self.prefix_len > 0 || self.body_len.is_some() || self.skip > 0)
     }
 
+    /// The announced length of a frame longer than the maximum while it is being skipped.
+    pub fn oversize(&self) -> Option<usize> {
+        (self.skip > 0).then_some(self.skipped)
+    }
+
     /// Bytes of the current frame read so far and its length, if known (for messages).
     pub fn progress(&self) -> String {
         match self.body_len {

@@ -31,8 +31,14 @@ pub const HELLO_TIMEOUT: Duration = Duration::from_secs(5);
 pub const KEEPALIVE_PERIOD: Duration = Duration::from_secs(1);
 /// Connections per port waiting for their version check; more are closed at once.
 const MAX_PENDING_PER_PORT: usize = 4;
-/// Connections on the environment socket; more are closed at once.
+/// Environment connections not paired with an agent connection (a client between its two
+/// connects, or a stranger). A new connection beyond them closes the oldest unpaired one,
+/// never the new one: a peer holding idle connections cannot lock a client out. Paired
+/// connections (at most one per agent) do not count.
 const MAX_ENV_CONNS: usize = 16;
+/// Frames on the environment socket: it carries only resets (a dozen bytes); a longer
+/// length closes the connection.
+const MAX_ENV_FRAME: usize = 1024;
 /// Frames read from one connection per pass; the rest waits for the next (the socket
 /// stays readable), so one flooding client cannot hold the host.
 const MAX_FRAMES_PER_PASS: usize = 256;
@@ -123,6 +129,8 @@ pub struct LegacyStats {
 struct Conn {
     stream: TcpStream,
     peer: SocketAddr,
+    /// Accept order (see [`LegacyHost::pair_env`]).
+    seq: u64,
     reader: FrameReader,
     dialect: Dialect,
     partial_since: Option<Instant>,
@@ -133,6 +141,7 @@ struct Conn {
 struct Pending {
     stream: TcpStream,
     peer: SocketAddr,
+    seq: u64,
     since: Instant,
     reader: FrameReader,
 }
@@ -175,6 +184,17 @@ struct EnvConn {
     stream: TcpStream,
     peer: SocketAddr,
     reader: FrameReader,
+    /// Accept order, shared with the agent sockets (see [`LegacyHost::pair_env`]).
+    seq: u64,
+    /// The agent connection of the same client: (slot, that connection's `seq`). Valid
+    /// while that slot's connection is still the one with this `seq`.
+    agent: Option<(usize, u64)>,
+    /// Since when it has no (valid) agent connection: closed after the hello timeout.
+    unpaired_since: Instant,
+    /// Since when a frame is incomplete.
+    partial_since: Option<Instant>,
+    /// Resets read before it was paired, handed over once it is.
+    resets: Vec<MotorCommand>,
 }
 
 /// The host side of the legacy transport.
@@ -193,10 +213,12 @@ pub struct LegacyHost {
     write_timeout: Duration,
     stats: LegacyStats,
     signals: SignalHandling,
-    /// Resets from the environment socket waiting for an agent to carry them.
-    resets: Vec<MotorCommand>,
+    /// The next accept's order number (environment and agent sockets alike).
+    next_seq: u64,
     /// How long a new connection may take to send its version check.
     hello_timeout: Duration,
+    /// How long a frame may stay incomplete ([`STALL_TIMEOUT`]; shorter in tests).
+    stall_timeout: Duration,
     /// Peers refused before their version check passed.
     refusals: Refusals,
 }
@@ -286,8 +308,9 @@ impl LegacyHost {
             write_timeout: config.sync.stop_timeout.max(Duration::from_secs(1)),
             stats: LegacyStats::default(),
             signals,
-            resets: Vec::new(),
+            next_seq: 0,
             hello_timeout: HELLO_TIMEOUT,
+            stall_timeout: STALL_TIMEOUT,
             refusals: Refusals::default(),
         };
         host.watch(host.env_listener.as_raw_fd())
@@ -333,8 +356,16 @@ impl LegacyHost {
             if let Some(c) = &s.conn {
                 at(c.last_write + KEEPALIVE_PERIOD);
                 if let Some(t) = c.partial_since {
-                    at(t + STALL_TIMEOUT);
+                    at(t + self.stall_timeout);
                 }
+            }
+        }
+        for c in &self.env_conns {
+            if c.agent.is_none() {
+                at(c.unpaired_since + self.hello_timeout);
+            }
+            if let Some(t) = c.partial_since {
+                at(t + self.stall_timeout);
             }
         }
         next
@@ -346,34 +377,93 @@ impl LegacyHost {
     pub fn service(&mut self) {
         self.accept_env();
         self.read_env();
+        // Before the agents' stops are read: a reset sent before its client's stop
+        // belongs to the cycle that stop ends.
+        self.route_resets();
         for i in 0..self.slots.len() {
             self.accept_agent(i);
             self.progress_pending(i);
             self.read_agent(i);
             self.keepalive(i);
         }
+        // Resets of connections paired just now.
         self.route_resets();
+        self.expire_env();
+    }
+
+    /// Whether environment connection `c`'s agent connection is still the one it was
+    /// paired with.
+    fn env_paired(&self, c: &EnvConn) -> bool {
+        c.agent.is_some_and(|(slot, seq)| {
+            self.slots
+                .get(slot)
+                .and_then(|s| s.conn.as_ref())
+                .is_some_and(|a| a.seq == seq)
+        })
+    }
+
+    /// Closes environment connection `k` with a warning naming its peer and `why`, and
+    /// reports it as a refused peer of `kind`.
+    fn close_env(&mut self, k: usize, kind: RefusalKind, why: String) {
+        let c = self.env_conns.remove(k);
+        let agent = c
+            .agent
+            .and_then(|(slot, _)| self.slots.get(slot))
+            .map(|s| s.id);
+        let lost = if c.resets.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " ({} resets sent before it was paired dropped)",
+                c.resets.len()
+            )
+        };
+        warn!(peer = %c.peer, ?agent, "legacy environment connection closed: {why}{lost}");
+        self.refusals.push(PeerRefusal {
+            kind,
+            agent,
+            peer: c.peer.to_string(),
+            reason: format!("environment socket: {why}"),
+        });
     }
 
     fn accept_env(&mut self) {
         loop {
             match self.env_listener.accept() {
                 Ok((stream, peer)) => {
-                    if self.env_conns.len() >= MAX_ENV_CONNS {
-                        warn!(%peer, "legacy environment connection closed at once: {MAX_ENV_CONNS} are open already");
-                        continue;
-                    }
                     if stream.set_nonblocking(true).is_err()
                         || self.watch(stream.as_raw_fd()).is_err()
                     {
                         continue;
                     }
+                    // A full cap closes the oldest unpaired connection, not the new one: a
+                    // peer holding idle connections cannot lock a client out (issue 22).
+                    let unpaired: Vec<usize> = (0..self.env_conns.len())
+                        .filter(|&k| !self.env_paired(&self.env_conns[k]))
+                        .collect();
+                    if unpaired.len() >= MAX_ENV_CONNS {
+                        // `env_conns` is in accept order: the first is the oldest.
+                        self.close_env(
+                            unpaired[0],
+                            RefusalKind::TooMany,
+                            format!(
+                                "{MAX_ENV_CONNS} connections without an agent connection are \
+                                 open; the oldest makes room for {peer}"
+                            ),
+                        );
+                    }
                     debug!(%peer, "legacy environment connection");
                     self.env_conns.push(EnvConn {
                         stream,
                         peer,
-                        reader: FrameReader::new(MAX_INCOMING_FRAME),
+                        reader: FrameReader::new(MAX_ENV_FRAME),
+                        seq: self.next_seq,
+                        agent: None,
+                        unpaired_since: Instant::now(),
+                        partial_since: None,
+                        resets: Vec::new(),
                     });
+                    self.next_seq += 1;
                 }
                 Err(e) if e.kind() == ErrorKind::Interrupted => {}
                 Err(e) => {
@@ -389,18 +479,31 @@ impl LegacyHost {
     fn read_env(&mut self) {
         let mut i = 0;
         while i < self.env_conns.len() {
+            let (max_commands, stall_timeout) = (self.max_commands, self.stall_timeout);
             let c = &mut self.env_conns[i];
             let mut drop_why = None;
             for _ in 0..MAX_FRAMES_PER_PASS {
-                match c.reader.read_from(&mut c.stream) {
+                let r = c.reader.read_from(&mut c.stream);
+                if let Some(n) = c.reader.oversize() {
+                    drop_why = Some((
+                        Some(RefusalKind::Malformed),
+                        format!(
+                            "it announced a frame of {n} bytes; the environment socket carries \
+                             only resets (at most {MAX_ENV_FRAME} bytes)"
+                        ),
+                    ));
+                    break;
+                }
+                match r {
                     Ok(FrameProgress::Frame) => {
+                        c.partial_since = None;
                         // Fields 11 and 12 are the same in both dialects.
                         match codec::decode_frame(c.reader.body(), Dialect::Burkhardt) {
                             Ok(Incoming::Reset(cmd)) => {
-                                if self.resets.len() < self.max_commands {
-                                    self.resets.push(cmd.encode(RESET_ACTION_ID));
+                                if c.resets.len() < max_commands {
+                                    c.resets.push(cmd.encode(RESET_ACTION_ID));
                                 } else {
-                                    warn!(peer = %c.peer, "legacy reset dropped: {} are waiting already", self.resets.len());
+                                    warn!(peer = %c.peer, "legacy reset dropped: {} are waiting already", c.resets.len());
                                 }
                             }
                             Ok(other) => {
@@ -413,48 +516,165 @@ impl LegacyHost {
                         }
                     }
                     Ok(FrameProgress::Skipped(n)) => {
-                        self.stats.frames_refused += 1;
-                        warn!(peer = %c.peer, "legacy environment frame of {n} bytes skipped: longer than {MAX_INCOMING_FRAME}");
+                        drop_why = Some((
+                            Some(RefusalKind::Malformed),
+                            format!("it sent a frame of {n} bytes (at most {MAX_ENV_FRAME})"),
+                        ));
+                        break;
                     }
-                    Ok(FrameProgress::Pending) => break,
+                    Ok(FrameProgress::Pending) => {
+                        if c.reader.mid_frame() {
+                            let now = Instant::now();
+                            let since = *c.partial_since.get_or_insert(now);
+                            if now.duration_since(since) >= stall_timeout {
+                                drop_why = Some((
+                                    Some(RefusalKind::Malformed),
+                                    format!(
+                                        "stalled mid-frame: {} within {}",
+                                        c.reader.progress(),
+                                        Rounded(stall_timeout)
+                                    ),
+                                ));
+                            }
+                        }
+                        break;
+                    }
                     Ok(FrameProgress::Closed) => {
-                        drop_why = Some((false, "connection closed".to_string()));
+                        if c.reader.mid_frame() {
+                            drop_why = Some((
+                                Some(RefusalKind::Malformed),
+                                format!(
+                                    "closed mid-frame after {} (truncated frame not applied)",
+                                    c.reader.progress()
+                                ),
+                            ));
+                        } else {
+                            drop_why = Some((None, String::new()));
+                        }
                         break;
                     }
                     Err(e) => {
-                        drop_why = Some((true, e.to_string()));
+                        drop_why = Some((Some(RefusalKind::Malformed), e.to_string()));
                         break;
                     }
                 }
             }
-            if let Some((bad, why)) = drop_why {
-                let c = self.env_conns.swap_remove(i);
-                if bad {
-                    warn!(peer = %c.peer, "legacy environment connection dropped: {why}");
-                } else {
-                    debug!(peer = %c.peer, "legacy environment connection closed");
-                }
-            } else {
+            let Some((kind, why)) = drop_why else {
                 i += 1;
+                continue;
+            };
+            // Resets it sent before it went still go to its agent.
+            self.route_env(i);
+            match kind {
+                Some(kind) => self.close_env(i, kind, why),
+                None => {
+                    let c = self.env_conns.remove(i);
+                    if c.resets.is_empty() {
+                        debug!(peer = %c.peer, "legacy environment connection closed by its client");
+                    } else {
+                        warn!(peer = %c.peer, "legacy environment connection closed by its client before it was paired with an agent connection: its {} resets are dropped", c.resets.len());
+                    }
+                }
             }
         }
     }
 
-    /// Hands resets from the environment socket to the lowest connected legacy agent, in
-    /// whose batch they are applied.
-    fn route_resets(&mut self) {
-        if self.resets.is_empty() {
+    /// Ends the life of unpaired environment connections: one whose client's agent
+    /// connection did not pass its version check within the hello timeout of it (or whose
+    /// agent connection went away that long ago) is closed.
+    fn expire_env(&mut self) {
+        let now = Instant::now();
+        let mut k = 0;
+        while k < self.env_conns.len() {
+            let paired = self.env_paired(&self.env_conns[k]);
+            let c = &mut self.env_conns[k];
+            if !paired && c.agent.take().is_some() {
+                c.unpaired_since = now;
+            }
+            if !paired && now.duration_since(c.unpaired_since) >= self.hello_timeout {
+                let why = format!(
+                    "no agent connection of the same client passed its version check within {} \
+                     (resets go to the agent whose client sent them)",
+                    Rounded(self.hello_timeout)
+                );
+                self.close_env(k, RefusalKind::Silent, why);
+            } else {
+                k += 1;
+            }
+        }
+    }
+
+    /// Hands the resets read on environment connection `k` to its paired agent, in whose
+    /// batch they are applied; unpaired, they wait (see [`LegacyHost::pair_env`]).
+    fn route_env(&mut self, k: usize) {
+        if !self.env_paired(&self.env_conns[k]) || self.env_conns[k].resets.is_empty() {
             return;
         }
-        let Some(i) = self.slots.iter().position(|s| s.conn.is_some()) else {
+        let Some((slot, _)) = self.env_conns[k].agent else {
             return;
         };
-        let resets = std::mem::take(&mut self.resets);
-        for cmd in &resets {
-            Self::queue_command(&mut self.slots[i], *cmd, self.sync_mode);
+        let mut resets = std::mem::take(&mut self.env_conns[k].resets);
+        for cmd in resets.drain(..) {
+            Self::queue_command(&mut self.slots[slot], cmd, self.sync_mode);
         }
-        self.resets = resets;
-        self.resets.clear();
+        // Keep the buffer.
+        self.env_conns[k].resets = resets;
+    }
+
+    fn route_resets(&mut self) {
+        for k in 0..self.env_conns.len() {
+            self.route_env(k);
+        }
+    }
+
+    /// Pairs the agent connection of slot `i` (which has just passed its version check)
+    /// with the environment connection of the same client, whose resets then go to this
+    /// agent. The wire carries no identity; the original clients connect the environment
+    /// socket first and their agent socket right after, from one process. So the rule:
+    /// among the environment connections not paired yet, from the same IP address and
+    /// accepted before this agent connection, the newest one; where the host can see
+    /// which process owns the client sockets (a peer on this machine, run by the same
+    /// user: `/proc/net/tcp` and `/proc/<pid>/fd`), one of the agent's own process, else
+    /// one whose process is unknown. A client that connects no environment socket
+    /// (`agentOnly`) gets none.
+    fn pair_env(&mut self, i: usize) {
+        let Some(a) = &self.slots[i].conn else {
+            return;
+        };
+        let (a_seq, a_peer) = (a.seq, a.peer);
+        let mut candidates: Vec<usize> = (0..self.env_conns.len())
+            .filter(|&k| {
+                let c = &self.env_conns[k];
+                c.seq < a_seq && c.peer.ip() == a_peer.ip() && !self.env_paired(c)
+            })
+            .collect();
+        if candidates.is_empty() {
+            debug!(agent = self.slots[i].id, peer = %a_peer, "legacy agent connection without an environment connection");
+            return;
+        }
+        // Newest first.
+        candidates.sort_by_key(|&k| std::cmp::Reverse(self.env_conns[k].seq));
+        let mut sockets = vec![(a_peer, a.stream.local_addr().ok())];
+        sockets.extend(candidates.iter().map(|&k| {
+            let c = &self.env_conns[k];
+            (c.peer, c.stream.local_addr().ok())
+        }));
+        let owners = socket_owners(&sockets);
+        let theirs = || candidates.iter().zip(owners.iter().skip(1));
+        let pick = match owners.first().copied().flatten() {
+            Some(pid) => theirs()
+                .find(|(_, o)| **o == Some(pid))
+                .or_else(|| theirs().find(|(_, o)| o.is_none()))
+                .map(|(&k, _)| k),
+            None => candidates.first().copied(),
+        };
+        let Some(k) = pick else {
+            debug!(agent = self.slots[i].id, peer = %a_peer, "legacy agent connection: no environment connection of its process");
+            return;
+        };
+        let c = &mut self.env_conns[k];
+        c.agent = Some((i, a_seq));
+        info!(agent = self.slots[i].id, agent_peer = %a_peer, env_peer = %c.peer, "legacy environment connection paired: its resets go to this agent");
     }
 
     fn accept_agent(&mut self, i: usize) {
@@ -478,13 +698,21 @@ impl LegacyHost {
                     if stream.set_nonblocking(true).is_err() || stream.set_nodelay(true).is_err() {
                         continue;
                     }
+                    // Environment connections made before this one are in their backlog
+                    // now (a loopback or remote connect completes before the client's next
+                    // one starts): accepted first, they get the lower `seq` that pairing
+                    // relies on, however long this pass took.
+                    self.accept_env();
+                    let s = &mut self.slots[i];
                     let fd = stream.as_raw_fd();
                     s.pending.push(Pending {
                         stream,
                         peer,
+                        seq: self.next_seq,
                         since: Instant::now(),
                         reader: FrameReader::new(MAX_INCOMING_FRAME),
                     });
+                    self.next_seq += 1;
                     if let Err(e) = self.watch(fd) {
                         warn!("legacy connection dropped: epoll: {e}");
                         self.slots[i].pending.pop();
@@ -590,11 +818,13 @@ impl LegacyHost {
                     s.conn = Some(Conn {
                         stream,
                         peer: p.peer,
+                        seq: p.seq,
                         reader: p.reader,
                         dialect,
                         partial_since: None,
                         last_write: Instant::now(),
                     });
+                    self.pair_env(i);
                 }
             }
         }
@@ -624,6 +854,7 @@ impl LegacyHost {
     fn read_agent(&mut self, i: usize) {
         let sync = self.sync_mode;
         let max_commands = self.max_commands;
+        let stall_timeout = self.stall_timeout;
         let s = &mut self.slots[i];
         // Taken out while its frames are applied to the slot; put back unless dropped.
         let Some(mut conn) = s.conn.take() else {
@@ -727,11 +958,11 @@ impl LegacyHost {
                     if c.reader.mid_frame() {
                         let now = Instant::now();
                         let since = *c.partial_since.get_or_insert(now);
-                        if now.duration_since(since) >= STALL_TIMEOUT {
+                        if now.duration_since(since) >= stall_timeout {
                             drop_why = Some(format!(
                                 "stalled mid-frame: {} within {}",
                                 c.reader.progress(),
-                                Rounded(STALL_TIMEOUT)
+                                Rounded(stall_timeout)
                             ));
                         }
                     }
@@ -965,6 +1196,110 @@ impl LegacyHost {
         codec::push_debug(&mut out, &format!("vrsync cycle {}", header.cycle));
         self.slots[slot].out = out;
     }
+}
+
+/// The processes owning the client ends of accepted connections `(peer, local)` (the
+/// host's accepted socket has local address `local` and peer `peer`; the client's socket
+/// is the one bound to `peer` and connected to `local`), where the host can see them: a
+/// client on this machine, in this network namespace, run by the same user (or the host
+/// is privileged). `None` where it cannot. Reads `/proc/net/tcp{,6}` once and walks
+/// `/proc/<pid>/fd` once; called only when an agent connection passes its version check.
+fn socket_owners(conns: &[(SocketAddr, Option<SocketAddr>)]) -> Vec<Option<u32>> {
+    let mut inodes: Vec<Option<u64>> = vec![None; conns.len()];
+    for table in ["/proc/net/tcp", "/proc/net/tcp6"] {
+        let Ok(text) = std::fs::read_to_string(table) else {
+            continue;
+        };
+        for line in text.lines().skip(1) {
+            let f: Vec<&str> = line.split_whitespace().collect();
+            let (Some(local), Some(remote), Some(inode)) = (
+                f.get(1).and_then(|a| proc_addr(a)),
+                f.get(2).and_then(|a| proc_addr(a)),
+                f.get(9).and_then(|i| i.parse::<u64>().ok()),
+            ) else {
+                continue;
+            };
+            for (k, (peer, host)) in conns.iter().enumerate() {
+                let host = host.map(canonical);
+                if inode != 0 && local == canonical(*peer) && Some(remote) == host {
+                    inodes[k] = Some(inode);
+                }
+            }
+        }
+    }
+    let mut owners: Vec<Option<u32>> = vec![None; conns.len()];
+    let mut left = inodes.iter().filter(|i| i.is_some()).count();
+    let Ok(procs) = std::fs::read_dir("/proc") else {
+        return owners;
+    };
+    for entry in procs.flatten() {
+        if left == 0 {
+            break;
+        }
+        let Some(pid) = entry
+            .file_name()
+            .to_str()
+            .and_then(|n| n.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        let Ok(fds) = std::fs::read_dir(entry.path().join("fd")) else {
+            continue;
+        };
+        for fd in fds.flatten() {
+            let Ok(target) = std::fs::read_link(fd.path()) else {
+                continue;
+            };
+            let Some(inode) = target
+                .to_str()
+                .and_then(|t| t.strip_prefix("socket:["))
+                .and_then(|t| t.strip_suffix(']'))
+                .and_then(|t| t.parse::<u64>().ok())
+            else {
+                continue;
+            };
+            for (k, want) in inodes.iter().enumerate() {
+                if *want == Some(inode) && owners[k].is_none() {
+                    owners[k] = Some(pid);
+                    left -= 1;
+                }
+            }
+        }
+    }
+    owners
+}
+
+/// `addr` with a v4-mapped IPv6 address (a v4 peer of a dual-stack socket) as IPv4.
+fn canonical(addr: SocketAddr) -> SocketAddr {
+    match addr.ip() {
+        IpAddr::V6(v6) => v6
+            .to_ipv4_mapped()
+            .map_or(addr, |v4| SocketAddr::new(v4.into(), addr.port())),
+        IpAddr::V4(_) => addr,
+    }
+}
+
+/// An address of `/proc/net/tcp{,6}`: the IP's 32-bit words in hex as stored (native
+/// byte order), a colon, the port in hex.
+fn proc_addr(text: &str) -> Option<SocketAddr> {
+    let (ip, port) = text.split_once(':')?;
+    let port = u16::from_str_radix(port, 16).ok()?;
+    let word = |k: usize| -> Option<[u8; 4]> {
+        let w = u32::from_str_radix(ip.get(8 * k..8 * k + 8)?, 16).ok()?;
+        Some(w.to_ne_bytes())
+    };
+    let ip: IpAddr = match ip.len() {
+        8 => std::net::Ipv4Addr::from(word(0)?).into(),
+        32 => {
+            let mut b = [0u8; 16];
+            for k in 0..4 {
+                b[4 * k..4 * k + 4].copy_from_slice(&word(k)?);
+            }
+            std::net::Ipv6Addr::from(b).into()
+        }
+        _ => return None,
+    };
+    Some(canonical(SocketAddr::new(ip, port)))
 }
 
 /// Appends an ActionExecutationStatus frame.
@@ -1503,7 +1838,7 @@ mod tests {
     }
 
     #[test]
-    fn environment_resets_ride_with_the_lowest_agent_and_rejected_commands_end_aborted() {
+    fn environment_resets_ride_with_their_clients_agent_and_rejected_commands_end_aborted() {
         let (mut h, base) = host(&[2, 5], "");
         let mut env = Client::connect(base);
         let mut a = join(&mut h, base, 2, 0, Dialect::Vrnew);
@@ -1536,5 +1871,209 @@ mod tests {
         let (_, statuses) = a.cycle();
         assert_eq!(statuses, [(77, ActionState::Aborted as i32)]);
         assert_eq!(h.stats().commands_rejected, 1);
+    }
+
+    fn reset_frame(reset_type: i32) -> Vec<u8> {
+        let mut out = Vec::new();
+        codec::push_message(
+            &mut out,
+            field::TRIAL_RESET,
+            &Reset {
+                reset_type: Some(reset_type),
+            },
+        );
+        out
+    }
+
+    /// The resets (by type) handed over for each slot until `want` have come.
+    fn resets_until(h: &mut LegacyHost, want: usize) -> Vec<(usize, Command)> {
+        let mut got = Vec::new();
+        pump(h, |h| {
+            for (slot, _, _, commands) in drain(h) {
+                for c in commands {
+                    if c.action_id == RESET_ACTION_ID {
+                        got.push((slot, c.decode().unwrap()));
+                    }
+                }
+            }
+            got.len() >= want
+        });
+        got
+    }
+
+    /// Issue 22: a peer holding 16 silent environment connections no longer locks a client
+    /// out; the oldest unpaired one makes room, and the client's first reset reaches its
+    /// agent.
+    #[test]
+    fn sixteen_silent_environment_connections_do_not_lock_a_client_out() {
+        let (mut h, base) = host(&[0], "");
+        let mut silent: Vec<Client> = (0..MAX_ENV_CONNS).map(|_| Client::connect(base)).collect();
+        pump(&mut h, |h| h.env_conns.len() == MAX_ENV_CONNS);
+        let mut env = Client::connect(base);
+        let mut c = join(&mut h, base, 0, 0, Dialect::Burkhardt);
+        // The oldest silent one was closed to make room; the client's is paired.
+        assert!(silent[0].closed());
+        assert_eq!(h.env_conns.len(), MAX_ENV_CONNS + 1 - 1);
+        let me = env.s.local_addr().unwrap();
+        assert!(
+            h.env_conns
+                .iter()
+                .any(|e| e.peer == me && h.env_paired(e) && e.agent.map(|a| a.0) == Some(0))
+        );
+        let mut refused = Vec::new();
+        h.take_refusals(&mut |r| refused.push(r.kind));
+        assert_eq!(refused, [RefusalKind::TooMany]);
+        assert!(publish(&mut h, 0, 0, 0));
+        c.cycle();
+        env.raw(&reset_frame(4));
+        c.frame(&[]);
+        assert_eq!(
+            resets_until(&mut h, 1),
+            [(0, Command::TrialReset { reset_type: 4 })]
+        );
+        // More strangers push out strangers, never the paired connection.
+        let more: Vec<Client> = (0..MAX_ENV_CONNS).map(|_| Client::connect(base)).collect();
+        // 15 strangers were unpaired: the first new one fits, each further one closes
+        // the oldest unpaired.
+        let mut refused = 0;
+        pump(&mut h, |h| {
+            h.take_refusals(&mut |r| {
+                assert_eq!(r.kind, RefusalKind::TooMany);
+                refused += 1;
+            });
+            refused == MAX_ENV_CONNS - 1
+        });
+        assert_eq!(h.env_conns.len(), MAX_ENV_CONNS + 1);
+        env.raw(&reset_frame(5));
+        assert!(publish(&mut h, 0, 1, 0));
+        assert_eq!(
+            resets_until(&mut h, 1),
+            [(0, Command::TrialReset { reset_type: 5 })]
+        );
+        drop((more, silent));
+    }
+
+    /// Environment connections get the agent sockets' timeouts: a half frame stalled past
+    /// the stall timeout, a huge length, and a connection no agent connection of its
+    /// client follows within the hello timeout are closed (reported as refused peers); a
+    /// paired, silent connection stays.
+    #[test]
+    fn stalled_huge_and_unpaired_environment_connections_are_closed() {
+        let (mut h, base) = host(&[0], "");
+        h.stall_timeout = Duration::from_millis(300);
+        h.hello_timeout = Duration::from_millis(600);
+        let mut env = Client::connect(base);
+        let _c = join(&mut h, base, 0, 0, Dialect::Vrnew);
+        let mut half = Client::connect(base);
+        half.raw(&[9, 0]);
+        let mut huge = Client::connect(base);
+        huge.raw(&(1i32 << 30).to_le_bytes());
+        let mut unpaired = Client::connect(base);
+        let started = Instant::now();
+        let mut kinds = Vec::new();
+        pump(&mut h, |h| {
+            h.take_refusals(&mut |r| kinds.push((r.kind, r.peer.clone())));
+            kinds.len() == 3
+        });
+        let took = started.elapsed();
+        assert!(half.closed() && huge.closed() && unpaired.closed());
+        let of = |c: &Client| c.s.local_addr().unwrap().to_string();
+        let kind_of = |c: &Client| kinds.iter().find(|k| k.1 == of(c)).map(|k| k.0);
+        assert_eq!(kind_of(&half), Some(RefusalKind::Malformed));
+        assert_eq!(kind_of(&huge), Some(RefusalKind::Malformed));
+        assert_eq!(kind_of(&unpaired), Some(RefusalKind::Silent));
+        assert!(took >= Duration::from_millis(600), "{took:?}");
+        // The paired connection, silent all along, still carries a reset.
+        assert_eq!(h.env_conns.len(), 1);
+        env.raw(&reset_frame(1));
+        pump(&mut h, |h| h.slots[0].queued.len() == 1);
+    }
+
+    /// A client process run by `bash` (its `/dev/tcp`): it opens its environment
+    /// connection, then its agent connection (with a version check), and sends resets on
+    /// the first, as told on its stdin. The host pairs by owner process, so two such
+    /// clients connecting interleaved are told apart.
+    struct BashClient {
+        child: std::process::Child,
+        stdin: std::process::ChildStdin,
+    }
+
+    impl BashClient {
+        fn spawn() -> Self {
+            let script = r#"while read -r cmd arg; do
+                case $cmd in
+                  env) exec 3<>/dev/tcp/127.0.0.1/$arg ;;
+                  agent) exec 4<>/dev/tcp/127.0.0.1/${arg%% *}; printf "${arg#* }" >&4 ;;
+                  send) printf "$arg" >&3 ;;
+                esac
+              done"#;
+            let mut child = std::process::Command::new("bash")
+                .args(["-c", script])
+                .stdin(std::process::Stdio::piped())
+                .spawn()
+                .unwrap();
+            let stdin = child.stdin.take().unwrap();
+            Self { child, stdin }
+        }
+
+        fn tell(&mut self, line: &str) {
+            writeln!(self.stdin, "{line}").unwrap();
+        }
+    }
+
+    impl Drop for BashClient {
+        fn drop(&mut self) {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+
+    fn escaped(bytes: &[u8]) -> String {
+        bytes.iter().map(|b| format!("\\x{b:02x}")).collect()
+    }
+
+    /// Issue 22: each client's resets reach its own agent, also when two client
+    /// processes connect interleaved (A's environment connection, B's, A's agent, B's
+    /// agent: by connect order alone, A's agent would take B's).
+    #[test]
+    fn resets_reach_the_agent_whose_client_process_sent_them() {
+        let (mut h, base) = host(&[0, 1], "");
+        let mut version = Vec::new();
+        codec::push_message(
+            &mut version,
+            Dialect::Vrnew.version_check_field(),
+            &VersionCheck {
+                version: Some("1.0".into()),
+            },
+        );
+        let (mut a, mut b) = (BashClient::spawn(), BashClient::spawn());
+        a.tell(&format!("env {base}"));
+        pump(&mut h, |h| h.env_conns.len() == 1);
+        b.tell(&format!("env {base}"));
+        pump(&mut h, |h| h.env_conns.len() == 2);
+        a.tell(&format!("agent {} {}", base + 1, escaped(&version)));
+        pump(&mut h, |h| h.is_connected(0));
+        b.tell(&format!("agent {} {}", base + 2, escaped(&version)));
+        pump(&mut h, |h| h.is_connected(1));
+        assert!(publish(&mut h, 0, 0, 0) && publish(&mut h, 1, 0, 0));
+        a.tell(&format!("send {}", escaped(&reset_frame(10))));
+        b.tell(&format!("send {}", escaped(&reset_frame(20))));
+        let mut got = Vec::new();
+        pump(&mut h, |h| {
+            got.extend(
+                h.slots
+                    .iter_mut()
+                    .flat_map(|s| s.batch.drain(..).map(|c| (s.id, c.decode()))),
+            );
+            got.len() == 2
+        });
+        got.sort_by_key(|g| g.0);
+        assert_eq!(
+            got,
+            [
+                (0, Ok(Command::TrialReset { reset_type: 10 })),
+                (1, Ok(Command::TrialReset { reset_type: 20 })),
+            ]
+        );
     }
 }

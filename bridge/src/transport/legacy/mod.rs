@@ -9,6 +9,12 @@
 //!   otherwise. A new connection on an agent port replaces the old one once it has passed
 //!   its version check (a stranger that connects and says nothing cannot push a working
 //!   agent out; it is dropped after [`HELLO_TIMEOUT`]).
+//! - **Resets.** The environment socket carries no agent id: an agent connection that
+//!   passes its version check is paired with its client's environment connection (the
+//!   newest unpaired one from the same IP accepted before it; of the same process where
+//!   `/proc` shows the owner), and that connection's resets go to this agent. Unpaired
+//!   environment connections close after [`HELLO_TIMEOUT`]; a full set of 16 closes its
+//!   oldest for a newcomer; a stalled or oversize frame closes the connection.
 //! - **Framing.** A signed little-endian `i32` length, then one protobuf `MsgObject`
 //!   ([`codec`]); frames longer than [`codec::MAX_INCOMING_FRAME`] are skipped unread, a
 //!   negative length drops the connection (there is no boundary to resume at).
