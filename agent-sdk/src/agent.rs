@@ -3,9 +3,6 @@
 use std::time::{Duration, Instant};
 
 pub use vrsync_bridge::HOST_LIVENESS_PERIOD;
-use vrsync_bridge::shm::{ShmAgent, ShmFrame};
-use vrsync_bridge::tcp::{TcpAgent, TcpFrame};
-use vrsync_bridge::zenoh::{ZenohAgent, ZenohFrame};
 use vrsync_bridge::{
     ActionState, ActionStatus, Collision, Command, ImageDesc, MOTOR_FLAG_ACK, MOTOR_FLAG_LEAVE,
     MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION, PixelFormat, Pose, SensorHeader,
@@ -15,7 +12,8 @@ use vrsync_bridge::{
     AgentFrame, AgentReceiveError, AgentSendError, AgentTransport, AgentWaitError,
     wait_for_newer_frame,
 };
-use vrsync_bridge::{Config, TransportKind, WaitForStop};
+use vrsync_bridge::{AnyAgent, AnyFrame};
+use vrsync_bridge::{Config, WaitForStop};
 
 /// Why [`Agent::wait_start`] returned without a frame.
 #[derive(Debug, thiserror::Error)]
@@ -162,38 +160,10 @@ impl<'a> Image<'a> {
 /// [`Agent::wait_start`] (an agent may hold at most two frames).
 #[derive(Debug)]
 pub struct Frame {
-    inner: FrameInner,
+    inner: AnyFrame,
     /// Index of the first status (collision) of the header that this frame hands out.
     new_statuses: usize,
     new_collisions: usize,
-}
-
-// The TCP variant carries its 784-byte header by value (a frame is moved once, from the
-// transport to the caller); boxing it would allocate every cycle.
-#[allow(clippy::large_enum_variant)]
-#[derive(Debug)]
-enum FrameInner {
-    Shm(ShmFrame),
-    Tcp(TcpFrame),
-    Zenoh(ZenohFrame),
-}
-
-impl FrameInner {
-    fn header(&self) -> &SensorHeader {
-        match self {
-            Self::Shm(f) => f.header(),
-            Self::Tcp(f) => f.header(),
-            Self::Zenoh(f) => AgentFrame::header(f),
-        }
-    }
-
-    fn payload(&self) -> &[u8] {
-        match self {
-            Self::Shm(f) => f.payload(),
-            Self::Tcp(f) => f.payload(),
-            Self::Zenoh(f) => AgentFrame::payload(f),
-        }
-    }
 }
 
 impl Frame {
@@ -373,52 +343,7 @@ impl<'c> AgentBuilder<'c> {
 
     fn connect_once(&self, timeout: Duration) -> Result<Agent, AgentConnectError> {
         // The agent's own transport (`[[agent]] transport`), else `[transport] kind`.
-        let kind = self
-            .config
-            .agent(self.id)
-            .map_or(self.config.transport.kind, |a| a.transport);
-        let backend = match kind {
-            TransportKind::Shm => Backend::Shm(Box::new(ShmAgent::connect(
-                self.config,
-                self.id,
-                timeout,
-                self.signals,
-            )?)),
-            TransportKind::Tcp => Backend::Tcp(TcpAgent::connect(
-                self.config,
-                self.id,
-                timeout,
-                self.config
-                    .transport
-                    .tcp_token
-                    .as_deref()
-                    .map(str::as_bytes),
-                self.signals,
-            )?),
-            // Served to programs written for the original system, not to this SDK.
-            TransportKind::Legacy => {
-                return Err(AgentConnectError::Transport {
-                    session: self.config.session.clone(),
-                    agent: self.id,
-                    detail: "its [[agent]] transport is \"legacy\": the host serves it the \
-                             original system's protocol for agents written for that system; \
-                             use \"shm\" or \"tcp\" for a vrsync agent"
-                        .into(),
-                });
-            }
-            TransportKind::Zenoh => Backend::Zenoh(Box::new(ZenohAgent::connect(
-                self.config,
-                self.id,
-                timeout,
-                self.config
-                    .transport
-                    .zenoh
-                    .token
-                    .as_deref()
-                    .map(str::as_bytes),
-                self.signals,
-            )?)),
-        };
+        let backend = AnyAgent::connect(self.config, self.id, timeout, self.signals)?;
         let max = self.config.transport.max_commands_per_cycle as usize;
         Ok(Agent {
             id: self.id,
@@ -473,13 +398,6 @@ fn left_recently(session: &str, agent: u32) -> Option<Instant> {
         .map(|e| e.2)
 }
 
-#[derive(Debug)]
-enum Backend {
-    Shm(Box<ShmAgent>),
-    Tcp(TcpAgent),
-    Zenoh(Box<ZenohAgent>),
-}
-
 /// A connected agent.
 #[derive(Debug)]
 pub struct Agent {
@@ -488,7 +406,7 @@ pub struct Agent {
     wait_for_stop: WaitForStop,
     sync_mode: bool,
     host_waits_without_limit: bool,
-    backend: Backend,
+    backend: AnyAgent,
     queue: Vec<MotorCommand>,
     max_commands: usize,
     last_cycle: Option<u64>,
@@ -623,17 +541,7 @@ impl Agent {
         let started = Instant::now();
         let deadline = timeout.map(|t| started + t);
         let (last, liveness) = (self.last_cycle, &mut self.next_liveness);
-        let waited = match &mut self.backend {
-            Backend::Shm(shm) => {
-                wait_for_newer_frame(&mut **shm, last, deadline, liveness).map(FrameInner::Shm)
-            }
-            Backend::Tcp(tcp) => {
-                wait_for_newer_frame(tcp, last, deadline, liveness).map(FrameInner::Tcp)
-            }
-            Backend::Zenoh(z) => {
-                wait_for_newer_frame(&mut **z, last, deadline, liveness).map(FrameInner::Zenoh)
-            }
-        };
+        let waited = wait_for_newer_frame(&mut self.backend, last, deadline, liveness);
         let inner = waited.map_err(|e| match e {
             AgentWaitError::Timeout => WaitStartError::Timeout {
                 waited: started.elapsed(),
@@ -737,11 +645,7 @@ impl Agent {
             command_count: self.queue.len() as u32,
             ack_cycle: cycle,
         };
-        let sent = match &mut self.backend {
-            Backend::Shm(shm) => AgentTransport::send_batch(&mut **shm, &header, &self.queue),
-            Backend::Tcp(tcp) => AgentTransport::send_batch(tcp, &header, &self.queue),
-            Backend::Zenoh(z) => AgentTransport::send_batch(&mut **z, &header, &self.queue),
-        };
+        let sent = self.backend.send_batch(&header, &self.queue);
         match sent {
             Ok(()) => {}
             Err(AgentSendError::HostClosed) => return Err(StopError::HostClosed),
@@ -779,11 +683,7 @@ impl Agent {
             command_count: 0,
             ack_cycle: self.last_cycle.unwrap_or(0),
         };
-        let _ = match &mut self.backend {
-            Backend::Shm(shm) => AgentTransport::send_batch(&mut **shm, &header, &[]),
-            Backend::Tcp(tcp) => AgentTransport::send_batch(tcp, &header, &[]),
-            Backend::Zenoh(z) => AgentTransport::send_batch(&mut **z, &header, &[]),
-        };
+        let _ = self.backend.send_batch(&header, &[]);
         note_left(&self.session, self.id);
     }
 }

@@ -34,9 +34,6 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use vrsync_agent::{AgentBuilder, Command, SignalHandling, WaitStartError};
-use vrsync_bridge::shm::ShmAgent;
-use vrsync_bridge::tcp::TcpAgent;
-use vrsync_bridge::zenoh::ZenohAgent;
 use vrsync_bridge::{
     AgentFrame, AgentOutcome, AgentTransport, Config, Host, MOTOR_FLAG_STOP, MotorCommand,
     MotorHeader, PROTOCOL_VERSION, wait_for_newer_frame,
@@ -308,16 +305,9 @@ fn first_cycle<T: AgentTransport>(agent: &mut T) -> u64 {
     frame.header().cycle
 }
 
-fn connect_shm(config: &Config) -> ShmAgent {
-    ShmAgent::connect(config, 4, WAIT, SignalHandling::Leave).unwrap()
-}
-
-fn connect_tcp(config: &Config) -> TcpAgent {
-    TcpAgent::connect(config, 4, WAIT, None, SignalHandling::Leave).unwrap()
-}
-
-fn connect_zenoh(config: &Config) -> ZenohAgent {
-    ZenohAgent::connect(config, 4, WAIT, None, SignalHandling::Leave).unwrap()
+/// Agent 4 over transport `T` (the contract's one connect).
+fn connect<T: AgentTransport>(config: &Config) -> T {
+    T::connect(config, 4, WAIT, SignalHandling::Leave).unwrap()
 }
 
 fn a_future_batch_is_dropped_and_counted<T: AgentTransport>(
@@ -554,7 +544,7 @@ fn sigterm_ends_an_agents_wait(kind: &str, test: &str) {
 }
 
 macro_rules! conformance {
-    ($($kind:ident => $connect:ident),* $(,)?) => {$(
+    ($($kind:ident => $agent:ty),* $(,)?) => {$(
         mod $kind {
             #[test]
             fn every_cycle_arrives_once_in_order_with_its_whole_batch() {
@@ -580,11 +570,11 @@ macro_rules! conformance {
             }
             #[test]
             fn a_future_batch_is_dropped_and_counted() {
-                super::a_future_batch_is_dropped_and_counted(stringify!($kind), super::$connect);
+                super::a_future_batch_is_dropped_and_counted(stringify!($kind), super::connect::<$agent>);
             }
             #[test]
             fn a_flood_of_batches_leaves_memory_bounded() {
-                super::a_flood_of_batches_leaves_memory_bounded(stringify!($kind), super::$connect);
+                super::a_flood_of_batches_leaves_memory_bounded(stringify!($kind), super::connect::<$agent>);
             }
             #[test]
             fn a_killed_host_is_seen_as_gone() {
@@ -604,4 +594,8 @@ macro_rules! conformance {
     )*};
 }
 
-conformance!(shm => connect_shm, tcp => connect_tcp, zenoh => connect_zenoh);
+conformance!(
+    shm => vrsync_bridge::shm::ShmAgent,
+    tcp => vrsync_bridge::tcp::TcpAgent,
+    zenoh => vrsync_bridge::zenoh::ZenohAgent,
+);

@@ -75,6 +75,7 @@ pub use host::{
 pub use rounded::Rounded;
 pub use shm::{ShmBudgetError, check_shm_budget};
 pub use signal::SignalHandling;
+pub use transport::any_agent::{AnyAgent, AnyFrame};
 pub use transport::mixed::{AnyLoan, Transports, TransportsCreateError};
 pub use transport::{
     AGENT_MAX_HELD_FRAMES, AgentConnectError, AgentFrame, AgentReceiveError, AgentSendError,

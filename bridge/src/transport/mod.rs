@@ -13,6 +13,7 @@
 //! [`HOST_LIVENESS_PERIOD`]), and [`retry_until`] (connect-retry with back-off while the
 //! host is not there yet).
 
+pub mod any_agent;
 pub mod legacy;
 pub(crate) mod mixed;
 pub mod record;
@@ -518,6 +519,21 @@ pub enum AgentSendError {
 pub trait AgentTransport {
     /// A received frame.
     type Frame: AgentFrame;
+    /// Connects as agent `id` of `config`'s session, retrying until the host answers or
+    /// `timeout` passes, with the credentials `config` names (`tcp_token`, zenoh's
+    /// `token`); `signals` says whether SIGINT/SIGTERM handlers are installed (see
+    /// [`crate::SignalHandling`]).
+    ///
+    /// # Errors
+    /// [`AgentConnectError`].
+    fn connect(
+        config: &crate::config::Config,
+        id: u32,
+        timeout: Duration,
+        signals: crate::signal::SignalHandling,
+    ) -> Result<Self, AgentConnectError>
+    where
+        Self: Sized;
     /// The newest frame that arrived since the last call, older ones dropped; never blocks
     /// for a frame (a record already arriving is read to its end).
     ///

@@ -6,21 +6,17 @@ use super::*;
 // Agent side
 // ---------------------------------------------------------------------------------------
 
-/// What [`ShmAgent::wait_start`] saw.
+/// What a wait on the start listener saw: whether the host closed the session (a start
+/// needs no note: the frame says it).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct StartSignal {
-    /// *start* was signalled.
-    pub start: bool,
-    /// The host closed the session.
-    pub shutdown: bool,
+struct StartSignal {
+    shutdown: bool,
 }
 
 impl StartSignal {
     fn record(&mut self, e: EventActivation) {
         if e.id.as_value() == SHUTDOWN_EVENT {
             self.shutdown = true;
-        } else {
-            self.start = true;
         }
     }
 }
@@ -108,13 +104,58 @@ fn served_agent_ids(session: &str) -> Vec<u32> {
 }
 
 impl ShmAgent {
-    /// Opens the session's services as agent `id`, retrying until the host created them or
-    /// `timeout` passed. Checks the protocol version and layout first. `signals` says
-    /// whether SIGINT/SIGTERM handlers are installed (see [`SignalHandling`]).
-    ///
-    /// # Errors
-    /// [`AgentConnectError`].
-    pub fn connect(
+    /// Whether the host's "session closed" event was ever seen (sticky: a call that
+    /// returned a frame may have consumed it).
+    pub fn shutdown_seen(&self) -> bool {
+        self.shutdown_seen
+    }
+
+    /// Whether a frame is waiting (cheap, non-blocking).
+    pub fn has_frame(&self) -> bool {
+        self.sensor_sub.has_samples().unwrap_or(true)
+    }
+
+    /// Whether this agent busy-polls (`[sync] wait = "spin"`).
+    pub fn spins(&self) -> bool {
+        self.spin
+    }
+
+    /// The state of the host's node.
+    fn host_node_state(&self) -> HostState {
+        // Cheap and allocation-free: is the host's process still there? Only when it is
+        // gone, ask iceoryx2's registry (which lists every node of the machine) what
+        // became of it.
+        if let Some(pid) = self.host_pid {
+            // SAFETY: kill with signal 0 only checks that the process exists.
+            let rc = unsafe { libc::kill(pid, 0) };
+            let gone =
+                rc != 0 && std::io::Error::last_os_error().raw_os_error() == Some(libc::ESRCH);
+            if !gone {
+                return HostState::Alive;
+            }
+            return match host_state(&self.session) {
+                HostState::Alive => HostState::Dead, // another host took over the session
+                other => other,
+            };
+        }
+        host_state(&self.session)
+    }
+}
+
+impl AgentFrame for ShmFrame {
+    fn header(&self) -> &SensorHeader {
+        self.sample.user_header()
+    }
+
+    fn payload(&self) -> &[u8] {
+        self.sample.payload()
+    }
+}
+
+impl AgentTransport for ShmAgent {
+    type Frame = ShmFrame;
+
+    fn connect(
         config: &Config,
         id: u32,
         timeout: Duration,
@@ -272,12 +313,7 @@ impl ShmAgent {
         })
     }
 
-    /// The newest frame not yet received; older queued frames are dropped.
-    ///
-    /// # Errors
-    /// [`AgentReceiveError::TooManyFramesHeld`] when the caller still holds
-    /// [`AGENT_BORROWED_FRAMES`] frames.
-    pub fn receive_newest(&mut self) -> Result<Option<ShmFrame>, AgentReceiveError> {
+    fn try_receive_newest(&mut self) -> Result<Option<ShmFrame>, AgentReceiveError> {
         let mut newest = None;
         loop {
             match self.sensor_sub.receive() {
@@ -300,17 +336,25 @@ impl ShmAgent {
         }
     }
 
-    /// Blocks until *start* may have been signalled, or `timeout` passed. Polls for a
-    /// frame for up to `spin_before_block_us` first.
-    pub fn wait_start(&mut self, timeout: Duration) -> StartSignal {
+    fn wait_readable(&mut self, timeout: Duration) {
+        if self.spin {
+            // Busy-poll the subscriber until the slice ends (`[sync] wait = "spin"`).
+            let until = Instant::now() + timeout;
+            while Instant::now() < until {
+                if self.has_frame() {
+                    break;
+                }
+                std::hint::spin_loop();
+            }
+            self.discard_wakeups();
+            return;
+        }
+        // Poll for a frame for up to `spin_before_block_us` first.
         if !self.spin_before_block.is_zero() {
             let until = Instant::now() + self.spin_before_block.min(timeout);
             while Instant::now() < until {
                 if self.has_frame() {
-                    return StartSignal {
-                        start: true,
-                        shutdown: false,
-                    };
+                    return;
                 }
                 std::hint::spin_loop();
             }
@@ -323,125 +367,13 @@ impl ShmAgent {
             let _ = self.start.try_wait(&mut record);
         }
         self.shutdown_seen |= signal.shutdown;
-        signal
     }
 
-    /// Whether the host's "session closed" event was ever seen (sticky: a call that
-    /// returned a frame may have consumed it).
-    pub fn shutdown_seen(&self) -> bool {
-        self.shutdown_seen
-    }
-
-    /// Whether a frame is waiting (cheap, non-blocking).
-    pub fn has_frame(&self) -> bool {
-        self.sensor_sub.has_samples().unwrap_or(true)
-    }
-
-    /// Whether this agent busy-polls (`[sync] wait = "spin"`).
-    pub fn spins(&self) -> bool {
-        self.spin
-    }
-
-    /// Discards pending *start* notifications; reports a pending shutdown.
-    pub fn clear_start(&mut self) -> StartSignal {
+    /// Also notes a pending shutdown.
+    fn discard_wakeups(&mut self) {
         let mut signal = StartSignal::default();
         let _ = self.start.try_wait(|e: EventActivation| signal.record(e));
         self.shutdown_seen |= signal.shutdown;
-        signal
-    }
-
-    /// The state of the host's node.
-    pub fn host_state(&self) -> HostState {
-        // Cheap and allocation-free: is the host's process still there? Only when it is
-        // gone, ask iceoryx2's registry (which lists every node of the machine) what
-        // became of it.
-        if let Some(pid) = self.host_pid {
-            // SAFETY: kill with signal 0 only checks that the process exists.
-            let rc = unsafe { libc::kill(pid, 0) };
-            let gone =
-                rc != 0 && std::io::Error::last_os_error().raw_os_error() == Some(libc::ESRCH);
-            if !gone {
-                return HostState::Alive;
-            }
-            return match host_state(&self.session) {
-                HostState::Alive => HostState::Dead, // another host took over the session
-                other => other,
-            };
-        }
-        host_state(&self.session)
-    }
-
-    /// Whether SIGINT/SIGTERM was received (never, with [`SignalHandling::Leave`]).
-    pub fn termination_requested(&self) -> bool {
-        self.signals.termination_requested()
-    }
-
-    /// Publishes a motor batch and, if it carries the stop flag, notifies *stop*.
-    ///
-    /// # Errors
-    /// A string describing the iceoryx2 failure.
-    pub fn send_batch(
-        &mut self,
-        header: &MotorHeader,
-        commands: &[MotorCommand],
-    ) -> Result<(), String> {
-        let n = commands.len().min(self.max_commands);
-        let mut sample = self
-            .motor_pub
-            .loan_slice_uninit(n)
-            .map_err(|e| format!("cannot loan a motor batch: {e:?}"))?;
-        *sample.user_header_mut() = MotorHeader {
-            command_count: n as u32,
-            ..*header
-        };
-        let sample = sample.write_from_slice(&commands[..n]);
-        sample
-            .send()
-            .map_err(|e| format!("cannot send the motor batch: {e:?}"))?;
-        if header.is_stop() {
-            self.stop
-                .notify()
-                .map_err(|e| format!("cannot notify stop: {e:?}"))?;
-        }
-        Ok(())
-    }
-}
-
-impl AgentFrame for ShmFrame {
-    fn header(&self) -> &SensorHeader {
-        self.sample.user_header()
-    }
-
-    fn payload(&self) -> &[u8] {
-        self.sample.payload()
-    }
-}
-
-impl AgentTransport for ShmAgent {
-    type Frame = ShmFrame;
-
-    fn try_receive_newest(&mut self) -> Result<Option<ShmFrame>, AgentReceiveError> {
-        self.receive_newest()
-    }
-
-    fn wait_readable(&mut self, timeout: Duration) {
-        if self.spin {
-            // Busy-poll the subscriber until the slice ends (`[sync] wait = "spin"`).
-            let until = Instant::now() + timeout;
-            while Instant::now() < until {
-                if self.has_frame() {
-                    break;
-                }
-                std::hint::spin_loop();
-            }
-            self.clear_start();
-            return;
-        }
-        self.wait_start(timeout);
-    }
-
-    fn discard_wakeups(&mut self) {
-        self.clear_start();
     }
 
     fn host_liveness(&mut self, check_process: bool) -> HostLiveness {
@@ -451,12 +383,12 @@ impl AgentTransport for ShmAgent {
         if !check_process {
             return HostLiveness::Alive;
         }
-        match self.host_state() {
+        match self.host_node_state() {
             HostState::Alive => HostLiveness::Alive,
             state => {
                 // The shutdown event may have raced with the node's removal: look once
                 // more before calling the host gone.
-                self.clear_start();
+                self.discard_wakeups();
                 if self.shutdown_seen {
                     HostLiveness::Closed
                 } else {
@@ -471,12 +403,32 @@ impl AgentTransport for ShmAgent {
         }
     }
 
+    /// Publishes the batch and, if it carries the stop flag, notifies *stop*.
     fn send_batch(
         &mut self,
         header: &MotorHeader,
         commands: &[MotorCommand],
     ) -> Result<(), AgentSendError> {
-        ShmAgent::send_batch(self, header, commands).map_err(AgentSendError::Transport)
+        let fail = AgentSendError::Transport;
+        let n = commands.len().min(self.max_commands);
+        let mut sample = self
+            .motor_pub
+            .loan_slice_uninit(n)
+            .map_err(|e| fail(format!("cannot loan a motor batch: {e:?}")))?;
+        *sample.user_header_mut() = MotorHeader {
+            command_count: n as u32,
+            ..*header
+        };
+        let sample = sample.write_from_slice(&commands[..n]);
+        sample
+            .send()
+            .map_err(|e| fail(format!("cannot send the motor batch: {e:?}")))?;
+        if header.is_stop() {
+            self.stop
+                .notify()
+                .map_err(|e| fail(format!("cannot notify stop: {e:?}")))?;
+        }
+        Ok(())
     }
 
     fn termination_requested(&self) -> bool {

@@ -76,7 +76,7 @@ impl TcpAgent {
     ///
     /// # Errors
     /// [`AgentConnectError`].
-    pub fn connect(
+    fn connect_with_token(
         config: &Config,
         id: u32,
         timeout: Duration,
@@ -355,6 +355,16 @@ impl AgentFrame for TcpFrame {
 
 impl AgentTransport for TcpAgent {
     type Frame = TcpFrame;
+
+    fn connect(
+        config: &Config,
+        id: u32,
+        timeout: Duration,
+        signals: SignalHandling,
+    ) -> Result<Self, AgentConnectError> {
+        let token = config.transport.tcp_token.as_deref().map(str::as_bytes);
+        Self::connect_with_token(config, id, timeout, token, signals)
+    }
 
     fn try_receive_newest(&mut self) -> Result<Option<TcpFrame>, AgentReceiveError> {
         self.read_arrived()

@@ -188,7 +188,7 @@ impl ZenohAgent {
     /// # Errors
     /// [`AgentConnectError`]: no host, protocol mismatch, id not served or in use, wrong
     /// token.
-    pub fn connect(
+    pub(crate) fn connect_with_token(
         config: &Config,
         id: u32,
         timeout: Duration,
@@ -416,6 +416,16 @@ impl Drop for ZenohAgent {
 
 impl AgentTransport for ZenohAgent {
     type Frame = ZenohFrame;
+
+    fn connect(
+        config: &Config,
+        id: u32,
+        timeout: Duration,
+        signals: SignalHandling,
+    ) -> Result<Self, AgentConnectError> {
+        let token = config.transport.zenoh.token.as_deref().map(str::as_bytes);
+        Self::connect_with_token(config, id, timeout, token, signals)
+    }
 
     fn try_receive_newest(&mut self) -> Result<Option<ZenohFrame>, AgentReceiveError> {
         if Rc::strong_count(&self.held) > AGENT_MAX_HELD_FRAMES {

@@ -63,7 +63,7 @@ fn config(token: Option<&str>) -> Config {
 }
 
 fn agent(config: &Config, id: u32, token: Option<&str>) -> Result<ZenohAgent, AgentConnectError> {
-    ZenohAgent::connect(
+    ZenohAgent::connect_with_token(
         config,
         id,
         WAIT,
