@@ -1,0 +1,880 @@
+//! The host API: what a simulator (vr-sim, or Unity through the C ABI) calls.
+//!
+//! One cycle, in order:
+//! 1. [`Host::loan_frame`] for each agent → write the header fields and render the images
+//!    straight into [`SensorFrameMut`] → [`Host::publish`];
+//! 2. [`Host::start`]: one broadcast *start*;
+//! 3. [`Host::collect`]: in sync mode block until every agent whose frame was published
+//!    sent its stop for this cycle, or `stop_timeout` passed; in async mode wait until the
+//!    next tick, taking commands as they arrive. The returned [`CycleReport`] lists each
+//!    agent's outcome and commands in (agent id, order sent) order; the cycle number then
+//!    advances and simulated time with it, by exactly `simulation_time_per_frame`.
+
+use std::time::{Duration, Instant};
+
+use tracing::{debug, info, warn};
+
+use crate::barrier::{AgentOutcome, BatchVerdict, CycleBarrier};
+use crate::config::{AgentLostPolicy, Config, WaitForStop};
+use crate::events::PendingEvents;
+use crate::rounded::Rounded;
+use crate::signal::SignalHandling;
+use crate::transport::mixed::{AnyLoan, Transports, TransportsCreateError};
+use crate::transport::shm::ShmHostCreateError;
+use crate::transport::tcp::TcpHostCreateError;
+use crate::transport::{FrameLoanMut, HostTransport, HostTransportError, PeerRefusal};
+use crate::wire::{
+    ActionState, ImageDesc, MAX_CAMERAS, MotorCommand, PROTOCOL_VERSION, SENSOR_FLAG_SYNC_MODE,
+    SensorHeader, WireOutcome,
+};
+
+mod errors;
+mod frame;
+mod report;
+#[cfg(test)]
+mod tests;
+
+pub use errors::*;
+pub use frame::*;
+pub use report::*;
+
+/// Builds a [`Host`] from a [`Config`].
+#[derive(Debug)]
+pub struct HostBuilder<'c> {
+    config: &'c Config,
+    signals: SignalHandling,
+}
+
+impl<'c> HostBuilder<'c> {
+    /// A builder for `config`.
+    pub fn new(config: &'c Config) -> Self {
+        Self {
+            config,
+            signals: SignalHandling::default(),
+        }
+    }
+
+    /// Whether the host installs SIGINT/SIGTERM handlers. Default:
+    /// [`SignalHandling::Leave`] (the embedding process keeps its own handlers, and
+    /// [`HostCycleError::Terminated`] is never returned); programs that own their process
+    /// choose [`SignalHandling::Install`]. No config key.
+    pub fn signal_handling(mut self, signals: SignalHandling) -> Self {
+        self.signals = signals;
+        self
+    }
+
+    /// Creates the transport's services and the host's ports.
+    ///
+    /// # Errors
+    /// [`HostCreateError`].
+    pub fn create(self) -> Result<Host, HostCreateError> {
+        let backend = Transports::create(self.config, self.signals).map_err(|e| match e {
+            TransportsCreateError::Shm(e) => HostCreateError::Shm(e),
+            TransportsCreateError::Tcp(e) => HostCreateError::Tcp(e),
+            TransportsCreateError::Legacy(e) => HostCreateError::Legacy(e),
+            TransportsCreateError::Zenoh(e) => HostCreateError::Zenoh(e),
+            TransportsCreateError::Wait(e) => HostCreateError::Wait(e),
+        })?;
+        Ok(Host::over(self.config, backend))
+    }
+}
+
+impl<T: HostTransport> Host<T> {
+    /// A host of `config` over `backend` (the builder's transports, or a test's fake).
+    pub(crate) fn over(config: &Config, backend: T) -> Self {
+        let config = config.clone();
+        let n = config.agents.len();
+        let cap = config.transport.max_commands_per_cycle as usize * 2;
+        let slots = config
+            .agents
+            .iter()
+            .map(|a| {
+                let (descs, _) = a.image_layout();
+                SlotState {
+                    id: a.id,
+                    descs,
+                    image_count: a.cameras.len().min(MAX_CAMERAS),
+                    last_outcome: WireOutcome::None,
+                    last_rejected: 0,
+                    evicted: false,
+                    seen: false,
+                    events: PendingEvents::new(),
+                    read_cycle: None,
+                    evicted_in: None,
+                    rejoined_in: None,
+                    connected_once: false,
+                    wait_for_stop: a.wait_for_stop,
+                    left: false,
+                    left_in: None,
+                }
+            })
+            .collect();
+        let agents = config
+            .agents
+            .iter()
+            .map(|a| AgentReport {
+                agent_id: a.id,
+                outcome: AgentOutcome::NotAwaited,
+                read_cycle: None,
+                evicted: false,
+                rejoined: false,
+                left: false,
+                slow: false,
+                commands: Vec::with_capacity(cap),
+            })
+            .collect();
+        let dt_ns = config.sync.simulation_time_per_frame.as_nanos() as u64;
+        info!(
+            session = %config.session,
+            agents = n,
+            mode = if config.sync.sync_mode { "sync" } else { "async" },
+            transport = config.transport.kind.as_str(),
+            "host created"
+        );
+        Host {
+            backend,
+            slots,
+            barrier: CycleBarrier::new(n),
+            cycle: 0,
+            dt_ns,
+            report: CycleReport {
+                cycle: 0,
+                sim_time_ns: 0,
+                timed_out: false,
+                late_batches: 0,
+                agents,
+            },
+            stats: HostStats::default(),
+            next_tick: None,
+            dead: Vec::with_capacity(n),
+            leaving: Vec::with_capacity(n),
+            lost_this_cycle: Vec::with_capacity(n),
+            evicted_hook: None,
+            refused_hook: None,
+            slow_hook: None,
+            wait_started: None,
+            config,
+        }
+    }
+}
+
+#[derive(Debug)]
+struct SlotState {
+    id: u32,
+    descs: [ImageDesc; MAX_CAMERAS],
+    image_count: usize,
+    last_outcome: WireOutcome,
+    last_rejected: u32,
+    /// Evicted and not yet back.
+    evicted: bool,
+    /// A frame reached it since it was last evicted (so losing it now is news).
+    seen: bool,
+    /// Its statuses and collisions not acknowledged yet, repeated in every frame.
+    events: PendingEvents,
+    /// The newest cycle it acknowledged having read.
+    read_cycle: Option<u64>,
+    /// The cycle of its latest eviction.
+    evicted_in: Option<u64>,
+    /// The cycle it latest rejoined in.
+    rejoined_in: Option<u64>,
+    /// Seen connected while the host waited for its agents.
+    connected_once: bool,
+    /// Its effective `wait_for_stop`.
+    wait_for_stop: WaitForStop,
+    /// Out because it left gracefully (with `evicted` set: out until a frame reaches a
+    /// new connection).
+    left: bool,
+    /// The cycle of its latest graceful leave.
+    left_in: Option<u64>,
+}
+
+/// How often the host looks for dead agent processes while it waits.
+pub const REAP_PERIOD: Duration = Duration::from_millis(100);
+
+/// The host side of a vrsync session, over the transports its agents use (`T` is only
+/// replaced in the crate's own tests, by a fake transport).
+pub struct Host<T: HostTransport = Transports> {
+    config: Config,
+    backend: T,
+    slots: Vec<SlotState>,
+    barrier: CycleBarrier,
+    cycle: u64,
+    dt_ns: u64,
+    report: CycleReport,
+    stats: HostStats,
+    next_tick: Option<Instant>,
+    dead: Vec<usize>,
+    /// Slots whose leave batch the last drain brought.
+    leaving: Vec<usize>,
+    lost_this_cycle: Vec<usize>,
+    evicted_hook: Option<Box<dyn FnMut(u32, u64)>>,
+    refused_hook: Option<RefusedHook>,
+    slow_hook: Option<SlowHook>,
+    /// When the current wait for agents began (a caller may wait in slices).
+    wait_started: Option<Instant>,
+}
+
+/// What [`Host::on_peer_refused`] installs.
+type RefusedHook = Box<dyn FnMut(&PeerRefusal)>;
+
+/// What [`Host::on_slow`] installs.
+type SlowHook = Box<dyn FnMut(u32, u64, Duration)>;
+
+impl<T: HostTransport> core::fmt::Debug for Host<T> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Host")
+            .field("session", &self.config.session)
+            .field("cycle", &self.cycle)
+            .field("stats", &self.stats)
+            .finish()
+    }
+}
+
+impl Host {
+    /// A builder for `config`.
+    pub fn builder(config: &Config) -> HostBuilder<'_> {
+        HostBuilder::new(config)
+    }
+}
+
+impl<T: HostTransport> Host<T> {
+    /// The configuration the host runs with.
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
+    /// Agent ids, ascending.
+    pub fn agent_ids(&self) -> impl Iterator<Item = u32> + '_ {
+        self.slots.iter().map(|s| s.id)
+    }
+
+    fn slot_of(&self, id: u32) -> Option<usize> {
+        self.slots.iter().position(|s| s.id == id)
+    }
+
+    /// The current cycle number.
+    pub fn cycle(&self) -> u64 {
+        self.cycle
+    }
+
+    /// Simulated time at the start of the current cycle: `cycle × simulation_time_per_frame`.
+    pub fn sim_time_ns(&self) -> u64 {
+        self.cycle.saturating_mul(self.dt_ns)
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> &HostStats {
+        &self.stats
+    }
+
+    /// Whether agent `id` is connected (its receiving side is attached).
+    pub fn is_connected(&self, id: u32) -> bool {
+        self.slot_of(id)
+            .is_some_and(|s| self.backend.is_connected(s))
+    }
+
+    /// Whether agent `id` is evicted: it was lost (process died or disconnected) and no
+    /// frame has reached it since. It rejoins when one does (see [`Host::publish`]).
+    pub fn is_evicted(&self, id: u32) -> bool {
+        self.slot_of(id)
+            .is_some_and(|s| self.slots[s].evicted && !self.slots[s].left)
+    }
+
+    /// Whether agent `id` left the session gracefully and no frame has reached a new
+    /// connection of that id since (it rejoins when one does, as an evicted agent).
+    pub fn has_left(&self, id: u32) -> bool {
+        self.slot_of(id)
+            .is_some_and(|s| self.slots[s].evicted && self.slots[s].left)
+    }
+
+    /// Calls `hook(agent, cycle)` each time an agent is evicted, as it happens: also while
+    /// [`Host::collect`] blocks (e.g. when `on_agent_lost = "wait"` pauses for the agent).
+    pub fn on_evicted(&mut self, hook: impl FnMut(u32, u64) + 'static) {
+        self.evicted_hook = Some(Box::new(hook));
+    }
+
+    /// Calls `hook(agent, cycle, waited)` while [`Host::collect`] waits past `stop_timeout`
+    /// for a live agent whose `wait_for_stop` is `"alive"`: at 1×, 2×, 4×, … `stop_timeout`
+    /// into the cycle, as it happens (so a stuck but alive agent is visible while the
+    /// host waits for it).
+    pub fn on_slow(&mut self, hook: impl FnMut(u32, u64, Duration) + 'static) {
+        self.slow_hook = Some(Box::new(hook));
+    }
+
+    /// Calls `hook(refusal)` for each peer a transport refused or dropped before admitting
+    /// it as an agent (garbage, a wrong token or version, an unknown or taken id, a silent
+    /// connection), as the host notices it: while it waits for agents and for stops.
+    /// [`HostStats::peers_refused`] counts them all, also the ones a flood left without
+    /// details.
+    pub fn on_peer_refused(&mut self, hook: impl FnMut(&PeerRefusal) + 'static) {
+        self.refused_hook = Some(Box::new(hook));
+    }
+
+    /// Takes the transports' refusals into the stats and the hook.
+    fn take_refusals(&mut self) {
+        let stats = &mut self.stats;
+        let hook = &mut self.refused_hook;
+        let unkept = self.backend.take_refusals(&mut |r| {
+            stats.peers_refused += 1;
+            if let Some(hook) = hook {
+                hook(r);
+            }
+        });
+        stats.peers_refused += unkept;
+    }
+
+    /// The address TCP agents connect to (the bound port when `tcp_listen` has port 0);
+    /// `None` on shared memory.
+    pub fn tcp_local_addr(&self) -> Option<std::net::SocketAddr> {
+        self.backend.local_addr()
+    }
+
+    /// Whether SIGINT/SIGTERM was received.
+    pub fn termination_requested(&self) -> bool {
+        self.backend.termination_requested()
+    }
+
+    /// Records how many of agent `id`'s commands the simulator rejected this cycle; the
+    /// agent sees the number in its next frame (`previous_rejected`).
+    pub fn set_rejected(&mut self, id: u32, rejected: u32) {
+        if let Some(s) = self.slot_of(id) {
+            self.slots[s].last_rejected = rejected;
+        }
+    }
+
+    /// Blocks until every configured agent is connected, logging which are still missing.
+    /// Notifications sent before an agent's listener exists are lost, so cycle 0 must not
+    /// start earlier.
+    ///
+    /// # Errors
+    /// [`HostWaitError::AgentsMissing`] naming the ids after `timeout`.
+    pub fn wait_for_agents(&mut self, timeout: Duration) -> Result<(), HostWaitError> {
+        let started = Instant::now();
+        // Callers may wait in slices (vr-sim does, to report progress): the log counts
+        // from the first slice.
+        let first_started = *self.wait_started.get_or_insert(started);
+        let deadline = started + timeout;
+        let mut next_log = started + Duration::from_secs(2);
+        let mut logged_once = false;
+        loop {
+            let mut missing = Vec::new();
+            for (slot, s) in self.slots.iter_mut().enumerate() {
+                if self.backend.is_connected(slot) {
+                    s.connected_once = true;
+                } else {
+                    missing.push(s.id);
+                }
+            }
+            if missing.is_empty() {
+                self.backend.update_connections()?;
+                self.wait_started = None;
+                info!(
+                    agents = self.slots.len(),
+                    waited_ms = first_started.elapsed().as_millis() as u64,
+                    "all agents connected"
+                );
+                return Ok(());
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                let left = self
+                    .slots
+                    .iter()
+                    .filter(|s| s.connected_once && missing.contains(&s.id))
+                    .map(|s| s.id)
+                    .collect();
+                return Err(HostWaitError::AgentsMissing {
+                    session: self.config.session.clone(),
+                    missing,
+                    left,
+                    waited: started.elapsed(),
+                });
+            }
+            if !logged_once || now >= next_log {
+                info!(?missing, session = %self.config.session, "waiting for agents");
+                logged_once = true;
+                next_log = now + Duration::from_secs(2);
+            }
+            // Agents notify the stop event once their ports exist; the 1 s cap only paces
+            // the log line above.
+            match self
+                .backend
+                .wait_activity((deadline - now).min(Duration::from_secs(1)))
+            {
+                Ok(()) => self.take_refusals(),
+                Err(HostTransportError::Terminated) => return Err(HostWaitError::Terminated),
+                Err(e) => return Err(e.into()),
+            }
+        }
+    }
+
+    /// Loans agent `id`'s sensor frame for the current cycle, header pre-filled (protocol
+    /// version, agent id, cycle, simulated time, mode, image table, previous outcome).
+    ///
+    /// # Errors
+    /// [`HostCycleError`].
+    pub fn loan_frame(&mut self, id: u32) -> Result<SensorFrameMut<T::Loan>, HostCycleError> {
+        let slot = self.slot_of(id).ok_or(HostCycleError::UnknownAgent(id))?;
+        let mut loan = self.backend.loan(slot)?;
+        let s = &self.slots[slot];
+        let h = loan.parts_mut().0;
+        h.protocol_version = PROTOCOL_VERSION;
+        h.agent_id = id;
+        h.cycle = self.cycle;
+        h.sim_time_ns = self.sim_time_ns();
+        h.flags = if self.config.sync.sync_mode {
+            SENSOR_FLAG_SYNC_MODE
+        } else {
+            0
+        };
+        h.image_count = s.image_count as u32;
+        h.images = s.descs;
+        h.previous_outcome = s.last_outcome as u32;
+        h.previous_rejected = s.last_rejected;
+        // The simulator adds this cycle's events; publish adds the unacknowledged ones.
+        h.status_count = 0;
+        h.collision_count = 0;
+        Ok(SensorFrameMut {
+            slot,
+            agent_id: id,
+            cycle: self.cycle,
+            loan,
+            descs: s.descs,
+            image_count: s.image_count,
+        })
+    }
+
+    /// Publishes a frame; if it reached its agent, that agent is awaited this cycle (sync
+    /// mode). A frame for an agent that is not connected is dropped and counted.
+    ///
+    /// The statuses and collisions the simulator wrote into the header are this cycle's
+    /// new events; publish adds every earlier event the agent has not acknowledged yet
+    /// (see [`SensorHeader::statuses`]), so the simulator reports each event once and the
+    /// agent gets it even if it skips frames.
+    ///
+    /// # Errors
+    /// [`HostCycleError`].
+    pub fn publish(&mut self, mut frame: SensorFrameMut<T::Loan>) -> Result<(), HostCycleError> {
+        if frame.cycle != self.cycle {
+            return Err(HostCycleError::StaleFrame {
+                agent: frame.agent_id,
+                loaned: frame.cycle,
+                current: self.cycle,
+            });
+        }
+        let slot = frame.slot;
+        let dropped = self.slots[slot]
+            .events
+            .merge_into(frame.loan.parts_mut().0, self.cycle);
+        if dropped.statuses + dropped.collisions > 0 {
+            self.stats.statuses_dropped += u64::from(dropped.statuses);
+            self.stats.collisions_dropped += u64::from(dropped.collisions);
+            debug!(
+                agent = frame.agent_id,
+                statuses = dropped.statuses,
+                collisions = dropped.collisions,
+                "unacknowledged events dropped: the agent's table is full"
+            );
+        }
+        if self.backend.publish(slot, frame.loan)? {
+            self.stats.frames_delivered += 1;
+            self.barrier.await_slot(slot);
+            self.slots[slot].seen = true;
+            if self.slots[slot].evicted {
+                self.slots[slot].evicted = false;
+                self.slots[slot].left = false;
+                self.slots[slot].rejoined_in = Some(self.cycle);
+                self.stats.rejoins += 1;
+                info!(agent = frame.agent_id, cycle = self.cycle, "agent rejoined");
+            }
+        } else {
+            self.stats.frames_undelivered += 1;
+            debug!(
+                agent = frame.agent_id,
+                cycle = self.cycle,
+                "frame not delivered: agent not connected"
+            );
+        }
+        Ok(())
+    }
+
+    /// Signals *start* to every agent. Call after all frames of the cycle are published.
+    ///
+    /// # Errors
+    /// [`HostCycleError`].
+    pub fn start(&mut self) -> Result<(), HostCycleError> {
+        self.backend.signal_start()?;
+        Ok(())
+    }
+
+    /// Ends the cycle. Sync mode: blocks until every agent whose frame was published this
+    /// cycle sent its stop, or `stop_timeout` passed (missing agents are logged and
+    /// counted). Async mode: waits until the next tick of `simulation_time_per_frame` real
+    /// time, taking every batch that arrives. Then advances the cycle number.
+    ///
+    /// # Errors
+    /// [`HostCycleError::Terminated`] on SIGINT/SIGTERM; transport failures.
+    pub fn collect(&mut self) -> Result<&CycleReport, HostCycleError> {
+        let cycle = self.cycle;
+        self.report.cycle = cycle;
+        self.report.sim_time_ns = self.sim_time_ns();
+        self.report.timed_out = false;
+        self.report.late_batches = 0;
+        for a in &mut self.report.agents {
+            a.commands.clear();
+            a.outcome = AgentOutcome::NotAwaited;
+        }
+        if self.config.sync.sync_mode {
+            self.collect_sync()?;
+        } else {
+            self.collect_async()?;
+        }
+        for (a, s) in self.report.agents.iter_mut().zip(&self.slots) {
+            a.read_cycle = s.read_cycle;
+            a.evicted = s.evicted_in == Some(cycle);
+            a.rejoined = s.rejoined_in == Some(cycle);
+            a.left = s.left_in == Some(cycle);
+        }
+        for (slot, a) in self.report.agents.iter_mut().enumerate() {
+            a.slow = self.barrier.is_slow(slot);
+        }
+        self.stats.cycles += 1;
+        self.cycle += 1;
+        self.barrier.begin(self.cycle);
+        Ok(&self.report)
+    }
+
+    fn drain(&mut self, sync: bool) -> Result<(), HostCycleError> {
+        let barrier = &mut self.barrier;
+        let report = &mut self.report;
+        let stats = &mut self.stats;
+        let slots = &mut self.slots;
+        let leaving = &mut self.leaving;
+        let cycle = self.cycle;
+        self.backend.drain(&mut |slot, header, commands| {
+            // Any batch may acknowledge a frame, a late one too; never one not yet sent.
+            if let Some(read) = header.acknowledged().filter(|&c| c <= cycle)
+                && let Some(s) = slots.get_mut(slot)
+                && s.read_cycle.is_none_or(|r| read > r)
+            {
+                s.read_cycle = Some(read);
+                s.events.acknowledge(read);
+                stats.frames_read += 1;
+            }
+            if header.is_leave() {
+                // Not part of any cycle: the agent is gone (see `check_lost`).
+                if !leaving.contains(&slot) {
+                    leaving.push(slot);
+                }
+                return;
+            }
+            let verdict = if sync {
+                barrier.on_batch(slot, header.cycle, header.is_stop())
+            } else {
+                BatchVerdict::Accept { stop: false }
+            };
+            // Commands from this index on are dropped.
+            let applied = match verdict {
+                BatchVerdict::Accept { .. } => {
+                    let Some(a) = report.agents.get_mut(slot) else {
+                        return;
+                    };
+                    let room = a.commands.capacity() - a.commands.len();
+                    let take = commands.len().min(room);
+                    a.commands.extend_from_slice(&commands[..take]);
+                    stats.commands_received += take as u64;
+                    if take < commands.len() {
+                        stats.commands_overflowed += (commands.len() - take) as u64;
+                        warn!(
+                            agent = a.agent_id,
+                            dropped = commands.len() - take,
+                            "too many commands in one cycle"
+                        );
+                    }
+                    take
+                }
+                BatchVerdict::Late => {
+                    report.late_batches += 1;
+                    stats.late_batches += 1;
+                    debug!(slot, batch_cycle = header.cycle, "late batch dropped");
+                    0
+                }
+                BatchVerdict::Future => {
+                    stats.future_batches += 1;
+                    // A misbehaving agent must not flood the log: warn at the 1st, 2nd,
+                    // 4th, 8th … such batch (the count is in the stats either way).
+                    if stats.future_batches.is_power_of_two() {
+                        warn!(
+                            slot,
+                            batch_cycle = header.cycle,
+                            total = stats.future_batches,
+                            "batch for a future cycle dropped"
+                        );
+                    }
+                    0
+                }
+                BatchVerdict::NotAwaited => 0,
+            };
+            // A dropped command never runs: its agent learns so from an `Aborted` status in
+            // its next frame (an agent that waits for its action's end must not wait in
+            // vain, e.g. after its batch came late).
+            if let Some(s) = slots.get_mut(slot) {
+                for c in commands.get(applied..).unwrap_or(&[]) {
+                    if s.events
+                        .push_status(c.action_id, ActionState::Aborted as u32, cycle + 1)
+                    {
+                        stats.statuses_dropped += 1;
+                    }
+                }
+            }
+        })?;
+        Ok(())
+    }
+
+    /// Lets agents that said they leave go (see [`AgentReport::left`]).
+    fn handle_leaves(&mut self) {
+        for i in 0..self.leaving.len() {
+            let slot = self.leaving[i];
+            let s = &self.slots[slot];
+            let id = s.id;
+            self.backend.forget_connection(slot);
+            // An agent that never took part (or is out already) has nothing to leave.
+            let pending = self.barrier.leave(slot);
+            if !pending && (!s.seen || s.evicted) {
+                continue;
+            }
+            info!(agent = id, cycle = self.cycle, "agent left the session");
+            let s = &mut self.slots[slot];
+            s.evicted = true;
+            s.left = true;
+            s.left_in = Some(self.cycle);
+            s.seen = false;
+            // A new connection starts afresh, as after an eviction.
+            s.events.clear();
+            s.read_cycle = None;
+            self.stats.leaves += 1;
+        }
+        self.leaving.clear();
+    }
+
+    /// Evicts awaited agents that disconnected or whose process died; lets those that said
+    /// they leave go.
+    fn check_lost(&mut self, sync: bool, reap: bool) -> Result<(), HostCycleError> {
+        self.take_refusals();
+        self.handle_leaves();
+        self.dead.clear();
+        if reap {
+            self.backend.reap_dead_agents(&mut self.dead);
+        }
+        // Awaited agents that disconnected, and agents that left between cycles.
+        let mut disconnected = false;
+        for slot in 0..self.slots.len() {
+            let pending = self.barrier.outcome(slot) == AgentOutcome::TimedOut;
+            let known = pending || (self.slots[slot].seen && !self.slots[slot].evicted);
+            if known && !self.backend.is_connected(slot) && !self.dead.contains(&slot) {
+                self.dead.push(slot);
+                disconnected = true;
+            }
+        }
+        if disconnected {
+            // An agent that leaves sends its leave batch, then closes: the batch may have
+            // come in since the last drain. A leave is not a loss (a slot that left is out
+            // already, so the loop below passes it by).
+            self.drain(sync)?;
+            self.handle_leaves();
+        }
+        for i in 0..self.dead.len() {
+            let slot = self.dead[i];
+            let pending = self.barrier.evict(slot);
+            if pending || !self.slots[slot].evicted {
+                let id = self.slots[slot].id;
+                self.backend.forget_connection(slot);
+                warn!(
+                    agent = id,
+                    cycle = self.cycle,
+                    "agent lost (process died or disconnected): evicted"
+                );
+                self.slots[slot].evicted = true;
+                self.slots[slot].evicted_in = Some(self.cycle);
+                self.stats.evictions += 1;
+                self.slots[slot].seen = false;
+                // A process that rejoins starts afresh: its events were for the old one.
+                self.slots[slot].events.clear();
+                self.slots[slot].read_cycle = None;
+                if let Some(hook) = &mut self.evicted_hook {
+                    hook(id, self.cycle);
+                }
+                self.lost_this_cycle.push(slot);
+                if let Err(pos) = self.stats.evicted_agents.binary_search(&id) {
+                    self.stats.evicted_agents.insert(pos, id);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Drains batches and watches for lost agents until `until` — in sync mode only until
+    /// every awaited agent stopped; there `until` is the stop timeout, after which agents
+    /// with `wait_for_stop = "timeout"` are given up and the others waited for as long as
+    /// they are connected (reported as slow) — then applies `on_agent_lost`.
+    fn wait_cycle(&mut self, sync: bool, until: Instant) -> Result<(), HostCycleError> {
+        let started = Instant::now();
+        let timeout = until.saturating_duration_since(started);
+        let mut next_reap = started + REAP_PERIOD;
+        // Past the stop timeout (sync mode): when the next slow report is due.
+        let mut past_timeout = false;
+        let mut next_report = until;
+        let mut reports = 0u32;
+        self.lost_this_cycle.clear();
+        loop {
+            self.drain(sync)?;
+            let now = Instant::now();
+            let reap = now >= next_reap;
+            if reap {
+                next_reap = now + REAP_PERIOD;
+            }
+            self.check_lost(sync, reap)?;
+            if sync && self.barrier.is_complete() {
+                break;
+            }
+            let mut wake = until;
+            if now >= until {
+                if !sync {
+                    break;
+                }
+                if !past_timeout {
+                    past_timeout = true;
+                    for slot in 0..self.slots.len() {
+                        if self.slots[slot].wait_for_stop == WaitForStop::Timeout {
+                            self.barrier.give_up(slot);
+                        }
+                    }
+                    if self.barrier.is_complete() {
+                        break;
+                    }
+                }
+                if now >= next_report {
+                    self.report_slow(now.saturating_duration_since(started));
+                    reports = reports.saturating_add(1);
+                    // 1×, 2×, 4×, … the stop timeout into the cycle.
+                    next_report = started + timeout.saturating_mul(1u32 << reports.min(20));
+                }
+                wake = next_report;
+            }
+            self.backend
+                .wait_activity(wake.min(next_reap).saturating_duration_since(now))?;
+        }
+        self.handle_lost()
+    }
+
+    /// Reports every agent still awaited past the stop timeout (all have `wait_for_stop =
+    /// "alive"` and are connected: the lost ones were evicted) as slow.
+    fn report_slow(&mut self, waited: Duration) {
+        if (0..self.slots.len()).all(|slot| !self.barrier.is_slow(slot)) {
+            self.stats.slow_stops += 1;
+        }
+        for slot in 0..self.slots.len() {
+            if !self.barrier.is_pending(slot) {
+                continue;
+            }
+            self.barrier.mark_slow(slot);
+            let agent = self.slots[slot].id;
+            warn!(
+                agent,
+                cycle = self.cycle,
+                waited_s = waited.as_secs_f64(),
+                "agent is slow: still waiting for its stop past stop_timeout (it is alive; \
+                 wait_for_stop = \"alive\")"
+            );
+            if let Some(hook) = &mut self.slow_hook {
+                hook(agent, self.cycle, waited);
+            }
+        }
+    }
+
+    fn collect_sync(&mut self) -> Result<(), HostCycleError> {
+        self.wait_cycle(true, Instant::now() + self.config.sync.stop_timeout)?;
+        let mut timed_out = 0u64;
+        for (slot, a) in self.report.agents.iter_mut().enumerate() {
+            a.outcome = self.barrier.outcome(slot);
+            self.slots[slot].last_outcome = match a.outcome {
+                AgentOutcome::Stopped => WireOutcome::Stopped,
+                AgentOutcome::TimedOut => WireOutcome::TimedOut,
+                _ => WireOutcome::None,
+            };
+            if a.outcome == AgentOutcome::TimedOut {
+                timed_out += 1;
+            }
+        }
+        if timed_out > 0 {
+            self.report.timed_out = true;
+            self.stats.stop_timeouts += 1;
+            self.stats.agent_timeouts += timed_out;
+            let missing: Vec<u32> = self.report.timed_out_agents().collect();
+            warn!(
+                cycle = self.cycle,
+                ?missing,
+                timeout_s = self.config.sync.stop_timeout.as_secs_f64(),
+                "stop timeout: cycle ends without these agents"
+            );
+        }
+        Ok(())
+    }
+
+    /// Applies `on_agent_lost` to the agents lost this cycle.
+    fn handle_lost(&mut self) -> Result<(), HostCycleError> {
+        let Some(&slot) = self.lost_this_cycle.first() else {
+            return Ok(());
+        };
+        let agent = self.slots[slot].id;
+        match self.config.sync.on_agent_lost {
+            AgentLostPolicy::Evict => Ok(()),
+            AgentLostPolicy::Abort => Err(HostCycleError::AgentLost {
+                agent,
+                cycle: self.cycle,
+            }),
+            AgentLostPolicy::Wait => {
+                let timeout = self.config.sync.connect_timeout;
+                let started = Instant::now();
+                for i in 0..self.lost_this_cycle.len() {
+                    let slot = self.lost_this_cycle[i];
+                    let agent = self.slots[slot].id;
+                    warn!(
+                        agent,
+                        "pausing until the agent reconnects (on_agent_lost = \"wait\")"
+                    );
+                    while !self.backend.is_connected(slot) {
+                        let left = timeout.saturating_sub(started.elapsed());
+                        if left.is_zero() {
+                            return Err(HostCycleError::AgentNotBack {
+                                agent,
+                                waited: started.elapsed(),
+                            });
+                        }
+                        self.backend
+                            .wait_activity(left.min(Duration::from_secs(1)))?;
+                    }
+                }
+                self.backend.update_connections()?;
+                Ok(())
+            }
+        }
+    }
+
+    fn collect_async(&mut self) -> Result<(), HostCycleError> {
+        let period = self.config.sync.simulation_time_per_frame;
+        let now = Instant::now();
+        let tick = match self.next_tick {
+            // Keep a fixed rate; if we fell behind by more than a period, resynchronise
+            // instead of bursting to catch up.
+            Some(t) if t + period > now => t,
+            _ => now + period,
+        };
+        self.wait_cycle(false, tick)?;
+        self.next_tick = Some(tick + period);
+        for a in &mut self.report.agents {
+            a.outcome = AgentOutcome::Async;
+        }
+        Ok(())
+    }
+}
