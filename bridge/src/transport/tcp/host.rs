@@ -1,5 +1,5 @@
 //! The TCP transport's host side: listening, hellos, one record buffer per agent, one
-//! `poll(2)` over every socket.
+//! epoll set of every socket (its readiness descriptor).
 
 use super::*;
 use crate::rounded::Rounded;

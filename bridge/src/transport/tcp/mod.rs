@@ -12,8 +12,8 @@
 //! The host renders straight into a per-agent record buffer laid out exactly as it goes on
 //! the wire, and sends it with one write: no per-frame allocation, no extra copy. Sockets
 //! use `TCP_NODELAY`. Reads are bounded: a length beyond the peer's maximum is an error,
-//! never an allocation. The host never blocks on reading: it waits for readiness with
-//! `poll(2)` on all agent sockets at once.
+//! never an allocation. The host never blocks on reading: it waits for readiness on an
+//! epoll set of all its sockets at once.
 //!
 //! # What a hostile or broken peer costs the host
 //! Every record is read by a [`RecordReader`]: one buffer of the largest acceptable record,

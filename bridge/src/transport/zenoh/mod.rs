@@ -40,8 +40,9 @@
 //!
 //! # Waking
 //! Every callback (a batch, a token, a match) writes an `eventfd` that the host's (and
-//! agent's) wait polls: no polling loop, and a host serving shm and zenoh agents waits for
-//! both in one `poll(2)` ([`super::HostTransport::activity_fd`]).
+//! agent's) wait polls: no polling loop, and a host serving agents over several
+//! transports waits for all of them at once (the eventfd is zenoh's
+//! [`super::HostTransport::activity_fd`]).
 
 use std::os::fd::RawFd;
 use std::sync::{Arc, Mutex, MutexGuard};
