@@ -189,13 +189,12 @@ impl Shared {
                 ),
             ));
         };
+        // Only a connection whose token exists holds the id. Welcomed but no token yet: a
+        // hello of the same id is that agent asking again (its query timed out before the
+        // welcome reached it, as on a loaded machine), so it gets a new welcome and the
+        // earlier one is void (a token with the old nonce is not this connection).
         let s = &st.slots[slot];
-        let in_use = match s.admitted {
-            Some(_) if s.alive => true,
-            // Welcomed, token not seen yet: the id is taken until the token timeout.
-            Some((_, since)) => since.elapsed() < TOKEN_TIMEOUT,
-            None => false,
-        };
+        let in_use = s.admitted.is_some() && s.alive;
         if in_use {
             return Err((
                 reject::ID_IN_USE,

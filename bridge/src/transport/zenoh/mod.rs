@@ -61,9 +61,6 @@ pub use host::*;
 pub const MAX_QUEUED_BATCHES: usize = 256;
 /// Most batches handed to the sink per agent in one drain.
 pub const MAX_BATCHES_PER_DRAIN: usize = 256;
-/// How long an admitted agent may take to declare its liveliness token before its id is
-/// free again for another hello.
-pub const TOKEN_TIMEOUT: Duration = Duration::from_secs(5);
 /// Bytes of a welcome reply body: protocol version, layout hash, largest frame, nonce.
 pub const WELCOME_LEN: usize = 4 + 8 + 4 + 8;
 

@@ -253,6 +253,32 @@ fn garbage_and_oversized_hellos_are_refused() {
     pump(&mut host, "agent 0", |h| h.is_connected(0));
 }
 
+/// A hello whose welcome did not reach its agent in time (a loaded machine) is asked
+/// again: the id is not "in use" until a token exists, each hello gets a new welcome, and
+/// the agent that declares its token with the last nonce is the connection.
+#[test]
+fn a_repeated_hello_before_the_token_is_welcomed_again() {
+    let config = config(None);
+    let mut host = ZenohHost::create(&config, SignalHandling::Leave).unwrap();
+    let peer = raw_peer(&config);
+    let hello = Hello {
+        protocol_version: PROTOCOL_VERSION,
+        layout_hash: LAYOUT_HASH,
+        agent_id: 1,
+        token: Vec::new(),
+    };
+    let (first, body1) = raw_hello(&peer, host.keys(), encode_hello(&hello));
+    let (second, body2) = raw_hello(&peer, host.keys(), encode_hello(&hello));
+    assert_eq!((first, second), (reply::WELCOME, reply::WELCOME));
+    assert_ne!(body1, body2, "each welcome has its own nonce");
+    assert_eq!(host.stats().refused_id_in_use, 0);
+    let _a1 = agent(&config, 1, None).unwrap();
+    pump(&mut host, "agent 1", |h| h.is_connected(1));
+    // Once its token exists the id is taken.
+    let (third, _) = raw_hello(&peer, host.keys(), encode_hello(&hello));
+    assert_eq!(third, reply::REJECT);
+}
+
 #[test]
 fn an_id_in_use_is_refused_and_free_again_once_its_agent_left() {
     let config = config(None);
