@@ -7,6 +7,8 @@
 #                    0 timeouts, commands from both agents, both bodies moved
 #   4. TCP           the same console host over the TCP transport, 50 cycles
 #   5. stop timeout  agent 1 stops late once: a TimedOut outcome, no exception
+#   6. leave, slow   agent 0 leaves after 3 cycles (Left, Stats.Leaves), agent 1 busy past the
+#                    stop timeout under wait_for_stop = "alive" (Slow, Stats.SlowStops)
 # Needs: cargo, mcs, mono (apt-get install -y mono-mcs mono-runtime), a C compiler for 1.
 # Every process runs under `timeout`; children are killed on exit. Usage:
 #   bash bridge/bindings/csharp/test.sh
@@ -167,6 +169,7 @@ value() { sed -n "s/^$1=//p" "$work/summary.txt"; }
 [[ "$(value cycles)" == 100 ]] || fail "cycles=$(value cycles), expected 100"
 [[ "$(value stop_timeouts)" == 0 ]] || fail "stop_timeouts=$(value stop_timeouts), expected 0"
 [[ "$(value agent_timeouts)" == 0 ]] || fail "agent_timeouts=$(value agent_timeouts), expected 0"
+[[ "$(value leaves)" == 0 ]] || fail "leaves=$(value leaves), expected 0 (the agents stay until the host closes)"
 for id in 0 1; do
     n="$(value "agent${id}_commands")"
     ((n > 0)) || fail "no commands from agent $id"
@@ -223,5 +226,17 @@ timeout 90 mono --debug "$work/VrsyncTests.exe" stop-timeout "$work/late.toml" 2
 [[ ${PIPESTATUS[0]} == 0 ]] || fail "VrsyncTests.exe stop-timeout"
 expect_exit "$late_agent0" "vr-agent 0 (stop timeout)"
 expect_exit "$late_agent1" "vr-agent 1 (stop timeout)"
+
+step "6. leave and slow: agent 0 leaves after 3 cycles, agent 1 is busy in cycle 1"
+write_config "$work/leave.toml" "$session_base-leave" 0.4 alive
+agent leave "$work/leave.toml" 0 --frames 3
+leave_agent0=$agent_pid
+agent leave "$work/leave.toml" 1 --late-stop-at 1
+leave_agent1=$agent_pid
+timeout 90 mono --debug "$work/VrsyncTests.exe" leave-slow "$work/leave.toml" 2>&1 |
+    tee "$work/leave.log"
+[[ ${PIPESTATUS[0]} == 0 ]] || fail "VrsyncTests.exe leave-slow"
+expect_exit "$leave_agent0" "vr-agent 0 (leave after 3 frames)"
+expect_exit "$leave_agent1" "vr-agent 1 (slow once)"
 
 step "C# binding: all tests passed"

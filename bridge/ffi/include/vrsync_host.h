@@ -435,9 +435,18 @@ typedef struct vrs_host_cycle_t {
   // Agents evicted during this cycle (lost: process died or disconnected); which ones:
   // `evicted` in their reports.
   uint32_t evicted_agents;
-  // Agents that rejoined in this cycle (their first frame since an eviction reached
-  // them); which ones: `rejoined` in their reports.
+  // Agents that rejoined in this cycle (their first frame since an eviction or a leave
+  // reached them); which ones: `rejoined` in their reports.
   uint32_t rejoined_agents;
+  // Agents that left the session gracefully during this cycle (their SDK's `close()`
+  // said so: not a fault, not evicted, not timed out; the id is free for a new
+  // connection, which takes part from the next cycle); which ones: `left` in their
+  // reports.
+  uint32_t left_agents;
+  // Agents the host waited for past `stop_timeout` in this cycle (their
+  // `wait_for_stop` is `"alive"` and they stayed connected: busy, not lost; nothing was
+  // dropped); which ones: `slow` in their reports.
+  uint32_t slow_agents;
 } vrs_host_cycle_t;
 
 // A motor command as the agent sent it. `kind` is a `vrs_host_command_kind_t` value, or
@@ -476,8 +485,18 @@ typedef struct vrs_host_agent_report_t {
   int64_t read_cycle;
   // 1 if the agent was evicted during this cycle (also after its stop arrived), else 0.
   uint32_t evicted;
-  // 1 if the agent rejoined in this cycle, else 0.
+  // 1 if the agent rejoined in this cycle (its first frame since an eviction or a leave
+  // reached it), else 0.
   uint32_t rejoined;
+  // 1 if the agent left the session gracefully during this cycle (its SDK's `close()`
+  // said so: not a fault, not evicted; its id is free for a new connection, which takes
+  // part from the next cycle), else 0. If its stop had arrived first, `outcome` stays
+  // `VRS_HOST_OUTCOME_STOPPED`, else it is `VRS_HOST_OUTCOME_LEFT`.
+  uint32_t left;
+  // 1 if the host waited for the agent's stop past `stop_timeout` in this cycle (its
+  // `wait_for_stop` is `"alive"` and it stayed connected: a slow agent, reported, not
+  // timed out), else 0.
+  uint32_t slow;
 } vrs_host_agent_report_t;
 
 // Counters since the host was created.
@@ -500,7 +519,7 @@ typedef struct vrs_host_stats_t {
   uint64_t frames_undelivered;
   // Evictions (an agent evicted twice counts 2).
   uint64_t evictions;
-  // Times an evicted agent came back.
+  // Times an evicted agent, or one that left, came back.
   uint64_t rejoins;
   // Frames delivered to an agent.
   uint64_t frames_delivered;
@@ -512,6 +531,16 @@ typedef struct vrs_host_stats_t {
   uint64_t statuses_dropped;
   // Collisions dropped likewise (`VRS_HOST_MAX_COLLISIONS`).
   uint64_t collisions_dropped;
+  // Cycles in which the host waited past `stop_timeout` for an agent whose
+  // `wait_for_stop` is `"alive"` (it was busy, not lost: nothing was dropped). Not
+  // stop timeouts.
+  uint64_t slow_stops;
+  // Graceful leaves: an agent's SDK said it leaves (`close()`, drop). Not evictions,
+  // not timeouts.
+  uint64_t leaves;
+  // Peers refused or dropped before they were admitted as agents (garbage, a wrong
+  // token or protocol version, an unknown or taken id, a silent connection).
+  uint64_t peers_refused;
 } vrs_host_stats_t;
 
 #ifdef __cplusplus

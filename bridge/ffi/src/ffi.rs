@@ -547,6 +547,8 @@ fn agent_report(r: &ReportCopy) -> vrs_host_agent_report_t {
             .map_or(-1, |c| i64::try_from(c).unwrap_or(i64::MAX)),
         evicted: u32::from(r.evicted),
         rejoined: u32::from(r.rejoined),
+        left: u32::from(r.left),
+        slow: u32::from(r.slow),
     }
 }
 
@@ -627,6 +629,9 @@ fn stats_impl(host: *mut vrs_host_t, out_stats: *mut vrs_host_stats_t) -> Result
             frames_read: s.frames_read,
             statuses_dropped: s.statuses_dropped,
             collisions_dropped: s.collisions_dropped,
+            slow_stops: s.slow_stops,
+            leaves: s.leaves,
+            peers_refused: s.peers_refused,
         };
         // SAFETY: null or writable by the caller's contract.
         unsafe { write_required(out_stats, "out_stats", stats) }

@@ -269,6 +269,8 @@ pub(crate) struct ReportCopy {
     pub(crate) read_cycle: Option<u64>,
     pub(crate) evicted: bool,
     pub(crate) rejoined: bool,
+    pub(crate) left: bool,
+    pub(crate) slow: bool,
     pub(crate) commands: Vec<MotorCommand>,
 }
 
@@ -298,6 +300,8 @@ impl HostState {
                 read_cycle: None,
                 evicted: false,
                 rejoined: false,
+                left: false,
+                slow: false,
                 commands: Vec::with_capacity(cap),
             })
             .collect();
@@ -345,7 +349,7 @@ pub(crate) fn copy_report(
 ) -> vrs_host_cycle_t {
     let mut timed_out = 0u32;
     let mut commands = 0u32;
-    let (mut evicted, mut rejoined) = (0u32, 0u32);
+    let (mut evicted, mut rejoined, mut left, mut slow) = (0u32, 0u32, 0u32, 0u32);
     for (copy, agent) in reports.iter_mut().zip(report.agents()) {
         copy.agent_id = agent.agent_id;
         copy.outcome = outcome(agent.outcome);
@@ -353,7 +357,11 @@ pub(crate) fn copy_report(
         copy.evicted = agent.evicted;
         copy.rejoined = agent.rejoined;
         evicted += u32::from(agent.evicted);
+        copy.left = agent.left;
+        copy.slow = agent.slow;
         rejoined += u32::from(agent.rejoined);
+        left += u32::from(agent.left);
+        slow += u32::from(agent.slow);
         copy.commands.clear();
         copy.commands.extend_from_slice(agent.commands());
         commands = commands.saturating_add(copy.commands.len() as u32);
@@ -370,6 +378,8 @@ pub(crate) fn copy_report(
         command_count: commands,
         evicted_agents: evicted,
         rejoined_agents: rejoined,
+        left_agents: left,
+        slow_agents: slow,
     }
 }
 

@@ -126,6 +126,12 @@ fn version_status_names_and_sizes() {
     assert_eq!(name(12345), "VRS_HOST_UNKNOWN_STATUS");
     assert_eq!(vrs_host_sizeof_sensors(), 328);
     assert_eq!(vrs_host_sizeof_command(), 32);
+    assert_eq!(vrs_host_sizeof_cycle(), 48);
+    assert_eq!(
+        vrs_host_sizeof_agent_report(),
+        std::mem::size_of::<vrs_host_agent_report_t>()
+    );
+    assert_eq!(vrs_host_sizeof_stats(), 136);
     assert_eq!(
         vrs_host_sizeof_image(),
         std::mem::size_of::<vrs_host_image_t>()
@@ -493,6 +499,7 @@ fn cycles_through_the_c_abi_with_a_real_agent() {
             // The agent's stop acknowledged the frame it answered.
             assert_eq!((r.read_cycle, r.evicted, r.rejoined), (i64::from(n), 0, 0));
             assert_eq!((c.evicted_agents, c.rejoined_agents), (0, 0));
+            assert_eq!((c.left_agents, c.slow_agents, r.left, r.slow), (0, 0, 0, 0));
             let mut by_id = MaybeUninit::<vrs_host_agent_report_t>::uninit();
             assert_eq!(
                 vrs_host_agent_report_by_id(host, 0, by_id.as_mut_ptr()),
@@ -549,6 +556,7 @@ fn cycles_through_the_c_abi_with_a_real_agent() {
         assert_eq!((s.cycles, s.stop_timeouts, s.commands_received), (3, 0, 6));
         assert_eq!((s.frames_delivered, s.frames_read), (3, 3));
         assert_eq!((s.evictions, s.rejoins, s.statuses_dropped), (0, 0, 0));
+        assert_eq!((s.slow_stops, s.leaves, s.peers_refused), (0, 0, 0));
     }
     // SAFETY: a handle from create.
     assert_eq!(unsafe { vrs_host_destroy(host) }, VRS_HOST_OK);
@@ -676,6 +684,8 @@ fn missing_agents_and_stop_timeouts_are_outcomes_not_errors() {
             let r1 = report.assume_init();
             assert_eq!(r1.agent_id, 1);
             assert_eq!(r1.outcome, vrs_host_outcome_t::VRS_HOST_OUTCOME_TIMED_OUT);
+            // `wait_for_stop = "timeout"`: a timeout, not a slow agent.
+            assert_eq!((r1.slow, r1.left, c.slow_agents), (0, 0, 0));
             assert_eq!(vrs_host_end_cycle(host), VRS_HOST_OK);
         }
         // A discarded frame: the agent is not waited for.
@@ -697,9 +707,138 @@ fn missing_agents_and_stop_timeouts_are_outcomes_not_errors() {
         assert_eq!(vrs_host_stats(host, stats.as_mut_ptr()), VRS_HOST_OK);
         let s = stats.assume_init();
         assert_eq!((s.cycles, s.stop_timeouts, s.agent_timeouts), (3, 2, 2));
+        assert_eq!((s.slow_stops, s.leaves), (0, 0));
         assert_eq!(vrs_host_destroy(host), VRS_HOST_OK);
     }
     responsive.join().unwrap();
+}
+
+/// Loans and publishes a frame for every agent, starts the cycle and collects it.
+///
+/// # Safety
+/// `host` is a live handle of this thread.
+unsafe fn run_cycle(host: *mut vrs_host_t, agents: u32) -> vrs_host_cycle_t {
+    let mut cycle = MaybeUninit::<vrs_host_cycle_t>::uninit();
+    // SAFETY: the caller's contract; the out pointer is valid.
+    unsafe {
+        for id in 0..agents {
+            assert_eq!(vrs_host_loan_frame(host, id, ptr::null_mut()), VRS_HOST_OK);
+            assert_eq!(vrs_host_publish(host, id, ptr::null()), VRS_HOST_OK);
+        }
+        assert_eq!(vrs_host_start(host), VRS_HOST_OK);
+        assert_eq!(
+            vrs_host_collect(host, cycle.as_mut_ptr()),
+            VRS_HOST_OK,
+            "{}",
+            last_error()
+        );
+        cycle.assume_init()
+    }
+}
+
+/// The report of agent `id` in the collected cycle.
+///
+/// # Safety
+/// `host` is a live handle of this thread, its cycle collected.
+unsafe fn report_of(host: *mut vrs_host_t, id: u32) -> vrs_host_agent_report_t {
+    let mut report = MaybeUninit::<vrs_host_agent_report_t>::uninit();
+    // SAFETY: the caller's contract; the out pointer is valid.
+    unsafe {
+        assert_eq!(
+            vrs_host_agent_report_by_id(host, id, report.as_mut_ptr()),
+            VRS_HOST_OK
+        );
+        report.assume_init()
+    }
+}
+
+#[test]
+fn leaves_and_slow_agents_are_reported_and_counted() {
+    let dir = tempfile::tempdir().unwrap();
+    // The default `wait_for_stop = "alive"`: the host waits past stop_timeout for a live
+    // agent and reports it slow.
+    let stop_timeout = Duration::from_millis(500);
+    let path = write_config(dir.path(), "leave", 2, stop_timeout.as_secs_f64());
+    let host = create(&path);
+    // Agent 1 stops cycle 0, reads cycle 1 and closes without stopping it.
+    let leaving_path = path.clone();
+    let leaving = std::thread::spawn(move || {
+        let mut agent = connect_agent(&leaving_path, 1);
+        drop(agent.wait_start(Some(Duration::from_secs(5))).unwrap());
+        agent.stop().unwrap();
+        let frame = agent.wait_start(Some(Duration::from_secs(5))).unwrap();
+        assert_eq!(frame.cycle(), 1);
+        drop(frame);
+        agent.close();
+    });
+    // Agent 0 stops every cycle; in cycle 2 it computes for 2 stop timeouts first.
+    let busy_path = path.clone();
+    let busy = std::thread::spawn(move || {
+        let mut agent = connect_agent(&busy_path, 0);
+        for n in 0..4u64 {
+            let frame = agent.wait_start(Some(Duration::from_secs(5))).unwrap();
+            assert_eq!(frame.cycle(), n);
+            drop(frame);
+            if n == 2 {
+                // Simulated compute time (a learner's update), not synchronisation.
+                std::thread::sleep(stop_timeout * 2);
+            }
+            agent.stop().unwrap();
+        }
+        wait_for_close(&mut agent);
+    });
+    // SAFETY: every pointer below is valid for its use.
+    unsafe {
+        assert_eq!(
+            vrs_host_wait_for_agents(host, 5000, ptr::null_mut(), 0, ptr::null_mut()),
+            VRS_HOST_OK,
+            "{}",
+            last_error()
+        );
+        let c = run_cycle(host, 2);
+        assert_eq!((c.cycle, c.left_agents, c.slow_agents), (0, 0, 0));
+        assert_eq!(vrs_host_end_cycle(host), VRS_HOST_OK);
+
+        // Cycle 1: agent 1 leaves instead of stopping: neither slow nor timed out.
+        let c = run_cycle(host, 2);
+        assert_eq!((c.cycle, c.left_agents, c.slow_agents), (1, 1, 0));
+        assert_eq!((c.timed_out_agents, c.evicted_agents), (0, 0));
+        let r1 = report_of(host, 1);
+        assert_eq!(r1.outcome, vrs_host_outcome_t::VRS_HOST_OUTCOME_LEFT);
+        assert_eq!((r1.left, r1.slow, r1.evicted), (1, 0, 0));
+        let r0 = report_of(host, 0);
+        assert_eq!(r0.outcome, vrs_host_outcome_t::VRS_HOST_OUTCOME_STOPPED);
+        assert_eq!((r0.left, r0.slow), (0, 0));
+        assert_eq!(vrs_host_end_cycle(host), VRS_HOST_OK);
+        leaving.join().unwrap();
+
+        // Cycle 2: agent 0 is busy for 2 stop timeouts: waited for, reported slow.
+        let c = run_cycle(host, 2);
+        assert_eq!((c.cycle, c.left_agents, c.slow_agents), (2, 0, 1));
+        assert_eq!(c.timed_out_agents, 0);
+        let r0 = report_of(host, 0);
+        assert_eq!(r0.outcome, vrs_host_outcome_t::VRS_HOST_OUTCOME_STOPPED);
+        assert_eq!((r0.slow, r0.left, r0.read_cycle), (1, 0, 2));
+        let r1 = report_of(host, 1);
+        assert_eq!(r1.outcome, vrs_host_outcome_t::VRS_HOST_OUTCOME_NOT_AWAITED);
+        assert_eq!((r1.left, r1.slow), (0, 0), "a leave is reported once");
+        assert_eq!(vrs_host_end_cycle(host), VRS_HOST_OK);
+
+        // Cycle 3: an ordinary cycle again.
+        let c = run_cycle(host, 2);
+        assert_eq!((c.cycle, c.left_agents, c.slow_agents), (3, 0, 0));
+        assert_eq!(report_of(host, 0).slow, 0);
+        assert_eq!(vrs_host_end_cycle(host), VRS_HOST_OK);
+
+        let mut stats = MaybeUninit::<vrs_host_stats_t>::uninit();
+        assert_eq!(vrs_host_stats(host, stats.as_mut_ptr()), VRS_HOST_OK);
+        let s = stats.assume_init();
+        assert_eq!(s.cycles, 4);
+        assert_eq!((s.leaves, s.slow_stops, s.peers_refused), (1, 1, 0));
+        assert_eq!((s.evictions, s.stop_timeouts, s.agent_timeouts), (0, 0, 0));
+        assert_eq!(vrs_host_destroy(host), VRS_HOST_OK);
+    }
+    busy.join().unwrap();
 }
 
 #[test]

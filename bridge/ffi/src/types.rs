@@ -456,9 +456,18 @@ pub struct vrs_host_cycle_t {
     /// Agents evicted during this cycle (lost: process died or disconnected); which ones:
     /// `evicted` in their reports.
     pub evicted_agents: u32,
-    /// Agents that rejoined in this cycle (their first frame since an eviction reached
-    /// them); which ones: `rejoined` in their reports.
+    /// Agents that rejoined in this cycle (their first frame since an eviction or a leave
+    /// reached them); which ones: `rejoined` in their reports.
     pub rejoined_agents: u32,
+    /// Agents that left the session gracefully during this cycle (their SDK's `close()`
+    /// said so: not a fault, not evicted, not timed out; the id is free for a new
+    /// connection, which takes part from the next cycle); which ones: `left` in their
+    /// reports.
+    pub left_agents: u32,
+    /// Agents the host waited for past `stop_timeout` in this cycle (their
+    /// `wait_for_stop` is `"alive"` and they stayed connected: busy, not lost; nothing was
+    /// dropped); which ones: `slow` in their reports.
+    pub slow_agents: u32,
 }
 
 /// A motor command as the agent sent it. `kind` is a `vrs_host_command_kind_t` value, or
@@ -501,8 +510,18 @@ pub struct vrs_host_agent_report_t {
     pub read_cycle: i64,
     /// 1 if the agent was evicted during this cycle (also after its stop arrived), else 0.
     pub evicted: u32,
-    /// 1 if the agent rejoined in this cycle, else 0.
+    /// 1 if the agent rejoined in this cycle (its first frame since an eviction or a leave
+    /// reached it), else 0.
     pub rejoined: u32,
+    /// 1 if the agent left the session gracefully during this cycle (its SDK's `close()`
+    /// said so: not a fault, not evicted; its id is free for a new connection, which takes
+    /// part from the next cycle), else 0. If its stop had arrived first, `outcome` stays
+    /// `VRS_HOST_OUTCOME_STOPPED`, else it is `VRS_HOST_OUTCOME_LEFT`.
+    pub left: u32,
+    /// 1 if the host waited for the agent's stop past `stop_timeout` in this cycle (its
+    /// `wait_for_stop` is `"alive"` and it stayed connected: a slow agent, reported, not
+    /// timed out), else 0.
+    pub slow: u32,
 }
 
 /// Counters since the host was created.
@@ -527,7 +546,7 @@ pub struct vrs_host_stats_t {
     pub frames_undelivered: u64,
     /// Evictions (an agent evicted twice counts 2).
     pub evictions: u64,
-    /// Times an evicted agent came back.
+    /// Times an evicted agent, or one that left, came back.
     pub rejoins: u64,
     /// Frames delivered to an agent.
     pub frames_delivered: u64,
@@ -539,6 +558,16 @@ pub struct vrs_host_stats_t {
     pub statuses_dropped: u64,
     /// Collisions dropped likewise (`VRS_HOST_MAX_COLLISIONS`).
     pub collisions_dropped: u64,
+    /// Cycles in which the host waited past `stop_timeout` for an agent whose
+    /// `wait_for_stop` is `"alive"` (it was busy, not lost: nothing was dropped). Not
+    /// stop timeouts.
+    pub slow_stops: u64,
+    /// Graceful leaves: an agent's SDK said it leaves (`close()`, drop). Not evictions,
+    /// not timeouts.
+    pub leaves: u64,
+    /// Peers refused or dropped before they were admitted as agents (garbage, a wrong
+    /// token or protocol version, an unknown or taken id, a silent connection).
+    pub peers_refused: u64,
 }
 
 // The command array of a report is the host's `[MotorCommand]`, handed out as is.
@@ -553,6 +582,19 @@ const _: () = {
     // Sizes the C# binding mirrors (64-bit targets; the pointer structs differ on 32-bit).
     assert!(size_of::<vrs_host_sensors_t>() == 328);
     assert!(size_of::<vrs_host_command_t>() == 32);
-    assert!(size_of::<vrs_host_cycle_t>() == 40);
-    assert!(size_of::<vrs_host_stats_t>() == 112);
+    assert!(size_of::<vrs_host_cycle_t>() == 48);
+    assert!(size_of::<vrs_host_stats_t>() == 136);
+    // Fields are only ever appended: the offsets of the first ABI's fields stay put.
+    assert!(offset_of!(vrs_host_cycle_t, rejoined_agents) == 36);
+    assert!(offset_of!(vrs_host_cycle_t, left_agents) == 40);
+    assert!(offset_of!(vrs_host_stats_t, collisions_dropped) == 104);
+    assert!(offset_of!(vrs_host_stats_t, slow_stops) == 112);
+};
+
+// The report holds a pointer: these hold on 64-bit targets, which the C# binding mirrors.
+#[cfg(target_pointer_width = "64")]
+const _: () = {
+    assert!(size_of::<vrs_host_agent_report_t>() == 48);
+    assert!(offset_of!(vrs_host_agent_report_t, rejoined) == 36);
+    assert!(offset_of!(vrs_host_agent_report_t, left) == 40);
 };

@@ -347,6 +347,8 @@ namespace Vrsync.Examples
                 Console.WriteLine("cycles=" + stats.Cycles);
                 Console.WriteLine("stop_timeouts=" + stats.StopTimeouts);
                 Console.WriteLine("agent_timeouts=" + stats.AgentTimeouts);
+                Console.WriteLine("slow_stops=" + stats.SlowStops);
+                Console.WriteLine("leaves=" + stats.Leaves);
                 Console.WriteLine("late_batches=" + stats.LateBatches);
                 Console.WriteLine("commands_received=" + stats.CommandsReceived);
                 Console.WriteLine("commands_applied=" + driver.CommandsApplied);

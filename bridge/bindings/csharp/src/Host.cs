@@ -229,12 +229,22 @@ namespace Vrsync
         /// <summary>The agent was evicted during this cycle (process died or disconnected),
         /// also when its stop had arrived first.</summary>
         public readonly bool Evicted;
-        /// <summary>The agent rejoined in this cycle (its first frame since an
-        /// eviction).</summary>
+        /// <summary>The agent rejoined in this cycle (its first frame since an eviction or
+        /// a leave).</summary>
         public readonly bool Rejoined;
         /// <summary>The newest cycle whose frame the agent acknowledged having read, -1
         /// before its first acknowledgement (and after an eviction).</summary>
         public readonly long ReadCycle;
+        /// <summary>The agent left the session gracefully during this cycle (its SDK's
+        /// <c>close()</c> said so): not a fault, not evicted; its id is free for a new
+        /// connection, which takes part from the next cycle. If its stop had arrived first,
+        /// <see cref="Outcome"/> stays <see cref="AgentOutcome.Stopped"/>, else it is
+        /// <see cref="AgentOutcome.Left"/>.</summary>
+        public readonly bool Left;
+        /// <summary>The host waited for the agent's stop past the stop timeout in this cycle
+        /// (its <c>wait_for_stop</c> is <c>"alive"</c> and it stayed connected): a slow
+        /// agent, reported, not timed out.</summary>
+        public readonly bool Slow;
 
         internal unsafe AgentReport(NativeStructs.AgentReport r)
         {
@@ -246,13 +256,15 @@ namespace Vrsync
             Evicted = r.Evicted != 0;
             Rejoined = r.Rejoined != 0;
             ReadCycle = r.ReadCycle;
+            Left = r.Left != 0;
+            Slow = r.Slow != 0;
         }
 
         /// <summary>A copy of everything but the commands: a plain struct that may be kept,
         /// stored or captured in a lambda.</summary>
         public AgentSummary Summary
         {
-            get { return new AgentSummary(AgentId, Outcome, Commands.Length, Evicted, Rejoined, ReadCycle); }
+            get { return new AgentSummary(AgentId, Outcome, Commands.Length, Evicted, Rejoined, ReadCycle, Left, Slow); }
         }
     }
 
@@ -273,8 +285,20 @@ namespace Vrsync
         public readonly bool Rejoined;
         /// <summary>See <see cref="AgentReport.ReadCycle"/>.</summary>
         public readonly long ReadCycle;
+        /// <summary>See <see cref="AgentReport.Left"/>.</summary>
+        public readonly bool Left;
+        /// <summary>See <see cref="AgentReport.Slow"/>.</summary>
+        public readonly bool Slow;
 
+        /// <summary>A summary that neither left nor was slow (the constructor before
+        /// <see cref="Left"/> and <see cref="Slow"/> existed).</summary>
         public AgentSummary(uint agentId, AgentOutcome outcome, int commandCount, bool evicted, bool rejoined, long readCycle)
+            : this(agentId, outcome, commandCount, evicted, rejoined, readCycle, false, false)
+        {
+        }
+
+        public AgentSummary(uint agentId, AgentOutcome outcome, int commandCount, bool evicted, bool rejoined, long readCycle,
+            bool left, bool slow)
         {
             AgentId = agentId;
             Outcome = outcome;
@@ -282,12 +306,14 @@ namespace Vrsync
             Evicted = evicted;
             Rejoined = rejoined;
             ReadCycle = readCycle;
+            Left = left;
+            Slow = slow;
         }
 
         public override string ToString()
         {
-            return string.Format("agent {0}: {1}, {2} commands{3}{4}", AgentId, Outcome, CommandCount,
-                Evicted ? ", evicted" : "", Rejoined ? ", rejoined" : "");
+            return string.Format("agent {0}: {1}, {2} commands{3}{4}{5}{6}", AgentId, Outcome, CommandCount,
+                Evicted ? ", evicted" : "", Rejoined ? ", rejoined" : "", Left ? ", left" : "", Slow ? ", slow" : "");
         }
     }
 

@@ -487,9 +487,18 @@ namespace Vrsync
         /// <summary>Agents evicted during this cycle (process died or disconnected); which
         /// ones: <see cref="AgentReport.Evicted"/>.</summary>
         public uint EvictedAgents;
-        /// <summary>Agents that rejoined in this cycle; which ones:
-        /// <see cref="AgentReport.Rejoined"/>.</summary>
+        /// <summary>Agents that rejoined in this cycle (their first frame since an eviction
+        /// or a leave reached them); which ones: <see cref="AgentReport.Rejoined"/>.</summary>
         public uint RejoinedAgents;
+        /// <summary>Agents that left the session gracefully during this cycle (their SDK's
+        /// <c>close()</c> said so: not a fault, not evicted, not timed out; the id is free
+        /// for a new connection, which takes part from the next cycle); which ones:
+        /// <see cref="AgentReport.Left"/>.</summary>
+        public uint LeftAgents;
+        /// <summary>Agents the host waited for past the stop timeout in this cycle (their
+        /// <c>wait_for_stop</c> is <c>"alive"</c> and they stayed connected: busy, not lost;
+        /// nothing was dropped); which ones: <see cref="AgentReport.Slow"/>.</summary>
+        public uint SlowAgents;
 
         /// <summary>Simulated time of the cycle that ended, seconds.</summary>
         public double SimTime
@@ -512,7 +521,7 @@ namespace Vrsync
         public ulong FramesUndelivered;
         /// <summary>Evictions (an agent evicted twice counts 2).</summary>
         public ulong Evictions;
-        /// <summary>Times an evicted agent came back.</summary>
+        /// <summary>Times an evicted agent, or one that left, came back.</summary>
         public ulong Rejoins;
         /// <summary>Frames delivered to an agent.</summary>
         public ulong FramesDelivered;
@@ -525,6 +534,17 @@ namespace Vrsync
         public ulong StatusesDropped;
         /// <summary>Collisions dropped likewise.</summary>
         public ulong CollisionsDropped;
+        /// <summary>Cycles in which the host waited past the stop timeout for an agent whose
+        /// <c>wait_for_stop</c> is <c>"alive"</c> (it was busy, not lost: nothing was
+        /// dropped). Not stop timeouts.</summary>
+        public ulong SlowStops;
+        /// <summary>Graceful leaves: an agent's SDK said it leaves (<c>close()</c>, drop).
+        /// Not evictions, not timeouts.</summary>
+        public ulong Leaves;
+        /// <summary>Peers refused or dropped before they were admitted as agents (garbage, a
+        /// wrong token or protocol version, an unknown or taken id, a silent
+        /// connection).</summary>
+        public ulong PeersRefused;
     }
 
     /// <summary>The raw C structs the public types are built from.</summary>
@@ -572,6 +592,8 @@ namespace Vrsync
             public long ReadCycle;
             public uint Evicted;
             public uint Rejoined;
+            public uint Left;
+            public uint Slow;
         }
     }
 

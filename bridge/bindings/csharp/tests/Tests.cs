@@ -3,6 +3,7 @@
 //   VrsyncTests.exe layout                  sizes, offsets and constants, C# side
 //   VrsyncTests.exe api CONFIG              API, errors, missing agent 1 (agent 0 runs)
 //   VrsyncTests.exe stop-timeout CONFIG     agent 1 stops late once: an outcome, not an exception
+//   VrsyncTests.exe leave-slow CONFIG       agent 0 leaves after 3 cycles, agent 1 is slow in cycle 1
 // Prints "ok <check>" lines; exits 1 with "FAIL <why>" on the first failed check.
 
 using System;
@@ -22,8 +23,9 @@ static class Tests
                 case "layout": Layout(); break;
                 case "api": Api(args[1]); break;
                 case "stop-timeout": StopTimeout(args[1]); break;
+                case "leave-slow": LeaveSlow(args[1]); break;
                 default:
-                    Console.Error.WriteLine("usage: VrsyncTests.exe layout | api CONFIG | stop-timeout CONFIG");
+                    Console.Error.WriteLine("usage: VrsyncTests.exe layout | api CONFIG | stop-timeout CONFIG | leave-slow CONFIG");
                     return 2;
             }
             return 0;
@@ -90,12 +92,12 @@ static class Tests
         "vrs_host_info_t", typeof(HostInfo),
             "cycle=Cycle sim_time_ns=SimTimeNs simulation_time_per_frame_ns=SimulationTimePerFrameNs stop_timeout_ns=StopTimeoutNs connect_timeout_ns=ConnectTimeoutNs agent_count=AgentCount sync_mode=SyncMode transport=Transport tcp_port=TcpPort max_commands_per_cycle=MaxCommandsPerCycle protocol_version=ProtocolVersion",
         "vrs_host_cycle_t", typeof(CycleResult),
-            "cycle=Cycle sim_time_ns=SimTimeNs agent_count=AgentCount timed_out_agents=TimedOutAgents late_batches=LateBatches command_count=CommandCount evicted_agents=EvictedAgents rejoined_agents=RejoinedAgents",
+            "cycle=Cycle sim_time_ns=SimTimeNs agent_count=AgentCount timed_out_agents=TimedOutAgents late_batches=LateBatches command_count=CommandCount evicted_agents=EvictedAgents rejoined_agents=RejoinedAgents left_agents=LeftAgents slow_agents=SlowAgents",
         "vrs_host_command_t", typeof(MotorCommand), "kind=Kind action_id=ActionId object_id=ObjectId reserved=reserved args=Arg0",
         "vrs_host_agent_report_t", typeof(NativeStructs.AgentReport),
-            "agent_id=AgentId outcome=Outcome command_count=CommandCount reserved=Reserved commands=Commands read_cycle=ReadCycle evicted=Evicted rejoined=Rejoined",
+            "agent_id=AgentId outcome=Outcome command_count=CommandCount reserved=Reserved commands=Commands read_cycle=ReadCycle evicted=Evicted rejoined=Rejoined left=Left slow=Slow",
         "vrs_host_stats_t", typeof(HostStats),
-            "cycles=Cycles stop_timeouts=StopTimeouts agent_timeouts=AgentTimeouts late_batches=LateBatches future_batches=FutureBatches commands_received=CommandsReceived commands_overflowed=CommandsOverflowed frames_undelivered=FramesUndelivered evictions=Evictions rejoins=Rejoins frames_delivered=FramesDelivered frames_read=FramesRead statuses_dropped=StatusesDropped collisions_dropped=CollisionsDropped",
+            "cycles=Cycles stop_timeouts=StopTimeouts agent_timeouts=AgentTimeouts late_batches=LateBatches future_batches=FutureBatches commands_received=CommandsReceived commands_overflowed=CommandsOverflowed frames_undelivered=FramesUndelivered evictions=Evictions rejoins=Rejoins frames_delivered=FramesDelivered frames_read=FramesRead statuses_dropped=StatusesDropped collisions_dropped=CollisionsDropped slow_stops=SlowStops leaves=Leaves peers_refused=PeersRefused",
     };
 
     static string Snake(string pascal)
@@ -276,6 +278,7 @@ static class Tests
             }
             Equal((long)n, r0.ReadCycle, "agent 0 acknowledged the frame it answered");
             Expect(!r0.Evicted && !r0.Rejoined, "agent 0 neither evicted nor rejoined");
+            Expect(!r0.Left && !r0.Slow, "agent 0 neither left nor slow");
             AgentReport r1 = host.GetReport(1);
             Equal(1u, r1.AgentId, "agent 1 id");
             Equal(AgentOutcome.NotAwaited, r1.Outcome, "agent 1 (not connected) is not awaited");
@@ -288,9 +291,11 @@ static class Tests
             AgentSummary summary = host.GetSummary(0);
             Func<AgentSummary> captured = () => summary; // a summary may be captured
             Equal(r0.Commands.Length, captured().CommandCount, "summary command count");
+            Expect(!captured().Left && !captured().Slow, "summary: neither left nor slow");
             Equal(AgentOutcome.Stopped, captured().Outcome, "summary outcome");
             Throws(Status.UnknownAgent, () => host.GetReportById(9), "report of an unknown id");
             Equal(0u, cycle.EvictedAgents + cycle.RejoinedAgents, "no evictions or rejoins");
+            Equal(0u, cycle.LeftAgents + cycle.SlowAgents, "no leaves or slow agents");
             Throws(Status.WrongState, () => host.LoanFrame(0), "loan before end cycle");
             host.SetRejected(0, 0);
             host.EndCycle();
@@ -309,6 +314,9 @@ static class Tests
         Equal(3ul, stats.FramesDelivered, "frames for agent 0 delivered");
         Equal(3ul, stats.FramesRead, "frames agent 0 acknowledged");
         Equal(0ul, stats.Evictions + stats.Rejoins, "no evictions or rejoins");
+        Equal(0ul, stats.SlowStops, "stats slow stops");
+        Equal(0ul, stats.Leaves, "stats leaves");
+        Equal(0ul, stats.PeersRefused, "stats peers refused");
         Ok("3 cycles: agent 0 stopped, agent 1 not awaited; images through spans");
 
         // Discard: the agent is not waited for.
@@ -399,5 +407,65 @@ static class Tests
                 stats.StopTimeouts, stats.AgentTimeouts, stats.LateBatches));
         }
         Ok("stop-timeout: a late agent is an outcome in its report, not an exception");
+    }
+
+    // ---------------------------------------------------------------------------------
+    // leave-slow: wait_for_stop = "alive"; agent 0 (vr-agent --frames 3) stops cycles 0..2
+    // and leaves; agent 1 (--late-stop-at 1) computes 1.5 stop timeouts in cycle 1.
+
+    static void LeaveSlow(string config)
+    {
+        using (var host = new Host(config))
+        {
+            host.WaitForAgents(20);
+            const int cycles = 6;
+            int leftIn = -1;
+            for (int n = 0; n < cycles; n++)
+            {
+                for (uint id = 0; id < 2; id++)
+                {
+                    SensorFrame frame = host.LoanFrame(id);
+                    for (int i = 0; i < frame.ImageCount; i++)
+                        frame.GetImage(i).Pixels.Fill(128);
+                    Sensors sensors = Sensors.Create();
+                    frame.Publish(ref sensors);
+                }
+                host.Start();
+                CycleResult cycle = host.Collect();
+                AgentReport r0 = host.GetReportById(0);
+                AgentReport r1 = host.GetReportById(1);
+                Console.Error.WriteLine(string.Format("cycle {0}: {1}; {2}; left {3}, slow {4}",
+                    cycle.Cycle, r0.Summary, r1.Summary, cycle.LeftAgents, cycle.SlowAgents));
+                Equal(0u, cycle.TimedOutAgents, "timed-out agents in cycle " + n);
+                Equal(0u, cycle.EvictedAgents, "evicted agents in cycle " + n);
+                // The leave comes after the stop of cycle 2: with it, or in cycle 3.
+                if (r0.Left)
+                {
+                    Equal(-1, leftIn, "agent 0 leaves once");
+                    leftIn = n;
+                    Expect(r0.Summary.Left, "the summary carries Left");
+                    Equal(n == 2 ? AgentOutcome.Stopped : AgentOutcome.Left, r0.Outcome, "agent 0 outcome as it leaves");
+                }
+                Equal(r0.Left ? 1u : 0u, cycle.LeftAgents, "left agents in cycle " + n);
+                Equal(n == 1, r1.Slow, "agent 1 slow in cycle " + n);
+                Equal(n == 1 ? 1u : 0u, cycle.SlowAgents, "slow agents in cycle " + n);
+                Expect(!r0.Slow && !r1.Left, "agent 0 never slow, agent 1 never leaves");
+                Equal(AgentOutcome.Stopped, r1.Outcome, "agent 1 in cycle " + n);
+                if (n > 3)
+                    Equal(AgentOutcome.NotAwaited, r0.Outcome, "agent 0 is gone in cycle " + n);
+                host.EndCycle();
+            }
+            Expect(leftIn == 2 || leftIn == 3, "agent 0 left in cycle 2 or 3, not " + leftIn);
+            Expect(!host.IsConnected(0), "agent 0 is not connected after its leave");
+            HostStats stats = host.Stats;
+            Console.Error.WriteLine(string.Format("leaves={0} slow_stops={1} stop_timeouts={2} evictions={3} peers_refused={4}",
+                stats.Leaves, stats.SlowStops, stats.StopTimeouts, stats.Evictions, stats.PeersRefused));
+            Equal(1ul, stats.Leaves, "stats leaves");
+            Equal(1ul, stats.SlowStops, "stats slow stops");
+            Equal(0ul, stats.StopTimeouts + stats.AgentTimeouts, "stats timeouts");
+            Equal(0ul, stats.Evictions, "stats evictions");
+            Equal(0ul, stats.PeersRefused, "stats peers refused");
+        }
+        Ok("leave-slow: a graceful leave and a slow agent in the reports and the stats");
     }
 }

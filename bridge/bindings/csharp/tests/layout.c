@@ -93,6 +93,8 @@ int main(void) {
     F(vrs_host_cycle_t, command_count);
     F(vrs_host_cycle_t, evicted_agents);
     F(vrs_host_cycle_t, rejoined_agents);
+    F(vrs_host_cycle_t, left_agents);
+    F(vrs_host_cycle_t, slow_agents);
     S(vrs_host_command_t);
     F(vrs_host_command_t, kind);
     F(vrs_host_command_t, action_id);
@@ -108,6 +110,8 @@ int main(void) {
     F(vrs_host_agent_report_t, read_cycle);
     F(vrs_host_agent_report_t, evicted);
     F(vrs_host_agent_report_t, rejoined);
+    F(vrs_host_agent_report_t, left);
+    F(vrs_host_agent_report_t, slow);
     S(vrs_host_stats_t);
     F(vrs_host_stats_t, cycles);
     F(vrs_host_stats_t, stop_timeouts);
@@ -123,6 +127,9 @@ int main(void) {
     F(vrs_host_stats_t, frames_read);
     F(vrs_host_stats_t, statuses_dropped);
     F(vrs_host_stats_t, collisions_dropped);
+    F(vrs_host_stats_t, slow_stops);
+    F(vrs_host_stats_t, leaves);
+    F(vrs_host_stats_t, peers_refused);
 
     E(VRS_HOST_OK);
     E(VRS_HOST_TIMEOUT);
