@@ -1,0 +1,128 @@
+//! Writing a config back as TOML (the effective config handed to spawned agents): one
+//! writer per section, in the order of `config/default.toml`.
+
+use std::fmt::Write;
+
+use super::{AgentConfig, AgentLostPolicy, Config, SyncConfig, TransportConfig, WaitMode};
+
+impl Config {
+    /// The config as TOML again (for handing the effective config to spawned agents).
+    pub fn to_toml_string(&self) -> String {
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "# effective vrsync config (generated from {})",
+            self.source.display().to_string().escape_debug()
+        );
+        let _ = writeln!(s, "session = {:?}\nseed = {}", self.session, self.seed);
+        write_sync(&mut s, &self.sync);
+        write_transport(&mut s, &self.transport);
+        for a in &self.agents {
+            write_agent(&mut s, a);
+        }
+        if let Some(world) = &self.world {
+            let mut doc = toml::Table::new();
+            doc.insert("world".into(), toml::Value::Table(world.clone()));
+            if let Ok(text) = toml::to_string(&doc) {
+                let _ = writeln!(s, "\n{text}");
+            }
+        }
+        s
+    }
+}
+
+/// `[sync]`.
+fn write_sync(s: &mut String, sync: &SyncConfig) {
+    let _ = writeln!(
+        s,
+        "\n[sync]\nsync_mode = {}\nsimulation_time_per_frame = {:?}\nstop_timeout = {:?}\nconnect_timeout = {:?}\nwait = {:?}\nspin_before_block_us = {}\non_agent_lost = {:?}",
+        sync.sync_mode,
+        sync.simulation_time_per_frame.as_secs_f64(),
+        sync.stop_timeout.as_secs_f64(),
+        sync.connect_timeout.as_secs_f64(),
+        match sync.wait {
+            WaitMode::Block => "block",
+            WaitMode::Spin => "spin",
+        },
+        sync.spin_before_block.as_micros(),
+        match sync.on_agent_lost {
+            AgentLostPolicy::Evict => "evict",
+            AgentLostPolicy::Wait => "wait",
+            AgentLostPolicy::Abort => "abort",
+        }
+    );
+    if let Some(w) = sync.wait_for_stop {
+        let _ = writeln!(s, "wait_for_stop = {:?}", w.as_str());
+    }
+}
+
+/// `[transport]`, `[transport.legacy]` and `[transport.zenoh]`.
+fn write_transport(s: &mut String, transport: &TransportConfig) {
+    let _ = writeln!(
+        s,
+        "\n[transport]\nkind = {:?}\ntcp_listen = \"{}\"\nmax_commands_per_cycle = {}",
+        transport.kind.as_str(),
+        transport.tcp_listen,
+        transport.max_commands_per_cycle
+    );
+    if let Some(token) = &transport.tcp_token {
+        let _ = writeln!(s, "tcp_token = {}", toml_string(token));
+    }
+    let l = &transport.legacy;
+    let _ = writeln!(
+        s,
+        "\n[transport.legacy]\nlocal_port = {}\nbind = \"{}\"\ndialect = {:?}\npng_compression = {:?}\nsend_eye_position = {}\nsend_head_motion = {}",
+        l.local_port,
+        l.bind,
+        l.dialect.as_str(),
+        l.png_compression.as_str(),
+        l.send_eye_position,
+        l.send_head_motion
+    );
+    let z = &transport.zenoh;
+    let list = |l: &[String]| {
+        l.iter()
+            .map(|e| toml_string(e))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let _ = writeln!(
+        s,
+        "\n[transport.zenoh]\nlisten = [{}]\nconnect = [{}]\nlease = {:?}\nscouting = {}",
+        list(&z.listen),
+        list(&z.connect),
+        z.lease.as_secs_f64(),
+        z.scouting
+    );
+    if let Some(token) = &z.token {
+        let _ = writeln!(s, "token = {}", toml_string(token));
+    }
+}
+
+/// One `[[agent]]` with its `[[agent.camera]]` entries.
+fn write_agent(s: &mut String, a: &AgentConfig) {
+    let _ = writeln!(
+        s,
+        "\n[[agent]]\nid = {}\ntransport = {:?}\nwait_for_stop = {:?}",
+        a.id,
+        a.transport.as_str(),
+        a.wait_for_stop.as_str()
+    );
+    for c in &a.cameras {
+        let _ = writeln!(
+            s,
+            "[[agent.camera]]\nname = {}\nwidth = {}\nheight = {}\nformat = {:?}\nfov_horizontal_deg = {:?}\nfov_vertical_deg = {:?}",
+            toml_string(&c.name),
+            c.width_px,
+            c.height_px,
+            c.format.as_str(),
+            f64::from(c.fov_horizontal_deg),
+            f64::from(c.fov_vertical_deg)
+        );
+    }
+}
+
+/// `s` as a TOML string value. (Rust's `{:?}` is not TOML: it writes `\u{7f}`.)
+fn toml_string(s: &str) -> String {
+    toml::Value::String(s.to_string()).to_string()
+}

@@ -1,0 +1,582 @@
+//! Configuration: TOML → typed, validated [`Config`].
+//!
+//! Every key is documented in `config/default.toml`. Unknown keys, wrong types and
+//! invalid values are rejected with a [`ConfigLoadError`] that names the file, the line
+//! and the key. The original system's names `SyncMode` and `SimulationTimePerFrame` are
+//! accepted as aliases.
+//!
+//! The file is read into `raw` (serde structs, every key optional), checked section by
+//! section in `checks` (defaults, ranges, file:line:key errors), and written back by
+//! `emit` ([`Config::to_toml_string`]).
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use serde::Deserialize;
+
+use crate::wire::{ImageDesc, MAX_CAMERAS, PixelFormat};
+
+mod checks;
+mod emit;
+mod raw;
+#[cfg(test)]
+mod tests;
+
+use checks::{Ctx, valid_session};
+
+/// Default of `[sync] spin_before_block_us`.
+pub const DEFAULT_SPIN_BEFORE_BLOCK_US: u64 = 50;
+
+/// Highest agent id accepted (ids are also iceoryx2 event ids).
+pub const MAX_AGENT_ID: u32 = 250;
+/// Largest accepted image side in pixels.
+pub const MAX_IMAGE_SIDE_PX: u32 = 8192;
+/// Largest config file [`Config::load`] reads, bytes.
+pub const MAX_CONFIG_BYTES: u64 = 4 << 20;
+
+/// Transport selected by `[transport] kind`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum TransportKind {
+    /// iceoryx2 shared memory (default).
+    #[default]
+    Shm,
+    /// TCP, the measured baseline.
+    Tcp,
+    /// The original system's protobuf/TCP protocol, for agents written for it
+    /// (`[transport.legacy]`; see [`crate::legacy`]).
+    Legacy,
+    /// zenoh, for agents on other machines (`[transport.zenoh]`).
+    Zenoh,
+}
+
+impl TransportKind {
+    /// Every transport, in the order above (the test matrix and the docs take it from
+    /// here; a unit test with an exhaustive match keeps it complete).
+    pub const ALL: [TransportKind; 4] = [Self::Shm, Self::Tcp, Self::Legacy, Self::Zenoh];
+
+    /// The config spelling.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Shm => "shm",
+            Self::Tcp => "tcp",
+            Self::Legacy => "legacy",
+            Self::Zenoh => "zenoh",
+        }
+    }
+}
+
+/// How waiting parties wait (`[sync] wait`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum WaitMode {
+    /// Sleep on the event until woken (default): no CPU while waiting.
+    #[default]
+    Block,
+    /// Busy-poll: lowest latency, one core per waiting process. Only sensible when there
+    /// are at least as many free cores as waiting processes.
+    Spin,
+}
+
+/// What the host does when an agent's process dies or disconnects (`[sync] on_agent_lost`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum AgentLostPolicy {
+    /// Stop waiting for it at once and go on with the others; it may rejoin (default).
+    #[default]
+    Evict,
+    /// Pause the simulation until it reconnects (up to `connect_timeout`).
+    Wait,
+    /// End the run with an error naming the agent.
+    Abort,
+}
+
+/// How long the host waits for an agent's stop in sync mode (`[sync] wait_for_stop`,
+/// per agent `[[agent]] wait_for_stop`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum WaitForStop {
+    /// Wait as long as the agent is alive (its transport still has it connected): a busy
+    /// agent (a learner updating, a debugger) never costs a stop timeout. Past
+    /// `stop_timeout` it is reported as slow (a warning with back-off, counted in
+    /// `HostStats::slow_stops`); a dead one is evicted by liveness (default).
+    #[default]
+    Alive,
+    /// End the cycle without the agent after `stop_timeout` (the original system's
+    /// behaviour): counted as a stop timeout, its late stop is dropped.
+    Timeout,
+}
+
+impl WaitForStop {
+    /// The policy of an agent on `transport` that does not choose its own, given
+    /// `[sync] wait_for_stop` (`None`: not set): `[sync]`'s, else `Alive`, except on the
+    /// legacy transport, whose clients (written for the original system) may block on an
+    /// action's end before they stop and so rely on the stop timeout: `Timeout` there.
+    pub fn default_for(sync: Option<WaitForStop>, transport: TransportKind) -> Self {
+        match (sync, transport) {
+            (Some(w), _) => w,
+            (None, TransportKind::Legacy) => Self::Timeout,
+            (None, _) => Self::Alive,
+        }
+    }
+
+    /// The config spelling.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Alive => "alive",
+            Self::Timeout => "timeout",
+        }
+    }
+}
+
+/// One camera of an agent.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CameraConfig {
+    /// Name (≤ 16 bytes), e.g. `left`, `right`, `main`.
+    pub name: String,
+    /// Width in pixels.
+    pub width_px: u32,
+    /// Height in pixels (given, or derived from the fields of view).
+    pub height_px: u32,
+    /// Pixel format.
+    pub format: PixelFormat,
+    /// Horizontal field of view in degrees.
+    pub fov_horizontal_deg: f32,
+    /// Vertical field of view in degrees.
+    pub fov_vertical_deg: f32,
+}
+
+impl CameraConfig {
+    /// Bytes per row.
+    pub fn stride_bytes(&self) -> usize {
+        self.width_px as usize * self.format.bytes_per_pixel()
+    }
+
+    /// Bytes of one image.
+    pub fn image_bytes(&self) -> usize {
+        self.stride_bytes() * self.height_px as usize
+    }
+}
+
+/// One agent: its id and cameras.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AgentConfig {
+    /// Agent id (`0..=250`).
+    pub id: u32,
+    /// The transport this agent uses (`[[agent]] transport`, default `[transport] kind`).
+    pub transport: TransportKind,
+    /// How long the host waits for this agent's stop (`[[agent]] wait_for_stop`, default
+    /// `[sync] wait_for_stop`): resolved, so this is the agent's effective policy.
+    pub wait_for_stop: WaitForStop,
+    /// Cameras, in image order.
+    pub cameras: Vec<CameraConfig>,
+}
+
+impl AgentConfig {
+    /// The image table of this agent's sensor frames and their payload size in bytes
+    /// (see [`crate::wire::image_layout`]).
+    pub fn image_layout(&self) -> ([ImageDesc; MAX_CAMERAS], usize) {
+        crate::wire::image_layout(
+            self.cameras
+                .iter()
+                .map(|c| (c.name.as_str(), c.width_px, c.height_px, c.format)),
+        )
+    }
+
+    /// Bytes of all images of one sensor frame of this agent.
+    pub fn frame_bytes(&self) -> usize {
+        self.image_layout().1
+    }
+}
+
+/// `[sync]` section.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SyncConfig {
+    /// Lock-step mode (`sync_mode`, alias `SyncMode`).
+    pub sync_mode: bool,
+    /// Simulated time per cycle (`simulation_time_per_frame`, alias `SimulationTimePerFrame`).
+    pub simulation_time_per_frame: Duration,
+    /// How long the host waits for all stops of a cycle (`stop_timeout`).
+    pub stop_timeout: Duration,
+    /// How long the host waits for agents to connect, and agents for the host (`connect_timeout`).
+    pub connect_timeout: Duration,
+    /// Block on events or busy-poll (`wait`).
+    pub wait: WaitMode,
+    /// In block mode, how long to poll before going to sleep (`spin_before_block_us`).
+    pub spin_before_block: Duration,
+    /// What to do when an agent is lost (`on_agent_lost`).
+    pub on_agent_lost: AgentLostPolicy,
+    /// How long to wait for a stop, for agents that do not choose (`wait_for_stop`;
+    /// `None`: not set, see [`WaitForStop::default_for`]).
+    pub wait_for_stop: Option<WaitForStop>,
+}
+
+impl SyncConfig {
+    /// The poll-before-sleep time to use with `agents` agents: `spin_before_block`, or zero
+    /// when the host and the agents together outnumber the cores (polling would then steal
+    /// the CPU from the process that has work to do).
+    pub fn effective_spin_before_block(&self, agents: usize) -> Duration {
+        let cores = std::thread::available_parallelism().map_or(1, usize::from);
+        if agents + 1 > cores {
+            Duration::ZERO
+        } else {
+            self.spin_before_block
+        }
+    }
+}
+
+/// `[transport]` section.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TransportConfig {
+    /// Which transport.
+    pub kind: TransportKind,
+    /// TCP listen address of the host (and the address agents connect to).
+    pub tcp_listen: SocketAddr,
+    /// Most commands an agent may send in one cycle.
+    pub max_commands_per_cycle: u32,
+    /// Shared secret TCP agents must present in their hello (`tcp_token`); `None`: none.
+    pub tcp_token: Option<String>,
+    /// `[transport.zenoh]`.
+    pub zenoh: ZenohConfig,
+    /// `[transport.legacy]`: the original system's protocol.
+    pub legacy: LegacyConfig,
+}
+
+/// Which generation of the original protocol a legacy agent speaks
+/// (`[transport.legacy] dialect`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum LegacyDialect {
+    /// Told from each connection's version check (default).
+    #[default]
+    Auto,
+    /// The older (Python 2) clients: version check in field 28.
+    Vrnew,
+    /// The later (Python 3) client: version check in field 29, a third "main" image.
+    Burkhardt,
+}
+
+impl LegacyDialect {
+    /// The config spelling.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::Vrnew => "vrnew",
+            Self::Burkhardt => "burkhardt",
+        }
+    }
+}
+
+/// PNG compression of the legacy transport's images (`[transport.legacy] png_compression`),
+/// the `png` crate's levels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum PngCompression {
+    /// The fastest (default): the images are encoded every cycle.
+    #[default]
+    Fastest,
+    /// Fast, a better ratio.
+    Fast,
+    /// Balanced.
+    Balanced,
+    /// Smallest, slowest.
+    High,
+}
+
+impl PngCompression {
+    /// The config spelling.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Fastest => "fastest",
+            Self::Fast => "fast",
+            Self::Balanced => "balanced",
+            Self::High => "high",
+        }
+    }
+}
+
+/// `[transport.legacy]` section: the original system's protobuf/TCP protocol.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LegacyConfig {
+    /// The environment socket's port (`local_port`, alias `LocalPort`); agent `id` listens
+    /// on `local_port + 1 + id`. Default 1337.
+    pub local_port: u16,
+    /// The address the sockets bind to (`bind`). Default loopback.
+    pub bind: std::net::IpAddr,
+    /// The dialect (`dialect`). Default auto.
+    pub dialect: LegacyDialect,
+    /// PNG compression (`png_compression`). Default fastest.
+    pub png_compression: PngCompression,
+    /// Send EyePosition every cycle (`send_eye_position`). Default false, as the original.
+    pub send_eye_position: bool,
+    /// Send HeadMotion every cycle (`send_head_motion`). Default false, as the original.
+    pub send_head_motion: bool,
+}
+
+impl Default for LegacyConfig {
+    fn default() -> Self {
+        Self {
+            local_port: 1337,
+            bind: std::net::IpAddr::from([127, 0, 0, 1]),
+            dialect: LegacyDialect::Auto,
+            png_compression: PngCompression::Fastest,
+            send_eye_position: false,
+            send_head_motion: false,
+        }
+    }
+}
+
+/// Default of `[transport.zenoh] listen` and `connect`.
+pub const DEFAULT_ZENOH_ENDPOINT: &str = "tcp/127.0.0.1:7447";
+
+/// `[transport.zenoh]` section: how the host and its zenoh agents find each other.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ZenohConfig {
+    /// Endpoints the host listens on (`listen`), e.g. `tcp/0.0.0.0:7447`.
+    pub listen: Vec<String>,
+    /// Endpoints agents connect to (`connect`; default: `listen`).
+    pub connect: Vec<String>,
+    /// How long a silent link lives before zenoh closes it (`lease`): bounds how fast a
+    /// pulled cable evicts an agent, and how fast an agent notices its host is gone.
+    pub lease: Duration,
+    /// Multicast and gossip scouting (`scouting`; default off: only explicit endpoints).
+    pub scouting: bool,
+    /// Shared secret zenoh agents present in their hello (`token`); `None`: none.
+    pub token: Option<String>,
+}
+
+impl Default for ZenohConfig {
+    fn default() -> Self {
+        Self {
+            listen: vec![DEFAULT_ZENOH_ENDPOINT.into()],
+            connect: vec![DEFAULT_ZENOH_ENDPOINT.into()],
+            lease: Duration::from_secs(2),
+            scouting: false,
+            token: None,
+        }
+    }
+}
+
+/// The validated configuration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Config {
+    /// Where it was loaded from (`<embedded>` for built-in configs).
+    pub source: PathBuf,
+    /// Session name: prefixes every service (`vrsync/<session>/…`).
+    pub session: String,
+    /// Seed of every random choice in the simulator.
+    pub seed: u64,
+    /// `[sync]`.
+    pub sync: SyncConfig,
+    /// `[transport]`.
+    pub transport: TransportConfig,
+    /// `[[agent]]` entries, sorted by id.
+    pub agents: Vec<AgentConfig>,
+    /// The `[world]` table, left to the simulator to interpret.
+    pub world: Option<toml::Table>,
+}
+
+/// Why a configuration could not be loaded.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ConfigLoadError {
+    /// The file could not be read.
+    #[error("cannot read config file {path}: {error}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error (in the message, so not also a `source()`: printed once).
+        error: std::io::Error,
+    },
+    /// TOML syntax error, unknown key or wrong type.
+    #[error("{path}:{line}:{column}: {message} (at key `{key}`)")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: usize,
+        /// 1-based column.
+        column: usize,
+        /// Dotted key at that line (table header + key), `?` if none.
+        key: String,
+        /// What the TOML parser said (names the key).
+        message: String,
+    },
+    /// A value is out of range or inconsistent.
+    #[error("{path}:{line}: invalid `{key}`: {reason}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line of the value.
+        line: usize,
+        /// Dotted key, e.g. `sync.stop_timeout`.
+        key: String,
+        /// Why it is invalid.
+        reason: String,
+    },
+}
+
+/// The built-in default configuration (`config/default.toml`).
+pub const DEFAULT_CONFIG_TOML: &str = include_str!("../../../config/default.toml");
+
+impl Config {
+    /// Loads and validates a config file.
+    ///
+    /// # Errors
+    /// [`ConfigLoadError`] naming the file, line and key.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, ConfigLoadError> {
+        use std::io::Read;
+        let path = path.as_ref();
+        let read = |error| ConfigLoadError::Read {
+            path: path.to_path_buf(),
+            error,
+        };
+        // Bounded: a wrong path (a device, a huge file) fails at once instead of filling
+        // memory.
+        let mut text = String::new();
+        std::fs::File::open(path)
+            .and_then(|f| f.take(MAX_CONFIG_BYTES + 1).read_to_string(&mut text))
+            .map_err(read)?;
+        if text.len() as u64 > MAX_CONFIG_BYTES {
+            return Err(read(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!(
+                    "larger than {} MiB: not a vrsync config",
+                    MAX_CONFIG_BYTES >> 20
+                ),
+            )));
+        }
+        Self::from_toml_str(&text, path)
+    }
+
+    /// The embedded default configuration.
+    ///
+    /// # Errors
+    /// Only if the embedded file is broken, which a unit test rules out.
+    pub fn embedded_default() -> Result<Self, ConfigLoadError> {
+        Self::from_toml_str(DEFAULT_CONFIG_TOML, Path::new("<embedded default.toml>"))
+    }
+
+    /// Parses and validates TOML text; `path` is used in error messages.
+    ///
+    /// # Errors
+    /// [`ConfigLoadError`] naming the file, line and key.
+    pub fn from_toml_str(text: &str, path: &Path) -> Result<Self, ConfigLoadError> {
+        let ctx = Ctx { path, text };
+        let raw = ctx.parse()?;
+        let session = ctx.session(raw.session)?;
+        let sync = ctx.sync(raw.sync)?;
+        let transport = ctx.transport(raw.transport)?;
+        let agents = ctx.agents(raw.agent, &sync, transport.kind)?;
+        Ok(Self {
+            source: path.to_path_buf(),
+            session,
+            seed: raw.seed,
+            sync,
+            transport,
+            agents,
+            world: raw.world,
+        })
+    }
+
+    /// The agent with this id.
+    pub fn agent(&self, id: u32) -> Option<&AgentConfig> {
+        self.agents.iter().find(|a| a.id == id)
+    }
+
+    /// The effective `wait_for_stop` of agent `id`: its `[[agent]] wait_for_stop`, else
+    /// `[sync] wait_for_stop`, else `"alive"` (`"timeout"` for legacy agents; see
+    /// [`WaitForStop::default_for`]); for an id not in the config, what an agent on
+    /// `[transport] kind` would get.
+    pub fn wait_for_stop(&self, id: u32) -> WaitForStop {
+        self.agent(id).map_or_else(
+            || WaitForStop::default_for(self.sync.wait_for_stop, self.transport.kind),
+            |a| a.wait_for_stop,
+        )
+    }
+
+    /// Whether the host may wait for a stop without limit in this session (sync mode and
+    /// some agent's `wait_for_stop = "alive"`): then an agent waiting for its next frame
+    /// must not give up after a time derived from `stop_timeout`, since another agent may
+    /// be busy for longer (host death is detected by liveness instead).
+    pub fn waits_for_live_agents(&self) -> bool {
+        self.sync.sync_mode
+            && self
+                .agents
+                .iter()
+                .any(|a| a.wait_for_stop == WaitForStop::Alive)
+    }
+
+    /// Resizes the agent list to `count` agents with ids `0..count`: existing entries keep
+    /// their cameras, new ones copy the cameras of the last configured agent. Used by
+    /// `--agents` / `--spawn-agents`.
+    ///
+    /// # Errors
+    /// [`ConfigLoadError::Invalid`] if `count` is 0 or larger than the id space.
+    pub fn with_agent_count(mut self, count: u32) -> Result<Self, ConfigLoadError> {
+        if count == 0 || count > MAX_AGENT_ID + 1 {
+            return Err(ConfigLoadError::Invalid {
+                path: self.source.clone(),
+                line: 1,
+                key: "agent".into(),
+                reason: format!(
+                    "agent count must be 1..={}, found {count}",
+                    MAX_AGENT_ID + 1
+                ),
+            });
+        }
+        let template = self
+            .agents
+            .last()
+            .map(|a| a.cameras.clone())
+            .unwrap_or_default();
+        let mut agents = Vec::with_capacity(count as usize);
+        for id in 0..count {
+            let (cameras, transport, wait_for_stop) = self.agent(id).map_or_else(
+                || {
+                    (
+                        template.clone(),
+                        self.transport.kind,
+                        WaitForStop::default_for(self.sync.wait_for_stop, self.transport.kind),
+                    )
+                },
+                |a| (a.cameras.clone(), a.transport, a.wait_for_stop),
+            );
+            agents.push(AgentConfig {
+                id,
+                transport,
+                wait_for_stop,
+                cameras,
+            });
+        }
+        self.agents = agents;
+        Ok(self)
+    }
+
+    /// Replaces the session name.
+    ///
+    /// # Errors
+    /// [`ConfigLoadError::Invalid`] if the name is not 1 to 64 characters from
+    /// `A-Z a-z 0-9 - _ .`.
+    pub fn with_session(mut self, session: &str) -> Result<Self, ConfigLoadError> {
+        if !valid_session(session) {
+            return Err(ConfigLoadError::Invalid {
+                path: self.source.clone(),
+                line: 1,
+                key: "session".into(),
+                reason: format!("{session:?}: use 1 to 64 characters from A-Z a-z 0-9 - _ ."),
+            });
+        }
+        self.session = session.to_string();
+        Ok(self)
+    }
+}
+
+/// Image height from width and fields of view, as the original system computed it:
+/// `H = round(W · tan(fov_v/2) / tan(fov_h/2))` (256 px at 120°×90° → 148 px).
+pub fn derived_height(width_px: u32, fov_h_deg: f64, fov_v_deg: f64) -> u32 {
+    let h = f64::from(width_px) * (fov_v_deg.to_radians() / 2.0).tan()
+        / (fov_h_deg.to_radians() / 2.0).tan();
+    (h.round() as u32).clamp(1, MAX_IMAGE_SIDE_PX)
+}

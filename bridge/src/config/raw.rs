@@ -1,0 +1,103 @@
+//! The config file as serde reads it: every key optional (defaults are applied by the
+//! checks), unknown keys rejected, values kept with their spans for error lines.
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use super::{AgentLostPolicy, LegacyDialect, PngCompression, TransportKind, WaitForStop, WaitMode};
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawConfig {
+    pub(super) session: Option<Spanned<String>>,
+    #[serde(default)]
+    pub(super) seed: u64,
+    #[serde(default)]
+    pub(super) sync: Option<RawSync>,
+    #[serde(default)]
+    pub(super) transport: Option<RawTransport>,
+    #[serde(default)]
+    pub(super) agent: Vec<Spanned<RawAgent>>,
+    #[serde(default)]
+    pub(super) world: Option<toml::Table>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawSync {
+    #[serde(alias = "SyncMode")]
+    pub(super) sync_mode: Option<bool>,
+    #[serde(alias = "SimulationTimePerFrame")]
+    pub(super) simulation_time_per_frame: Option<Spanned<f64>>,
+    #[serde(alias = "SyncModeFrameTimeOut")]
+    pub(super) stop_timeout: Option<Spanned<f64>>,
+    pub(super) connect_timeout: Option<Spanned<f64>>,
+    pub(super) wait: Option<WaitMode>,
+    pub(super) spin_before_block_us: Option<Spanned<i64>>,
+    pub(super) on_agent_lost: Option<AgentLostPolicy>,
+    pub(super) wait_for_stop: Option<WaitForStop>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawTransport {
+    pub(super) kind: Option<TransportKind>,
+    pub(super) tcp_listen: Option<Spanned<String>>,
+    pub(super) max_commands_per_cycle: Option<Spanned<i64>>,
+    pub(super) tcp_token: Option<Spanned<String>>,
+    pub(super) legacy: Option<RawLegacy>,
+    pub(super) zenoh: Option<RawZenoh>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawLegacy {
+    #[serde(alias = "LocalPort")]
+    pub(super) local_port: Option<Spanned<i64>>,
+    pub(super) bind: Option<Spanned<String>>,
+    pub(super) dialect: Option<LegacyDialect>,
+    pub(super) png_compression: Option<PngCompression>,
+    pub(super) send_eye_position: Option<bool>,
+    pub(super) send_head_motion: Option<bool>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawZenoh {
+    pub(super) listen: Option<Spanned<Vec<String>>>,
+    pub(super) connect: Option<Spanned<Vec<String>>>,
+    pub(super) lease: Option<Spanned<f64>>,
+    pub(super) scouting: Option<bool>,
+    pub(super) token: Option<Spanned<String>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawAgent {
+    pub(super) id: Spanned<i64>,
+    pub(super) transport: Option<TransportKind>,
+    pub(super) wait_for_stop: Option<WaitForStop>,
+    #[serde(default)]
+    pub(super) camera: Vec<Spanned<RawCamera>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawCamera {
+    pub(super) name: Spanned<String>,
+    pub(super) width: Spanned<i64>,
+    pub(super) height: Option<Spanned<i64>>,
+    #[serde(default)]
+    pub(super) format: Option<Spanned<String>>,
+    #[serde(default = "default_fov_h")]
+    pub(super) fov_horizontal_deg: Spanned<f64>,
+    #[serde(default = "default_fov_v")]
+    pub(super) fov_vertical_deg: Spanned<f64>,
+}
+
+fn default_fov_h() -> Spanned<f64> {
+    Spanned::new(0..0, 120.0)
+}
+fn default_fov_v() -> Spanned<f64> {
+    Spanned::new(0..0, 90.0)
+}

@@ -1,0 +1,229 @@
+//! Unit tests of loading, checking and writing configs.
+
+use super::*;
+
+fn parse(text: &str) -> Result<Config, ConfigLoadError> {
+    Config::from_toml_str(text, Path::new("test.toml"))
+}
+
+const MINIMAL: &str = "session = \"t\"\n[[agent]]\nid = 0\n";
+
+#[test]
+fn transport_kind_all_lists_every_transport_once() {
+    // Exhaustive: a new variant does not compile here until it is counted.
+    let index = |k: TransportKind| match k {
+        TransportKind::Shm => 0,
+        TransportKind::Tcp => 1,
+        TransportKind::Legacy => 2,
+        TransportKind::Zenoh => 3,
+    };
+    let found: Vec<usize> = TransportKind::ALL.into_iter().map(index).collect();
+    assert_eq!(found, (0..TransportKind::ALL.len()).collect::<Vec<_>>());
+}
+
+#[test]
+fn embedded_default_matches_the_documented_defaults() {
+    let c = Config::embedded_default().unwrap();
+    assert_eq!(c.agents.len(), 2);
+    assert!(c.sync.sync_mode);
+    assert_eq!(c.sync.simulation_time_per_frame, Duration::from_millis(100));
+    assert_eq!(c.sync.stop_timeout, Duration::from_secs(5));
+    assert_eq!(c.transport.kind, TransportKind::Shm);
+    for a in &c.agents {
+        assert_eq!(a.cameras.len(), 2);
+        for cam in &a.cameras {
+            assert_eq!((cam.width_px, cam.height_px), (256, 148));
+            assert_eq!(cam.format, PixelFormat::Rgb8);
+        }
+    }
+}
+
+#[test]
+fn the_legacy_section_takes_the_original_key_and_round_trips() {
+    let c = parse(MINIMAL).unwrap();
+    assert_eq!(c.transport.legacy, LegacyConfig::default());
+    assert_eq!(c.transport.legacy.local_port, 1337);
+    assert!(c.transport.legacy.bind.is_loopback());
+    let c = parse(
+        "[transport.legacy]\nLocalPort = 2000\ndialect = \"burkhardt\"\npng_compression = \"fast\"\nbind = \"0.0.0.0\"\n[[agent]]\nid = 3\ntransport = \"legacy\"\n",
+    )
+    .unwrap();
+    let l = &c.transport.legacy;
+    assert_eq!(l.local_port, 2000);
+    assert_eq!(l.dialect, LegacyDialect::Burkhardt);
+    assert_eq!(l.png_compression, PngCompression::Fast);
+    assert_eq!(c.agents[0].transport, TransportKind::Legacy);
+    let back = parse(&c.to_toml_string()).unwrap();
+    assert_eq!(back.transport, c.transport);
+    assert_eq!(back.agents, c.agents);
+    // The agent ports must fit: local_port + 1 + 250 <= 65535.
+    let err = parse("[transport.legacy]\nlocal_port = 65300\n[[agent]]\nid = 0\n").unwrap_err();
+    assert!(
+        err.to_string().contains("transport.legacy.local_port"),
+        "{err}"
+    );
+    let err = parse("[transport.legacy]\nbind = \"localhost:1\"\n[[agent]]\nid = 0\n").unwrap_err();
+    assert!(err.to_string().contains("transport.legacy.bind"), "{err}");
+    assert!(parse("[transport.legacy]\nport = 1\n[[agent]]\nid = 0\n").is_err());
+}
+
+#[test]
+fn each_agent_has_a_transport_defaulting_to_the_kind() {
+    let text = "session = \"t\"\n[transport]\nkind = \"tcp\"\n\
+                [[agent]]\nid = 0\ntransport = \"shm\"\n[[agent]]\nid = 1\n";
+    let c = parse(text).unwrap();
+    assert_eq!(c.agents[0].transport, TransportKind::Shm);
+    assert_eq!(c.agents[1].transport, TransportKind::Tcp);
+    // The effective config keeps each agent's choice, and resizing keeps it too.
+    let again = parse(&c.to_toml_string()).unwrap();
+    assert_eq!(again.agents, c.agents);
+    let more = c.with_agent_count(3).unwrap();
+    let kinds: Vec<_> = more.agents.iter().map(|a| a.transport).collect();
+    assert_eq!(
+        kinds,
+        [TransportKind::Shm, TransportKind::Tcp, TransportKind::Tcp]
+    );
+    let err = parse("[[agent]]\nid = 0\ntransport = \"carrier-pigeon\"\n").unwrap_err();
+    assert!(err.to_string().contains("transport"), "{err}");
+}
+
+#[test]
+fn wait_for_stop_defaults_to_alive_and_each_agent_may_override_it() {
+    let c = parse(MINIMAL).unwrap();
+    assert_eq!(c.sync.wait_for_stop, None);
+    assert_eq!(c.wait_for_stop(0), WaitForStop::Alive);
+    assert!(c.waits_for_live_agents());
+    let text = "session = \"t\"\n[sync]\nwait_for_stop = \"timeout\"\n[[agent]]\nid = 0\n\
+                [[agent]]\nid = 1\nwait_for_stop = \"alive\"\n";
+    let c = parse(text).unwrap();
+    assert_eq!(c.sync.wait_for_stop, Some(WaitForStop::Timeout));
+    assert_eq!(c.wait_for_stop(0), WaitForStop::Timeout);
+    assert_eq!(c.wait_for_stop(1), WaitForStop::Alive);
+    assert_eq!(
+        c.wait_for_stop(9),
+        WaitForStop::Timeout,
+        "not an agent: the default"
+    );
+    assert!(c.waits_for_live_agents());
+    // Round trip, and agents added by a count take the [sync] default.
+    let again = parse(&c.to_toml_string()).unwrap();
+    assert_eq!(again.wait_for_stop(1), WaitForStop::Alive);
+    let grown = c.with_agent_count(3).unwrap();
+    assert_eq!(grown.wait_for_stop(2), WaitForStop::Timeout);
+    let all_timeout = parse(&text.replace("\"alive\"", "\"timeout\"")).unwrap();
+    assert!(!all_timeout.waits_for_live_agents());
+    // Legacy agents (original clients may block on an action's end before stopping)
+    // default to "timeout", unless [sync] or the agent says otherwise.
+    let legacy = "session = \"t\"\n[[agent]]\nid = 0\ntransport = \"legacy\"\n[[agent]]\nid = 1\n";
+    let c = parse(legacy).unwrap();
+    assert_eq!(c.wait_for_stop(0), WaitForStop::Timeout);
+    assert_eq!(c.wait_for_stop(1), WaitForStop::Alive);
+    let c = parse(&legacy.replace(
+        "session = \"t\"\n",
+        "session = \"t\"\n[sync]\nwait_for_stop = \"alive\"\n",
+    ))
+    .unwrap();
+    assert_eq!(c.wait_for_stop(0), WaitForStop::Alive);
+    expect_err(
+        "[sync]\nwait_for_stop = \"forever\"\n[[agent]]\nid = 0\n",
+        2,
+        "sync.wait_for_stop",
+    );
+}
+
+#[test]
+fn original_names_are_aliases() {
+    let c = parse("[sync]\nSyncMode = false\nSimulationTimePerFrame = 0.05\n[[agent]]\nid = 0\n")
+        .unwrap();
+    assert!(!c.sync.sync_mode);
+    assert_eq!(c.sync.simulation_time_per_frame, Duration::from_millis(50));
+}
+
+#[test]
+fn derived_height_matches_the_original() {
+    assert_eq!(derived_height(256, 120.0, 90.0), 148);
+    assert_eq!(derived_height(512, 120.0, 90.0), 296);
+    assert_eq!(derived_height(1024, 120.0, 90.0), 591);
+}
+
+fn expect_err(text: &str, line: usize, needle: &str) {
+    let e = parse(text).unwrap_err();
+    let msg = e.to_string();
+    assert!(msg.contains("test.toml"), "{msg}");
+    assert!(msg.contains(needle), "expected {needle:?} in {msg}");
+    match e {
+        ConfigLoadError::Parse { line: l, .. } | ConfigLoadError::Invalid { line: l, .. } => {
+            assert_eq!(l, line, "{msg}")
+        }
+        other => panic!("unexpected {other:?}"),
+    }
+}
+
+#[test]
+fn bad_configs_name_file_line_and_key() {
+    expect_err(
+        "session = \"t\"\nbogus = 1\n[[agent]]\nid = 0\n",
+        2,
+        "bogus",
+    );
+    expect_err(
+        "[sync]\nsync_mode = \"yes\"\n[[agent]]\nid = 0\n",
+        2,
+        "sync_mode",
+    );
+    expect_err(
+        "[sync]\nstop_timeout = -1.0\n[[agent]]\nid = 0\n",
+        2,
+        "sync.stop_timeout",
+    );
+    expect_err(
+        "[sync]\nsimulation_time_per_frame = 0\n[[agent]]\nid = 0\n",
+        2,
+        "sync.simulation_time_per_frame",
+    );
+    expect_err(
+        "[[agent]]\nid = 0\n[[agent]]\nid = 0\n",
+        4,
+        "duplicate agent id 0",
+    );
+    expect_err("session = \"t\"\n", 1, "agent");
+    expect_err(
+        "[[agent]]\nid = 0\n[[agent.camera]]\nname = \"l\"\nwidth = 0\n",
+        5,
+        "agent.camera.width",
+    );
+    expect_err(
+        "[[agent]]\nid = 0\n[[agent.camera]]\nname = \"l\"\nwidth = 64\nformat = \"bgr\"\n",
+        6,
+        "agent.camera.format",
+    );
+    expect_err("[transport]\nkind = \"udp\"\n[[agent]]\nid = 0\n", 2, "udp");
+    expect_err("[[agent]]\nid = 999\n", 2, "agent.id");
+    expect_err("session = \"a/b\"\n[[agent]]\nid = 0\n", 1, "session");
+}
+
+#[test]
+fn agent_count_override_copies_the_last_agents_cameras() {
+    let c = Config::embedded_default()
+        .unwrap()
+        .with_agent_count(3)
+        .unwrap();
+    assert_eq!(c.agents.iter().map(|a| a.id).collect::<Vec<_>>(), [0, 1, 2]);
+    assert_eq!(c.agents[2].cameras, c.agents[1].cameras);
+    assert!(parse(MINIMAL).unwrap().with_agent_count(0).is_err());
+}
+
+#[test]
+fn effective_config_round_trips() {
+    let c = Config::embedded_default()
+        .unwrap()
+        .with_agent_count(3)
+        .unwrap();
+    let text = c.to_toml_string();
+    let back = Config::from_toml_str(&text, Path::new("eff.toml")).unwrap();
+    assert_eq!(back.agents, c.agents);
+    assert_eq!(back.sync, c.sync);
+    assert_eq!(back.transport, c.transport);
+    assert_eq!(back.session, c.session);
+    assert_eq!(back.world, c.world);
+}
