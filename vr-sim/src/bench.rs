@@ -17,7 +17,7 @@ use hdrhistogram::Histogram;
 use serde::Serialize;
 use vrsync_bridge::{Config, Host, SignalHandling};
 use vrsync_floor::alloc_count::allocations;
-use vrsync_floor::{ShmFloorHost, TcpFloorHost, ZenohFloorHost};
+use vrsync_floor::{FloorError, ShmFloorHost, TcpFloorHost, ZenohFloorHost};
 
 mod legacy;
 
@@ -530,23 +530,36 @@ fn bench_floor_shm(case: &Case, session: &str, spin: bool) -> anyhow::Result<Mea
         case.agents,
     )?;
     host.wait_connected(Duration::from_secs(30))?;
+    let (hist, host_allocs) =
+        measure_floor(case, |cycle| host.cycle(cycle, Duration::from_secs(10)))?;
+    let agent_allocs = agents.finish()?.allocs_per_cycle;
+    drop(host);
+    Ok(Measured::new(hist, host_allocs, agent_allocs))
+}
+
+/// The one measurement loop of every floor: runs `cycle` for the warm-up and measured
+/// cycles of `case` and returns the histogram of the measured cycles' round trips (ns) and
+/// the host's allocations per measured cycle.
+fn measure_floor(
+    case: &Case,
+    mut cycle: impl FnMut(u64) -> Result<(), FloorError>,
+) -> anyhow::Result<(Histogram<u64>, f64)> {
+    let total = case.warmup + case.cycles;
     let mut hist = histogram()?;
     let mut allocs_start = 0;
-    for cycle in 0..total {
-        if cycle == case.warmup {
+    for c in 0..total {
+        if c == case.warmup {
             allocs_start = allocations();
         }
         let t0 = Instant::now();
-        host.cycle(cycle, Duration::from_secs(10))?;
-        if cycle >= case.warmup {
+        cycle(c)?;
+        if c >= case.warmup {
             hist.record(t0.elapsed().as_nanos() as u64)
                 .context("record")?;
         }
     }
     let host_allocs = (allocations() - allocs_start) as f64 / case.cycles as f64;
-    let agent_allocs = agents.finish()?.allocs_per_cycle;
-    drop(host);
-    Ok(Measured::new(hist, host_allocs, agent_allocs))
+    Ok((hist, host_allocs))
 }
 
 /// `tcp/127.0.0.1:<a port free a moment ago>`.
@@ -587,20 +600,8 @@ fn bench_floor_zenoh(case: &Case, session: &str) -> anyhow::Result<Measured> {
         case.agents,
     )?;
     host.wait_connected(Duration::from_secs(30))?;
-    let mut hist = histogram()?;
-    let mut allocs_start = 0;
-    for cycle in 0..total {
-        if cycle == case.warmup {
-            allocs_start = allocations();
-        }
-        let t0 = Instant::now();
-        host.cycle(cycle, Duration::from_secs(10))?;
-        if cycle >= case.warmup {
-            hist.record(t0.elapsed().as_nanos() as u64)
-                .context("record")?;
-        }
-    }
-    let host_allocs = (allocations() - allocs_start) as f64 / case.cycles as f64;
+    let (hist, host_allocs) =
+        measure_floor(case, |cycle| host.cycle(cycle, Duration::from_secs(10)))?;
     drop(host);
     let agent_allocs = agents.finish()?.allocs_per_cycle;
     Ok(Measured::new(hist, host_allocs, agent_allocs))
@@ -633,20 +634,7 @@ fn bench_floor_tcp(case: &Case) -> anyhow::Result<Measured> {
         case.agents,
     )?;
     host.accept(case.agents, Duration::from_secs(30))?;
-    let mut hist = histogram()?;
-    let mut allocs_start = 0;
-    for cycle in 0..total {
-        if cycle == case.warmup {
-            allocs_start = allocations();
-        }
-        let t0 = Instant::now();
-        host.cycle(cycle)?;
-        if cycle >= case.warmup {
-            hist.record(t0.elapsed().as_nanos() as u64)
-                .context("record")?;
-        }
-    }
-    let host_allocs = (allocations() - allocs_start) as f64 / case.cycles as f64;
+    let (hist, host_allocs) = measure_floor(case, |cycle| host.cycle(cycle))?;
     let agent_allocs = agents.finish()?.allocs_per_cycle;
     Ok(Measured::new(hist, host_allocs, agent_allocs))
 }
