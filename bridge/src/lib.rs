@@ -66,7 +66,7 @@ pub use config::{
     AgentConfig, AgentLostPolicy, CameraConfig, Config, ConfigLoadError, DEFAULT_CONFIG_TOML,
     DEFAULT_SPIN_BEFORE_BLOCK_US, DEFAULT_ZENOH_ENDPOINT, LegacyConfig, LegacyDialect,
     MAX_AGENT_ID, MAX_CONFIG_BYTES, MAX_IMAGE_SIDE_PX, PngCompression, SyncConfig, TransportConfig,
-    TransportKind, WaitForStop, WaitMode, ZenohConfig, derived_height,
+    TransportKind, WaitForStop, WaitMode, ZenohConfig, ZenohTls, derived_height,
 };
 pub use host::{
     AgentReport, CycleReport, Host, HostBuilder, HostCreateError, HostCycleError, HostStats,

@@ -13,7 +13,7 @@ use super::raw::{RawAgent, RawCamera, RawConfig, RawLegacy, RawSync, RawTranspor
 use super::{
     AgentConfig, CameraConfig, ConfigLoadError, DEFAULT_SPIN_BEFORE_BLOCK_US,
     DEFAULT_ZENOH_ENDPOINT, LegacyConfig, MAX_AGENT_ID, MAX_IMAGE_SIDE_PX, SyncConfig,
-    TransportConfig, TransportKind, WaitForStop, ZenohConfig, derived_height,
+    TransportConfig, TransportKind, WaitForStop, ZenohConfig, ZenohTls, derived_height,
 };
 use crate::wire::{CAMERA_NAME_LEN, MAX_CAMERAS, MAX_TOKEN, PixelFormat};
 
@@ -42,7 +42,15 @@ impl Ctx<'_> {
         }
     }
 
-    fn zenoh(&self, rz: RawZenoh) -> Result<ZenohConfig, ConfigLoadError> {
+    fn zenoh(&self, mut rz: RawZenoh) -> Result<ZenohConfig, ConfigLoadError> {
+        let tls_raw = RawTls {
+            ca: rz.tls_ca.take(),
+            cert: rz.tls_cert.take(),
+            key: rz.tls_key.take(),
+            mtls: rz.mtls.take(),
+            listen: rz.listen.as_ref().map(Spanned::span),
+            connect: rz.connect.as_ref().map(Spanned::span),
+        };
         let endpoints = |v: Spanned<Vec<String>>, key: &str| {
             let span = v.span();
             let list = v.into_inner();
@@ -94,13 +102,125 @@ impl Ctx<'_> {
                 Some(t.into_inner())
             }
         };
+        let tls = self.zenoh_tls(tls_raw, &listen, &connect)?;
         Ok(ZenohConfig {
             listen,
             connect,
             lease,
             scouting: rz.scouting.unwrap_or(false),
             token,
+            tls,
         })
+    }
+
+    /// `tls_ca`, `tls_cert`, `tls_key` and `mtls`: each file exists; a `tls/` listen
+    /// endpoint has a certificate and key (and the CA with `mtls`), a `tls/` connect
+    /// endpoint the CA (and a certificate and key with `mtls`); TLS settings without any
+    /// `tls/` endpoint are refused (the traffic would be in the clear).
+    fn zenoh_tls(
+        &self,
+        rz: RawTls,
+        listen: &[String],
+        connect: &[String],
+    ) -> Result<ZenohTls, ConfigLoadError> {
+        let base = self.path.parent().unwrap_or(Path::new(""));
+        let file = |v: &Option<Spanned<String>>, name: &str| -> Result<_, ConfigLoadError> {
+            let Some(v) = v else { return Ok(None) };
+            let key = format!("transport.zenoh.{name}");
+            let given = v.get_ref();
+            if given.is_empty() {
+                return Err(self.invalid(v.span(), &key, "must name a PEM file, found \"\""));
+            }
+            let path = base.join(given);
+            // Absolute: a config written back (`to_toml_string`) elsewhere names the same file.
+            let path = std::path::absolute(&path).unwrap_or(path);
+            if !path.is_file() {
+                return Err(self.invalid(
+                    v.span(),
+                    &key,
+                    format!(
+                        "{} is not a readable file (relative paths are resolved against the \
+                         config file's folder)",
+                        path.display()
+                    ),
+                ));
+            }
+            Ok(Some(path))
+        };
+        let tls = ZenohTls {
+            ca: file(&rz.ca, "tls_ca")?,
+            cert: file(&rz.cert, "tls_cert")?,
+            key: file(&rz.key, "tls_key")?,
+            mtls: rz.mtls.as_ref().is_some_and(|m| *m.get_ref()),
+        };
+        let is_tls = |l: &[String]| l.iter().any(|e| e.starts_with("tls/"));
+        let (tls_listen, tls_connect) = (is_tls(listen), is_tls(connect));
+        // The span of the endpoint list that needs a file, for the line of the error.
+        let span = |v: &Option<Range<usize>>| v.clone().unwrap_or(0..0);
+        let need = |has: bool, name: &str, side: &str, why: &str| {
+            if has {
+                return Ok(());
+            }
+            let (key, at) = if side == "listen" {
+                ("transport.zenoh.listen", span(&rz.listen))
+            } else if rz.connect.is_some() {
+                ("transport.zenoh.connect", span(&rz.connect))
+            } else {
+                ("transport.zenoh.listen", span(&rz.listen))
+            };
+            Err(self.invalid(
+                at,
+                key,
+                format!(
+                    "a tls/ {side} endpoint needs `{name}` in [transport.zenoh] ({why}); \
+                     see the README's \"Agents on other machines\" for making them"
+                ),
+            ))
+        };
+        if tls_listen {
+            let cert = "the host's PEM certificate, signed by tls_ca";
+            need(tls.cert.is_some(), "tls_cert", "listen", cert)?;
+            need(
+                tls.key.is_some(),
+                "tls_key",
+                "listen",
+                "the host's PEM private key",
+            )?;
+            if tls.mtls {
+                let ca = "with mtls the CA the agents' certificates are checked against";
+                need(tls.ca.is_some(), "tls_ca", "listen", ca)?;
+            }
+        }
+        if tls_connect {
+            let ca = "the PEM certificate of the CA that signed the host's certificate";
+            need(tls.ca.is_some(), "tls_ca", "connect", ca)?;
+            if tls.mtls {
+                let cert = "with mtls the agent's PEM certificate, signed by tls_ca";
+                need(tls.cert.is_some(), "tls_cert", "connect", cert)?;
+                let key = "with mtls the agent's PEM private key";
+                need(tls.key.is_some(), "tls_key", "connect", key)?;
+            }
+        }
+        if !tls_listen && !tls_connect {
+            let set = [
+                ("tls_ca", rz.ca.as_ref().map(Spanned::span)),
+                ("tls_cert", rz.cert.as_ref().map(Spanned::span)),
+                ("tls_key", rz.key.as_ref().map(Spanned::span)),
+                (
+                    "mtls",
+                    rz.mtls.as_ref().filter(|m| *m.get_ref()).map(Spanned::span),
+                ),
+            ];
+            if let Some((name, Some(at))) = set.into_iter().find(|(_, s)| s.is_some()) {
+                return Err(self.invalid(
+                    at,
+                    &format!("transport.zenoh.{name}"),
+                    "is set, but no listen or connect endpoint is tls/: the traffic would \
+                     be in the clear; use endpoints like \"tls/192.168.1.10:7447\"",
+                ));
+            }
+        }
+        Ok(tls)
     }
 
     fn seconds(
@@ -469,12 +589,23 @@ impl Ctx<'_> {
     }
 }
 
-/// Checks a zenoh endpoint of this build: `tcp/<host>:<port>` (only TCP links are
-/// compiled in), port 1..=65535.
+/// The TLS keys of `[transport.zenoh]`, and where its endpoint lists are (for errors).
+struct RawTls {
+    ca: Option<Spanned<String>>,
+    cert: Option<Spanned<String>>,
+    key: Option<Spanned<String>>,
+    mtls: Option<Spanned<bool>>,
+    listen: Option<Range<usize>>,
+    connect: Option<Range<usize>>,
+}
+
+/// Checks a zenoh endpoint of this build: `tcp/<host>:<port>` or `tls/<host>:<port>`
+/// (only TCP and TLS links are compiled in), port 1..=65535.
 fn check_zenoh_endpoint(e: &str) -> Result<(), String> {
-    let hint = "use an endpoint like \"tcp/192.168.1.10:7447\" (only tcp/ links are built in)";
-    let Some(addr) = e.strip_prefix("tcp/") else {
-        return Err(format!("{e:?} is not a tcp/ endpoint: {hint}"));
+    let hint = "use an endpoint like \"tcp/192.168.1.10:7447\" or \"tls/192.168.1.10:7447\" \
+                (only tcp/ and tls/ links are built in)";
+    let Some(addr) = e.strip_prefix("tcp/").or_else(|| e.strip_prefix("tls/")) else {
+        return Err(format!("{e:?} is not a tcp/ or tls/ endpoint: {hint}"));
     };
     let addr = addr.split('#').next().unwrap_or(addr);
     let port = addr

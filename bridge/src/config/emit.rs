@@ -97,6 +97,16 @@ fn write_transport(s: &mut String, transport: &TransportConfig) {
     if let Some(token) = &z.token {
         let _ = writeln!(s, "token = {}", toml_string(token));
     }
+    for (name, path) in [
+        ("tls_ca", &z.tls.ca),
+        ("tls_cert", &z.tls.cert),
+        ("tls_key", &z.tls.key),
+    ] {
+        if let Some(p) = path {
+            let _ = writeln!(s, "{name} = {}", toml_string(&p.to_string_lossy()));
+        }
+    }
+    let _ = writeln!(s, "mtls = {}", z.tls.mtls);
 }
 
 /// One `[[agent]]` with its `[[agent.camera]]` entries.

@@ -344,6 +344,25 @@ pub struct ZenohConfig {
     pub scouting: bool,
     /// Shared secret zenoh agents present in their hello (`token`); `None`: none.
     pub token: Option<String>,
+    /// TLS of `tls/` endpoints (`tls_ca`, `tls_cert`, `tls_key`, `mtls`); all unset and
+    /// false by default.
+    pub tls: ZenohTls,
+}
+
+/// Certificates of the zenoh transport's `tls/` endpoints. Paths are resolved against
+/// the config file's folder at load and checked to exist.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ZenohTls {
+    /// PEM certificate of the CA that signed the host's certificate (and, with `mtls`,
+    /// the agents'): agents check the host against it, the host checks agents (`tls_ca`).
+    pub ca: Option<PathBuf>,
+    /// PEM certificate of this side (`tls_cert`): the host's, served to agents; an
+    /// agent's, shown to the host with `mtls`.
+    pub cert: Option<PathBuf>,
+    /// PEM private key of `cert` (`tls_key`).
+    pub key: Option<PathBuf>,
+    /// Mutual TLS (`mtls`): the host admits only peers with a certificate signed by `ca`.
+    pub mtls: bool,
 }
 
 impl Default for ZenohConfig {
@@ -354,6 +373,7 @@ impl Default for ZenohConfig {
             lease: Duration::from_secs(2),
             scouting: false,
             token: None,
+            tls: ZenohTls::default(),
         }
     }
 }

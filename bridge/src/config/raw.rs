@@ -69,6 +69,10 @@ pub(super) struct RawZenoh {
     pub(super) lease: Option<Spanned<f64>>,
     pub(super) scouting: Option<bool>,
     pub(super) token: Option<Spanned<String>>,
+    pub(super) tls_ca: Option<Spanned<String>>,
+    pub(super) tls_cert: Option<Spanned<String>>,
+    pub(super) tls_key: Option<Spanned<String>>,
+    pub(super) mtls: Option<Spanned<bool>>,
 }
 
 #[derive(Deserialize)]

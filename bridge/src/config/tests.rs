@@ -22,6 +22,76 @@ fn transport_kind_all_lists_every_transport_once() {
 }
 
 #[test]
+fn zenoh_tls_needs_existing_files_and_a_tls_endpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    for f in ["ca.pem", "host.pem", "host.key"] {
+        std::fs::write(dir.path().join(f), "-----BEGIN X-----\n").unwrap();
+    }
+    let path = dir.path().join("c.toml");
+    let load = |zenoh: &str| {
+        let text = format!("session = \"t\"\n[transport.zenoh]\n{zenoh}[[agent]]\nid = 0\n");
+        std::fs::write(&path, text).unwrap();
+        Config::load(&path)
+    };
+    let err = |zenoh: &str| load(zenoh).unwrap_err().to_string();
+    // Relative paths resolve against the config file's folder; written back absolute.
+    let files = "tls_ca = \"ca.pem\"\ntls_cert = \"host.pem\"\ntls_key = \"host.key\"\n";
+    let c = load(&format!(
+        "listen = [\"tls/127.0.0.1:7447\"]\nmtls = true\n{files}"
+    ))
+    .unwrap();
+    let t = &c.transport.zenoh.tls;
+    assert_eq!(t.ca.as_deref(), Some(dir.path().join("ca.pem").as_path()));
+    assert_eq!(
+        t.key.as_deref(),
+        Some(dir.path().join("host.key").as_path())
+    );
+    assert!(t.mtls);
+    assert_eq!(c.transport.zenoh.connect, ["tls/127.0.0.1:7447"]);
+    let again = Config::from_toml_str(&c.to_toml_string(), Path::new("/elsewhere/x.toml"));
+    assert_eq!(again.unwrap().transport.zenoh, c.transport.zenoh);
+    // Plain tcp/ stays the default, without TLS.
+    assert_eq!(
+        parse(MINIMAL).unwrap().transport.zenoh.tls,
+        ZenohTls::default()
+    );
+    // A tls/ listen endpoint without a certificate: file:line:key.
+    let e = err("mtls = false\nlisten = [\"tls/127.0.0.1:7447\"]\ntls_ca = \"ca.pem\"\n");
+    assert!(
+        e.contains("c.toml:4: invalid `transport.zenoh.listen`"),
+        "{e}"
+    );
+    assert!(e.contains("needs `tls_cert`"), "{e}");
+    // An agent-side config: a tls/ connect endpoint needs the CA; with mtls its own pair.
+    let e = err("connect = [\"tls/10.0.0.1:7447\"]\n");
+    assert!(
+        e.contains(":3: invalid `transport.zenoh.connect`") && e.contains("`tls_ca`"),
+        "{e}"
+    );
+    let e = err("connect = [\"tls/10.0.0.1:7447\"]\nmtls = true\ntls_ca = \"ca.pem\"\n");
+    assert!(e.contains("needs `tls_cert`") && e.contains("mtls"), "{e}");
+    // A file that does not exist, named with its line and key.
+    let e = err(
+        "listen = [\"tls/127.0.0.1:7447\"]\ntls_cert = \"host.pem\"\ntls_key = \"missing.key\"\n",
+    );
+    assert!(
+        e.contains("c.toml:5: invalid `transport.zenoh.tls_key`"),
+        "{e}"
+    );
+    assert!(e.contains("missing.key is not a readable file"), "{e}");
+    // Certificates with only tcp/ endpoints: refused, the traffic would be in the clear.
+    let e = err("listen = [\"tcp/127.0.0.1:7447\"]\ntls_ca = \"ca.pem\"\n");
+    assert!(
+        e.contains("c.toml:4: invalid `transport.zenoh.tls_ca`"),
+        "{e}"
+    );
+    assert!(e.contains("in the clear"), "{e}");
+    // Another scheme is still refused.
+    let e = err("listen = [\"quic/127.0.0.1:7447\"]\n");
+    assert!(e.contains("not a tcp/ or tls/ endpoint"), "{e}");
+}
+
+#[test]
 fn embedded_default_matches_the_documented_defaults() {
     let c = Config::embedded_default().unwrap();
     assert_eq!(c.agents.len(), 2);

@@ -180,6 +180,23 @@ enum Answer {
     Refused(AgentConnectError),
 }
 
+/// What else a link that never opens may mean with `tls/` endpoints: zenoh refuses a
+/// TLS handshake without telling either session why.
+fn tls_hint(connect: &[String]) -> &'static str {
+    let tls = connect.iter().any(|e| e.starts_with("tls/"));
+    let plain = connect.iter().any(|e| e.starts_with("tcp/"));
+    if tls {
+        "; a tls/ link also fails when the host's certificate is not signed by tls_ca or does \
+         not name the address connected to, when the host has mtls and this side has no \
+         certificate signed by its CA (mtls = true with tls_cert and tls_key), or when the \
+         host listens on plain tcp/"
+    } else if plain {
+        "; a plain tcp/ link is also dropped by a host that listens on tls/"
+    } else {
+        ""
+    }
+}
+
 impl ZenohAgent {
     /// Opens a zenoh peer connecting to `transport.zenoh.connect`, says hello (retrying
     /// until `timeout` while no host answers), then subscribes to its frames and declares
@@ -275,9 +292,10 @@ impl ZenohAgent {
                     agent: id,
                     waited: started.elapsed(),
                     looked_for: format!(
-                        "a zenoh host answering {} via {:?} ({missing})",
+                        "a zenoh host answering {} via {:?} ({missing}{})",
                         keys.hello(),
-                        z.connect
+                        z.connect,
+                        tls_hint(&z.connect)
                     ),
                 });
             }

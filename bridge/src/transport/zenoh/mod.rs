@@ -155,7 +155,8 @@ fn parse_decimal(s: &str) -> Option<u64> {
 }
 
 /// The zenoh session configuration of one side: peer mode, scouting as configured (off by
-/// default), explicit endpoints, the lease, and — on the host — a bound on what one
+/// default), explicit endpoints, the lease, TLS certificates (the host's as the listen
+/// side's, an agent's as the connect side's), and — on the host — a bound on what one
 /// message may grow to while zenoh reassembles it.
 ///
 /// # Errors
@@ -206,6 +207,34 @@ pub(crate) fn session_config(
         "transport/link/tx/queue/congestion_control/block/wait_before_close",
         block_us.to_string(),
     )?;
+    // TLS (`tls/` endpoints): the host serves its certificate on the listen side, an
+    // agent shows its own on the connect side (with mtls); both trust `tls_ca`. The host's
+    // certificate must name the address agents connect to (zenoh checks the name).
+    let t = &z.tls;
+    let path = |p: &std::path::Path| {
+        p.to_str()
+            .map(|s| format!("{s:?}"))
+            .ok_or_else(|| format!("TLS file path {} is not UTF-8", p.display()))
+    };
+    if let Some(ca) = &t.ca {
+        set("transport/link/tls/root_ca_certificate", path(ca)?)?;
+    }
+    if let (Some(cert), Some(key)) = (&t.cert, &t.key) {
+        let side = if listen.is_empty() {
+            "connect"
+        } else {
+            "listen"
+        };
+        set(
+            &format!("transport/link/tls/{side}_certificate"),
+            path(cert)?,
+        )?;
+        set(
+            &format!("transport/link/tls/{side}_private_key"),
+            path(key)?,
+        )?;
+    }
+    set("transport/link/tls/enable_mtls", t.mtls.to_string())?;
     Ok(c)
 }
 
