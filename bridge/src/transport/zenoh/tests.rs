@@ -389,3 +389,252 @@ fn a_flood_of_batches_is_bounded() {
     assert_eq!(got, want);
     assert!(host.is_connected(0) && host.is_connected(1));
 }
+
+// --- TLS: certificates made by the test, a host and agents over tls/ on loopback -------
+
+/// A folder with `ca.pem`; `host.pem`/`.key` (names 127.0.0.1 and localhost) and
+/// `agent.pem`/`.key` signed by it; `stranger.pem`/`.key` signed by another CA.
+fn pki() -> tempfile::TempDir {
+    use rcgen::{
+        BasicConstraints, CertificateParams, CertifiedIssuer, DnType, ExtendedKeyUsagePurpose,
+        IsCa, KeyPair,
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, text: String| std::fs::write(dir.path().join(name), text).unwrap();
+    let ca = |cn: &str| {
+        let mut p = CertificateParams::new(Vec::<String>::new()).unwrap();
+        p.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+        p.distinguished_name.push(DnType::CommonName, cn);
+        CertifiedIssuer::self_signed(p, KeyPair::generate().unwrap()).unwrap()
+    };
+    let (ours, theirs) = (ca("vrsync test CA"), ca("another CA"));
+    write("ca.pem", ours.pem());
+    for (name, issuer) in [("host", &ours), ("agent", &ours), ("stranger", &theirs)] {
+        let mut p = CertificateParams::new(vec!["127.0.0.1".into(), "localhost".into()]).unwrap();
+        p.distinguished_name.push(DnType::CommonName, name);
+        p.extended_key_usages = vec![
+            ExtendedKeyUsagePurpose::ServerAuth,
+            ExtendedKeyUsagePurpose::ClientAuth,
+        ];
+        let key = KeyPair::generate().unwrap();
+        write(
+            &format!("{name}.pem"),
+            p.signed_by(&key, issuer).unwrap().pem(),
+        );
+        write(&format!("{name}.key"), key.serialize_pem());
+    }
+    dir
+}
+
+/// A session whose host listens (`side` "listen") or whose agents connect (`side`
+/// "connect") on `endpoint`, with TLS settings `tls` (TOML lines of `[transport.zenoh]`),
+/// its files in `dir`.
+fn tls_config(
+    dir: &std::path::Path,
+    session: &str,
+    side: &str,
+    endpoint: &str,
+    tls: &str,
+) -> Config {
+    let text = format!(
+        "session = {session:?}\n[sync]\nstop_timeout = 5.0\n[transport]\nkind = \"zenoh\"\n\
+         [transport.zenoh]\n{side} = [{endpoint:?}]\n{tls}\
+         [[agent]]\nid = 0\n[[agent.camera]]\nname = \"c\"\nwidth = 8\n\
+         [[agent]]\nid = 1\n[[agent.camera]]\nname = \"c\"\nwidth = 8\n"
+    );
+    Config::from_toml_str(&text, &dir.join("c.toml")).unwrap()
+}
+
+/// A host config with mutual TLS on a loopback port free a moment ago, and its session.
+fn mtls_host(dir: &std::path::Path) -> (Config, String) {
+    static N: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let session = format!(
+        "zt{}-{}",
+        std::process::id(),
+        N.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+    );
+    let host = tls_config(
+        dir,
+        &session,
+        "listen",
+        &format!("tls/127.0.0.1:{port}"),
+        "tls_ca = \"ca.pem\"\ntls_cert = \"host.pem\"\ntls_key = \"host.key\"\nmtls = true\n",
+    );
+    (host, session)
+}
+
+fn mtls_agent_lines(name: &str) -> String {
+    format!(
+        "tls_ca = \"ca.pem\"\ntls_cert = \"{name}.pem\"\ntls_key = \"{name}.key\"\nmtls = true\n"
+    )
+}
+
+/// How long a refused agent tries before it gives up.
+const REFUSED_AFTER: Duration = Duration::from_secs(3);
+
+/// Connects agent 0 of `config`, expecting no host within REFUSED_AFTER: returns the
+/// error's message; panics if it took far longer (a hang) or got in.
+fn refused(config: &Config) -> String {
+    let started = Instant::now();
+    let err =
+        match ZenohAgent::connect_with_token(config, 0, REFUSED_AFTER, None, SignalHandling::Leave)
+        {
+            Ok(_) => panic!("an agent with {:?} got in", config.transport.zenoh),
+            Err(e) => e,
+        };
+    assert!(
+        started.elapsed() < REFUSED_AFTER + Duration::from_secs(10),
+        "gave up only after {:?}",
+        started.elapsed()
+    );
+    assert!(
+        matches!(err, AgentConnectError::HostNotFound { .. }),
+        "{err}"
+    );
+    err.to_string()
+}
+
+#[test]
+fn mutual_tls_agents_run_cycles_in_lock_step() {
+    use super::super::AgentFrame;
+    let dir = pki();
+    let (host_config, session) = mtls_host(dir.path());
+    let endpoint = &host_config.transport.zenoh.listen[0];
+    let agent_config = tls_config(
+        dir.path(),
+        &session,
+        "connect",
+        endpoint,
+        &mtls_agent_lines("agent"),
+    );
+    assert_eq!(
+        agent_config.transport.zenoh.connect,
+        std::slice::from_ref(endpoint)
+    );
+    let mut host = ZenohHost::create(&host_config, SignalHandling::Leave).unwrap();
+    let mut agents = [
+        agent(&agent_config, 0, None).unwrap(),
+        agent(&agent_config, 1, None).unwrap(),
+    ];
+    pump(&mut host, "both agents over mutual TLS", |h| {
+        h.is_connected(0) && h.is_connected(1)
+    });
+    for cycle in 0..40u64 {
+        // Each agent's frame carries its cycle, and its payload a byte of it.
+        for slot in 0..2 {
+            let mut loan = host.loan(slot).unwrap();
+            let (h, payload) = super::super::FrameLoanMut::parts_mut(&mut loan);
+            h.cycle = cycle;
+            payload.fill(cycle as u8 ^ slot as u8);
+            assert!(host.publish(slot, loan).unwrap());
+        }
+        // Each agent sees this cycle's frame (not an older one) and stops it.
+        for (slot, a) in agents.iter_mut().enumerate() {
+            let deadline = Instant::now() + WAIT;
+            let frame = loop {
+                if let Some(f) = a.try_receive_newest().unwrap() {
+                    break f;
+                }
+                assert!(Instant::now() < deadline, "agent {slot}: no frame {cycle}");
+                a.wait_readable(Duration::from_millis(50));
+            };
+            assert_eq!(frame.header().cycle, cycle);
+            assert!(
+                frame
+                    .payload()
+                    .iter()
+                    .all(|&b| b == cycle as u8 ^ slot as u8)
+            );
+            drop(frame);
+            let (h, c) = batch(slot as u32, cycle, cycle as u32 * 10 + slot as u32);
+            a.send_batch(&h, &c).unwrap();
+        }
+        // The host has both stops of this cycle before the next frame goes out.
+        let mut seen = Vec::new();
+        pump(&mut host, "both stops", |h| {
+            h.drain(&mut |s, _, c| seen.extend(c.iter().map(|c| (s, c.action_id))))
+                .unwrap();
+            seen.len() == 2
+        });
+        seen.sort_unstable();
+        let want = [(0, cycle as u32 * 10), (1, cycle as u32 * 10 + 1)];
+        assert_eq!(seen, want, "cycle {cycle}");
+    }
+    assert_eq!(host.stats().frames_sent, 80);
+}
+
+#[test]
+fn peers_without_a_certificate_of_the_ca_never_reach_the_hello() {
+    let dir = pki();
+    let (host_config, session) = mtls_host(dir.path());
+    let endpoint = &host_config.transport.zenoh.listen[0];
+    let mut host = ZenohHost::create(&host_config, SignalHandling::Leave).unwrap();
+    // TLS without a client certificate; a client certificate from another CA.
+    let no_cert = tls_config(
+        dir.path(),
+        &session,
+        "connect",
+        endpoint,
+        "tls_ca = \"ca.pem\"\n",
+    );
+    assert!(no_cert.transport.zenoh.tls.cert.is_none());
+    let stranger = tls_config(
+        dir.path(),
+        &session,
+        "connect",
+        endpoint,
+        &mtls_agent_lines("stranger"),
+    );
+    for config in [&no_cert, &stranger] {
+        let message = refused(config);
+        assert!(message.contains(endpoint.as_str()), "{message}");
+        assert!(message.contains("signed by tls_ca"), "{message}");
+    }
+    // Refused in the TLS handshake, below zenoh: no hello reached the host, none was
+    // refused by it, nobody was admitted.
+    host.wait_activity(Duration::ZERO).unwrap();
+    assert_eq!(host.stats(), ZenohHostStats::default());
+    assert_eq!(host.take_refusals(&mut |_| {}), 0);
+    assert!(!host.is_connected(0));
+    // The host is unharmed: an agent with a certificate of its CA gets in.
+    let ok = tls_config(
+        dir.path(),
+        &session,
+        "connect",
+        endpoint,
+        &mtls_agent_lines("agent"),
+    );
+    let _a0 = agent(&ok, 0, None).unwrap();
+    pump(&mut host, "the certified agent", |h| h.is_connected(0));
+}
+
+#[test]
+fn a_plaintext_agent_against_a_tls_host_is_refused_naming_the_endpoint() {
+    let dir = pki();
+    let (host_config, session) = mtls_host(dir.path());
+    let mut host = ZenohHost::create(&host_config, SignalHandling::Leave).unwrap();
+    let tls_endpoint = &host_config.transport.zenoh.listen[0];
+    let plain_endpoint = tls_endpoint.replacen("tls/", "tcp/", 1);
+    let plain = tls_config(dir.path(), &session, "connect", &plain_endpoint, "");
+    let message = refused(&plain);
+    assert!(message.contains(&plain_endpoint), "{message}");
+    assert!(message.contains("host that listens on tls/"), "{message}");
+    host.wait_activity(Duration::ZERO).unwrap();
+    assert_eq!(host.stats(), ZenohHostStats::default());
+    assert!(!host.is_connected(0));
+    // And the other way round: a TLS agent against a plain host never gets in either.
+    let (other, other_session) = mtls_host(dir.path());
+    let other_tls = &other.transport.zenoh.listen[0];
+    let other_plain = other_tls.replacen("tls/", "tcp/", 1);
+    let plain_host_config = tls_config(dir.path(), &other_session, "listen", &other_plain, "");
+    let _plain_host = ZenohHost::create(&plain_host_config, SignalHandling::Leave).unwrap();
+    let lines = mtls_agent_lines("agent");
+    let tls_agent = tls_config(dir.path(), &other_session, "connect", other_tls, &lines);
+    let message = refused(&tls_agent);
+    assert!(message.contains(other_tls.as_str()), "{message}");
+}
