@@ -30,14 +30,6 @@ static ALLOC: vrsync_floor::alloc_count::CountingAlloc = vrsync_floor::alloc_cou
 const EXIT_USAGE: u8 = 2;
 
 fn main() -> ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .with_writer(std::io::stderr)
-        .with_ansi(vrsync_agent::log::ansi_on_stderr())
-        .init();
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {
@@ -49,6 +41,20 @@ fn main() -> ExitCode {
             };
         }
     };
+    // The bench prints a table: its hosts' and agents' progress lines (info) would
+    // interleave with it. RUST_LOG still decides when set.
+    let default_filter = match cli.command {
+        Command::Bench(_) => "warn",
+        _ => "info",
+    };
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_filter)),
+        )
+        .with_writer(std::io::stderr)
+        .with_ansi(vrsync_agent::log::ansi_on_stderr())
+        .init();
     match run(cli) {
         Ok(code) => code,
         Err(e) => {
