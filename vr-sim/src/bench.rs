@@ -41,8 +41,8 @@ pub struct BenchOptions {
 /// One measured configuration (DESIGN §8 bench JSON keys, plus allocations).
 #[derive(Debug, Clone, Serialize)]
 pub struct Row {
-    /// `shm`, `shm-spin`, `tcp`, `zenoh`, `floor-shm`, `floor-shm-spin`, `floor-tcp`,
-    /// `floor-zenoh`, `legacy`, `python`, `python-vec`.
+    /// `shm`, `shm-spin`, `tcp`, `zenoh`, `zenoh-tls` (mutual TLS), `floor-shm`,
+    /// `floor-shm-spin`, `floor-tcp`, `floor-zenoh`, `legacy`, `python`, `python-vec`.
     pub transport: String,
     /// Agents.
     pub agents: u32,
@@ -310,10 +310,42 @@ fn measure_render(config: &Config, host: &mut Host, n: u32) -> anyhow::Result<f6
     Ok(total.as_secs_f64() * 1e6 / f64::from(n.max(1)))
 }
 
-fn config_text(case: &Case, session: &str) -> String {
+/// A CA and one certificate (naming 127.0.0.1, for server and client use) for the
+/// `zenoh-tls` rows, in `dir`: `ca.pem`, `bench.pem`, `bench.key`.
+fn make_certificates(dir: &Path) -> anyhow::Result<()> {
+    use rcgen::{
+        BasicConstraints, CertificateParams, CertifiedIssuer, DnType, ExtendedKeyUsagePurpose,
+        IsCa, KeyPair,
+    };
+    let mut p = CertificateParams::new(Vec::<String>::new())?;
+    p.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+    p.distinguished_name
+        .push(DnType::CommonName, "vrsync bench CA");
+    let ca = CertifiedIssuer::self_signed(p, KeyPair::generate()?)?;
+    let mut p = CertificateParams::new(vec!["127.0.0.1".to_string()])?;
+    p.distinguished_name
+        .push(DnType::CommonName, "vrsync bench");
+    p.extended_key_usages = vec![
+        ExtendedKeyUsagePurpose::ServerAuth,
+        ExtendedKeyUsagePurpose::ClientAuth,
+    ];
+    let key = KeyPair::generate()?;
+    let cert = p.signed_by(&key, &ca)?;
+    for (name, text) in [
+        ("ca.pem", ca.pem()),
+        ("bench.pem", cert.pem()),
+        ("bench.key", key.serialize_pem()),
+    ] {
+        std::fs::write(dir.join(name), text).with_context(|| format!("write {name}"))?;
+    }
+    Ok(())
+}
+
+/// The config of `case`; `certs`: the folder of [`make_certificates`] (`zenoh-tls`).
+fn config_text(case: &Case, session: &str, certs: &Path) -> String {
     let (kind, wait) = match case.transport {
         "tcp" => ("tcp", "block"),
-        "zenoh" => ("zenoh", "block"),
+        "zenoh" | "zenoh-tls" => ("zenoh", "block"),
         "shm-spin" => ("shm", "spin"),
         _ => ("shm", "block"),
     };
@@ -325,10 +357,21 @@ fn config_text(case: &Case, session: &str) -> String {
     if kind == "zenoh" {
         // Loopback, a port free a moment ago (zenoh's stable API cannot report the port
         // of a port-0 listener), scouting off (the default).
-        s += &format!(
-            "[transport.zenoh]\nlisten = [\"{}\"]\n",
-            loopback_endpoint().unwrap_or_default()
-        );
+        let endpoint = loopback_endpoint().unwrap_or_default();
+        if case.transport == "zenoh-tls" {
+            // Mutual TLS: host and agents share the config, hence the certificate.
+            let file = |name: &str| certs.join(name).display().to_string();
+            s += &format!(
+                "[transport.zenoh]\nlisten = [{:?}]\ntls_ca = {:?}\ntls_cert = {:?}\n\
+                 tls_key = {:?}\nmtls = true\n",
+                endpoint.replacen("tcp/", "tls/", 1),
+                file("ca.pem"),
+                file("bench.pem"),
+                file("bench.key")
+            );
+        } else {
+            s += &format!("[transport.zenoh]\nlisten = [{endpoint:?}]\n");
+        }
     }
     for id in 0..case.agents {
         s += &format!("[[agent]]\nid = {id}\n");
@@ -372,7 +415,7 @@ fn bench_vrsync(
     render: bool,
     python: Option<&Path>,
 ) -> anyhow::Result<Measured> {
-    let text = config_text(case, session);
+    let text = config_text(case, session, dir);
     let mut config = Config::from_toml_str(&text, Path::new("<bench>"))?;
     let mut host = Host::builder(&config)
         .signal_handling(SignalHandling::Install)
@@ -669,6 +712,7 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
             .tempdir()
             .context("cannot create a temp dir for the bench configs")?
     };
+    make_certificates(dir.path()).context("make the zenoh-tls rows' certificates")?;
     let mut rows = Vec::new();
     let mut n = 0u32;
     let session = |n: &mut u32| {
@@ -710,6 +754,7 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
             cases.push(mk("tcp", tcp_cycles));
             cases.push(mk("floor-tcp", tcp_cycles));
             cases.push(mk("zenoh", tcp_cycles));
+            cases.push(mk("zenoh-tls", tcp_cycles));
             cases.push(mk("floor-zenoh", tcp_cycles));
             // The Python agent (1 agent, the smallest and the largest image set).
             if python.is_some() && agents == 1 && (w == 320 || w == 1920) {
@@ -949,6 +994,14 @@ fn print_ratios(rows: &[Row]) {
             line(
                 &format!("zenoh / tcp, {agents} agent(s), {}", size_name(w)),
                 ratio(find(rows, "zenoh", agents, w), find(rows, "tcp", agents, w)),
+                "report",
+            );
+            line(
+                &format!("zenoh-tls / zenoh, {agents} agent(s), {}", size_name(w)),
+                ratio(
+                    find(rows, "zenoh-tls", agents, w),
+                    find(rows, "zenoh", agents, w),
+                ),
                 "report",
             );
         }
@@ -1261,7 +1314,7 @@ mod tests {
             warmup: 1,
             cycles: 1,
         };
-        let text = config_text(&case, "bench-test-vec");
+        let text = config_text(&case, "bench-test-vec", Path::new("/nonexistent"));
         let config = Config::from_toml_str(&text, Path::new("<test>")).unwrap();
         assert_eq!(config.agents.len(), 16);
         assert!(config.agents.iter().all(|a| a.cameras.len() == 1));
