@@ -30,7 +30,8 @@ use vrsync_bridge::tcp::{
 use vrsync_bridge::{LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, SensorHeader};
 
 use crate::util::{
-    Events, Proc, RUN_DEADLINE, TestConfig, Transport, bin, cycle_log, spawn_host, summary,
+    EVENT_DEADLINE, Events, Proc, RUN_DEADLINE, TestConfig, Transport, bin, cycle_log,
+    make_certificates, spawn_host, summary,
 };
 
 // --- hostile bytes, in process: what decoding costs -------------------------------------
@@ -733,4 +734,107 @@ fn vr_agent_without_the_token_exits_with_a_clear_error() {
     assert!(out.stderr.contains("wrong tcp_token"), "{}", out.stderr);
     a1.play_to_the_end();
     s.finish(&[], &["token"]);
+}
+
+// --- strangers against a mutual-TLS zenoh host ------------------------------------------
+
+/// A `vr-sim run` host over zenoh mutual TLS (`tls/127.0.0.1`): a plaintext TCP peer and
+/// an agent whose certificate is of another CA never reach the hello and are counted as
+/// refused (`peer_refused` events of kind `tls`, the summary's `peers_refused`); the
+/// certified agent then runs every cycle.
+#[test]
+fn tls_strangers_are_counted_as_refused_and_a_certified_agent_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    make_certificates(dir.path(), "127.0.0.1");
+    let mut cfg = TestConfig::with_transport("tlsstranger", 1, Transport::Zenoh);
+    cfg.connect_timeout_s = 60.0;
+    let port = cfg.zenoh_port;
+    let config_for = |name: &str, cert: &str, connect_timeout: &str| {
+        let text = cfg
+            .toml()
+            .replace("\"tcp/127.0.0.1:", "\"tls/127.0.0.1:")
+            .replace(
+                "connect_timeout = 60\n",
+                &format!("connect_timeout = {connect_timeout}\n"),
+            )
+            .replace(
+                "[transport.zenoh]\n",
+                &format!(
+                    "[transport.zenoh]\ntls_ca = \"ca.pem\"\ntls_cert = \"{cert}.pem\"\n\
+                     tls_key = \"{cert}.key\"\nmtls = true\n"
+                ),
+            );
+        assert!(
+            text.contains("tls/127.0.0.1:") && text.contains("mtls"),
+            "{text}"
+        );
+        let path = dir.path().join(format!("{name}.toml"));
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let host_config = config_for("host", "host", "60");
+    let agent_config = config_for("agent", "agent", "60");
+    let stranger_config = config_for("stranger", "stranger", "3");
+    let events = Events::in_dir(dir.path());
+    let sum_path = dir.path().join("summary.json");
+    let host = spawn_host(
+        &host_config,
+        &events,
+        &[
+            "--frames",
+            "20",
+            "--summary-json",
+            sum_path.to_str().unwrap(),
+        ],
+    );
+    events.wait_for("listening", EVENT_DEADLINE);
+    let is_tls = |e: &serde_json::Value| e["kind"] == "tls";
+
+    // Plain TCP bytes: the TLS handshake fails, the connection is closed.
+    let mut plain = TcpStream::connect(("127.0.0.1", port)).unwrap();
+    plain.set_read_timeout(Some(LINE)).unwrap();
+    plain.write_all(b"not TLS at all\r\n\r\n").unwrap();
+    let mut rest = Vec::new();
+    let _ = plain.read_to_end(&mut rest); // EOF or a reset: closed either way
+    events.wait_for_match("peer_refused", is_tls, EVENT_DEADLINE);
+    let after_plain = events.of("peer_refused").len();
+
+    // A zenoh agent with a certificate of another CA: it never finds the host.
+    let out = Proc::spawn(
+        &bin("vr-agent"),
+        &["--config", stranger_config.to_str().unwrap(), "--id", "0"],
+    )
+    .wait(LINE);
+    assert_ne!(out.code(), Some(0), "{}", out.stderr);
+
+    let (agent, log) = (
+        Proc::spawn(
+            &bin("vr-agent"),
+            &[
+                "--config",
+                agent_config.to_str().unwrap(),
+                "--id",
+                "0",
+                "--log-cycles",
+                dir.path().join("a0.log").to_str().unwrap(),
+            ],
+        ),
+        dir.path().join("a0.log"),
+    );
+    let out = host.wait(RUN_DEADLINE);
+    assert_eq!(out.code(), Some(0), "host stderr:\n{}", out.stderr);
+    let a = agent.wait(LINE);
+    assert_eq!(a.code(), Some(0), "agent stderr:\n{}", a.stderr);
+    let sum = summary(&sum_path);
+    assert_eq!(sum["frames"], 20, "{sum}");
+    assert_eq!(sum["stop_timeouts"], 0, "{sum}");
+    let cycles: Vec<u64> = cycle_log(&log).iter().map(|l| l.cycle).collect();
+    assert_eq!(cycles, (0..20).collect::<Vec<_>>());
+    let refused = events.of("peer_refused");
+    assert!(refused.iter().all(is_tls), "{refused:?}");
+    assert!(
+        refused.len() > after_plain,
+        "the agent of another CA was not counted: {refused:?}"
+    );
+    assert_eq!(sum["peers_refused"], refused.len() as u64, "{sum}");
 }

@@ -373,37 +373,6 @@ fn zenoh_agents_across_network_namespaces_run_in_lock_step_and_survive_faults() 
     drop(ns);
 }
 
-/// A CA (`ca.pem`) and, signed by it, the host's certificate naming HOST_IP
-/// (`host.pem`, `host.key`) and the agents' (`agent.pem`, `agent.key`), in `dir`.
-fn make_certificates(dir: &Path) {
-    use rcgen::{
-        BasicConstraints, CertificateParams, CertifiedIssuer, DnType, ExtendedKeyUsagePurpose,
-        IsCa, KeyPair,
-    };
-    let mut p = CertificateParams::new(Vec::<String>::new()).unwrap();
-    p.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
-    p.distinguished_name
-        .push(DnType::CommonName, "vrsync netns CA");
-    let ca = CertifiedIssuer::self_signed(p, KeyPair::generate().unwrap()).unwrap();
-    std::fs::write(dir.join("ca.pem"), ca.pem()).unwrap();
-    for (name, names, usage) in [
-        (
-            "host",
-            vec![HOST_IP.to_string()],
-            ExtendedKeyUsagePurpose::ServerAuth,
-        ),
-        ("agent", vec![], ExtendedKeyUsagePurpose::ClientAuth),
-    ] {
-        let mut p = CertificateParams::new(names).unwrap();
-        p.distinguished_name.push(DnType::CommonName, name);
-        p.extended_key_usages = vec![usage];
-        let key = KeyPair::generate().unwrap();
-        let cert = p.signed_by(&key, &ca).unwrap();
-        std::fs::write(dir.join(format!("{name}.pem")), cert.pem()).unwrap();
-        std::fs::write(dir.join(format!("{name}.key")), key.serialize_pem()).unwrap();
-    }
-}
-
 /// The same lock-step run as the plain zenoh one, over mutual TLS: the host's config
 /// (`tls/` listen, its certificate) and the agents' (`tls/` connect, their own
 /// certificate) are separate files, as on two machines. 300 cycles, the all-shm
@@ -414,7 +383,7 @@ fn zenoh_agents_across_network_namespaces_run_in_lock_step_over_mutual_tls() {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    make_certificates(dir.path());
+    util::make_certificates(dir.path(), HOST_IP);
     let reference = dir.path().join("shm.toml");
     std::fs::write(&reference, config_text(&util::session("nstref"), "shm")).unwrap();
     let ref_sum = dir.path().join("shm.json");

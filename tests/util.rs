@@ -707,3 +707,44 @@ pub fn cycle_log(path: &Path) -> Vec<CycleLine> {
 
 /// Generous deadline for a whole run in a debug build on a loaded 2-core machine.
 pub const RUN_DEADLINE: Duration = Duration::from_secs(120);
+
+/// A CA (`ca.pem`) and, signed by it, the host's certificate naming `host_ip` (`host.pem`,
+/// `host.key`) and an agent's (`agent.pem`, `agent.key`); and a stranger's certificate
+/// (`stranger.pem`, `stranger.key`) signed by another CA, in `dir`.
+pub fn make_certificates(dir: &Path, host_ip: &str) {
+    use rcgen::{
+        BasicConstraints, CertificateParams, CertifiedIssuer, DnType, ExtendedKeyUsagePurpose,
+        IsCa, KeyPair,
+    };
+    let ca = |name: &str| {
+        let mut p = CertificateParams::new(Vec::<String>::new()).expect("CA params");
+        p.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+        p.distinguished_name.push(DnType::CommonName, name);
+        CertifiedIssuer::self_signed(p, KeyPair::generate().expect("CA key")).expect("CA")
+    };
+    let (ours, other) = (ca("vrsync test CA"), ca("another CA"));
+    std::fs::write(dir.join("ca.pem"), ours.pem()).expect("write ca.pem");
+    for (name, names, usage, issuer) in [
+        (
+            "host",
+            vec![host_ip.to_string()],
+            ExtendedKeyUsagePurpose::ServerAuth,
+            &ours,
+        ),
+        ("agent", vec![], ExtendedKeyUsagePurpose::ClientAuth, &ours),
+        (
+            "stranger",
+            vec![],
+            ExtendedKeyUsagePurpose::ClientAuth,
+            &other,
+        ),
+    ] {
+        let mut p = CertificateParams::new(names).expect("params");
+        p.distinguished_name.push(DnType::CommonName, name);
+        p.extended_key_usages = vec![usage];
+        let key = KeyPair::generate().expect("key");
+        let cert = p.signed_by(&key, issuer).expect("sign");
+        std::fs::write(dir.join(format!("{name}.pem")), cert.pem()).expect("write cert");
+        std::fs::write(dir.join(format!("{name}.key")), key.serialize_pem()).expect("write key");
+    }
+}

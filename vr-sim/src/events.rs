@@ -14,7 +14,7 @@
 //! | `agent_evicted` | `agent`, `cycle`, `reason`: written as the host evicts it (also while a cycle waits for it) |
 //! | `agent_rejoined` | `agent`, `cycle` (the first cycle it takes part in again) |
 //! | `agent_slow` | `agent`, `cycle`, `waited_s`: the host still waits for this live agent's stop past `stop_timeout` (`wait_for_stop = "alive"`); written as it happens, at 1×, 2×, 4×, … `stop_timeout` into the cycle |
-//! | `peer_refused` | `kind` (`malformed`, `version`, `token`, `unknown_agent`, `id_in_use`, `silent`, `too_many`), `agent` (the id it claimed, or `null`), `peer` (its address), `reason`: a connection the host refused or dropped before admitting it as an agent (at most 256 per wait are itemised; the summary counts all) |
+//! | `peer_refused` | `kind` (`malformed`, `version`, `token`, `unknown_agent`, `id_in_use`, `silent`, `too_many`, `tls`), `agent` (the id it claimed, or `null`), `peer` (its address), `reason`: a connection the host refused or dropped before admitting it as an agent (at most 256 per wait are itemised; the summary counts all) |
 //! | `command_rejected` | `agent`, `cycle`, `kind`, `reason`: the first rejection per agent and command kind (later ones are only counted in the summary) |
 //! | `cycle` | `cycle`, `timed_out_agents`, `slow_agents`, `late_batches`: sampled, see below |
 //! | `finished` | `frames`, `interrupted`, `trajectory_hash`, `summary` (the `--summary-json` path or `null`) |

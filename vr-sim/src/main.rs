@@ -47,14 +47,23 @@ fn main() -> ExitCode {
         Command::Bench(_) => "warn",
         _ => "info",
     };
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_filter)),
-        )
-        .with_writer(std::io::stderr)
-        .with_ansi(vrsync_agent::log::ansi_on_stderr())
-        .init();
+    {
+        use tracing_subscriber::layer::SubscriberExt;
+        use tracing_subscriber::util::SubscriberInitExt;
+        use tracing_subscriber::{EnvFilter, Layer};
+        let filter =
+            EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(default_filter));
+        tracing_subscriber::registry()
+            .with(
+                tracing_subscriber::fmt::layer()
+                    .with_writer(std::io::stderr)
+                    .with_ansi(vrsync_agent::log::ansi_on_stderr())
+                    .with_filter(filter),
+            )
+            // Peers dropped in a zenoh TLS handshake count as refused (whatever RUST_LOG).
+            .with(vrsync_bridge::zenoh::tls_refusal_layer())
+            .init();
+    }
     match run(cli) {
         Ok(code) => code,
         Err(e) => {

@@ -648,10 +648,18 @@ fn init_logging_impl(filter: *const c_char) -> Result<(), FfiError> {
         EnvFilter::try_new(text)
             .map_err(|e| FfiError::InvalidArgument(format!("bad log filter {text:?}: {e}")))?
     };
-    tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .with_ansi(ansi_on_stderr())
+    use tracing_subscriber::Layer;
+    use tracing_subscriber::layer::SubscriberExt;
+    use tracing_subscriber::util::SubscriberInitExt;
+    tracing_subscriber::registry()
+        .with(
+            tracing_subscriber::fmt::layer()
+                .with_writer(std::io::stderr)
+                .with_ansi(ansi_on_stderr())
+                .with_filter(filter),
+        )
+        // Peers dropped in a zenoh TLS handshake count as refused (whatever the filter).
+        .with(vrsync_bridge::zenoh::tls_refusal_layer())
         .try_init()
         .map_err(|_| FfiError::LoggingAlreadySet)
 }

@@ -190,6 +190,9 @@ pub enum RefusalKind {
     Silent,
     /// Turned away at once: too many connections are waiting for their hello.
     TooMany,
+    /// Dropped in the TLS handshake (zenoh `tls/` endpoints): no certificate of the CA,
+    /// or not TLS at all.
+    Tls,
 }
 
 impl RefusalKind {
@@ -203,6 +206,7 @@ impl RefusalKind {
             Self::IdInUse => "id_in_use",
             Self::Silent => "silent",
             Self::TooMany => "too_many",
+            Self::Tls => "tls",
         }
     }
 }

@@ -59,6 +59,9 @@ pub struct ZenohHostStats {
     pub refused_id_in_use: u64,
     /// Hellos refused: not a hello (garbage, too long, truncated).
     pub refused_malformed: u64,
+    /// Peers dropped in the TLS handshake (counted when the process's `tracing`
+    /// subscriber has [`super::tls_refusal_layer`]).
+    pub refused_tls: u64,
     /// Batches dropped: too long, or not a header plus its commands, or naming another agent.
     pub dropped_malformed: u64,
     /// Batches dropped: from an agent id that is not connected.
@@ -116,6 +119,17 @@ struct Shared {
     token: Option<Vec<u8>>,
     max_motor_body: usize,
     frame_bodies: Vec<usize>,
+}
+
+impl super::tls_refusals::TlsRefusalSink for Shared {
+    fn tls_refused(&self, refusal: PeerRefusal) {
+        {
+            let mut st = lock(&self.state);
+            st.stats.refused_tls += 1;
+            st.refusals.push(refusal);
+        }
+        self.wake.wake();
+    }
 }
 
 impl Shared {
@@ -594,6 +608,10 @@ impl ZenohHost {
             .declare_token(keys.host_alive())
             .wait()
             .map_err(declare("the host's liveliness token"))?;
+        for endpoint in z.listen.iter().filter(|e| e.starts_with("tls/")) {
+            let sink: Arc<dyn super::tls_refusals::TlsRefusalSink> = shared.clone();
+            super::tls_refusals::register(&sink, endpoint.clone());
+        }
         info!(listen = ?z.listen, session = %config.session, "zenoh host listening");
         Ok(Self {
             shared,

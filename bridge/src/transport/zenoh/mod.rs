@@ -52,9 +52,11 @@ use crate::config::Config;
 
 mod agent;
 mod host;
+mod tls_refusals;
 
 pub use agent::*;
 pub use host::*;
+pub use tls_refusals::tls_refusal_layer;
 
 /// Most batches that may wait per agent between two drains; more are dropped (a flood),
 /// except batches with the stop flag, which may fill as many again.
