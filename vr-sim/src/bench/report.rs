@@ -1,0 +1,282 @@
+//! The table, the ratios against the targets, the CSV file and the SVG plot.
+
+use super::*;
+
+pub(super) fn print_header() {
+    println!(
+        "{:<15} {:>6} {:>12} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}",
+        "transport",
+        "agents",
+        "image",
+        "MB/agent",
+        "p50 µs",
+        "p99 µs",
+        "mean µs",
+        "allocs/c",
+        "agent a/c",
+        "render µs",
+        "sdk µs/step"
+    );
+}
+
+pub(super) fn print_row(r: &Row) {
+    let mb = f64::from(r.cameras) * f64::from(r.width) * f64::from(r.height) * BPP as f64 / 1e6;
+    println!(
+        "{:<15} {:>6} {:>12} {:>10.3} {:>10.1} {:>10.1} {:>10.1} {:>10.2} {:>10.2} {:>10} {:>10}",
+        r.transport,
+        r.agents,
+        format!("{}x{}x{}", r.cameras, r.width, r.height),
+        mb,
+        r.p50_us,
+        r.p99_us,
+        r.mean_us,
+        r.allocs_per_cycle,
+        r.agent_allocs_per_cycle,
+        if r.render_us.is_nan() {
+            "-".to_string()
+        } else {
+            format!("{:.0}", r.render_us)
+        },
+        if r.sdk_us_per_agent_step.is_nan() {
+            "-".to_string()
+        } else {
+            format!("{:.2}", r.sdk_us_per_agent_step)
+        }
+    );
+    let _ = std::io::stdout().flush();
+}
+
+pub(super) fn size_name(w: u32) -> &'static str {
+    if w == 256 {
+        return "2x256x148";
+    }
+    if w == 1920 {
+        "3x1920x1080"
+    } else {
+        "3x320x240"
+    }
+}
+
+pub(super) fn find<'a>(rows: &'a [Row], t: &str, agents: u32, w: u32) -> Option<&'a Row> {
+    rows.iter()
+        .find(|r| r.transport == t && r.agents == agents && r.width == w)
+}
+
+/// A row by transport, agents and image width.
+type Key = (&'static str, u32, u32);
+
+/// The ratio of two rows' p50s, if both were measured.
+fn p50_ratio(rows: &[Row], (t, a, w): Key, (u, b, x): Key) -> Option<f64> {
+    match (find(rows, t, a, w), find(rows, u, b, x)) {
+        (Some(n), Some(d)) if d.p50_us > 0.0 => Some(n.p50_us / d.p50_us),
+        _ => None,
+    }
+}
+
+/// Prints the ratio table: each line's figure, and its target or "report".
+pub(super) fn print_ratios(rows: &[Row]) {
+    println!("\nratios (targets in parentheses):");
+    for (what, v, target) in ratio_lines(rows) {
+        if let Some(v) = v {
+            println!("  {what:<52} {v:>8.2}  ({target})");
+        }
+    }
+}
+
+/// The ratio table's lines, in print order: what, figure (`None`: a row is missing),
+/// target.
+pub(super) fn ratio_lines(rows: &[Row]) -> Vec<(String, Option<f64>, &'static str)> {
+    let p = |num: Key, den: Key| p50_ratio(rows, num, den);
+    // A transport's growth from 3x320x240 to 3x1920x1080 (1 agent).
+    let growth = |t: &'static str| p((t, 1, 1920), (t, 1, 320));
+    let mut v: Vec<(String, Option<f64>, &'static str)> = Vec::new();
+    for a in [1, 4] {
+        let what = format!("shm / floor-shm, {a} agent(s), 3x1920x1080");
+        v.push((what, p(("shm", a, 1920), ("floor-shm", a, 1920)), "<= 2"));
+    }
+    // Zero copy (DESIGN §9): the bridge's growth from 3x320x240 to 3x1920x1080 against
+    // the floor's growth (the bench agent reads every row, so both grow with the rows).
+    let (shm, floor) = (growth("shm"), growth("floor-shm"));
+    v.push((
+        "shm 3x1920x1080 / shm 3x320x240, 1 agent".into(),
+        shm,
+        "report",
+    ));
+    let what = "floor-shm 3x1920x1080 / floor-shm 3x320x240, 1 agent";
+    v.push((what.into(), floor, "report"));
+    let what = "zero copy: shm growth / floor-shm growth, 1 agent";
+    v.push((what.into(), shm.zip(floor).map(|(s, f)| s / f), "<= 1.2"));
+    for a in [1, 4] {
+        let target = if a == 1 { ">= 200" } else { "report" };
+        let what = format!("tcp / shm, {a} agent(s), 3x1920x1080");
+        v.push((what, p(("tcp", a, 1920), ("shm", a, 1920)), target));
+    }
+    for a in [1, 4] {
+        for w in [320, 1920] {
+            let size = size_name(w);
+            for (num, den, target) in [
+                ("zenoh", "floor-zenoh", "<= 1.3"),
+                ("zenoh", "tcp", "report"),
+                ("zenoh-tls", "zenoh", "report"),
+            ] {
+                let what = format!("{num} / {den}, {a} agent(s), {size}");
+                v.push((what, p((num, a, w), (den, a, w)), target));
+            }
+        }
+    }
+    for w in [320, 1920] {
+        let what = format!("python / shm (Rust agent), 1 agent, {}", size_name(w));
+        v.push((what, p(("python", 1, w), ("shm", 1, w)), "<= 2"));
+    }
+    if let (Some(py), Some(rust)) = (growth("python"), shm) {
+        let what = "python 1080p/320x240 growth / Rust agent's growth";
+        v.push((what.into(), Some(py / rust), "<= 1.2"));
+    }
+    for (t, target) in [("shm", "report; compare floors"), ("floor-shm", "report")] {
+        let what = format!("{t} 4 agents / {t} 1 agent, 3x1920x1080");
+        v.push((what, p((t, 4, 1920), (t, 1, 1920)), target));
+    }
+    let what = "shm-spin / floor-shm-spin, 1 agent, 3x1920x1080";
+    let spin = p(("shm-spin", 1, 1920), ("floor-shm-spin", 1, 1920));
+    v.push((what.into(), spin, "<= 2"));
+    for w in [256, 1920] {
+        let what = format!("legacy / shm, 1 agent, {}", size_name(w));
+        v.push((what, p(("legacy", 1, w), ("shm", 1, w)), "report"));
+        if let Some(r) = find(rows, "legacy", 1, w) {
+            let what = format!(
+                "PNG encode per image (fastest), {}x{} µs",
+                r.width, r.height
+            );
+            v.push((what, Some(r.png_us), "report"));
+        }
+    }
+    // The batched Python vector env: one process, one wake-up per cycle, against N Rust
+    // agent processes (DESIGN §9).
+    for a in VEC_AGENTS {
+        let target = |at16: &'static str| if a == 16 { at16 } else { "report" };
+        let what = format!("python-vec / shm (Rust agents), {a} agents, 1x84x84");
+        let vec_ratio = p(("python-vec", a, VEC_SIZE), ("shm", a, VEC_SIZE));
+        v.push((what, vec_ratio, target("<= 1.0")));
+        let what = format!("python-vec SDK µs per agent-step, {a} agents");
+        let sdk = find(rows, "python-vec", a, VEC_SIZE).map(|r| r.sdk_us_per_agent_step);
+        v.push((what, sdk, target("<= 5")));
+        let what = format!("shm / floor-shm, {a} agents, 1x84x84");
+        v.push((
+            what,
+            p(("shm", a, VEC_SIZE), ("floor-shm", a, VEC_SIZE)),
+            "report",
+        ));
+    }
+    let max_allocs = rows
+        .iter()
+        .filter(|r| r.transport.starts_with("shm"))
+        .map(|r| r.allocs_per_cycle.max(r.agent_allocs_per_cycle))
+        .fold(0.0, f64::max);
+    let what = "max allocations per cycle on the shm path";
+    v.push((what.into(), Some(max_allocs), "0"));
+    v
+}
+
+pub(super) fn write_csv(path: &Path, rows: &[Row]) -> anyhow::Result<()> {
+    let mut s = String::from(
+        "transport,agents,cameras,width,height,format,frames,p50_us,p99_us,mean_us,frames_per_s,allocs_per_cycle,agent_allocs_per_cycle,render_us,sdk_us_per_agent_step\n",
+    );
+    for r in rows {
+        s += &format!(
+            "{},{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.1},{:.3}\n",
+            r.transport,
+            r.agents,
+            r.cameras,
+            r.width,
+            r.height,
+            r.format,
+            r.frames,
+            r.p50_us,
+            r.p99_us,
+            r.mean_us,
+            r.frames_per_s,
+            r.allocs_per_cycle,
+            r.agent_allocs_per_cycle,
+            r.render_us,
+            r.sdk_us_per_agent_step
+        );
+    }
+    std::fs::write(path, s).with_context(|| format!("write {}", path.display()))
+}
+
+pub(super) fn plot(path: &Path, rows: &[Row]) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+
+    let bytes =
+        |r: &Row| f64::from(r.cameras) * f64::from(r.width) * f64::from(r.height) * BPP as f64;
+    let (xmin, xmax) = rows
+        .iter()
+        .map(bytes)
+        .fold((f64::MAX, 0.0f64), |(lo, hi), b| (lo.min(b), hi.max(b)));
+    let (ymin, ymax) = rows
+        .iter()
+        .map(|r| r.p50_us)
+        .fold((f64::MAX, 0.0f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    let root = SVGBackend::new(path, (900, 600)).into_drawing_area();
+    root.fill(&WHITE)
+        .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "vrsync cycle time p50 vs image bytes per agent (log-log)",
+            ("sans-serif", 20),
+        )
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(
+            (xmin * 0.8..xmax * 1.25).log_scale(),
+            (ymin.max(0.1) * 0.7..ymax * 1.5).log_scale(),
+        )
+        .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+    chart
+        .configure_mesh()
+        .x_desc("image bytes per agent and cycle (rgb8)")
+        .y_desc("p50 cycle time (µs)")
+        .draw()
+        .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+    let mut series: Vec<(String, u32)> = Vec::new();
+    for r in rows {
+        let key = (r.transport.clone(), r.agents);
+        if !series.contains(&key) {
+            series.push(key);
+        }
+    }
+    for (i, (transport, agents)) in series.iter().enumerate() {
+        let mut points: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| &r.transport == transport && r.agents == *agents)
+            .map(|r| (bytes(r), r.p50_us))
+            .collect();
+        points.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let color = Palette99::pick(i).to_rgba();
+        let floor = transport.starts_with("floor");
+        let label = format!("{transport} ×{agents}");
+        let style = ShapeStyle::from(&color).stroke_width(2);
+        let drawn = if floor {
+            chart.draw_series(DashedLineSeries::new(points.clone(), 6, 4, style))
+        } else {
+            chart.draw_series(LineSeries::new(points.clone(), style))
+        }
+        .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+        drawn
+            .label(label)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+        chart
+            .draw_series(points.iter().map(|&p| Circle::new(p, 3, color.filled())))
+            .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperLeft)
+        .draw()
+        .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+    root.present().map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+    Ok(())
+}

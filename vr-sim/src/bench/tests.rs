@@ -1,0 +1,165 @@
+//! Unit tests of the bench's bookkeeping.
+
+use super::vrsync::config_text;
+
+use super::*;
+
+#[test]
+fn median_of_round_p50s_ignores_one_disturbed_round() {
+    assert_eq!(median(&[5.0, 4.0, 400.0, 4.5, 5.5]), 5.0);
+    assert_eq!(median(&[2.0, 1.0]), 1.5);
+    assert!(median(&[]).is_nan());
+}
+
+#[test]
+fn a_row_reports_the_median_of_the_rounds_p50s() {
+    let hist = |us: u64, n: u64| {
+        let mut h = histogram().unwrap();
+        h.record_n(us * 1000, n).unwrap();
+        h
+    };
+    let case = Case {
+        transport: "shm",
+        agents: 1,
+        cameras: CAMERAS,
+        width: 320,
+        height: 240,
+        warmup: 1,
+        cycles: 10,
+    };
+    // One slow round with many samples would own the merged histogram's p50.
+    let mut m = Measured::new(hist(10, 10), 0.0, 0.0);
+    m.merge(Measured::new(hist(900, 100), 0.0, 0.0)).unwrap();
+    m.merge(Measured::new(hist(11, 10), 0.0, 0.0)).unwrap();
+    let r = row(&case, &m);
+    assert!((r.p50_us - 11.0).abs() < 0.1, "{}", r.p50_us);
+    assert_eq!(r.frames, 120);
+}
+
+#[test]
+fn agent_reports_are_parsed_and_missing_figures_stay_nan() {
+    let mut r = Reported::default();
+    for line in ["checksum 123", "sdk_us_per_agent_step 3.250"] {
+        r.parse_line(line);
+    }
+    assert_eq!(r.sdk_us_per_agent_step, 3.25);
+    assert!(r.allocs_per_cycle.is_nan());
+    let mut r = Reported::default();
+    r.parse_line("allocs_per_cycle 1.00");
+    r.parse_line("sdk_us_per_agent_step nan");
+    assert_eq!(r.allocs_per_cycle, 1.0);
+    assert!(r.sdk_us_per_agent_step.is_nan());
+}
+
+#[test]
+fn a_vector_env_row_carries_the_median_sdk_time_and_json_null_elsewhere() {
+    let mut h = histogram().unwrap();
+    h.record(100_000).unwrap();
+    let case = Case {
+        transport: "python-vec",
+        agents: 16,
+        cameras: 1,
+        width: VEC_SIZE,
+        height: VEC_SIZE,
+        warmup: 1,
+        cycles: 1,
+    };
+    let mut m = Measured::new(h.clone(), 0.0, f64::NAN);
+    m.round_sdk_us = vec![4.0];
+    for sdk in [40.0, 3.0] {
+        let mut other = Measured::new(h.clone(), 0.0, f64::NAN);
+        other.round_sdk_us = vec![sdk];
+        m.merge(other).unwrap();
+    }
+    let r = row(&case, &m);
+    assert_eq!(r.sdk_us_per_agent_step, 4.0);
+    assert_eq!(r.cameras, 1);
+    let json = serde_json::to_value(&r).unwrap();
+    assert_eq!(json["sdk_us_per_agent_step"], 4.0);
+    let shm = row(
+        &Case {
+            transport: "shm",
+            ..case
+        },
+        &Measured::new(h, 0.0, 0.0),
+    );
+    let json = serde_json::to_value(&shm).unwrap();
+    assert!(json["sdk_us_per_agent_step"].is_null());
+    // DESIGN §8: the contract's keys are all there.
+    for key in [
+        "transport",
+        "agents",
+        "cameras",
+        "width",
+        "height",
+        "format",
+        "frames",
+        "p50_us",
+        "p99_us",
+        "mean_us",
+        "frames_per_s",
+    ] {
+        assert!(json.get(key).is_some(), "{key}");
+    }
+}
+
+#[test]
+fn a_vector_env_case_configures_one_camera_per_agent() {
+    let case = Case {
+        transport: "python-vec",
+        agents: 16,
+        cameras: 1,
+        width: VEC_SIZE,
+        height: VEC_SIZE,
+        warmup: 1,
+        cycles: 1,
+    };
+    let text = config_text(&case, "bench-test-vec", Path::new("/nonexistent"));
+    let config = Config::from_toml_str(&text, Path::new("<test>")).unwrap();
+    assert_eq!(config.agents.len(), 16);
+    assert!(config.agents.iter().all(|a| a.cameras.len() == 1));
+    assert_eq!(case.frame_bytes(), 84 * 84 * 3);
+}
+
+#[test]
+fn the_ratio_table_divides_the_named_rows_p50s_and_skips_missing_rows() {
+    let mut h = histogram().unwrap();
+    h.record(1000).unwrap();
+    let row_of = |transport: &'static str, width: u32, p50_us: f64| {
+        let case = Case {
+            transport,
+            agents: 1,
+            cameras: CAMERAS,
+            width,
+            height: 240,
+            warmup: 1,
+            cycles: 1,
+        };
+        let mut r = row(&case, &Measured::new(h.clone(), 0.0, 0.0));
+        r.p50_us = p50_us;
+        r
+    };
+    let rows = [
+        row_of("shm", 1920, 30.0),
+        row_of("floor-shm", 1920, 20.0),
+        row_of("shm", 320, 10.0),
+        row_of("floor-shm", 320, 10.0),
+    ];
+    let lines = report::ratio_lines(&rows);
+    let value = |what: &str| {
+        lines
+            .iter()
+            .find(|(w, _, _)| w == what)
+            .unwrap_or_else(|| panic!("no line {what:?}"))
+            .1
+    };
+    assert_eq!(value("shm / floor-shm, 1 agent(s), 3x1920x1080"), Some(1.5));
+    assert_eq!(value("shm 3x1920x1080 / shm 3x320x240, 1 agent"), Some(3.0));
+    // (30 / 10) / (20 / 10)
+    assert_eq!(
+        value("zero copy: shm growth / floor-shm growth, 1 agent"),
+        Some(1.5)
+    );
+    assert_eq!(value("shm / floor-shm, 4 agent(s), 3x1920x1080"), None);
+    assert_eq!(value("tcp / shm, 1 agent(s), 3x1920x1080"), None);
+}

@@ -1,0 +1,229 @@
+//! The vrsync rows: full sync cycles through the host API with bench agents (Rust,
+//! Python, the Python vector env) over every transport.
+
+use super::floor::loopback_endpoint;
+use super::*;
+
+/// Renders agent 0's frame `n` times into a loaned (never published) sample: what the
+/// simulator would add to each cycle per agent.
+pub(super) fn measure_render(config: &Config, host: &mut Host, n: u32) -> anyhow::Result<f64> {
+    let world = crate::world::World::from_config(config)?;
+    let mut renderer = crate::render::Renderer::new(0)?;
+    let mut total = Duration::ZERO;
+    for _ in 0..n {
+        let mut frame = host.loan_frame(0)?;
+        let t0 = Instant::now();
+        renderer.render_agent(&world, 0, frame.images_mut());
+        total += t0.elapsed();
+    }
+    Ok(total.as_secs_f64() * 1e6 / f64::from(n.max(1)))
+}
+
+/// A CA and one certificate (naming 127.0.0.1, for server and client use) for the
+/// `zenoh-tls` rows, in `dir`: `ca.pem`, `bench.pem`, `bench.key`.
+pub(super) fn make_certificates(dir: &Path) -> anyhow::Result<()> {
+    use rcgen::{
+        BasicConstraints, CertificateParams, CertifiedIssuer, DnType, ExtendedKeyUsagePurpose,
+        IsCa, KeyPair,
+    };
+    let mut p = CertificateParams::new(Vec::<String>::new())?;
+    p.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+    p.distinguished_name
+        .push(DnType::CommonName, "vrsync bench CA");
+    let ca = CertifiedIssuer::self_signed(p, KeyPair::generate()?)?;
+    let mut p = CertificateParams::new(vec!["127.0.0.1".to_string()])?;
+    p.distinguished_name
+        .push(DnType::CommonName, "vrsync bench");
+    p.extended_key_usages = vec![
+        ExtendedKeyUsagePurpose::ServerAuth,
+        ExtendedKeyUsagePurpose::ClientAuth,
+    ];
+    let key = KeyPair::generate()?;
+    let cert = p.signed_by(&key, &ca)?;
+    for (name, text) in [
+        ("ca.pem", ca.pem()),
+        ("bench.pem", cert.pem()),
+        ("bench.key", key.serialize_pem()),
+    ] {
+        std::fs::write(dir.join(name), text).with_context(|| format!("write {name}"))?;
+    }
+    Ok(())
+}
+
+/// The config of `case`; `certs`: the folder of [`make_certificates`] (`zenoh-tls`).
+pub(super) fn config_text(case: &Case, session: &str, certs: &Path) -> String {
+    let (kind, wait) = match case.transport {
+        "tcp" => ("tcp", "block"),
+        "zenoh" | "zenoh-tls" => ("zenoh", "block"),
+        "shm-spin" => ("shm", "spin"),
+        _ => ("shm", "block"),
+    };
+    let mut s = format!(
+        "session = {session:?}\n[sync]\nsync_mode = true\nsimulation_time_per_frame = 0.01\n\
+         stop_timeout = 10.0\nconnect_timeout = 30.0\nwait = {wait:?}\n[transport]\nkind = {kind:?}\n\
+         tcp_listen = \"127.0.0.1:0\"\nmax_commands_per_cycle = 8\n"
+    );
+    if kind == "zenoh" {
+        // Loopback, a port free a moment ago (zenoh's stable API cannot report the port
+        // of a port-0 listener), scouting off (the default).
+        let endpoint = loopback_endpoint().unwrap_or_default();
+        if case.transport == "zenoh-tls" {
+            // Mutual TLS: host and agents share the config, hence the certificate.
+            let file = |name: &str| certs.join(name).display().to_string();
+            s += &format!(
+                "[transport.zenoh]\nlisten = [{:?}]\ntls_ca = {:?}\ntls_cert = {:?}\n\
+                 tls_key = {:?}\nmtls = true\n",
+                endpoint.replacen("tcp/", "tls/", 1),
+                file("ca.pem"),
+                file("bench.pem"),
+                file("bench.key")
+            );
+        } else {
+            s += &format!("[transport.zenoh]\nlisten = [{endpoint:?}]\n");
+        }
+    }
+    for id in 0..case.agents {
+        s += &format!("[[agent]]\nid = {id}\n");
+        for c in 0..case.cameras {
+            s += &format!(
+                "[[agent.camera]]\nname = \"c{c}\"\nwidth = {}\nheight = {}\nformat = \"rgb8\"\n",
+                case.width, case.height
+            );
+        }
+    }
+    s
+}
+
+/// The interpreter for the `python` rows, if it can import `vrsync` (else the rows are
+/// left out, saying why).
+pub(super) fn python_agent(python: Option<&Path>) -> Option<PathBuf> {
+    let python = python?;
+    let ok = Command::new(python)
+        .args(["-c", "import vrsync.bench_agent, vrsync.bench_vector"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if ok {
+        Some(python.to_path_buf())
+    } else {
+        println!(
+            "python rows left out: {} cannot import vrsync (pip install ./agent-sdk/python, \
+             or give --python)",
+            python.display()
+        );
+        None
+    }
+}
+
+/// A full vrsync cycle through the host API.
+pub(super) fn bench_vrsync(
+    case: &Case,
+    session: &str,
+    dir: &Path,
+    render: bool,
+    python: Option<&Path>,
+) -> anyhow::Result<Measured> {
+    let text = config_text(case, session, dir);
+    let mut config = Config::from_toml_str(&text, Path::new("<bench>"))?;
+    let mut host = Host::builder(&config)
+        .signal_handling(SignalHandling::Install)
+        .create()
+        .context("create the bench host")?;
+    if let Some(addr) = host.tcp_local_addr() {
+        config.transport.tcp_listen = addr;
+    }
+    let path = dir.join(format!("{session}.toml"));
+    std::fs::write(&path, config.to_toml_string()).context("write the bench config")?;
+    // Before the agents exist: nothing else competes for the cores (spinning agents would).
+    let render_us = if render && case.agents == 1 {
+        measure_render(&config, &mut host, 5)?
+    } else {
+        f64::NAN
+    };
+    let agents = spawn_agents(case, &path, python)?;
+    // The agents' start-up (a Python interpreter importing numpy, 16 processes on 2
+    // cores) happens here, before cycle 0; the warm-up cycles follow.
+    host.wait_for_agents(Duration::from_secs(60))?;
+    let (hist, host_allocs) = measure_cycles(case, &mut host)?;
+    drop(host);
+    let reported = agents.finish()?;
+    let _ = std::fs::remove_file(&path);
+    let mut m = Measured::new(hist, host_allocs, reported.allocs_per_cycle);
+    m.render_us = render_us;
+    if !reported.sdk_us_per_agent_step.is_nan() {
+        m.round_sdk_us.push(reported.sdk_us_per_agent_step);
+    }
+    Ok(m)
+}
+
+/// The bench agents of `case` on the config at `config`: `vr-bench-agent` processes, or
+/// the Python agent (`python`), or one Python vector-env process (`python-vec`).
+fn spawn_agents(case: &Case, config: &Path, python: Option<&Path>) -> anyhow::Result<Agents> {
+    let config_arg = config.display().to_string();
+    let args = |words: &[&str]| -> Vec<String> {
+        let mut a: Vec<String> = words.iter().map(|w| (*w).to_string()).collect();
+        a.extend(["--config".to_string(), config_arg.clone()]);
+        a
+    };
+    let warmup = case.warmup.to_string();
+    match python {
+        // One Python process drives every agent through the batched vector env, doing
+        // the same work per agent.
+        Some(python) if case.transport == "python-vec" => Agents::spawn_program(
+            python,
+            |_| args(&["-m", "vrsync.bench_vector", "--warmup", &warmup]),
+            1,
+        ),
+        // The Python agent does the Rust agent's work (first and last byte of every row,
+        // one command, stop) through the Python SDK.
+        Some(python) if case.transport == "python" => Agents::spawn_program(
+            python,
+            |id| args(&["-m", "vrsync.bench_agent", "--id", &id.to_string()]),
+            case.agents,
+        ),
+        _ => Agents::spawn(
+            |id| {
+                args(&[
+                    "--mode",
+                    "sdk",
+                    "--id",
+                    &id.to_string(),
+                    "--warmup",
+                    &warmup,
+                ])
+            },
+            case.agents,
+        ),
+    }
+}
+
+/// Runs the warm-up and measured cycles of `case` (every agent connected): the histogram
+/// of the measured cycles (ns) and the host's allocations per measured cycle.
+fn measure_cycles(case: &Case, host: &mut Host) -> anyhow::Result<(Histogram<u64>, f64)> {
+    let ids: Vec<u32> = host.agent_ids().collect();
+    measure_loop(case, |cycle| {
+        for &id in &ids {
+            let mut frame = host.loan_frame(id)?;
+            // The host's part of "rendering": mark each image (the frame is already in
+            // shared memory; nothing is copied).
+            for image in frame.images_mut() {
+                if let Some(b) = image.data.first_mut() {
+                    *b = cycle as u8;
+                }
+            }
+            host.publish(frame)?;
+        }
+        host.start()?;
+        if host.collect()?.timed_out {
+            bail!(
+                "{} agents={} {}x{}: cycle {cycle} timed out",
+                case.transport,
+                case.agents,
+                case.width,
+                case.height
+            );
+        }
+        Ok(())
+    })
+}
