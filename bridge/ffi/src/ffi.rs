@@ -4,10 +4,10 @@
 use std::ffi::{CStr, c_char};
 use std::time::Duration;
 
+use vrsync_bridge::Config;
 use vrsync_bridge::{
     self, ActionState, ActionStatus, Collision, EyePosition, GridPosition, HeadMotion, Pose,
 };
-use vrsync_bridge::{Config, TransportKind};
 use vrsync_bridge::{Host, HostWaitError, SignalHandling};
 
 use crate::state::{
@@ -194,12 +194,7 @@ fn info_impl(host: *mut vrs_host_t, out_info: *mut vrs_host_info_t) -> Result<()
             connect_timeout_ns: c.sync.connect_timeout.as_nanos() as u64,
             agent_count: st.ids.len() as u32,
             sync_mode: u32::from(c.sync.sync_mode),
-            transport: match c.transport.kind {
-                TransportKind::Shm => vrs_host_transport_t::VRS_HOST_TRANSPORT_SHM,
-                TransportKind::Tcp => vrs_host_transport_t::VRS_HOST_TRANSPORT_TCP,
-                TransportKind::Legacy => vrs_host_transport_t::VRS_HOST_TRANSPORT_LEGACY,
-                TransportKind::Zenoh => vrs_host_transport_t::VRS_HOST_TRANSPORT_ZENOH,
-            },
+            transport: vrs_host_transport_t::of(c.transport.kind),
             tcp_port: h.tcp_local_addr().map_or(0, |a| u32::from(a.port())),
             max_commands_per_cycle: c.transport.max_commands_per_cycle,
             protocol_version: vrsync_bridge::PROTOCOL_VERSION,

@@ -194,6 +194,22 @@ pub enum vrs_host_transport_t {
     VRS_HOST_TRANSPORT_LEGACY = 3,
 }
 
+impl vrs_host_transport_t {
+    /// The constant of `kind`. The `match` covers the bridge's transport registry: a
+    /// transport added there does not compile here until it has its constant (and
+    /// `tests/transport_constants.rs` then checks the header, the C# binding and the C side
+    /// of its layout check for it).
+    pub fn of(kind: vrsync_bridge::TransportKind) -> Self {
+        use vrsync_bridge::TransportKind as K;
+        match kind {
+            K::Shm => Self::VRS_HOST_TRANSPORT_SHM,
+            K::Tcp => Self::VRS_HOST_TRANSPORT_TCP,
+            K::Legacy => Self::VRS_HOST_TRANSPORT_LEGACY,
+            K::Zenoh => Self::VRS_HOST_TRANSPORT_ZENOH,
+        }
+    }
+}
+
 const _: () = {
     use vrs_host_command_kind_t::*;
     assert!(VRS_HOST_COMMAND_MOVE as u32 == vrsync_bridge::command_kind::MOVE);

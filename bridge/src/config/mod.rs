@@ -35,37 +35,41 @@ pub const MAX_IMAGE_SIDE_PX: u32 = 8192;
 /// Largest config file [`Config::load`] reads, bytes.
 pub const MAX_CONFIG_BYTES: u64 = 4 << 20;
 
-/// Transport selected by `[transport] kind`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "lowercase")]
-pub enum TransportKind {
-    /// iceoryx2 shared memory (default).
-    #[default]
-    Shm,
-    /// TCP, the measured baseline.
-    Tcp,
-    /// The original system's protobuf/TCP protocol, for agents written for it
-    /// (`[transport.legacy]`; see [`crate::legacy`]).
-    Legacy,
-    /// zenoh, for agents on other machines (`[transport.zenoh]`).
-    Zenoh,
-}
-
-impl TransportKind {
-    /// Every transport, in the order above (the test matrix and the docs take it from
-    /// here; a unit test with an exhaustive match keeps it complete).
-    pub const ALL: [TransportKind; 4] = [Self::Shm, Self::Tcp, Self::Legacy, Self::Zenoh];
-
-    /// The config spelling.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Shm => "shm",
-            Self::Tcp => "tcp",
-            Self::Legacy => "legacy",
-            Self::Zenoh => "zenoh",
+/// Generates [`TransportKind`] from the transport registry
+/// (`transport/registry.rs`).
+macro_rules! transport_kind {
+    ($(
+        $(#[$attr:meta])*
+        $kind:ident $name:literal $module:ident:
+            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident;
+    )*) => {
+        /// Transport selected by `[transport] kind` (and `[[agent]] transport`), spelled
+        /// as [`TransportKind::as_str`] says.
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+        pub enum TransportKind {
+            $(
+                $(#[$attr])*
+                #[serde(rename = $name)]
+                $kind,
+            )*
         }
-    }
+
+        impl TransportKind {
+            /// Every transport, in the registry's order (the test matrix and the docs take
+            /// it from here).
+            pub const ALL: [TransportKind; [$($name),*].len()] = [$(Self::$kind),*];
+
+            /// The config spelling.
+            pub fn as_str(self) -> &'static str {
+                match self {
+                    $(Self::$kind => $name,)*
+                }
+            }
+        }
+    };
 }
+
+crate::transport::registry::transports!(transport_kind);
 
 /// How waiting parties wait (`[sync] wait`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]

@@ -2,26 +2,10 @@
 
 use super::*;
 
-/// Why the host could not be created.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum HostCreateError {
-    /// The shared-memory transport failed.
-    #[error(transparent)]
-    Shm(#[from] ShmHostCreateError),
-    /// The TCP transport failed.
-    #[error(transparent)]
-    Tcp(#[from] TcpHostCreateError),
-    /// The legacy transport (the original protocol) failed.
-    #[error(transparent)]
-    Legacy(#[from] crate::transport::legacy::LegacyHostCreateError),
-    /// The zenoh transport failed.
-    #[error(transparent)]
-    Zenoh(#[from] crate::transport::zenoh::ZenohHostCreateError),
-    /// The one wait over several transports could not be set up (an epoll set).
-    #[error("cannot wait on several transports at once: epoll: {0}")]
-    Wait(std::io::Error),
-}
+/// Why the host could not be created: one variant per transport (its own create error,
+/// shown as it is), and `Wait` when the one wait over several transports could not be set
+/// up (an epoll set). Generated from the transport registry, with the transport mix.
+pub type HostCreateError = crate::transport::mixed::TransportsCreateError;
 
 /// Why waiting for agents failed.
 #[derive(Debug, thiserror::Error)]

@@ -19,9 +19,7 @@ use crate::config::{AgentLostPolicy, Config, WaitForStop};
 use crate::events::PendingEvents;
 use crate::rounded::Rounded;
 use crate::signal::SignalHandling;
-use crate::transport::mixed::{AnyLoan, Transports, TransportsCreateError};
-use crate::transport::shm::ShmHostCreateError;
-use crate::transport::tcp::TcpHostCreateError;
+use crate::transport::mixed::{AnyLoan, Transports};
 use crate::transport::{FrameLoanMut, HostTransport, HostTransportError, PeerRefusal};
 use crate::wire::{
     ActionState, ImageDesc, MAX_CAMERAS, MotorCommand, PROTOCOL_VERSION, SENSOR_FLAG_SYNC_MODE,
@@ -68,13 +66,7 @@ impl<'c> HostBuilder<'c> {
     /// # Errors
     /// [`HostCreateError`].
     pub fn create(self) -> Result<Host, HostCreateError> {
-        let backend = Transports::create(self.config, self.signals).map_err(|e| match e {
-            TransportsCreateError::Shm(e) => HostCreateError::Shm(e),
-            TransportsCreateError::Tcp(e) => HostCreateError::Tcp(e),
-            TransportsCreateError::Legacy(e) => HostCreateError::Legacy(e),
-            TransportsCreateError::Zenoh(e) => HostCreateError::Zenoh(e),
-            TransportsCreateError::Wait(e) => HostCreateError::Wait(e),
-        })?;
+        let backend = Transports::create(self.config, self.signals)?;
         Ok(Host::over(self.config, backend))
     }
 }

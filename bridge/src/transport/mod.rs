@@ -17,6 +17,7 @@ pub mod any_agent;
 pub mod legacy;
 pub(crate) mod mixed;
 pub mod record;
+pub(crate) mod registry;
 pub mod shm;
 pub mod tcp;
 pub(crate) mod wait;

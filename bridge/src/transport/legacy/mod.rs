@@ -41,7 +41,9 @@
 //! transport's [`super::HostTransport::activity_fd`]: a host serving agents over several
 //! transports waits for all of them at once.
 
+mod agent;
 pub mod codec;
 mod host;
 
+pub use agent::{LegacyAgent, LegacyFrame};
 pub use host::*;
