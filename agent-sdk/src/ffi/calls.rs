@@ -1,65 +1,19 @@
 //! The `*_impl` functions behind the exported `vrs_*` functions, each returning a
 //! `Result`, and the helpers they share.
 
-use std::ffi::{CStr, c_char};
+use std::ffi::c_char;
 use std::time::Duration;
 
 use vrsync_bridge::{Command, Config};
+use vrsync_cabi::{ArgError, c_name, str_arg, write_opt, write_required};
 
-use super::state::{
-    AGENTS, AgentState, FfiError, handle_key, register, unknown_handle, with_agent,
-};
+use super::state::{AGENTS, AgentState, FfiError, with_agent};
 use super::types::*;
 use crate::agent::{AgentBuilder, Frame, SignalHandling};
 
 // ---------------------------------------------------------------------------------------
 // Helpers
 // ---------------------------------------------------------------------------------------
-
-/// Writes `value` through `out` when `out` is not null.
-///
-/// # Safety
-/// `out` is null or valid for writing a `T`.
-pub(super) unsafe fn write_opt<T>(out: *mut T, value: T) {
-    if !out.is_null() {
-        // SAFETY: non-null and, by the caller's contract, valid for writes.
-        unsafe { out.write(value) }
-    }
-}
-
-/// Writes `value` through `out`, which must not be null.
-///
-/// # Safety
-/// `out` is null or valid for writing a `T`.
-pub(super) unsafe fn write_required<T>(
-    out: *mut T,
-    what: &'static str,
-    value: T,
-) -> Result<(), FfiError> {
-    if out.is_null() {
-        return Err(FfiError::Null(what));
-    }
-    // SAFETY: non-null and, by the caller's contract, valid for writes.
-    unsafe { out.write(value) };
-    Ok(())
-}
-
-/// Reads a C string argument as UTF-8.
-///
-/// # Safety
-/// `s` is null or a valid NUL-terminated string.
-pub(super) unsafe fn str_arg<'a>(
-    s: *const c_char,
-    what: &'static str,
-) -> Result<&'a str, FfiError> {
-    if s.is_null() {
-        return Err(FfiError::Null(what));
-    }
-    // SAFETY: non-null and NUL-terminated by the caller's contract.
-    let c = unsafe { CStr::from_ptr(s) };
-    c.to_str()
-        .map_err(|e| FfiError::InvalidArgument(format!("{what} is not UTF-8: {e}")))
-}
 
 /// A timeout in milliseconds; negative means none.
 pub(super) fn timeout_arg(timeout_ms: i64) -> Option<Duration> {
@@ -81,25 +35,11 @@ pub(super) fn frame_info(frame: &Frame, frames_skipped: u64) -> vrs_frame_t {
         image_count: frame.image_count() as u32,
         status_count: frame.statuses().len() as u32,
         collision_count: frame.collisions().len() as u32,
-        pose: vrs_pose_t {
-            position: h.pose.position,
-            rotation: h.pose.rotation,
-        },
+        pose: h.pose.into(),
         reward: h.reward,
-        grid: vrs_grid_position_t {
-            position: h.grid.position,
-            rotation_deg: h.grid.rotation_deg,
-        },
-        head_motion: vrs_head_motion_t {
-            velocity: h.head_motion.velocity,
-            acceleration: h.head_motion.acceleration,
-            angular_velocity_deg: h.head_motion.angular_velocity_deg,
-            angular_acceleration_deg: h.head_motion.angular_acceleration_deg,
-        },
-        eye: vrs_eye_position_t {
-            rotation_deg: h.eye.rotation_deg,
-            rotation_velocity_deg: h.eye.rotation_velocity_deg,
-        },
+        grid: h.grid.into(),
+        head_motion: h.head_motion.into(),
+        eye: h.eye.into(),
         previous_outcome: outcome,
         previous_rejected: h.previous_rejected,
         frames_skipped,
@@ -113,10 +53,6 @@ pub(super) fn image_info(frame: &Frame, index: usize) -> Result<vrs_image_t, Ffi
         index,
         count,
     })?;
-    let mut name = [0 as c_char; VRS_CAMERA_NAME_SIZE];
-    for (dst, &src) in name.iter_mut().zip(image.name().as_bytes()) {
-        *dst = src as c_char;
-    }
     let data = image.data();
     Ok(vrs_image_t {
         data: data.as_ptr(),
@@ -126,7 +62,7 @@ pub(super) fn image_info(frame: &Frame, index: usize) -> Result<vrs_image_t, Ffi
         stride: image.stride(),
         format: image.format().into(),
         camera: image.desc().camera,
-        name,
+        name: c_name(image.name()),
     })
 }
 
@@ -165,7 +101,7 @@ pub(super) fn connect_impl(
     out_agent: *mut *mut vrs_agent_t,
 ) -> Result<(), FfiError> {
     if out_agent.is_null() {
-        return Err(FfiError::Null("out_agent"));
+        return Err(ArgError::Null("out_agent").into());
     }
     // SAFETY: checked non-null; valid for writes by the caller's contract. Cleared first
     // so that a failed connect leaves NULL behind.
@@ -180,32 +116,14 @@ pub(super) fn connect_impl(
         builder = builder.connect_timeout(t);
     }
     let agent = builder.connect()?;
-    let key = register(|handle| AgentState {
-        handle,
-        frame: None,
-        agent,
-    })?;
+    let key = AGENTS.insert(|_| AgentState { frame: None, agent })?;
     // SAFETY: as above. The handle is a registry key, never dereferenced.
     unsafe { out_agent.write(std::ptr::without_provenance_mut(key)) };
     Ok(())
 }
 
 pub(super) fn disconnect_impl(agent: *mut vrs_agent_t) -> Result<(), FfiError> {
-    let key = handle_key(agent);
-    if key == 0 {
-        return Err(FfiError::NullHandle);
-    }
-    let state = AGENTS
-        .try_with(|agents| agents.borrow_mut().remove(&key))
-        .map_err(|_| FfiError::ThreadExiting)?;
-    match state {
-        // Dropped outside the registry borrow.
-        Some(state) => {
-            drop(state);
-            Ok(())
-        }
-        None => Err(unknown_handle(key)),
-    }
+    Ok(AGENTS.remove(agent)?)
 }
 
 pub(super) fn wait_start_impl(
@@ -280,10 +198,7 @@ pub(super) fn status_impl(
             index,
             count: statuses.len(),
         })?;
-        let value = vrs_action_status_t {
-            action_id: s.action_id,
-            state: s.state,
-        };
+        let value = vrs_action_status_t::from(s);
         // SAFETY: null or writable by the caller's contract.
         unsafe { write_required(out_status, "out_status", value) }
     })
@@ -301,10 +216,7 @@ pub(super) fn collision_impl(
             index,
             count: collisions.len(),
         })?;
-        let value = vrs_collision_t {
-            action_id: c.action_id,
-            collider_id: c.collider_id,
-        };
+        let value = vrs_collision_t::from(c);
         // SAFETY: null or writable by the caller's contract.
         unsafe { write_required(out_collision, "out_collision", value) }
     })
@@ -320,7 +232,7 @@ pub(super) fn action_state_impl(
         let state = st.agent.action_state(action_id);
         // SAFETY: null or writable by the caller's contract.
         unsafe {
-            write_required(out_known, "out_known", state.is_some())?;
+            write_required::<_, FfiError>(out_known, "out_known", state.is_some())?;
             write_required(out_state, "out_state", state.map_or(0, |s| s as u32))
         }
     })
@@ -345,7 +257,7 @@ pub(super) fn send_with_id_impl(
     command: *const vrs_command_t,
 ) -> Result<(), FfiError> {
     if command.is_null() {
-        return Err(FfiError::Null("command"));
+        return Err(ArgError::Null("command").into());
     }
     // SAFETY: non-null; a readable vrs_command_t by the caller's contract. Every bit
     // pattern of its fields is valid.

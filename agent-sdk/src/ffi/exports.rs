@@ -5,7 +5,7 @@
 use std::ffi::{CStr, c_char};
 
 use super::calls::*;
-use super::state::{LAST_ERROR, boundary};
+use super::state::{boundary, last_error_ptr};
 use super::types::*;
 
 // ---------------------------------------------------------------------------------------
@@ -43,13 +43,7 @@ pub extern "C" fn vrs_protocol_version() -> u32 {
 /// `vrs_` call on this thread; copy it to keep it. Do not free it.
 #[unsafe(no_mangle)]
 pub extern "C" fn vrs_last_error_message() -> *const c_char {
-    LAST_ERROR
-        .try_with(|cell| match cell.try_borrow() {
-            // The CString's buffer stays where it is until the next call replaces it.
-            Ok(s) => s.as_ptr(),
-            Err(_) => c"".as_ptr(),
-        })
-        .unwrap_or(c"".as_ptr())
+    last_error_ptr()
 }
 
 /// The name of a status code (`"VRS_TIMEOUT"`, …), or `"VRS_UNKNOWN_STATUS"`. A static

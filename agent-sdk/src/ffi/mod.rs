@@ -36,7 +36,9 @@
 //! `types.rs` the constants, enums and `#[repr(C)]` structs; `state.rs` the error type of
 //! the boundary and the registry of agents; `calls.rs` the `*_impl` functions behind the
 //! exports; `exports.rs` the library, connection and frame functions; `send.rs` the
-//! commands and the stop that sends them.
+//! commands and the stop that sends them. The plumbing (handle registry, last error, panic
+//! boundary, argument helpers) and the sensor structs are `vrsync_cabi`'s, shared with the
+//! host C ABI.
 
 #![allow(non_camel_case_types)]
 

@@ -3,7 +3,9 @@
 use vrsync_bridge::Command;
 
 use super::calls::{command_from, send_impl, send_with_id_impl, stop_impl};
-use super::state::{FfiError, boundary};
+use vrsync_cabi::ArgError;
+
+use super::state::boundary;
 use super::types::*;
 
 /// Queues a command of any kind with a fresh action id, written to `*out_action_id` if
@@ -24,7 +26,7 @@ pub unsafe extern "C" fn vrs_agent_send(
 ) -> vrs_status_t {
     boundary(|| {
         let command = if command.is_null() {
-            Err(FfiError::Null("command"))
+            Err(ArgError::Null("command").into())
         } else {
             // SAFETY: non-null and readable by the caller's contract; any bit pattern is
             // a valid vrs_command_t.

@@ -74,6 +74,7 @@ fn header_is_up_to_date() {
     let mut generated = Vec::new();
     cbindgen::Builder::new()
         .with_config(config)
+        .with_src(dir.join("../bridge/cabi/src/sensors.rs"))
         .with_src(dir.join("src/ffi/types.rs"))
         .with_src(dir.join("src/ffi/exports.rs"))
         .with_src(dir.join("src/ffi/send.rs"))

@@ -4,6 +4,11 @@
 use std::ffi::c_char;
 
 use vrsync_bridge::PixelFormat;
+/// The sensor structs both C ABIs share (`vrsync_cabi::sensors`).
+pub use vrsync_cabi::{
+    vrs_action_status_t, vrs_collision_t, vrs_eye_position_t, vrs_grid_position_t,
+    vrs_head_motion_t, vrs_pose_t,
+};
 
 // For the doc links only (the header keeps the `[`name`]` text).
 #[cfg(doc)]
@@ -24,7 +29,7 @@ const _: () = {
     assert!(VRS_MAX_IMAGES == vrsync_bridge::MAX_CAMERAS);
     assert!(VRS_MAX_STATUSES == vrsync_bridge::MAX_STATUSES);
     assert!(VRS_MAX_COLLISIONS == vrsync_bridge::MAX_COLLISIONS);
-    assert!(VRS_CAMERA_NAME_SIZE == vrsync_bridge::CAMERA_NAME_LEN + 1);
+    assert!(VRS_CAMERA_NAME_SIZE == vrsync_cabi::CAMERA_NAME_SIZE);
 };
 
 /// Result of a call: 0 is success, positive values are outcomes that are not errors,
@@ -173,70 +178,6 @@ const _: () = {
 /// Opaque agent handle (see the module documentation: it is a registry key, not memory).
 pub struct vrs_agent_t {
     _private: [u8; 0],
-}
-
-/// Body pose: position in metres, orientation as a unit quaternion `[x, y, z, w]`.
-#[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct vrs_pose_t {
-    /// Position `[x, y, z]` in metres (world frame: x right, y up, z forward).
-    pub position: [f32; 3],
-    /// Orientation quaternion `[x, y, z, w]`.
-    pub rotation: [f32; 4],
-}
-
-/// Grid position sensor (the original `MsgGridPosition`).
-#[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct vrs_grid_position_t {
-    /// Position in metres.
-    pub position: [f32; 3],
-    /// Euler rotation in degrees (x, y, z).
-    pub rotation_deg: [f32; 3],
-}
-
-/// Head motion sensor (the original `MsgHeadMotion`).
-#[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct vrs_head_motion_t {
-    /// Velocity in metres per second.
-    pub velocity: [f32; 3],
-    /// Acceleration in metres per second squared.
-    pub acceleration: [f32; 3],
-    /// Angular velocity in degrees per second.
-    pub angular_velocity_deg: [f32; 3],
-    /// Angular acceleration in degrees per second squared.
-    pub angular_acceleration_deg: [f32; 3],
-}
-
-/// Eye position sensor (the original `MsgEyePosition`).
-#[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct vrs_eye_position_t {
-    /// Eye rotation in degrees: pan left, pan right, tilt.
-    pub rotation_deg: [f32; 3],
-    /// Change of the eye rotation per cycle, degrees.
-    pub rotation_velocity_deg: [f32; 3],
-}
-
-/// One action status: the state of the action the agent sent with `action_id`.
-#[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct vrs_action_status_t {
-    /// The action id returned when the command was queued.
-    pub action_id: u32,
-    /// A `vrs_action_state_t` value.
-    pub state: u32,
-}
-
-/// One collision.
-#[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct vrs_collision_t {
-    /// The action that was running.
-    pub action_id: u32,
-    /// The object (or wall) that was hit.
-    pub collider_id: u32,
 }
 
 /// The scalar sensor data of a frame (everything but images, statuses and collisions,

@@ -5,58 +5,20 @@ use std::ffi::{CStr, c_char};
 use std::time::Duration;
 
 use vrsync_bridge::Config;
-use vrsync_bridge::{
-    self, ActionState, ActionStatus, Collision, EyePosition, GridPosition, HeadMotion, Pose,
-};
+use vrsync_bridge::{self, ActionState, ActionStatus, Collision};
 use vrsync_bridge::{Host, HostWaitError, SignalHandling};
 
+use vrsync_cabi::{ArgError, c_name, str_arg, write_opt, write_required};
+
 use crate::state::{
-    FfiError, ImageView, Phase, ReportCopy, boundary, boundary_status, c_name, copy_report,
-    destroy, last_error_ptr, register, with_host,
+    FfiError, ImageView, Phase, ReportCopy, boundary, boundary_status, copy_report, destroy,
+    last_error_ptr, register, with_host,
 };
 use crate::types::*;
 
 // ---------------------------------------------------------------------------------------
 // Helpers
 // ---------------------------------------------------------------------------------------
-
-/// Writes `value` through `out` when `out` is not null.
-///
-/// # Safety
-/// `out` is null or valid for writing a `T`.
-unsafe fn write_opt<T>(out: *mut T, value: T) {
-    if !out.is_null() {
-        // SAFETY: non-null and, by the caller's contract, valid for writes.
-        unsafe { out.write(value) }
-    }
-}
-
-/// Writes `value` through `out`, which must not be null.
-///
-/// # Safety
-/// `out` is null or valid for writing a `T`.
-unsafe fn write_required<T>(out: *mut T, what: &'static str, value: T) -> Result<(), FfiError> {
-    if out.is_null() {
-        return Err(FfiError::Null(what));
-    }
-    // SAFETY: non-null and, by the caller's contract, valid for writes.
-    unsafe { out.write(value) };
-    Ok(())
-}
-
-/// Reads a C string argument as UTF-8.
-///
-/// # Safety
-/// `s` is null or a valid NUL-terminated string.
-unsafe fn str_arg<'a>(s: *const c_char, what: &'static str) -> Result<&'a str, FfiError> {
-    if s.is_null() {
-        return Err(FfiError::Null(what));
-    }
-    // SAFETY: non-null and NUL-terminated by the caller's contract.
-    let c = unsafe { CStr::from_ptr(s) };
-    c.to_str()
-        .map_err(|e| FfiError::InvalidArgument(format!("{what} is not UTF-8: {e}")))
-}
 
 fn image_info(view: &ImageView) -> vrs_host_image_t {
     let d = &view.desc;
@@ -106,52 +68,24 @@ fn check_sensors(s: &vrs_host_sensors_t) -> Result<(), FfiError> {
 }
 
 fn write_header(h: &mut vrsync_bridge::SensorHeader, s: &vrs_host_sensors_t) {
-    // A zero-initialised struct (C `{0}`, C# `default`) has no valid rotation; the
-    // agents would compute NaN headings from it.
-    let rotation = if s.pose.rotation == [0.0; 4] {
-        [0.0, 0.0, 0.0, 1.0]
-    } else {
-        s.pose.rotation
-    };
-    h.pose = Pose {
-        position: s.pose.position,
-        rotation,
-    };
+    // A zero rotation becomes the identity (see `From<vrs_pose_t> for Pose`).
+    h.pose = s.pose.into();
     h.reward = s.reward;
-    h.grid = GridPosition {
-        position: s.grid.position,
-        rotation_deg: s.grid.rotation_deg,
-    };
-    h.head_motion = HeadMotion {
-        velocity: s.head_motion.velocity,
-        acceleration: s.head_motion.acceleration,
-        angular_velocity_deg: s.head_motion.angular_velocity_deg,
-        angular_acceleration_deg: s.head_motion.angular_acceleration_deg,
-    };
-    h.eye = EyePosition {
-        rotation_deg: s.eye.rotation_deg,
-        rotation_velocity_deg: s.eye.rotation_velocity_deg,
-    };
+    h.grid = s.grid.into();
+    h.head_motion = s.head_motion.into();
+    h.eye = s.eye.into();
     // Every entry is written, the unused ones zeroed: the sample may hold an older frame.
     h.status_count = s.status_count;
     for (i, dst) in h.statuses.iter_mut().enumerate() {
         *dst = match s.statuses.get(i) {
-            Some(src) if i < s.status_count as usize => ActionStatus {
-                action_id: src.action_id,
-                state: src.state,
-                seq: 0,
-            },
+            Some(&src) if i < s.status_count as usize => src.into(),
             _ => ActionStatus::default(),
         };
     }
     h.collision_count = s.collision_count;
     for (i, dst) in h.collisions.iter_mut().enumerate() {
         *dst = match s.collisions.get(i) {
-            Some(src) if i < s.collision_count as usize => Collision {
-                action_id: src.action_id,
-                collider_id: src.collider_id,
-                seq: 0,
-            },
+            Some(&src) if i < s.collision_count as usize => src.into(),
             _ => Collision::default(),
         };
     }
@@ -163,7 +97,7 @@ fn write_header(h: &mut vrsync_bridge::SensorHeader, s: &vrs_host_sensors_t) {
 
 fn create_impl(config_path: *const c_char, out_host: *mut *mut vrs_host_t) -> Result<(), FfiError> {
     if out_host.is_null() {
-        return Err(FfiError::Null("out_host"));
+        return Err(ArgError::Null("out_host").into());
     }
     // SAFETY: checked non-null; valid for writes by the caller's contract. Cleared first
     // so that a failed create leaves NULL behind.
@@ -265,7 +199,7 @@ fn wait_for_agents_impl(
     out_missing_count: *mut u32,
 ) -> Result<(vrs_host_status_t, String), FfiError> {
     if out_missing.is_null() && missing_capacity > 0 {
-        return Err(FfiError::Null("out_missing (with missing_capacity > 0)"));
+        return Err(ArgError::Null("out_missing (with missing_capacity > 0)").into());
     }
     with_host(host, |st| {
         st.expect_phase("vrs_host_wait_for_agents", Phase::Frames)?;

@@ -2,22 +2,19 @@
 //! error type of the boundary and the thread-local last-error message.
 
 use std::cell::RefCell;
-use std::collections::{BTreeMap, HashMap};
-use std::ffi::{CString, c_char};
-use std::panic::{AssertUnwindSafe, catch_unwind};
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::thread::ThreadId;
+use std::collections::HashMap;
+use std::ffi::c_char;
+use std::thread::LocalKey;
 
 use vrsync_bridge::ConfigLoadError;
 use vrsync_bridge::{
     AgentOutcome, Host, HostCreateError, HostCycleError, HostWaitError, SensorFrameMut,
 };
 use vrsync_bridge::{ImageDesc, MAX_CAMERAS, MotorCommand};
+use vrsync_cabi::handles::LocalMap;
+use vrsync_cabi::{AbiError, ArgError, HandleError, HandleKind, LastError, Registry, Removal};
 
-use crate::types::{
-    VRS_HOST_CAMERA_NAME_SIZE, vrs_host_cycle_t, vrs_host_outcome_t, vrs_host_status_t, vrs_host_t,
-};
+use crate::types::{vrs_host_cycle_t, vrs_host_outcome_t, vrs_host_status_t, vrs_host_t};
 
 // ---------------------------------------------------------------------------------------
 // Errors and the boundary
@@ -26,21 +23,12 @@ use crate::types::{
 /// Everything a host C ABI call can fail with; each maps to one [`vrs_host_status_t`].
 #[derive(Debug, thiserror::Error)]
 pub(crate) enum FfiError {
-    #[error("{0} must not be null")]
-    Null(&'static str),
+    #[error(transparent)]
+    Arg(#[from] ArgError),
     #[error("invalid argument: {0}")]
     InvalidArgument(String),
-    #[error("invalid host handle: null")]
-    NullHandle,
-    #[error("invalid host handle {0:#x}: not a host, or already destroyed (double free?)")]
-    UnknownHandle(usize),
-    #[error(
-        "host handle {0:#x} belongs to another thread: use a host only on the thread that \
-         created it (Unity: the main thread)"
-    )]
-    WrongThread(usize),
-    #[error("the calling thread is exiting; its hosts are already destroyed")]
-    ThreadExiting,
+    #[error(transparent)]
+    Handle(#[from] HandleError),
     #[error(transparent)]
     Config(#[from] ConfigLoadError),
     #[error("cannot create the host: {0}")]
@@ -74,20 +62,33 @@ pub(crate) enum FfiError {
     Panic(String),
 }
 
-impl FfiError {
+impl AbiError for FfiError {
+    type Status = vrs_host_status_t;
+    const OK: vrs_host_status_t = vrs_host_status_t::VRS_HOST_OK;
+
+    fn last_error() -> &'static LocalKey<LastError> {
+        &LAST_ERROR
+    }
+
+    fn panicked(message: String) -> Self {
+        Self::Panic(message)
+    }
+
     // The wildcard arms keep new variants of the bridge's (non-exhaustive) error enums
     // from breaking the build; they map to VRS_HOST_ERROR_OTHER with their message.
     fn status(&self) -> vrs_host_status_t {
         use vrs_host_status_t::*;
         match self {
-            Self::Null(_)
+            Self::Arg(_)
             | Self::InvalidArgument(_)
             | Self::NoSuchCamera { .. }
             | Self::LoggingAlreadySet => VRS_HOST_ERROR_INVALID_ARGUMENT,
-            Self::NullHandle | Self::UnknownHandle(_) | Self::ThreadExiting => {
-                VRS_HOST_ERROR_INVALID_HANDLE
-            }
-            Self::WrongThread(_) => VRS_HOST_ERROR_WRONG_THREAD,
+            Self::Handle(e) => match e {
+                HandleError::WrongThread { .. } => VRS_HOST_ERROR_WRONG_THREAD,
+                HandleError::Null(_)
+                | HandleError::Unknown { .. }
+                | HandleError::ThreadExiting(_) => VRS_HOST_ERROR_INVALID_HANDLE,
+            },
             Self::Config(_) => VRS_HOST_ERROR_CONFIG,
             Self::Create(_) => VRS_HOST_ERROR_CREATE,
             Self::AgentsMissing { .. } => VRS_HOST_TIMEOUT,
@@ -129,93 +130,34 @@ impl From<HostWaitError> for FfiError {
     }
 }
 
-/// The error and its sources, `: `-separated (what `{:#}` prints with anyhow).
-fn chain(e: &dyn std::error::Error) -> String {
-    let mut s = e.to_string();
-    let mut source = e.source();
-    while let Some(inner) = source {
-        let text = inner.to_string();
-        // `#[error(transparent)]` repeats the source's text; say it once.
-        if !s.ends_with(&text) {
-            s.push_str(": ");
-            s.push_str(&text);
-        }
-        source = inner.source();
-    }
-    s
-}
-
 thread_local! {
-    static LAST_ERROR: RefCell<CString> = RefCell::new(CString::default());
-}
-
-fn set_last_error(message: &str) {
-    // A message cannot hold NUL bytes in C; cut at the first one.
-    let message = message.split('\0').next().unwrap_or_default();
-    let c = CString::new(message).unwrap_or_default();
-    let _ = LAST_ERROR.try_with(|cell| {
-        if let Ok(mut slot) = cell.try_borrow_mut() {
-            *slot = c;
-        }
-    });
+    static LAST_ERROR: LastError = LastError::default();
+    static LOCAL_HOSTS: LocalMap<HostState> = RefCell::new(HashMap::new());
 }
 
 /// The last message of this thread as a C string (empty after a success).
 pub(crate) fn last_error_ptr() -> *const c_char {
-    LAST_ERROR
-        .try_with(|cell| match cell.try_borrow() {
-            // The CString's buffer stays where it is until the next call replaces it.
-            Ok(s) => s.as_ptr(),
-            Err(_) => c"".as_ptr(),
-        })
-        .unwrap_or(c"".as_ptr())
-}
-
-fn panic_message(payload: Box<dyn std::any::Any + Send>) -> String {
-    if let Some(s) = payload.downcast_ref::<&str>() {
-        (*s).to_owned()
-    } else if let Some(s) = payload.downcast_ref::<String>() {
-        s.clone()
-    } else {
-        "unknown panic payload".to_owned()
-    }
+    vrsync_cabi::last_error_ptr(&LAST_ERROR)
 }
 
 /// The boundary: destroys hosts whose destruction other threads deferred to this one,
-/// runs `f`, catches panics, records the message, returns the status. `f` may return a
-/// positive status with a message (`VRS_HOST_TIMEOUT`, `VRS_HOST_DEFERRED`).
+/// runs `f`, catches panics, records the message, returns the status.
 pub(crate) fn boundary(f: impl FnOnce() -> Result<(), FfiError>) -> vrs_host_status_t {
-    let result = catch_unwind(AssertUnwindSafe(|| {
-        destroy_deferred();
+    vrsync_cabi::boundary(|| {
+        HOSTS.drop_deferred();
         f()
-    }))
-    .unwrap_or_else(|payload| Err(FfiError::Panic(panic_message(payload))));
-    match result {
-        Ok(()) => {
-            set_last_error("");
-            vrs_host_status_t::VRS_HOST_OK
-        }
-        Err(e) => {
-            set_last_error(&chain(&e));
-            e.status()
-        }
-    }
+    })
 }
 
-/// Like [`boundary`] for calls whose success is itself a positive status.
+/// Like [`boundary`] for calls whose success is itself a positive status
+/// (`VRS_HOST_TIMEOUT`, `VRS_HOST_DEFERRED`) with a message.
 pub(crate) fn boundary_status(
     f: impl FnOnce() -> Result<(vrs_host_status_t, String), FfiError>,
 ) -> vrs_host_status_t {
-    let mut outcome = (vrs_host_status_t::VRS_HOST_OK, String::new());
-    let status = boundary(|| {
-        outcome = f()?;
-        Ok(())
-    });
-    if status == vrs_host_status_t::VRS_HOST_OK && outcome.0 != vrs_host_status_t::VRS_HOST_OK {
-        set_last_error(&outcome.1);
-        return outcome.0;
-    }
-    status
+    vrsync_cabi::boundary_status(|| {
+        HOSTS.drop_deferred();
+        f()
+    })
 }
 
 // ---------------------------------------------------------------------------------------
@@ -276,7 +218,6 @@ pub(crate) struct ReportCopy {
 
 /// Everything behind one handle.
 pub(crate) struct HostState {
-    handle: usize,
     // Declared before `host`: loaned samples are released before the ports.
     pub(crate) slots: Vec<FrameSlot>,
     pub(crate) host: Host,
@@ -287,7 +228,7 @@ pub(crate) struct HostState {
 }
 
 impl HostState {
-    pub(crate) fn new(handle: usize, host: Host) -> Self {
+    pub(crate) fn new(host: Host) -> Self {
         let ids: Vec<u32> = host.agent_ids().collect();
         // Room for what the host hands over in one cycle, so that copying the report
         // does not allocate in steady state.
@@ -306,7 +247,6 @@ impl HostState {
             })
             .collect();
         Self {
-            handle,
             slots: ids.iter().map(|_| FrameSlot::default()).collect(),
             host,
             ids,
@@ -397,164 +337,45 @@ pub(crate) fn outcome(o: AgentOutcome) -> vrs_host_outcome_t {
     }
 }
 
-/// A camera name as a NUL-terminated C array.
-pub(crate) fn c_name(name: &str) -> [c_char; VRS_HOST_CAMERA_NAME_SIZE] {
-    let mut out = [0 as c_char; VRS_HOST_CAMERA_NAME_SIZE];
-    for (dst, &src) in out
-        .iter_mut()
-        .zip(name.as_bytes().iter().take(vrsync_bridge::CAMERA_NAME_LEN))
-    {
-        *dst = src as c_char;
-    }
-    out
-}
-
-impl Drop for HostState {
-    fn drop(&mut self) {
-        if owners()
-            .remove(&self.handle)
-            .is_some_and(|o| o.destroy_requested)
-        {
-            PENDING_DESTROYS.fetch_sub(1, Ordering::Relaxed);
-        }
-    }
-}
-
 // ---------------------------------------------------------------------------------------
 // The handle registry
 // ---------------------------------------------------------------------------------------
-//
-// A `vrs_host_t*` carries a number from a counter that is never reused; the hosts live in
-// a per-thread map keyed by that number (iceoryx2 `ipc` ports are neither `Send` nor
-// `Sync`, so a host belongs to the thread that created it). A global map remembers which
-// thread owns each live handle, to tell "wrong thread" from "unknown handle", and holds
-// the destructions other threads asked for.
 
-/// The next handle value; never reused, never 0.
-static NEXT_HANDLE: AtomicUsize = AtomicUsize::new(1);
+static HOST_HANDLES: HandleKind = HandleKind {
+    noun: "host",
+    a_noun: "a host",
+    released: "destroyed",
+    made_by: "created it (Unity: the main thread)",
+};
 
-/// Owner of each live handle, and whether another thread asked to destroy it.
-#[derive(Debug)]
-struct Owner {
-    thread: ThreadId,
-    destroy_requested: bool,
-}
-
-static OWNERS: Mutex<BTreeMap<usize, Owner>> = Mutex::new(BTreeMap::new());
-
-/// How many handles have a destruction requested (lets every call skip the lock).
-static PENDING_DESTROYS: AtomicUsize = AtomicUsize::new(0);
-
-fn owners() -> std::sync::MutexGuard<'static, BTreeMap<usize, Owner>> {
-    // The map stays consistent even if a holder panicked: every operation is one call.
-    OWNERS
-        .lock()
-        .unwrap_or_else(|poisoned| poisoned.into_inner())
-}
-
-thread_local! {
-    static HOSTS: RefCell<HashMap<usize, HostState>> = RefCell::new(HashMap::new());
-}
-
-fn handle_key(handle: *const vrs_host_t) -> usize {
-    handle.addr()
-}
-
-fn unknown_handle(key: usize) -> FfiError {
-    match owners().get(&key) {
-        Some(owner) if owner.thread != std::thread::current().id() => FfiError::WrongThread(key),
-        _ => FfiError::UnknownHandle(key),
-    }
-}
+/// The hosts of every thread (each lives in its thread's map).
+static HOSTS: Registry<HostState> = Registry::new(&HOST_HANDLES, &LOCAL_HOSTS);
 
 /// Runs `f` on the host behind `handle`.
 pub(crate) fn with_host<R>(
     handle: *const vrs_host_t,
     f: impl FnOnce(&mut HostState) -> Result<R, FfiError>,
 ) -> Result<R, FfiError> {
-    let key = handle_key(handle);
-    if key == 0 {
-        return Err(FfiError::NullHandle);
-    }
-    HOSTS
-        .try_with(|hosts| {
-            let mut hosts = hosts.borrow_mut();
-            match hosts.get_mut(&key) {
-                Some(state) => f(state),
-                None => Err(unknown_handle(key)),
-            }
-        })
-        .unwrap_or(Err(FfiError::ThreadExiting))
+    HOSTS.with(handle, f)
 }
 
 /// Registers a new host on this thread and returns its handle value.
 pub(crate) fn register(host: Host) -> Result<usize, FfiError> {
-    let key = NEXT_HANDLE.fetch_add(1, Ordering::Relaxed);
-    let state = HostState::new(key, host);
-    owners().insert(
-        key,
-        Owner {
-            thread: std::thread::current().id(),
-            destroy_requested: false,
-        },
-    );
-    HOSTS
-        .try_with(|hosts| {
-            hosts.borrow_mut().insert(key, state);
-        })
-        .map_err(|_| FfiError::ThreadExiting)?;
-    Ok(key)
+    Ok(HOSTS.insert(|_| HostState::new(host))?)
 }
 
 /// Destroys the host behind `handle`: at once on its own thread, deferred to the owner's
 /// next call from any other thread (a .NET finalizer runs on its own thread).
 pub(crate) fn destroy(handle: *mut vrs_host_t) -> Result<(vrs_host_status_t, String), FfiError> {
-    let key = handle_key(handle);
-    if key == 0 {
-        return Err(FfiError::NullHandle);
-    }
-    let state = HOSTS
-        .try_with(|hosts| hosts.borrow_mut().remove(&key))
-        .map_err(|_| FfiError::ThreadExiting)?;
-    if let Some(state) = state {
-        // Dropped outside the registry borrow.
-        drop(state);
-        return Ok((vrs_host_status_t::VRS_HOST_OK, String::new()));
-    }
-    let mut owners = owners();
-    match owners.get_mut(&key) {
-        Some(owner) if !owner.destroy_requested => {
-            owner.destroy_requested = true;
-            PENDING_DESTROYS.fetch_add(1, Ordering::Relaxed);
-            Ok((
-                vrs_host_status_t::VRS_HOST_DEFERRED,
-                format!(
-                    "host handle {key:#x} belongs to another thread: it is destroyed at that \
-                     thread's next vrs_host_ call"
-                ),
-            ))
-        }
-        Some(_) => Err(FfiError::UnknownHandle(key)),
-        None => Err(FfiError::UnknownHandle(key)),
-    }
-}
-
-/// Drops the hosts of this thread that other threads asked to destroy.
-fn destroy_deferred() {
-    if PENDING_DESTROYS.load(Ordering::Relaxed) == 0 {
-        return;
-    }
-    let me = std::thread::current().id();
-    let doomed: Vec<usize> = {
-        owners()
-            .iter()
-            .filter(|(_, o)| o.destroy_requested && o.thread == me)
-            .map(|(&k, _)| k)
-            .collect()
-    };
-    for key in doomed {
-        if let Ok(Some(state)) = HOSTS.try_with(|hosts| hosts.borrow_mut().remove(&key)) {
-            drop(state);
-        }
-    }
+    Ok(match HOSTS.remove_or_defer(handle)? {
+        Removal::Removed => (vrs_host_status_t::VRS_HOST_OK, String::new()),
+        Removal::Deferred => (
+            vrs_host_status_t::VRS_HOST_DEFERRED,
+            format!(
+                "host handle {:#x} belongs to another thread: it is destroyed at that \
+                 thread's next vrs_host_ call",
+                handle.addr()
+            ),
+        ),
+    })
 }

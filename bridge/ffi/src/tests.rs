@@ -84,6 +84,7 @@ fn header_is_up_to_date() {
     let mut generated = Vec::new();
     cbindgen::Builder::new()
         .with_config(config)
+        .with_src(dir.join("../cabi/src/sensors.rs"))
         .with_src(dir.join("src/types.rs"))
         .with_src(dir.join("src/ffi.rs"))
         .generate()

@@ -13,6 +13,10 @@ use core::mem::{align_of, offset_of, size_of};
 use std::ffi::c_char;
 
 use vrsync_bridge::{MotorCommand, PixelFormat};
+use vrsync_cabi::{
+    vrs_action_status_t, vrs_collision_t, vrs_eye_position_t, vrs_grid_position_t,
+    vrs_head_motion_t, vrs_pose_t,
+};
 
 /// Most images (cameras) per agent and frame.
 pub const VRS_HOST_MAX_IMAGES: u32 = 4;
@@ -27,7 +31,7 @@ const _: () = {
     assert!(VRS_HOST_MAX_IMAGES as usize == vrsync_bridge::MAX_CAMERAS);
     assert!(VRS_HOST_MAX_STATUSES as usize == vrsync_bridge::MAX_STATUSES);
     assert!(VRS_HOST_MAX_COLLISIONS as usize == vrsync_bridge::MAX_COLLISIONS);
-    assert!(VRS_HOST_CAMERA_NAME_SIZE == vrsync_bridge::CAMERA_NAME_LEN + 1);
+    assert!(VRS_HOST_CAMERA_NAME_SIZE == vrsync_cabi::CAMERA_NAME_SIZE);
 };
 
 /// Result of a call: 0 is success, positive values are outcomes that are not errors,
@@ -233,79 +237,13 @@ pub struct vrs_host_t {
     _private: [u8; 0],
 }
 
-/// Body pose: position in metres, orientation as a unit quaternion `[x, y, z, w]`.
-#[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct vrs_host_pose_t {
-    /// Position `[x, y, z]` in metres (world frame: x right, y up, z forward).
-    pub position: [f32; 3],
-    /// Orientation quaternion `[x, y, z, w]` (Unity's `Quaternion` has the same order).
-    /// All zeros (a zero-initialised struct) is sent as the identity.
-    pub rotation: [f32; 4],
-}
-
-impl Default for vrs_host_pose_t {
-    fn default() -> Self {
-        Self {
-            position: [0.0; 3],
-            rotation: [0.0, 0.0, 0.0, 1.0],
-        }
-    }
-}
-
-/// Grid position sensor (the original `MsgGridPosition`).
-#[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct vrs_host_grid_position_t {
-    /// Position in metres.
-    pub position: [f32; 3],
-    /// Euler rotation in degrees (x, y, z).
-    pub rotation_deg: [f32; 3],
-}
-
-/// Head motion sensor (the original `MsgHeadMotion`).
-#[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct vrs_host_head_motion_t {
-    /// Velocity in metres per second.
-    pub velocity: [f32; 3],
-    /// Acceleration in metres per second squared.
-    pub acceleration: [f32; 3],
-    /// Angular velocity in degrees per second.
-    pub angular_velocity_deg: [f32; 3],
-    /// Angular acceleration in degrees per second squared.
-    pub angular_acceleration_deg: [f32; 3],
-}
-
-/// Eye position sensor (the original `MsgEyePosition`).
-#[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct vrs_host_eye_position_t {
-    /// Eye rotation in degrees: pan left, pan right, tilt.
-    pub rotation_deg: [f32; 3],
-    /// Change of the eye rotation per cycle, degrees.
-    pub rotation_velocity_deg: [f32; 3],
-}
-
-/// One action status: the state of the agent's action `action_id`.
-#[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct vrs_host_action_status_t {
-    /// The action id the agent sent with the command.
-    pub action_id: u32,
-    /// A `vrs_host_action_state_t` value.
-    pub state: u32,
-}
-
-/// One collision.
-#[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct vrs_host_collision_t {
-    /// The action that was running.
-    pub action_id: u32,
-    /// The object (or wall) that was hit.
-    pub collider_id: u32,
-}
+/// The sensor structs both C ABIs share (`vrsync_cabi::sensors`), under this ABI's names;
+/// `cbindgen.toml` renames them likewise in the header.
+pub use vrsync_cabi::{
+    vrs_action_status_t as vrs_host_action_status_t, vrs_collision_t as vrs_host_collision_t,
+    vrs_eye_position_t as vrs_host_eye_position_t, vrs_grid_position_t as vrs_host_grid_position_t,
+    vrs_head_motion_t as vrs_host_head_motion_t, vrs_pose_t as vrs_host_pose_t,
+};
 
 /// The sensor data of one agent's frame, everything but the images: passed to
 /// `vrs_host_publish`, which copies it into the frame's header in shared memory.
@@ -313,37 +251,37 @@ pub struct vrs_host_collision_t {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct vrs_host_sensors_t {
     /// Body pose.
-    pub pose: vrs_host_pose_t,
+    pub pose: vrs_pose_t,
     /// Reward since the previous frame.
     pub reward: f32,
     /// Grid position sensor.
-    pub grid: vrs_host_grid_position_t,
+    pub grid: vrs_grid_position_t,
     /// Head motion sensor.
-    pub head_motion: vrs_host_head_motion_t,
+    pub head_motion: vrs_head_motion_t,
     /// Eye position sensor.
-    pub eye: vrs_host_eye_position_t,
+    pub eye: vrs_eye_position_t,
     /// Valid entries in `statuses` (at most `VRS_HOST_MAX_STATUSES`).
     pub status_count: u32,
     /// Valid entries in `collisions` (at most `VRS_HOST_MAX_COLLISIONS`).
     pub collision_count: u32,
     /// Action statuses that changed since the previous frame.
-    pub statuses: [vrs_host_action_status_t; VRS_HOST_MAX_STATUSES as usize],
+    pub statuses: [vrs_action_status_t; VRS_HOST_MAX_STATUSES as usize],
     /// Collisions since the previous frame.
-    pub collisions: [vrs_host_collision_t; VRS_HOST_MAX_COLLISIONS as usize],
+    pub collisions: [vrs_collision_t; VRS_HOST_MAX_COLLISIONS as usize],
 }
 
 impl Default for vrs_host_sensors_t {
     fn default() -> Self {
         Self {
-            pose: vrs_host_pose_t::default(),
+            pose: vrs_pose_t::default(),
             reward: 0.0,
-            grid: vrs_host_grid_position_t::default(),
-            head_motion: vrs_host_head_motion_t::default(),
-            eye: vrs_host_eye_position_t::default(),
+            grid: vrs_grid_position_t::default(),
+            head_motion: vrs_head_motion_t::default(),
+            eye: vrs_eye_position_t::default(),
             status_count: 0,
             collision_count: 0,
-            statuses: [vrs_host_action_status_t::default(); VRS_HOST_MAX_STATUSES as usize],
-            collisions: [vrs_host_collision_t::default(); VRS_HOST_MAX_COLLISIONS as usize],
+            statuses: [vrs_action_status_t::default(); VRS_HOST_MAX_STATUSES as usize],
+            collisions: [vrs_collision_t::default(); VRS_HOST_MAX_COLLISIONS as usize],
         }
     }
 }
