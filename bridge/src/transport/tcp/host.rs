@@ -170,8 +170,6 @@ impl TcpHost {
 
     /// Services the sockets the last wait found ready (see [`HostTransport::after_wait`]).
     fn service(&mut self) {
-        // A deferred hello whose predecessor the host has let go since is admitted now.
-        self.admit_deferred();
         self.ready.clear();
         // A failed look finds nothing ready: the next wait looks again.
         if let Ok(tokens) = self.poll.wait(Duration::ZERO) {
@@ -336,6 +334,7 @@ impl TcpHost {
 
     /// Reads pending hellos; admits, rejects or times out each connection.
     fn handle_pending(&mut self) {
+        // A deferred hello whose predecessor the host has let go since is admitted now.
         self.admit_deferred();
         let mut i = 0;
         while i < self.pending.len() {
