@@ -52,13 +52,29 @@ impl LegacyHost {
         let mut out = std::mem::take(&mut self.slots[slot].out);
         out.clear();
         // 1. Statuses and collisions of the last cycle's commands.
+        self.push_events(slot, header, &mut out);
+        // 2. Images.
+        self.push_images(slot, dialect, header, payload, &mut out);
+        // 3. Grid position; 4. optional sensors.
+        self.push_sensors(dialect, header, &mut out);
+        // 5. StartSync (sync mode); 6. a Debug trailer naming the cycle.
+        if self.sync_mode {
+            codec::push_message(&mut out, field::START_SYNC, &codec::Empty {});
+        }
+        codec::push_debug(&mut out, &format!("vrsync cycle {}", header.cycle));
+        self.slots[slot].out = out;
+    }
+
+    /// The statuses and collisions of slot `slot`'s commands not sent yet; a command the
+    /// simulator rejected last cycle (no status for it) ends Aborted.
+    fn push_events(&mut self, slot: usize, header: &SensorHeader, out: &mut Vec<u8>) {
         let s = &mut self.slots[slot];
         if header.previous_rejected > 0 && s.applied_cycle.is_some_and(|c| c + 1 == header.cycle) {
             // The simulator rejected some of the commands handed over last cycle and
             // reports no status for them: those without one end Aborted.
             for &id in &s.applied {
                 if !header.statuses().iter().any(|st| st.action_id == id) {
-                    push_status(&mut out, id, ActionState::Aborted);
+                    push_status(out, id, ActionState::Aborted);
                     self.stats.commands_rejected += 1;
                 }
             }
@@ -73,7 +89,7 @@ impl LegacyHost {
             .fold(seen, u64::max);
         for c in header.collisions().iter().filter(|c| c.seq > seen) {
             codec::push_message(
-                &mut out,
+                out,
                 field::COLLISION,
                 &codec::Collision {
                     action_id: Some(c.action_id as i32),
@@ -84,7 +100,7 @@ impl LegacyHost {
         for st in header.statuses().iter().filter(|st| st.seq > seen) {
             if st.action_id != RESET_ACTION_ID {
                 codec::push_message(
-                    &mut out,
+                    out,
                     field::ACTION_STATUS,
                     &ActionStatus {
                         action_id: Some(st.action_id as i32),
@@ -93,7 +109,17 @@ impl LegacyHost {
                 );
             }
         }
-        // 2. Images.
+    }
+
+    /// The left, right and (burkhardt) main images as PNG, each camera encoded once.
+    fn push_images(
+        &mut self,
+        slot: usize,
+        dialect: Dialect,
+        header: &SensorHeader,
+        payload: &[u8],
+        out: &mut Vec<u8>,
+    ) {
         let descs = header.image_descs();
         let pick = |name: &str, index: usize| {
             descs
@@ -121,11 +147,14 @@ impl LegacyHost {
         }
         let s = &mut self.slots[slot];
         let png = |k: usize| -> &[u8] { s.png.get(which_of[k]).map_or(&[], Vec::as_slice) };
-        codec::push_images(&mut out, png(0), png(1), main.is_some().then(|| png(2)));
-        // 3. Grid position; 4. optional sensors.
+        codec::push_images(out, png(0), png(1), main.is_some().then(|| png(2)));
+    }
+
+    /// GridPosition, a non-zero reward, and EyePosition and HeadMotion if configured.
+    fn push_sensors(&self, dialect: Dialect, header: &SensorHeader, out: &mut Vec<u8>) {
         let g = &header.grid;
         codec::push_message(
-            &mut out,
+            out,
             field::GRID_POSITION,
             &GridPosition {
                 x: Some(g.position[0]),
@@ -138,7 +167,7 @@ impl LegacyHost {
         );
         if header.reward != 0.0 {
             codec::push_message(
-                &mut out,
+                out,
                 field::REWARD,
                 &Reward {
                     reward: Some(header.reward),
@@ -148,7 +177,7 @@ impl LegacyHost {
         if self.send_eye {
             let e = &header.eye;
             codec::push_message(
-                &mut out,
+                out,
                 field::EYE_POSITION,
                 &EyePosition {
                     x: Some(e.rotation_deg[0]),
@@ -163,7 +192,7 @@ impl LegacyHost {
         if self.send_head {
             let h = &header.head_motion;
             codec::push_message(
-                &mut out,
+                out,
                 dialect.head_motion_field(),
                 &HeadMotion {
                     vx: Some(h.velocity[0]),
@@ -181,12 +210,6 @@ impl LegacyHost {
                 },
             );
         }
-        // 5. StartSync (sync mode); 6. a Debug trailer naming the cycle.
-        if self.sync_mode {
-            codec::push_message(&mut out, field::START_SYNC, &codec::Empty {});
-        }
-        codec::push_debug(&mut out, &format!("vrsync cycle {}", header.cycle));
-        self.slots[slot].out = out;
     }
 }
 

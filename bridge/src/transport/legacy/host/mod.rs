@@ -572,6 +572,112 @@ impl LegacyHost {
         }
     }
 
+    /// Applies one decoded frame of agent slot `s`: a stop ends its cycle, a command is
+    /// queued and acknowledged in `acks`, a reset queued, a version check answered.
+    fn apply_frame(
+        stats: &mut LegacyStats,
+        s: &mut Slot,
+        acks: &mut Vec<u8>,
+        dialect: Dialect,
+        incoming: Incoming,
+        sync: bool,
+        max_commands: usize,
+    ) {
+        match incoming {
+            Incoming::Stop => Self::apply_stop(stats, s, sync),
+            Incoming::Command { action_id, command } => {
+                Self::apply_command(stats, s, acks, action_id, command, sync, max_commands);
+            }
+            Incoming::Reset(cmd) => {
+                Self::queue_command(s, cmd.encode(RESET_ACTION_ID), sync);
+            }
+            Incoming::VersionCheck(_) => {
+                codec::push_message(
+                    acks,
+                    dialect.version_check_field(),
+                    &VersionCheck {
+                        version: Some(VERSION.into()),
+                    },
+                );
+            }
+            Incoming::Ignored(what) => {
+                debug!(agent = s.id, "legacy {what} ignored");
+            }
+        }
+    }
+
+    /// A stop: it ends the open cycle, or the next one if none is open (the wire carries
+    /// no cycle number), once; async mode ignores stops.
+    fn apply_stop(stats: &mut LegacyStats, s: &mut Slot, sync: bool) {
+        if !sync {
+            // Async mode: stops are accepted and ignored.
+        } else if s.open {
+            s.batch_stop = true;
+            s.open = false;
+        } else if s.queued_stop.is_none() {
+            s.queued_stop = Some(s.queued.len());
+            stats.stops_without_cycle += 1;
+            debug!(
+                agent = s.id,
+                "legacy stop while no cycle is open: it ends the next one"
+            );
+        } else {
+            stats.stops_ignored += 1;
+            debug!(
+                agent = s.id,
+                "legacy stop ignored: one is waiting for the next cycle already"
+            );
+        }
+    }
+
+    /// A command: acknowledged at once and queued, or answered Aborted when it is invalid
+    /// or over `max_commands` in its cycle.
+    fn apply_command(
+        stats: &mut LegacyStats,
+        s: &mut Slot,
+        acks: &mut Vec<u8>,
+        action_id: u32,
+        command: Command,
+        sync: bool,
+        max_commands: usize,
+    ) {
+        let ack = match command {
+            Command::Turn { .. } => ActionState::Rotating,
+            Command::Move { .. } | Command::MoveTo { .. } => ActionState::Walking,
+            _ => ActionState::InExecution,
+        };
+        let wire = command.encode(action_id);
+        let in_cycle = if s.open || !sync {
+            s.in_cycle
+        } else {
+            s.queued.len() - s.queued_stop.unwrap_or(0)
+        };
+        let refused = if let Err(e) = wire.decode() {
+            Some(e.to_string())
+        } else if in_cycle >= max_commands {
+            Some(format!(
+                "more than max_commands_per_cycle = {max_commands} in one cycle"
+            ))
+        } else {
+            None
+        };
+        if let Some(why) = refused {
+            stats.commands_refused += 1;
+            if stats.commands_refused.is_power_of_two() {
+                warn!(
+                    agent = s.id,
+                    action_id,
+                    total = stats.commands_refused,
+                    "legacy command answered Aborted: {why}"
+                );
+            }
+            push_status(acks, action_id, ActionState::Aborted);
+        } else {
+            push_status(acks, action_id, ack);
+            Self::queue_command(s, wire, sync);
+        }
+    }
+
     fn read_agent(&mut self, i: usize) {
         let sync = self.sync_mode;
         let max_commands = self.max_commands;
@@ -590,81 +696,15 @@ impl LegacyHost {
                 Ok(FrameProgress::Frame) => {
                     c.partial_since = None;
                     match codec::decode_frame(c.reader.body(), c.dialect) {
-                        Ok(Incoming::Stop) => {
-                            if !sync {
-                                // Async mode: stops are accepted and ignored.
-                            } else if s.open {
-                                s.batch_stop = true;
-                                s.open = false;
-                            } else if s.queued_stop.is_none() {
-                                s.queued_stop = Some(s.queued.len());
-                                self.stats.stops_without_cycle += 1;
-                                debug!(
-                                    agent = s.id,
-                                    "legacy stop while no cycle is open: it ends the next one"
-                                );
-                            } else {
-                                self.stats.stops_ignored += 1;
-                                debug!(
-                                    agent = s.id,
-                                    "legacy stop ignored: one is waiting for the next cycle already"
-                                );
-                            }
-                        }
-                        Ok(Incoming::Command { action_id, command }) => {
-                            let ack = match command {
-                                Command::Turn { .. } => ActionState::Rotating,
-                                Command::Move { .. } | Command::MoveTo { .. } => {
-                                    ActionState::Walking
-                                }
-                                _ => ActionState::InExecution,
-                            };
-                            let wire = command.encode(action_id);
-                            let in_cycle = if s.open || !sync {
-                                s.in_cycle
-                            } else {
-                                s.queued.len() - s.queued_stop.unwrap_or(0)
-                            };
-                            let refused = if let Err(e) = wire.decode() {
-                                Some(e.to_string())
-                            } else if in_cycle >= max_commands {
-                                Some(format!(
-                                    "more than max_commands_per_cycle = {max_commands} in one cycle"
-                                ))
-                            } else {
-                                None
-                            };
-                            if let Some(why) = refused {
-                                self.stats.commands_refused += 1;
-                                if self.stats.commands_refused.is_power_of_two() {
-                                    warn!(
-                                        agent = s.id,
-                                        action_id,
-                                        total = self.stats.commands_refused,
-                                        "legacy command answered Aborted: {why}"
-                                    );
-                                }
-                                push_status(&mut acks, action_id, ActionState::Aborted);
-                            } else {
-                                push_status(&mut acks, action_id, ack);
-                                Self::queue_command(s, wire, sync);
-                            }
-                        }
-                        Ok(Incoming::Reset(cmd)) => {
-                            Self::queue_command(s, cmd.encode(RESET_ACTION_ID), sync);
-                        }
-                        Ok(Incoming::VersionCheck(_)) => {
-                            codec::push_message(
-                                &mut acks,
-                                c.dialect.version_check_field(),
-                                &VersionCheck {
-                                    version: Some(VERSION.into()),
-                                },
-                            );
-                        }
-                        Ok(Incoming::Ignored(what)) => {
-                            debug!(agent = s.id, "legacy {what} ignored");
-                        }
+                        Ok(incoming) => Self::apply_frame(
+                            &mut self.stats,
+                            s,
+                            &mut acks,
+                            c.dialect,
+                            incoming,
+                            sync,
+                            max_commands,
+                        ),
                         Err(e) => {
                             self.stats.frames_refused += 1;
                             warn!(agent = s.id, peer = %c.peer, "legacy frame refused, nothing of it applied: {e}");
