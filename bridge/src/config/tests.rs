@@ -9,16 +9,25 @@ fn parse(text: &str) -> Result<Config, ConfigLoadError> {
 const MINIMAL: &str = "session = \"t\"\n[[agent]]\nid = 0\n";
 
 #[test]
-fn transport_kind_all_lists_every_transport_once() {
-    // Exhaustive: a new variant does not compile here until it is counted.
-    let index = |k: TransportKind| match k {
-        TransportKind::Shm => 0,
-        TransportKind::Tcp => 1,
-        TransportKind::Legacy => 2,
-        TransportKind::Zenoh => 3,
-    };
-    let found: Vec<usize> = TransportKind::ALL.into_iter().map(index).collect();
-    assert_eq!(found, (0..TransportKind::ALL.len()).collect::<Vec<_>>());
+fn every_transport_of_the_registry_is_read_by_its_config_name() {
+    // TransportKind comes from the transport registry: ALL in declaration order (the host's
+    // routing indexes by `kind as usize`), one config name each, read back as that kind.
+    for (i, kind) in TransportKind::ALL.into_iter().enumerate() {
+        assert_eq!(kind as usize, i, "{}", kind.as_str());
+        let name = kind.as_str();
+        let c = parse(&format!(
+            "session = \"t\"\n[transport]\nkind = \"{name}\"\n[[agent]]\nid = 0\n\
+             [[agent]]\nid = 1\ntransport = \"{name}\"\n"
+        ))
+        .unwrap();
+        assert_eq!(c.transport.kind, kind, "{name}");
+        assert_eq!(c.agents[0].transport, kind, "{name}");
+        assert_eq!(c.agents[1].transport, kind, "{name}");
+    }
+    let mut names: Vec<&str> = TransportKind::ALL.iter().map(|k| k.as_str()).collect();
+    names.sort_unstable();
+    names.dedup();
+    assert_eq!(names.len(), TransportKind::ALL.len());
 }
 
 #[test]
