@@ -5,7 +5,7 @@ use std::ffi::c_char;
 use std::time::Duration;
 
 use vrsync_bridge::{Command, Config};
-use vrsync_cabi::{ArgError, c_name, str_arg, write_opt, write_required};
+use vrsync_cabi::{ArgError, c_name, log_filter, str_arg, write_opt, write_required};
 
 use super::state::{AGENTS, AgentState, FfiError, with_agent};
 use super::types::*;
@@ -282,15 +282,8 @@ pub(super) fn agent_id_impl(agent: *mut vrs_agent_t, out_id: *mut u32) -> Result
 }
 
 pub(super) fn init_logging_impl(filter: *const c_char) -> Result<(), FfiError> {
-    use tracing_subscriber::EnvFilter;
-    let filter = if filter.is_null() {
-        EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("warn"))
-    } else {
-        // SAFETY: a C string by the caller's contract.
-        let text = unsafe { str_arg(filter, "filter") }?;
-        EnvFilter::try_new(text)
-            .map_err(|e| FfiError::InvalidArgument(format!("bad log filter {text:?}: {e}")))?
-    };
+    // SAFETY: a C string by the caller's contract.
+    let filter = unsafe { log_filter(filter) }?;
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)

@@ -3,6 +3,9 @@
 use std::ffi::{CStr, c_char};
 use std::str::Utf8Error;
 
+use tracing_subscriber::EnvFilter;
+use tracing_subscriber::filter::ParseError;
+
 use crate::sensors::CAMERA_NAME_SIZE;
 
 /// An argument a call cannot use.
@@ -18,6 +21,14 @@ pub enum ArgError {
         what: &'static str,
         /// Where the bytes stop being UTF-8.
         source: Utf8Error,
+    },
+    /// A log filter that does not parse.
+    #[error("invalid argument: bad log filter {text:?}: {source}")]
+    BadLogFilter {
+        /// The filter as given.
+        text: String,
+        /// Why it does not parse.
+        source: ParseError,
     },
 }
 
@@ -69,6 +80,26 @@ pub unsafe fn str_arg<'a>(s: *const c_char, what: &'static str) -> Result<&'a st
         .map_err(|source| ArgError::NotUtf8 { what, source })
 }
 
+/// The log filter of an `init_logging` call: `filter`, a `RUST_LOG`-style filter such as
+/// `"info"`; NULL takes the `RUST_LOG` environment variable, or `"warn"`.
+///
+/// # Errors
+/// [`ArgError::NotUtf8`], [`ArgError::BadLogFilter`].
+///
+/// # Safety
+/// `filter` is null or a valid NUL-terminated string.
+pub unsafe fn log_filter(filter: *const c_char) -> Result<EnvFilter, ArgError> {
+    if filter.is_null() {
+        return Ok(EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("warn")));
+    }
+    // SAFETY: a C string by the caller's contract.
+    let text = unsafe { str_arg(filter, "filter") }?;
+    EnvFilter::try_new(text).map_err(|source| ArgError::BadLogFilter {
+        text: text.to_owned(),
+        source,
+    })
+}
+
 /// A camera name as a NUL-terminated C array (cut at the wire format's
 /// [`CAMERA_NAME_LEN`](vrsync_bridge::CAMERA_NAME_LEN) bytes).
 pub fn c_name(name: &str) -> [c_char; CAMERA_NAME_SIZE] {
@@ -111,6 +142,13 @@ mod tests {
             assert_eq!(v, 5);
             let e = write_required::<_, ArgError>(ptr::null_mut(), "out_id", 6u32);
             assert_eq!(e.unwrap_err().to_string(), "out_id must not be null");
+
+            let bad = log_filter(c"[[[".as_ptr()).unwrap_err().to_string();
+            assert!(
+                bad.starts_with("invalid argument: bad log filter \"[[[\""),
+                "{bad}"
+            );
+            assert!(log_filter(c"info,vrsync_agent=debug".as_ptr()).is_ok());
 
             let name = c_name("a-very-long-camera-name");
             assert_eq!(CStr::from_ptr(name.as_ptr()).to_bytes().len(), 16);

@@ -11,7 +11,7 @@
 //!   thread that made it, and another thread can only ask for its destruction.
 //! - [`error`]: the per-thread last-error message of each ABI, the error chain it holds,
 //!   and the boundary that catches panics and turns a `Result` into a status code.
-//! - [`args`]: reading C string arguments and writing out-parameters.
+//! - [`args`]: reading C string and log filter arguments, writing out-parameters.
 //! - [`sensors`]: the `#[repr(C)]` sensor structs both headers declare. One Rust type
 //!   each; the host's cbindgen settings rename them (`vrs_pose_t` → `vrs_host_pose_t`, …)
 //!   so each header keeps its names and both can be included together.
@@ -21,7 +21,7 @@ pub mod error;
 pub mod handles;
 pub mod sensors;
 
-pub use args::{ArgError, c_name, str_arg, write_opt, write_required};
+pub use args::{ArgError, c_name, log_filter, str_arg, write_opt, write_required};
 pub use error::{AbiError, LastError, boundary, boundary_status, chain, last_error_ptr};
 pub use handles::{HandleError, HandleKind, Registry, Removal};
 pub use sensors::{

@@ -72,24 +72,6 @@ pub struct vrs_grid_position_t {
     pub rotation_deg: [f32; 3],
 }
 
-impl From<GridPosition> for vrs_grid_position_t {
-    fn from(g: GridPosition) -> Self {
-        Self {
-            position: g.position,
-            rotation_deg: g.rotation_deg,
-        }
-    }
-}
-
-impl From<vrs_grid_position_t> for GridPosition {
-    fn from(g: vrs_grid_position_t) -> Self {
-        Self {
-            position: g.position,
-            rotation_deg: g.rotation_deg,
-        }
-    }
-}
-
 /// Head motion sensor (the original `MsgHeadMotion`).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -104,28 +86,6 @@ pub struct vrs_head_motion_t {
     pub angular_acceleration_deg: [f32; 3],
 }
 
-impl From<HeadMotion> for vrs_head_motion_t {
-    fn from(h: HeadMotion) -> Self {
-        Self {
-            velocity: h.velocity,
-            acceleration: h.acceleration,
-            angular_velocity_deg: h.angular_velocity_deg,
-            angular_acceleration_deg: h.angular_acceleration_deg,
-        }
-    }
-}
-
-impl From<vrs_head_motion_t> for HeadMotion {
-    fn from(h: vrs_head_motion_t) -> Self {
-        Self {
-            velocity: h.velocity,
-            acceleration: h.acceleration,
-            angular_velocity_deg: h.angular_velocity_deg,
-            angular_acceleration_deg: h.angular_acceleration_deg,
-        }
-    }
-}
-
 /// Eye position sensor (the original `MsgEyePosition`).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -134,24 +94,6 @@ pub struct vrs_eye_position_t {
     pub rotation_deg: [f32; 3],
     /// Change of the eye rotation per cycle, degrees.
     pub rotation_velocity_deg: [f32; 3],
-}
-
-impl From<EyePosition> for vrs_eye_position_t {
-    fn from(e: EyePosition) -> Self {
-        Self {
-            rotation_deg: e.rotation_deg,
-            rotation_velocity_deg: e.rotation_velocity_deg,
-        }
-    }
-}
-
-impl From<vrs_eye_position_t> for EyePosition {
-    fn from(e: vrs_eye_position_t) -> Self {
-        Self {
-            rotation_deg: e.rotation_deg,
-            rotation_velocity_deg: e.rotation_velocity_deg,
-        }
-    }
 }
 
 /// One action status: the state of the agent's action `action_id`.
@@ -165,25 +107,6 @@ pub struct vrs_action_status_t {
     pub state: u32,
 }
 
-impl From<&ActionStatus> for vrs_action_status_t {
-    fn from(s: &ActionStatus) -> Self {
-        Self {
-            action_id: s.action_id,
-            state: s.state,
-        }
-    }
-}
-
-impl From<vrs_action_status_t> for ActionStatus {
-    fn from(s: vrs_action_status_t) -> Self {
-        Self {
-            action_id: s.action_id,
-            state: s.state,
-            seq: 0,
-        }
-    }
-}
-
 /// One collision.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -194,24 +117,40 @@ pub struct vrs_collision_t {
     pub collider_id: u32,
 }
 
-impl From<&Collision> for vrs_collision_t {
-    fn from(c: &Collision) -> Self {
-        Self {
-            action_id: c.action_id,
-            collider_id: c.collider_id,
+/// `From` both ways between a C struct and the wire struct with the same fields (and
+/// `zeroed` wire-only fields, zero from C): one list of fields per pair.
+macro_rules! mirror {
+    ($c:ident <=> $wire:ident { $($field:ident),+ } $(zeroed { $($zero:ident),+ })?) => {
+        impl From<$wire> for $c {
+            fn from(w: $wire) -> Self {
+                Self { $($field: w.$field),+ }
+            }
         }
-    }
+
+        impl From<&$wire> for $c {
+            fn from(w: &$wire) -> Self {
+                Self::from(*w)
+            }
+        }
+
+        impl From<$c> for $wire {
+            fn from(c: $c) -> Self {
+                Self { $($field: c.$field,)+ $($($zero: 0,)+)? }
+            }
+        }
+    };
 }
 
-impl From<vrs_collision_t> for Collision {
-    fn from(c: vrs_collision_t) -> Self {
-        Self {
-            action_id: c.action_id,
-            collider_id: c.collider_id,
-            seq: 0,
-        }
-    }
-}
+mirror!(vrs_grid_position_t <=> GridPosition { position, rotation_deg });
+mirror!(vrs_head_motion_t <=> HeadMotion {
+    velocity,
+    acceleration,
+    angular_velocity_deg,
+    angular_acceleration_deg
+});
+mirror!(vrs_eye_position_t <=> EyePosition { rotation_deg, rotation_velocity_deg });
+mirror!(vrs_action_status_t <=> ActionStatus { action_id, state } zeroed { seq });
+mirror!(vrs_collision_t <=> Collision { action_id, collider_id } zeroed { seq });
 
 #[cfg(test)]
 mod tests {

@@ -8,7 +8,7 @@ use vrsync_bridge::Config;
 use vrsync_bridge::{self, ActionState, ActionStatus, Collision};
 use vrsync_bridge::{Host, HostWaitError, SignalHandling};
 
-use vrsync_cabi::{ArgError, c_name, str_arg, write_opt, write_required};
+use vrsync_cabi::{ArgError, c_name, log_filter, str_arg, write_opt, write_required};
 
 use crate::state::{
     FfiError, ImageView, Phase, ReportCopy, boundary, boundary_status, copy_report, destroy,
@@ -568,15 +568,8 @@ fn stats_impl(host: *mut vrs_host_t, out_stats: *mut vrs_host_stats_t) -> Result
 }
 
 fn init_logging_impl(filter: *const c_char) -> Result<(), FfiError> {
-    use tracing_subscriber::EnvFilter;
-    let filter = if filter.is_null() {
-        EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("warn"))
-    } else {
-        // SAFETY: a C string by the caller's contract.
-        let text = unsafe { str_arg(filter, "filter") }?;
-        EnvFilter::try_new(text)
-            .map_err(|e| FfiError::InvalidArgument(format!("bad log filter {text:?}: {e}")))?
-    };
+    // SAFETY: a C string by the caller's contract.
+    let filter = unsafe { log_filter(filter) }?;
     use tracing_subscriber::Layer;
     use tracing_subscriber::layer::SubscriberExt;
     use tracing_subscriber::util::SubscriberInitExt;
