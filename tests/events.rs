@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Duration;
 
-use vrsync_agent::policy::STATUS_WAIT_CYCLES;
+use vrsync_agent_bin::policy::STATUS_WAIT_CYCLES;
 
 use crate::util::{
     CycleLine, EVENT_DEADLINE, Events, Proc, RUN_DEADLINE, TestConfig, Transport,

@@ -32,7 +32,7 @@ fn profile_dir() -> PathBuf {
 
 /// The folder holding `vr-sim`, `vr-agent` and `vr-bench-agent`: `target/<profile>` of this
 /// test build. Cargo itself builds them there in the same `cargo test --workspace` (no
-/// nested `cargo build`): `vrsync-sim` and `vrsync-agent` have integration tests of their
+/// nested `cargo build`): `vrsync-sim` and `vrsync-agent-bin` have integration tests of their
 /// own, and Cargo builds a package's binaries for its integration tests.
 pub fn bin_dir() -> PathBuf {
     profile_dir()

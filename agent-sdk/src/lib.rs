@@ -31,7 +31,6 @@
 mod agent;
 pub mod ffi;
 pub mod log;
-pub mod policy;
 
 pub use agent::{
     ACTION_STATES_CAPACITY, Agent, AgentBuilder, AgentConnectError, Frame, HOST_LIVENESS_PERIOD,

@@ -53,6 +53,7 @@
 //! ```
 
 mod barrier;
+mod colour;
 mod config;
 mod events;
 mod host;
@@ -62,6 +63,7 @@ mod transport;
 mod wire;
 
 pub use barrier::AgentOutcome;
+pub use colour::ansi_on_stderr;
 pub use config::{
     AgentConfig, AgentLostPolicy, CameraConfig, Config, ConfigLoadError, DEFAULT_CONFIG_TOML,
     DEFAULT_SPIN_BEFORE_BLOCK_US, DEFAULT_ZENOH_ENDPOINT, LegacyConfig, LegacyDialect,

@@ -57,7 +57,7 @@ fn main() -> ExitCode {
             .with(
                 tracing_subscriber::fmt::layer()
                     .with_writer(std::io::stderr)
-                    .with_ansi(vrsync_agent::log::ansi_on_stderr())
+                    .with_ansi(vrsync_bridge::ansi_on_stderr())
                     .with_filter(filter),
             )
             // Peers dropped in a zenoh TLS handshake count as refused (whatever RUST_LOG).

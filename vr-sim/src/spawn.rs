@@ -16,7 +16,7 @@ pub fn agent_executable() -> anyhow::Result<PathBuf> {
     let agent = dir.join(format!("vr-agent{}", std::env::consts::EXE_SUFFIX));
     if !agent.is_file() {
         bail!(
-            "cannot find {} (build it with `cargo build -p vrsync-agent`)",
+            "cannot find {} (build it with `cargo build -p vrsync-agent-bin`)",
             agent.display()
         );
     }

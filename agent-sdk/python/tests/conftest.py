@@ -32,7 +32,7 @@ def binary(name: str) -> Path:
     path = bin_dir() / name
     if not path.exists():
         pytest.fail(
-            f"{path} does not exist: build it first (`cargo build -p vrsync-sim -p vrsync-agent`) "
+            f"{path} does not exist: build it first (`cargo build -p vrsync-sim -p vrsync-agent-bin`) "
             "or set VRSYNC_BIN_DIR; scripts/test-all does both",
             pytrace=False,
         )

@@ -121,7 +121,7 @@ fn exe(name: &str) -> anyhow::Result<PathBuf> {
         .join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
     if !path.is_file() {
         bail!(
-            "cannot find {} (build it with `cargo build --release -p vrsync-agent`)",
+            "cannot find {} (build it with `cargo build --release -p vrsync-agent-bin`)",
             path.display()
         );
     }

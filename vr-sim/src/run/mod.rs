@@ -270,7 +270,7 @@ impl Run {
             cycle,
             "no agent is connected: paused, waiting up to {} (sync.connect_timeout) for \
              every agent to connect again",
-            vrsync_agent::log::Rounded(timeout)
+            vrsync_bridge::Rounded(timeout)
         );
         let paused = Instant::now();
         loop {
@@ -293,7 +293,7 @@ impl Run {
                              host waited {} (sync.connect_timeout) for agents {missing:?} to \
                              connect again and gives up",
                             config.session,
-                            vrsync_agent::log::Rounded(paused.elapsed())
+                            vrsync_bridge::Rounded(paused.elapsed())
                         ));
                         return Ok(ControlFlow::Break(()));
                     }

@@ -159,7 +159,7 @@ pub(super) fn agents_missing(opts: &RunOptions, missing: &[u32], gone: &[u32]) -
     if !never.is_empty() {
         why.push(format!(
             "agents {never:?} did not connect within {}",
-            vrsync_agent::log::Rounded(config.sync.connect_timeout)
+            vrsync_bridge::Rounded(config.sync.connect_timeout)
         ));
     }
     if !gone.is_empty() {

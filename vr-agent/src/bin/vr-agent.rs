@@ -9,8 +9,8 @@ use clap::Parser;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tracing::{info, warn};
-use vrsync_agent::policy::{Policy, PolicyKind};
 use vrsync_agent::{Agent, AgentBuilder, SignalHandling, StopError, WaitStartError};
+use vrsync_agent_bin::policy::{Policy, PolicyKind};
 use vrsync_bridge::Config;
 
 /// Example vrsync agent: waits for each cycle's start, reads its sensor frame from shared

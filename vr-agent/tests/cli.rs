@@ -23,7 +23,7 @@ fn vr_bench_agent_bad_usage_exits_2() {
 
 #[test]
 fn vr_agent_help_states_how_long_the_policies_wait_for_a_status() {
-    use vrsync_agent::policy::{SEEK_SEARCH_WAIT_CYCLES, STATUS_WAIT_CYCLES};
+    use vrsync_agent_bin::policy::{SEEK_SEARCH_WAIT_CYCLES, STATUS_WAIT_CYCLES};
     let out = Command::new(env!("CARGO_BIN_EXE_vr-agent"))
         .arg("--help")
         .output()

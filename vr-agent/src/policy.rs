@@ -11,7 +11,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use vrsync_bridge::{ActionState, ActionStatus, Collision, Command, PixelFormat, SensorHeader};
 
-use crate::{Frame, Image};
+use vrsync_agent::{Frame, Image};
 
 /// Which policy `vr-agent` runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -212,7 +212,11 @@ impl Policy {
             }
             PolicyKind::Wander | PolicyKind::Seek => {}
         }
-        let yaw = h.pose.rotation().to_euler(glam::EulerRot::YXZ).0;
+        let yaw = h
+            .pose
+            .rotation()
+            .to_euler(vrsync_agent::glam::EulerRot::YXZ)
+            .0;
         self.heading_deg = yaw.to_degrees().rem_euclid(360.0);
         let collided = self
             .running
