@@ -577,22 +577,15 @@ fn init_logging_impl(filter: *const c_char) -> Result<(), FfiError> {
         .with(
             tracing_subscriber::fmt::layer()
                 .with_writer(std::io::stderr)
-                .with_ansi(ansi_on_stderr())
+                // Colour only on a terminal without NO_COLOR: a host's stderr is often a log
+                // file (Unity's `Editor.log`). The rule vr-sim and the agent SDK use too.
+                .with_ansi(vrsync_bridge::ansi_on_stderr())
                 .with_filter(filter),
         )
         // Peers dropped in a zenoh TLS handshake count as refused (whatever the filter).
         .with(vrsync_bridge::zenoh::tls_refusal_layer())
         .try_init()
         .map_err(|_| FfiError::LoggingAlreadySet)
-}
-
-/// Colour only when stderr is a terminal and `NO_COLOR` is unset or empty
-/// (<https://no-color.org>): a host's stderr is often a log file (Unity's `Editor.log`). The
-/// same rule as `vrsync_agent::log::ansi_on_stderr` (a host library does not link the agent
-/// SDK; the shared home would be `vrsync-bridge`).
-fn ansi_on_stderr() -> bool {
-    std::io::IsTerminal::is_terminal(&std::io::stderr())
-        && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty())
 }
 
 // ---------------------------------------------------------------------------------------
