@@ -128,7 +128,8 @@ pub struct RunArgs {
     /// interrupted, trajectory_hash, summary) or error (message).
     #[arg(long, value_name = "FILE")]
     pub events: Option<PathBuf>,
-    /// Write a top-down PNG map of the room with every agent's trajectory at the end.
+    /// Write a top-down PNG map of the room at the end: every agent's trajectory with start
+    /// and end markers, labelled goals and objects, a legend and a scale bar in metres.
     #[arg(long, value_name = "FILE.png")]
     pub map: Option<PathBuf>,
     /// Write the agents' camera images as PNG files into DIR
