@@ -61,7 +61,12 @@ fn a_killed_agent_is_evicted_and_can_rejoin(t: Transport) {
     assert_eq!(rejoined["agent"], 1, "{rejoined}");
     let rejoined_at = rejoined["cycle"].as_u64().unwrap();
     assert!(rejoined_at > 9, "{rejoined}");
-    wait_for_cycle_line(&log_back, rejoined_at, EVENT_DEADLINE);
+    // The restarted agent took part in a whole cycle: it got the frame of the cycle after
+    // its first, so the host completed that first one. (Its log line of the first cycle
+    // alone is not enough: SIGTERM can end the run while the host still waits for that
+    // cycle's stop, and an interrupted cycle is not counted in `frames`; over zenoh, whose
+    // stop takes longer to arrive, that happened in 8 of 40 runs on a loaded machine.)
+    wait_for_cycle_line(&log_back, rejoined_at + 1, EVENT_DEADLINE);
     run.host.signal(libc::SIGTERM);
     let out = run.host.wait(RUN_DEADLINE);
     assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
@@ -411,6 +416,7 @@ fn sigterm(t: Transport) {
 }
 
 for_each_transport!(
+    a_killed_agent_is_evicted_and_can_rejoin,
     a_killed_host_is_noticed_and_a_new_host_starts,
     bad_commands_are_rejected_and_leave_the_world_untouched,
     sigint,
@@ -419,24 +425,3 @@ for_each_transport!(
     on_agent_lost_abort_ends_the_run,
     on_agent_lost_wait_pauses_until_the_agent_is_back,
 );
-
-/// `a_killed_agent_is_evicted_and_can_rejoin` over shm and tcp only. Its first run over
-/// zenoh in a clean-clone CI (2 cores, heavily loaded) failed the frames-delivered count
-/// once (summary: 16 frames, 28 delivered, 1 eviction, 1 rejoin, 0 timeouts) after passing
-/// in every earlier run here; the cause is not found yet (the frame of the cycle the agent
-/// was killed in, or of the cycle SIGTERM interrupted, counted differently over zenoh), so
-/// zenoh's eviction and rejoin are covered by `liveness.rs` and the conformance suite
-/// until it is.
-mod killed_agent_rejoins {
-    use crate::util::Transport;
-
-    #[test]
-    fn shm() {
-        super::a_killed_agent_is_evicted_and_can_rejoin(Transport::Shm);
-    }
-
-    #[test]
-    fn tcp() {
-        super::a_killed_agent_is_evicted_and_can_rejoin(Transport::Tcp);
-    }
-}
