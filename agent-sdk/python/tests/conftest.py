@@ -222,6 +222,13 @@ class Host:
             self.proc.wait(timeout=30)
 
 
+@pytest.fixture(autouse=True)
+def _sb3_logs_in_tmp_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Stable-Baselines3 makes a log folder per training run, by default
+    `$TMPDIR/SB3-<date>` (left behind); its `$SB3_LOGDIR` puts it in the test's tmp_path."""
+    monkeypatch.setenv("SB3_LOGDIR", str(tmp_path / "sb3"))
+
+
 @pytest.fixture
 def hosts() -> Iterator[list[Host]]:
     """Start hosts with `hosts.append(Host(...))`; all are killed at the end."""
