@@ -17,5 +17,6 @@ mod legacy;
 mod liveness;
 mod logs;
 mod netns;
+mod replay;
 mod sync;
 mod world;

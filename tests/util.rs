@@ -663,8 +663,17 @@ pub fn summary(path: &Path) -> serde_json::Value {
     serde_json::from_str(&text).expect("summary JSON")
 }
 
-/// Reads a `vr-sim --record` file: one JSON value per line.
+/// Reads a `vr-sim --record` file's agent lines (one per agent per cycle; the header and
+/// end lines, which have `record` instead of `agent`, are left out).
 pub fn record(path: &Path) -> Vec<serde_json::Value> {
+    record_lines(path)
+        .into_iter()
+        .filter(|v| v.get("agent").is_some())
+        .collect()
+}
+
+/// Reads every line of a `vr-sim --record` file: header, agent lines, end.
+pub fn record_lines(path: &Path) -> Vec<serde_json::Value> {
     std::fs::read_to_string(path)
         .unwrap_or_else(|e| panic!("cannot read record {}: {e}", path.display()))
         .lines()

@@ -31,6 +31,67 @@ pub enum Command {
     /// Rust agent processes and the raw floor). Build with --release: it spawns
     /// `vr-bench-agent` from the same folder.
     Bench(BenchArgs),
+    /// Replay a `run --record` file without agents: apply its commands to the world cycle
+    /// by cycle as the run did, compare every agent's state after every cycle with the
+    /// record and the trajectory hash at the end. Exit 0: the same trajectory; 1: it
+    /// diverges (the first cycle, agent and field are named); 2: the record cannot be
+    /// replayed (unreadable, malformed, truncated: no end line, or written by a vr-sim
+    /// before format version 2).
+    ///
+    /// With --dump-frames it renders the same trajectory again, with the recorded cameras
+    /// or others (--config, --camera-size), e.g. 1920x1080 for figures and videos.
+    ///
+    /// Limits: the world, its config and the command order come from the record only:
+    /// a record is replayed by a vr-sim whose world code gives the same results (the
+    /// hash check says when it does not). Images are rendered only for the agents and
+    /// cycles whose sensor frame the run wrote, at the start of the cycle, as `run
+    /// --dump-frames` does. A record cut short (killed run) is replayed up to where it
+    /// ends and then refused (exit 2): it has no hash to check.
+    Replay(ReplayArgs),
+}
+
+/// `vr-sim replay`.
+#[derive(Debug, Args)]
+pub struct ReplayArgs {
+    /// The `vr-sim run --record` file.
+    #[arg(value_name = "RECORD")]
+    pub record: PathBuf,
+    /// Render with the cameras of this config's `[[agent]]` entries (matched by agent id;
+    /// agents it does not list keep their recorded cameras). Only the cameras are used:
+    /// the world, timing and agents are the record's, and commands naming a pixel still
+    /// resolve against the recorded cameras.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Render every camera at WIDTHxHEIGHT (e.g. 1920x1080). The horizontal field of view
+    /// is kept; the vertical one follows the new aspect ratio (square pixels).
+    #[arg(long, value_name = "WxH", value_parser = parse_size)]
+    pub camera_size: Option<(u32, u32)>,
+    /// Write the agents' camera images as PNG files into DIR, named as `run
+    /// --dump-frames` names them (`c<cycle>_a<agent>_<camera>.png`): with the recorded
+    /// cameras the files are those of the run, byte for byte.
+    #[arg(long, value_name = "DIR")]
+    pub dump_frames: Option<PathBuf>,
+    /// With --dump-frames: write the images of every K-th cycle (0, K, 2K, ...).
+    #[arg(long, value_name = "K", default_value_t = 1, requires = "dump_frames",
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub every: u64,
+    /// Write a top-down PNG map of the replayed trajectories (as `run --map`).
+    #[arg(long, value_name = "FILE.png")]
+    pub map: Option<PathBuf>,
+    /// Threads shading image rows (1: the calling thread only; 0: one per core).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub render_threads: usize,
+}
+
+/// `WIDTHxHEIGHT`, both at least 1.
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("{s:?} is not WIDTHxHEIGHT (e.g. 1920x1080)");
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let (w, h): (u32, u32) = (w.parse().map_err(|_| bad())?, h.parse().map_err(|_| bad())?);
+    if w == 0 || h == 0 || w > 16_384 || h > 16_384 {
+        return Err(format!("{s}: width and height must be within 1..=16384"));
+    }
+    Ok((w, h))
 }
 
 /// `vr-sim bench`.

@@ -5,7 +5,9 @@ mod cli;
 mod events;
 mod geometry;
 mod picture;
+mod record;
 mod render;
+mod replay;
 mod run;
 mod spawn;
 mod world;
@@ -18,7 +20,7 @@ use anyhow::Context;
 use clap::Parser;
 use vrsync_bridge::{Config, ConfigLoadError};
 
-use crate::cli::{BenchArgs, Cli, Command, DemoArgs, RunArgs};
+use crate::cli::{BenchArgs, Cli, Command, DemoArgs, ReplayArgs, RunArgs};
 use crate::run::{RunOptions, print_summary};
 
 // Counts allocations for `vr-sim bench` (allocs_per_cycle); one relaxed atomic add per
@@ -71,6 +73,7 @@ fn main() -> ExitCode {
             if e.downcast_ref::<ConfigLoadError>().is_some()
                 || e.downcast_ref::<vrsync_bridge::ShmBudgetError>().is_some()
                 || e.downcast_ref::<world_config::WorldConfigError>().is_some()
+                || e.downcast_ref::<replay::RecordReadError>().is_some()
             {
                 ExitCode::from(EXIT_USAGE)
             } else {
@@ -85,7 +88,37 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Demo(args) => demo(args),
         Command::Run(args) => run_cmd(args),
         Command::Bench(args) => bench_cmd(args),
+        Command::Replay(args) => replay_cmd(args),
     }
+}
+
+fn replay_cmd(args: ReplayArgs) -> anyhow::Result<ExitCode> {
+    let done = replay::replay(&replay::ReplayOptions {
+        record: args.record.clone(),
+        config: args.config,
+        camera_size: args.camera_size,
+        dump_frames: args.dump_frames.clone().map(|d| (d, args.every)),
+        map: args.map,
+        render_threads: args.render_threads,
+    })?;
+    println!(
+        "vr-sim replay: {} cycles of {} agents ({} commands applied, {} rejected) follow {}; \
+         trajectory hash {} as recorded",
+        done.cycles,
+        done.agents,
+        done.commands_applied,
+        done.commands_rejected,
+        args.record.display(),
+        done.trajectory_hash
+    );
+    if let Some(dir) = &args.dump_frames {
+        println!(
+            "  {} images written to {}",
+            done.frames_written,
+            dir.display()
+        );
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 fn bench_cmd(args: BenchArgs) -> anyhow::Result<ExitCode> {

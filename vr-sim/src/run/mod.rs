@@ -8,12 +8,12 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use serde::Serialize;
 use tracing::{info, warn};
 use vrsync_bridge::{Config, CycleReport, Host, HostCycleError, HostWaitError, SignalHandling};
 
 use crate::events::{CYCLE_EVENT_EVERY, Event, Events};
 use crate::picture::{Trails, dump_image, write_map};
+use crate::record::{self, AgentLine, Sent};
 use crate::render::Renderer;
 use crate::spawn::{Agents, PrivateConfig};
 use crate::world::World;
@@ -49,24 +49,6 @@ pub struct RunOptions {
     pub dump_frames: Option<(PathBuf, u64)>,
     /// Threads shading image rows (1: the host thread only; 0: one per core).
     pub render_threads: usize,
-}
-
-#[derive(Serialize)]
-struct RecordLine<'a> {
-    cycle: u64,
-    sim_time_s: f64,
-    agent: u32,
-    outcome: &'a str,
-    position: [f32; 3],
-    rotation: [f32; 4],
-    heading_deg: f32,
-    eyes_deg: [f32; 3],
-    held: Option<u32>,
-    commands: Vec<(&'static str, u32)>,
-    rejected: u32,
-    statuses: Vec<(u32, u32)>,
-    collisions: Vec<(u32, u32)>,
-    reward: f32,
 }
 
 /// Runs the world until `frames` cycles are done (or Ctrl-C).
@@ -129,6 +111,9 @@ struct Roster {
     ids: Vec<u32>,
     /// Connected as last reported (all connected after the first wait).
     connected: Vec<bool>,
+    /// Whether this cycle's frame 1 wrote the agent's sensors (which clears its pending
+    /// statuses, collisions and reward): recorded for the replay.
+    sensed: Vec<bool>,
     /// Evicted or left, remembered to report a rejoin.
     evicted: Vec<bool>,
 }
@@ -150,6 +135,8 @@ struct AgentCommands {
     /// Applied commands: name and action id, in the order sent.
     applied: Vec<(&'static str, u32)>,
     rejected: u32,
+    /// Every command, in the order applied, with its arguments and rejection.
+    sent: Vec<Sent>,
 }
 
 impl Run {
@@ -194,9 +181,13 @@ impl Run {
 
         let trails = opts.map.as_ref().map(|_| Trails::new(&world));
         let record = match &opts.record {
-            Some(p) => Some(BufWriter::new(
-                File::create(p).with_context(|| format!("cannot create {}", p.display()))?,
-            )),
+            Some(p) => {
+                let mut out = BufWriter::new(
+                    File::create(p).with_context(|| format!("cannot create {}", p.display()))?,
+                );
+                write_line(&mut out, &record::Header::of(config))?;
+                Some(out)
+            }
             None => None,
         };
         let bar = opts.progress.then(|| progress_bar(opts.frames));
@@ -215,6 +206,7 @@ impl Run {
             roster: Roster {
                 ids,
                 connected: vec![true; agent_count],
+                sensed: vec![false; agent_count],
                 evicted: vec![false; agent_count],
             },
             commands: CommandTally {
@@ -314,9 +306,11 @@ impl Run {
         let mut notable = false;
         for i in 0..self.roster.ids.len() {
             let id = self.roster.ids[i];
+            self.roster.sensed[i] = false;
             if !self.note_connection(i)? {
                 continue;
             }
+            self.roster.sensed[i] = true;
             let cycle = self.render_and_publish(id)?;
             if self.roster.evicted[i] && !self.host.is_evicted(id) && !self.host.has_left(id) {
                 self.roster.evicted[i] = false;
@@ -441,33 +435,23 @@ impl Run {
             let Some(body) = self.world.bodies().iter().find(|b| b.id == agent.agent) else {
                 continue;
             };
-            let pose = body.pose();
-            let line = RecordLine {
+            let sensed = self
+                .roster
+                .ids
+                .iter()
+                .position(|&id| id == agent.agent)
+                .is_some_and(|i| self.roster.sensed[i]);
+            let line = AgentLine::of(
+                body,
                 cycle,
                 sim_time_s,
-                agent: agent.agent,
-                outcome: agent.outcome.as_str(),
-                position: pose.position,
-                rotation: pose.rotation,
-                heading_deg: body.heading_deg,
-                eyes_deg: [
-                    body.eyes.pan_left_deg,
-                    body.eyes.pan_right_deg,
-                    body.eyes.tilt_deg,
-                ],
-                held: body.held,
-                commands: agent.applied,
-                rejected: agent.rejected,
-                statuses: body
-                    .pending_statuses()
-                    .iter()
-                    .map(|&(a, s)| (a, s as u32))
-                    .collect(),
-                collisions: body.pending_collisions().to_vec(),
-                reward: body.pending_reward(),
-            };
-            serde_json::to_writer(&mut *out, &line).context("write record")?;
-            out.write_all(b"\n").context("write record")?;
+                agent.outcome.as_str(),
+                sensed,
+                agent.applied,
+                agent.rejected,
+                &agent.sent,
+            );
+            write_line(out, &line)?;
         }
         Ok(())
     }
@@ -515,7 +499,19 @@ impl Run {
         if let Some(bar) = bar {
             bar.finish_and_clear();
         }
+        let trajectory_hash = hasher.finalize().to_hex().to_string();
         if let Some(mut out) = record {
+            write_line(
+                &mut out,
+                &record::End {
+                    record: "end".into(),
+                    cycles: done,
+                    trajectory_hash: trajectory_hash.clone(),
+                    interrupted,
+                    commands_applied: commands.applied,
+                    commands_rejected: commands.rejected,
+                },
+            )?;
             out.flush().context("write record")?;
         }
         if let (Some(path), Some(trails)) = (&opts.map, &trails) {
@@ -569,7 +565,7 @@ impl Run {
             collisions_dropped: stats.collisions_dropped,
             commands_applied: commands.applied,
             commands_rejected: commands.rejected,
-            trajectory_hash: hasher.finalize().to_hex().to_string(),
+            trajectory_hash,
             render_us: if done > 0 {
                 render_time.as_secs_f64() * 1e6 / done as f64
             } else {
@@ -637,11 +633,22 @@ impl CommandTally {
         for a in report.agents() {
             let mut rejected = 0u32;
             let mut names = Vec::new();
+            let mut sent = Vec::new();
             for wire in a.commands() {
-                let result = wire
-                    .decode()
+                let decoded = wire.decode();
+                let result = decoded
                     .map_err(crate::world::CommandRejected::from)
                     .and_then(|cmd| world.apply(a.agent_id, wire.action_id, cmd).map(|()| cmd));
+                if recording {
+                    sent.push(Sent {
+                        action: wire.action_id,
+                        command: decoded.map_or(
+                            record::RecordedCommand::Undecoded { tag: wire.kind },
+                            Into::into,
+                        ),
+                        error: result.as_ref().err().map(ToString::to_string),
+                    });
+                }
                 match result {
                     Ok(cmd) => {
                         self.applied += 1;
@@ -676,9 +683,16 @@ impl CommandTally {
                     outcome: a.outcome,
                     applied: names,
                     rejected,
+                    sent,
                 });
             }
         }
         Ok(per_agent)
     }
+}
+
+/// Writes one JSON line of the recording.
+fn write_line(out: &mut impl Write, line: &impl serde::Serialize) -> anyhow::Result<()> {
+    serde_json::to_writer(&mut *out, line).context("write record")?;
+    out.write_all(b"\n").context("write record")
 }

@@ -55,6 +55,18 @@ pub struct CameraSpec {
     pub fov_v_deg: f32,
 }
 
+impl From<&vrsync_bridge::CameraConfig> for CameraSpec {
+    fn from(c: &vrsync_bridge::CameraConfig) -> Self {
+        Self {
+            name: c.name.clone(),
+            width_px: c.width_px,
+            height_px: c.height_px,
+            fov_h_deg: c.fov_horizontal_deg,
+            fov_v_deg: c.fov_vertical_deg,
+        }
+    }
+}
+
 /// Which viewpoint a camera renders.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Viewpoint {
@@ -211,6 +223,15 @@ impl Body {
         &self.cameras
     }
 
+    /// This body seen through other cameras (for rendering only: commands that name a
+    /// pixel keep resolving against the body's own cameras in the world).
+    pub fn with_cameras(&self, cameras: Vec<CameraSpec>) -> Self {
+        Self {
+            cameras,
+            ..self.clone()
+        }
+    }
+
     fn left_camera(&self) -> Option<&CameraSpec> {
         self.cameras
             .iter()
@@ -328,17 +349,7 @@ impl World {
                     )
                 })?,
             };
-            let cameras = a
-                .cameras
-                .iter()
-                .map(|c| CameraSpec {
-                    name: c.name.clone(),
-                    width_px: c.width_px,
-                    height_px: c.height_px,
-                    fov_h_deg: c.fov_horizontal_deg,
-                    fov_v_deg: c.fov_vertical_deg,
-                })
-                .collect();
+            let cameras = a.cameras.iter().map(CameraSpec::from).collect();
             world.bodies.push(Body {
                 id: a.id,
                 position,
