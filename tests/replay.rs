@@ -249,6 +249,20 @@ fn an_edited_command_is_named_at_its_cycle_and_agent() {
         "{}",
         out.stderr
     );
+
+    // Every line as recorded, another hash at the end (e.g. an object moved otherwise).
+    let mut lines = record_lines(&rec);
+    let last = lines.len() - 1;
+    lines[last]["trajectory_hash"] = "0".repeat(64).into();
+    write_record(&edited, &lines);
+    let out = replay(&[edited.to_str().unwrap()]);
+    assert_eq!(out.code(), Some(1), "stderr:\n{}", out.stderr);
+    assert!(
+        out.stderr
+            .contains("matches every agent line but not the trajectory hash"),
+        "{}",
+        out.stderr
+    );
 }
 
 #[test]
@@ -291,6 +305,11 @@ fn a_cut_malformed_or_old_record_is_bad_input() {
     check(
         lines[1..lines.len() - 1].join("\n") + "\n",
         "a record of format version 1",
+    );
+    // Something after the end line.
+    check(
+        text.clone() + "{}\n",
+        &format!("bad.jsonl:{}: ", lines.len() + 1),
     );
     // Not a record at all.
     check("[1, 2, 3]\n".into(), "the first line is not a header");
