@@ -49,8 +49,12 @@ pub struct Header {
 }
 
 impl Header {
-    /// The header of a run of `config`.
+    /// The header of a run of `config`. The shared secrets (`tcp_token`, zenoh `token`)
+    /// are left out: a record is meant to be passed around, and a replay connects nothing.
     pub fn of(config: &Config) -> Self {
+        let mut shared = config.clone();
+        shared.transport.tcp_token = None;
+        shared.transport.zenoh.token = None;
         Self {
             record: "header".into(),
             format: FORMAT.into(),
@@ -59,7 +63,7 @@ impl Header {
             agents: config.agents.iter().map(|a| a.id).collect(),
             sync_mode: config.sync.sync_mode,
             simulation_time_per_frame_s: config.sync.simulation_time_per_frame.as_secs_f64(),
-            config: config.to_toml_string(),
+            config: shared.to_toml_string(),
         }
     }
 }
@@ -400,6 +404,21 @@ mod tests {
             let back: F32 = serde_json::from_str(&text).unwrap();
             assert_eq!(back.0.to_bits(), v.to_bits(), "{v:e} written as {text}");
         }
+    }
+
+    #[test]
+    fn the_header_keeps_the_config_but_not_its_secrets() {
+        let text = "session = \"s\"\n[transport]\nkind = \"tcp\"\ntcp_token = \"tcp-secret\"\n\
+                    [transport.zenoh]\ntoken = \"zenoh-secret\"\n[[agent]]\nid = 3\n\
+                    [world]\nroom_width = 7.0\n";
+        let config = Config::from_toml_str(text, std::path::Path::new("t.toml")).unwrap();
+        let header = Header::of(&config);
+        assert!(!header.config.contains("secret"), "{}", header.config);
+        assert_eq!(header.agents, [3]);
+        let back = Config::from_toml_str(&header.config, std::path::Path::new("h")).unwrap();
+        assert_eq!(back.world, config.world);
+        assert_eq!(back.agents, config.agents);
+        assert_eq!(back.sync, config.sync);
     }
 
     #[test]
