@@ -48,8 +48,9 @@ pub struct BenchOptions {
 /// One measured configuration (DESIGN §8 bench JSON keys, plus allocations).
 #[derive(Debug, Clone, Serialize)]
 pub struct Row {
-    /// `shm`, `shm-spin`, `tcp`, `zenoh`, `zenoh-tls` (mutual TLS), `floor-shm`,
-    /// `floor-shm-spin`, `floor-tcp`, `floor-zenoh`, `legacy`, `python`, `python-vec`.
+    /// `shm`, `shm-spin`, `tcp`, `zenoh`, `zenoh-tls` (mutual TLS), `mixed` (agents over
+    /// shm, shm, tcp, zenoh), `floor-shm`, `floor-shm-spin`, `floor-tcp`, `floor-zenoh`,
+    /// `legacy`, `python`, `python-vec`.
     pub transport: String,
     /// Agents.
     pub agents: u32,
@@ -417,6 +418,11 @@ impl Bench<'_> {
                 }
                 for t in ["tcp", "floor-tcp", "zenoh", "zenoh-tls", "floor-zenoh"] {
                     cases.push(mk(t, tcp_cycles));
+                }
+                // One host mixing transports (2 shm, 1 tcp, 1 zenoh agents): its one wait
+                // over every transport against the single-transport rows.
+                if agents == 4 {
+                    cases.push(mk("mixed", tcp_cycles));
                 }
                 // The Python agent (1 agent, the smallest and the largest image set).
                 if self.python.is_some() && agents == 1 && (w == 320 || w == 1920) {

@@ -122,6 +122,26 @@ fn a_vector_env_case_configures_one_camera_per_agent() {
 }
 
 #[test]
+fn a_mixed_case_puts_its_agents_on_shm_tcp_and_zenoh_of_one_host() {
+    let case = Case {
+        transport: "mixed",
+        agents: 4,
+        cameras: CAMERAS,
+        width: 320,
+        height: 240,
+        warmup: 1,
+        cycles: 1,
+    };
+    let text = config_text(&case, "bench-test-mixed", Path::new("/nonexistent"));
+    let config = Config::from_toml_str(&text, Path::new("<test>")).unwrap();
+    let kinds: Vec<&str> = config.agents.iter().map(|a| a.transport.as_str()).collect();
+    assert_eq!(kinds, super::vrsync::MIXED);
+    assert_eq!(config.transport.kind.as_str(), "shm");
+    // The zenoh agent's host listens on loopback (a port free a moment ago).
+    assert!(text.contains("listen = [\"tcp/127.0.0.1:"), "{text}");
+}
+
+#[test]
 fn the_ratio_table_divides_the_named_rows_p50s_and_skips_missing_rows() {
     let mut h = histogram().unwrap();
     h.record(1000).unwrap();

@@ -50,6 +50,10 @@ pub(super) fn make_certificates(dir: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The `mixed` rows' transports, agent by agent (cycling): one host serving agents over
+/// shared memory, TCP and zenoh at once.
+pub(super) const MIXED: [&str; 4] = ["shm", "shm", "tcp", "zenoh"];
+
 /// The config of `case`; `certs`: the folder of [`make_certificates`] (`zenoh-tls`).
 pub(super) fn config_text(case: &Case, session: &str, certs: &Path) -> String {
     let (kind, wait) = match case.transport {
@@ -58,12 +62,13 @@ pub(super) fn config_text(case: &Case, session: &str, certs: &Path) -> String {
         "shm-spin" => ("shm", "spin"),
         _ => ("shm", "block"),
     };
+    let mixed = case.transport == "mixed";
     let mut s = format!(
         "session = {session:?}\n[sync]\nsync_mode = true\nsimulation_time_per_frame = 0.01\n\
          stop_timeout = 10.0\nconnect_timeout = 30.0\nwait = {wait:?}\n[transport]\nkind = {kind:?}\n\
          tcp_listen = \"127.0.0.1:0\"\nmax_commands_per_cycle = 8\n"
     );
-    if kind == "zenoh" {
+    if kind == "zenoh" || mixed {
         // Loopback, a port free a moment ago (zenoh's stable API cannot report the port
         // of a port-0 listener), scouting off (the default).
         let endpoint = loopback_endpoint().unwrap_or_default();
@@ -84,6 +89,10 @@ pub(super) fn config_text(case: &Case, session: &str, certs: &Path) -> String {
     }
     for id in 0..case.agents {
         s += &format!("[[agent]]\nid = {id}\n");
+        if mixed {
+            let transport = MIXED[id as usize % MIXED.len()];
+            s += &format!("transport = {transport:?}\n");
+        }
         for c in 0..case.cameras {
             s += &format!(
                 "[[agent.camera]]\nname = \"c{c}\"\nwidth = {}\nheight = {}\nformat = \"rgb8\"\n",
