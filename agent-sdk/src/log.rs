@@ -1,6 +1,7 @@
-//! Log and message output: ANSI colours only where a person reads them, durations as a
-//! person writes them. Both are defined in the bridge, whose messages and programs use them
-//! too; re-exported here so that an agent needs no other crate for them.
+//! Log and message output: ANSI colours only where a person reads them, the default log
+//! filter, durations as a person writes them. All are defined in the bridge, whose messages
+//! and programs use them too; re-exported here so that an agent needs no other crate for
+//! them.
 
 /// Displays a duration rounded to three significant digits (`30 s`, `2.5 s`, `250 ms`).
 pub use vrsync_bridge::Rounded;
@@ -9,3 +10,8 @@ pub use vrsync_bridge::Rounded;
 /// [`vrs_init_logging`](crate::ffi::vrs_init_logging) use; pass it to your own subscriber's
 /// `with_ansi`.
 pub use vrsync_bridge::ansi_on_stderr;
+/// The filter text of a program logging at a level by default: the level plus directives
+/// that silence zenoh's notices meaningless to vrsync users ([`QUIET_ZENOH`]). What
+/// `vr-agent` and [`vrs_init_logging`](crate::ffi::vrs_init_logging) use when `RUST_LOG`
+/// is unset; give it to your own subscriber's `EnvFilter::new`.
+pub use vrsync_bridge::{QUIET_ZENOH, default_log_filter};

@@ -57,6 +57,7 @@ mod colour;
 mod config;
 mod events;
 mod host;
+mod logging;
 mod rounded;
 mod signal;
 mod transport;
@@ -74,6 +75,7 @@ pub use host::{
     AgentReport, CycleReport, Host, HostBuilder, HostCreateError, HostCycleError, HostStats,
     HostWaitError, ImageMut, ImagesMut, REAP_PERIOD, SensorFrameMut,
 };
+pub use logging::{QUIET_ZENOH, default_log_filter};
 pub use rounded::Rounded;
 pub use shm::{ShmBudgetError, check_shm_budget};
 pub use signal::SignalHandling;

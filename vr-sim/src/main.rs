@@ -53,8 +53,8 @@ fn main() -> ExitCode {
         use tracing_subscriber::layer::SubscriberExt;
         use tracing_subscriber::util::SubscriberInitExt;
         use tracing_subscriber::{EnvFilter, Layer};
-        let filter =
-            EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(default_filter));
+        let filter = EnvFilter::try_from_default_env()
+            .unwrap_or_else(|_| EnvFilter::new(vrsync_bridge::default_log_filter(default_filter)));
         tracing_subscriber::registry()
             .with(
                 tracing_subscriber::fmt::layer()

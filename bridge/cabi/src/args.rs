@@ -90,7 +90,8 @@ pub unsafe fn str_arg<'a>(s: *const c_char, what: &'static str) -> Result<&'a st
 /// `filter` is null or a valid NUL-terminated string.
 pub unsafe fn log_filter(filter: *const c_char) -> Result<EnvFilter, ArgError> {
     if filter.is_null() {
-        return Ok(EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("warn")));
+        return Ok(EnvFilter::try_from_default_env()
+            .unwrap_or_else(|_| EnvFilter::new(vrsync_bridge::default_log_filter("warn"))));
     }
     // SAFETY: a C string by the caller's contract.
     let text = unsafe { str_arg(filter, "filter") }?;

@@ -85,8 +85,9 @@ struct Args {
 fn main() -> ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
+                tracing_subscriber::EnvFilter::new(vrsync_agent::log::default_log_filter("info"))
+            }),
         )
         .with_writer(std::io::stderr)
         .with_ansi(vrsync_agent::log::ansi_on_stderr())
