@@ -1,0 +1,283 @@
+//! A crowded scene: 64 agents on their rings in a 10 × 10 room with objects, some of them
+//! overlapping (coplanar faces: hits at equal depth), rendered from every agent's four
+//! cameras (rgb8, depth32f, gray8, rgba8; several sizes and fields of view). The frames'
+//! hash is pinned: any change of the renderer that changes a single byte of a single
+//! image fails [`crowd_frames_hash_is_unchanged`].
+
+use std::path::Path;
+
+use glam::Vec3;
+use vrsync_bridge::{CAMERA_NAME_LEN, Command, Config, ImageDesc, ImageMut, PixelFormat};
+
+use super::Renderer;
+use crate::world::World;
+
+/// A camera: name, format, width, height, fov h × v.
+type Cam = (&'static str, PixelFormat, u32, u32, f32, f32);
+
+/// Agent 0's cameras (every agent copies them).
+const CAMERAS: [Cam; 4] = [
+    ("left", PixelFormat::Rgb8, 32, 24, 120.0, 90.0),
+    ("right", PixelFormat::Depth32f, 40, 30, 120.0, 90.0),
+    ("main", PixelFormat::Gray8, 64, 48, 90.0, 60.0),
+    ("wide", PixelFormat::Rgba8, 96, 72, 150.0, 100.0),
+];
+
+fn format_name(f: PixelFormat) -> &'static str {
+    match f {
+        PixelFormat::Rgb8 => "rgb8",
+        PixelFormat::Rgba8 => "rgba8",
+        PixelFormat::Gray8 => "gray8",
+        PixelFormat::Depth32f => "depth32f",
+    }
+}
+
+/// `agents` agents with [`CAMERAS`] in the default-sized room with seven objects: the
+/// default world's five, a box exactly on top of the blue box (same faces: every hit on
+/// them is a tie) and a box whose faces partly coincide with the brown one's.
+pub(super) fn crowd_world(agents: u32) -> World {
+    crowd_world_with(agents, &CAMERAS)
+}
+
+/// [`crowd_world`] with other cameras.
+fn crowd_world_with(agents: u32, cameras: &[Cam]) -> World {
+    let mut text = String::from("[[agent]]\nid = 0\n");
+    for &(name, format, w, h, fh, fv) in cameras {
+        text += &format!(
+            "[[agent.camera]]\nname = \"{name}\"\nwidth = {w}\nheight = {h}\nformat = \"{}\"\n\
+             fov_horizontal_deg = {fh:.1}\nfov_vertical_deg = {fv:.1}\n",
+            format_name(format)
+        );
+    }
+    text += "[world]\nroom_width = 10.0\nroom_depth = 10.0\n";
+    for (id, shape, position, extent, color) in [
+        (1, "sphere", [2.5, 0.4, 3.0], "radius = 0.4", [220, 30, 30]),
+        (
+            2,
+            "box",
+            [-2.5, 0.5, 2.5],
+            "size = [1.0, 1.0, 1.0]",
+            [40, 90, 220],
+        ),
+        (
+            3,
+            "box",
+            [3.0, 0.75, -2.0],
+            "size = [0.8, 1.5, 0.8]",
+            [40, 170, 70],
+        ),
+        (
+            4,
+            "sphere",
+            [-3.0, 0.3, -2.5],
+            "radius = 0.3",
+            [245, 245, 245],
+        ),
+        (
+            5,
+            "box",
+            [0.0, 0.4, -4.0],
+            "size = [2.0, 0.8, 0.8]",
+            [140, 95, 55],
+        ),
+        (
+            6,
+            "box",
+            [-2.5, 0.5, 2.5],
+            "size = [1.0, 1.0, 1.0]",
+            [250, 120, 0],
+        ),
+        (
+            7,
+            "box",
+            [1.0, 0.6, -4.0],
+            "size = [1.0, 1.2, 0.8]",
+            [90, 90, 90],
+        ),
+    ] {
+        text += &format!(
+            "[[world.object]]\nid = {id}\nshape = \"{shape}\"\nposition = [{:.2}, {:.2}, {:.2}]\n\
+             {extent}\ncolor = [{}, {}, {}]\n",
+            position[0], position[1], position[2], color[0], color[1], color[2]
+        );
+    }
+    let config = Config::from_toml_str(&text, Path::new("crowd.toml"))
+        .unwrap()
+        .with_agent_count(agents)
+        .unwrap();
+    World::from_config(&config).unwrap()
+}
+
+/// [`crowd_world`] after a few cycles in which some agents turned, tilted their eyes or
+/// walked towards the centre (bodies close to other cameras, partly behind their near
+/// planes).
+pub(super) fn crowd_world_moved(agents: u32) -> World {
+    let mut w = crowd_world(agents);
+    for id in 0..agents {
+        let command = match id % 4 {
+            0 => Command::Turn {
+                angle_deg: 17.0 * id as f32,
+            },
+            1 => Command::EyeMovement {
+                pan_left_deg: -25.0,
+                pan_right_deg: 10.0,
+                tilt_deg: if id % 8 == 1 { -35.0 } else { 20.0 },
+            },
+            2 => Command::MoveTo {
+                target: Vec3::new(0.2, 0.0, 0.1),
+            },
+            _ => continue,
+        };
+        w.apply(id, 1, command).unwrap();
+    }
+    for _ in 0..12 {
+        w.step();
+    }
+    w
+}
+
+pub(super) fn desc(
+    camera: u32,
+    name: &str,
+    format: PixelFormat,
+    width: u32,
+    height: u32,
+) -> ImageDesc {
+    let mut n = [0u8; CAMERA_NAME_LEN];
+    n[..name.len()].copy_from_slice(name.as_bytes());
+    let stride = width * format.bytes_per_pixel() as u32;
+    ImageDesc {
+        name: n,
+        camera,
+        format: format as u32,
+        width_px: width,
+        height_px: height,
+        stride_bytes: stride,
+        reserved: 0,
+        offset: 0,
+        len: u64::from(stride * height),
+    }
+}
+
+/// Every agent's images, agent by agent, camera by camera, rendered by `render`.
+pub(super) fn crowd_frames(
+    w: &World,
+    mut render: impl FnMut(&World, u32, ImageMut<'_>),
+) -> Vec<Vec<u8>> {
+    let mut frames = Vec::new();
+    for body in w.bodies() {
+        for (camera, (name, format, width, height, _, _)) in CAMERAS.into_iter().enumerate() {
+            let d = desc(camera as u32, name, format, width, height);
+            let mut buf = vec![0xAB; d.len as usize];
+            render(
+                w,
+                body.id,
+                ImageMut {
+                    desc: d,
+                    data: &mut buf,
+                },
+            );
+            frames.push(buf);
+        }
+    }
+    frames
+}
+
+fn hash(frames: &[Vec<u8>]) -> String {
+    let mut h = blake3::Hasher::new();
+    for f in frames {
+        h.update(f);
+    }
+    h.finalize().to_hex().to_string()
+}
+
+/// The hash of every image of [`crowd_world`] (64 agents) and [`crowd_world_moved`] (64
+/// and 5 agents), rendered by the renderer of commit "render: a pinned hash of a crowded
+/// scene" (before the per-tile lists), on 1 and on 2 threads.
+///
+/// A bit-exact check: it assumes IEEE f32 arithmetic without fused multiply-adds and the
+/// platform's `sin`/`cos`/`tan` of x86_64 Linux (glibc), as CI has. If it fails elsewhere
+/// and only there, [`super::reference_tests`] (the brute-force renderer against the
+/// fast one on the same machine) is the check that counts.
+#[test]
+fn crowd_frames_hash_is_unchanged() {
+    let worlds = [crowd_world(64), crowd_world_moved(64), crowd_world_moved(5)];
+    for threads in [1, 2] {
+        let mut r = Renderer::new(threads).unwrap();
+        let mut all = Vec::new();
+        for w in &worlds {
+            all.extend(crowd_frames(w, |w, id, image| {
+                let body = w.bodies().iter().find(|b| b.id == id).unwrap();
+                r.render_image(w, body, image);
+            }));
+        }
+        assert_eq!(all.len(), (64 + 64 + 5) * CAMERAS.len());
+        assert_eq!(
+            hash(&all),
+            "35e8de9aabc1e72acc5a6e362cf7022d6f6d72f5f69f63b0443ef75c7c9aac23",
+            "{threads} thread(s): the crowd's frames changed"
+        );
+    }
+}
+
+/// Where the time goes, for the numbers in the report (not an assertion): per image, the
+/// primitives kept after culling; per ray, the primitives whose row range covers the ray
+/// (the ones the ray's column is compared with) and those whose rectangle covers it (the
+/// intersection tests); and the render time per ray, at 1 to 64 agents with two 32×24
+/// cameras each. `cargo test --release -p vrsync-sim crowd_render_speed -- --ignored
+/// --nocapture`.
+#[test]
+#[ignore = "measurement, run by hand in release mode"]
+fn crowd_render_speed() {
+    let cams: [Cam; 2] = [
+        ("left", PixelFormat::Rgb8, 32, 24, 120.0, 90.0),
+        ("right", PixelFormat::Rgb8, 32, 24, 120.0, 90.0),
+    ];
+    for agents in [1, 4, 8, 16, 32, 64] {
+        let w = crowd_world_with(agents, &cams);
+        let mut r = Renderer::new(1).unwrap();
+        let (mut prims, mut in_row, mut in_rect, mut rays) = (0usize, 0usize, 0usize, 0usize);
+        for body in w.bodies() {
+            for spec in body.cameras() {
+                let cam = w.camera(body, spec);
+                r.collect_prims(&w, body, &cam);
+                prims += r.prims.len();
+                for y in 0..cam.height_px {
+                    for x in 0..cam.width_px {
+                        rays += 1;
+                        let row = r.prims.iter().filter(|p| (p.y0..=p.y1).contains(&y));
+                        in_row += row.clone().count();
+                        in_rect += row.filter(|p| (p.x0..=p.x1).contains(&x)).count();
+                    }
+                }
+            }
+        }
+        let images = w.bodies().len() * cams.len();
+        for threads in [1, 2] {
+            let mut r = Renderer::new(threads).unwrap();
+            let mut best = f64::MAX;
+            let cycles = (2000 / agents).max(20);
+            let mut bufs: Vec<Vec<u8>> = (0..images).map(|_| vec![0u8; 32 * 24 * 3]).collect();
+            for _ in 0..3 {
+                let t = std::time::Instant::now();
+                for _ in 0..cycles {
+                    for (i, buf) in bufs.iter_mut().enumerate() {
+                        let (body, camera) = (&w.bodies()[i / 2], i % 2);
+                        let d = desc(camera as u32, cams[camera].0, PixelFormat::Rgb8, 32, 24);
+                        r.render_image(&w, body, ImageMut { desc: d, data: buf });
+                    }
+                }
+                best = best.min(t.elapsed().as_secs_f64() / f64::from(cycles));
+            }
+            println!(
+                "{agents:>2} agents, {threads} thread(s): {:.1} prims/image, {:.2} in row/ray, \
+                 {:.2} in rect/ray; {:.0} µs/cycle, {:.1} ns/ray",
+                prims as f64 / images as f64,
+                in_row as f64 / rays as f64,
+                in_rect as f64 / rays as f64,
+                best * 1e6,
+                best * 1e9 / rays as f64
+            );
+        }
+    }
+}
