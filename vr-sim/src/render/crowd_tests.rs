@@ -159,14 +159,24 @@ pub(super) fn desc(
     }
 }
 
-/// Every agent's images, agent by agent, camera by camera, rendered by `render`.
+/// Every agent's images of [`CAMERAS`], agent by agent, camera by camera, rendered by
+/// `render`.
 pub(super) fn crowd_frames(
     w: &World,
+    render: impl FnMut(&World, u32, ImageMut<'_>),
+) -> Vec<Vec<u8>> {
+    frames_of(w, &CAMERAS, render)
+}
+
+/// Every agent's images of `cameras` (the world's), rendered by `render`.
+fn frames_of(
+    w: &World,
+    cameras: &[Cam],
     mut render: impl FnMut(&World, u32, ImageMut<'_>),
 ) -> Vec<Vec<u8>> {
     let mut frames = Vec::new();
     for body in w.bodies() {
-        for (camera, (name, format, width, height, _, _)) in CAMERAS.into_iter().enumerate() {
+        for (camera, &(name, format, width, height, _, _)) in cameras.iter().enumerate() {
             let d = desc(camera as u32, name, format, width, height);
             let mut buf = vec![0xAB; d.len as usize];
             render(
@@ -193,12 +203,12 @@ fn hash(frames: &[Vec<u8>]) -> String {
 
 /// The hash of every image of [`crowd_world`] (64 agents) and [`crowd_world_moved`] (64
 /// and 5 agents), rendered by the renderer of commit "render: a pinned hash of a crowded
-/// scene" (before the per-tile lists), on 1 and on 2 threads.
+/// scene" (the brute-force loop of [`super::reference`]), on 1 and on 2 threads.
 ///
 /// A bit-exact check: it assumes IEEE f32 arithmetic without fused multiply-adds and the
 /// platform's `sin`/`cos`/`tan` of x86_64 Linux (glibc), as CI has. If it fails elsewhere
-/// and only there, [`super::reference_tests`] (the brute-force renderer against the
-/// fast one on the same machine) is the check that counts.
+/// and only there, [`fast_renderer_equals_the_brute_force_loop`] (the same comparison on
+/// the machine itself) is the check that counts.
 #[test]
 fn crowd_frames_hash_is_unchanged() {
     let worlds = [crowd_world(64), crowd_world_moved(64), crowd_world_moved(5)];
@@ -218,6 +228,67 @@ fn crowd_frames_hash_is_unchanged() {
             "{threads} thread(s): the crowd's frames changed"
         );
     }
+}
+
+/// The fast renderer (per-tile lists, depth order, early exit) gives exactly the bytes of
+/// the brute-force loop it replaced ([`super::reference`]), for every image of the crowd
+/// as it starts and after moving, with 64 and 5 agents, on 1 and 2 threads; and with
+/// larger images (larger tiles) from 8 agents of which some walked close to others.
+#[test]
+fn fast_renderer_equals_the_brute_force_loop() {
+    let large: [Cam; 3] = [
+        ("left", PixelFormat::Rgb8, 320, 240, 120.0, 90.0),
+        ("main", PixelFormat::Depth32f, 200, 150, 100.0, 80.0),
+        ("right", PixelFormat::Gray8, 275, 131, 170.0, 60.0),
+    ];
+    let mut moved_large = crowd_world_with(8, &large);
+    for id in 0..8 {
+        let target = Vec3::new(0.1 * id as f32, 0.0, -0.2);
+        w_apply(&mut moved_large, id, Command::MoveTo { target });
+    }
+    for _ in 0..40 {
+        moved_large.step();
+    }
+    let worlds = [
+        (crowd_world(64), &CAMERAS[..]),
+        (crowd_world_moved(64), &CAMERAS[..]),
+        (crowd_world_moved(5), &CAMERAS[..]),
+        (crowd_world_with(8, &large), &large[..]),
+        (moved_large, &large[..]),
+    ];
+    let want: Vec<Vec<Vec<u8>>> = worlds
+        .iter()
+        .map(|(w, cams)| {
+            frames_of(w, cams, |w, id, image| {
+                let body = w.bodies().iter().find(|b| b.id == id).unwrap();
+                super::reference::render_image(w, body, image);
+            })
+        })
+        .collect();
+    for threads in [1, 2] {
+        let mut r = Renderer::new(threads).unwrap();
+        for (k, ((w, cams), want)) in worlds.iter().zip(&want).enumerate() {
+            let got = frames_of(w, cams, |w, id, image| {
+                let body = w.bodies().iter().find(|b| b.id == id).unwrap();
+                r.render_image(w, body, image);
+            });
+            for (i, (g, e)) in got.iter().zip(want).enumerate() {
+                let differ = g.iter().zip(e).filter(|(a, b)| a != b).count();
+                assert!(
+                    differ == 0,
+                    "world {k}, agent {}, camera {}, {threads} thread(s): {differ} of {} \
+                     bytes differ from the brute-force render",
+                    i / cams.len(),
+                    i % cams.len(),
+                    e.len()
+                );
+            }
+        }
+    }
+}
+
+fn w_apply(w: &mut World, id: u32, command: Command) {
+    w.apply(id, 1, command).unwrap();
 }
 
 /// Where the time goes, for the numbers in the report (not an assertion): per image, the
