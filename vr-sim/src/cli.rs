@@ -25,7 +25,9 @@ pub enum Command {
     /// Run a world from a config file, with spawned or external agents.
     Run(RunArgs),
     /// Benchmark full sync cycles over shared memory, TCP and zenoh against the raw
-    /// transport floors (3 rgb8 images per agent; 1/2/4 agents; 320x240 up to 1920x1080),
+    /// transport floors (3 rgb8 images per agent; 1/2/4 agents; 320x240 up to 1920x1080;
+    /// over shared memory also 16 and 64 agents at 84x84 and 320x240, with the time to
+    /// render each cycle's images and the bridge's share of the cycle),
     /// plus the original protocol, the Python agent and the batched Python vector env
     /// (`python-vec`: one process for 4 and 16 agents of one 84x84 camera, against as many
     /// Rust agent processes and the raw floor). Build with --release: it spawns
@@ -97,7 +99,8 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 /// `vr-sim bench`.
 #[derive(Debug, Args)]
 pub struct BenchArgs {
-    /// Fewer cycles, 320x240 and 1920x1080 only, 1 and 4 agents (about a minute on 2 cores).
+    /// Fewer cycles, 320x240 and 1920x1080 only, 1 and 4 agents; 16 and 64 agents at
+    /// 84x84 only (about two minutes on 2 cores).
     #[arg(long)]
     pub quick: bool,
     /// Write the rows as a JSON array.

@@ -31,7 +31,8 @@ use vrsync::{bench_vrsync, make_certificates, python_agent};
 /// What to run and where to write.
 #[derive(Debug)]
 pub struct BenchOptions {
-    /// Fewer cycles, 320×240 and 1920×1080 only, agents 1 and 4.
+    /// Fewer cycles, 320×240 and 1920×1080 only, agents 1 and 4; 16 and 64 agents at
+    /// 84×84 only.
     pub quick: bool,
     /// JSON output.
     pub json: Option<PathBuf>,
@@ -76,8 +77,10 @@ pub struct Row {
     pub allocs_per_cycle: f64,
     /// Agent allocations per cycle in steady state (mean over agents).
     pub agent_allocs_per_cycle: f64,
-    /// Time vr-sim's renderer needs for one agent's 3 images at this size, µs (measured
-    /// separately, not part of the cycle; `null` on floor rows).
+    /// Time vr-sim's renderer (one thread per core) needs for the images of one cycle,
+    /// every agent's, µs: what a simulator adds to each cycle (measured separately, before
+    /// the agents start, not part of the cycle; `null` on floor rows and where not
+    /// measured).
     pub render_us: f64,
     /// `legacy` rows: time to PNG-encode one of these images at the fastest level, µs
     /// (measured separately; `null` elsewhere).
@@ -93,6 +96,10 @@ const CAMERAS: u32 = 3;
 /// The vector-env rows: one camera of this size (rgb8) per agent, at these agent counts.
 const VEC_SIZE: u32 = 84;
 const VEC_AGENTS: [u32; 2] = [4, 16];
+/// The many-agent rows (3 rgb8 images per agent, against the raw floor at the same
+/// fan-out): these agent counts at these image sizes.
+const MANY_AGENTS: [u32; 2] = [16, 64];
+const MANY_SIZES: [(u32, u32); 2] = [(84, 84), (320, 240)];
 /// Interleaved rounds per case (the row's p50 is the median of the rounds' p50s).
 const ROUNDS: u64 = 5;
 const BPP: usize = 3;
@@ -342,6 +349,7 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
     };
     let mut rows = Vec::new();
     bench.image_sets(&mut rows)?;
+    bench.many_agents(&mut rows)?;
     bench.vector_env(&mut rows)?;
     bench.original_protocol(&mut rows)?;
     print_ratios(&rows);
@@ -436,6 +444,41 @@ impl Bench<'_> {
                     _ => {
                         let session = self.session();
                         bench_vrsync(case, &session, self.dir, round == 0, self.python)
+                    }
+                })?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Many agents on one host: 16 and 64 Rust bench agents of 3 images each (84x84, and
+    /// 320x240 unless quick) over shm against the raw iceoryx2 floor at the same fan-out;
+    /// the shm row also carries the time vr-sim needs to render that cycle's images, so
+    /// the table shows the bridge's share of a simulated cycle.
+    fn many_agents(&mut self, rows: &mut Vec<Row>) -> anyhow::Result<()> {
+        let sizes = if self.quick {
+            &MANY_SIZES[..1]
+        } else {
+            &MANY_SIZES[..]
+        };
+        let cycles = if self.quick { 250 } else { 1500 };
+        for &(w, h) in sizes {
+            for agents in MANY_AGENTS {
+                let mk = |transport: &'static str| Case {
+                    transport,
+                    agents,
+                    cameras: CAMERAS,
+                    width: w,
+                    height: h,
+                    warmup: (cycles / ROUNDS / 10).max(10),
+                    cycles: (cycles / ROUNDS).max(10),
+                };
+                let cases = [mk("shm"), mk("floor-shm")];
+                measure_interleaved(&cases, rows, |case, round| match case.transport {
+                    "floor-shm" => bench_floor_shm(case, &self.session(), false),
+                    _ => {
+                        let session = self.session();
+                        bench_vrsync(case, &session, self.dir, round == 0, None)
                     }
                 })?;
             }

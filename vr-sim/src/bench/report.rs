@@ -4,7 +4,7 @@ use super::*;
 
 pub(super) fn print_header() {
     println!(
-        "{:<15} {:>6} {:>12} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}",
+        "{:<15} {:>6} {:>12} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>8} {:>10}",
         "transport",
         "agents",
         "image",
@@ -15,14 +15,21 @@ pub(super) fn print_header() {
         "allocs/c",
         "agent a/c",
         "render µs",
+        "bridge %",
         "sdk µs/step"
     );
+}
+
+/// The bridge's share of a simulated cycle: its cycle time (p50) against that plus the
+/// time to render the cycle's images, %; NaN without a render time.
+pub(super) fn bridge_share(r: &Row) -> f64 {
+    100.0 * r.p50_us / (r.p50_us + r.render_us)
 }
 
 pub(super) fn print_row(r: &Row) {
     let mb = f64::from(r.cameras) * f64::from(r.width) * f64::from(r.height) * BPP as f64 / 1e6;
     println!(
-        "{:<15} {:>6} {:>12} {:>10.3} {:>10.1} {:>10.1} {:>10.1} {:>10.2} {:>10.2} {:>10} {:>10}",
+        "{:<15} {:>6} {:>12} {:>10.3} {:>10.1} {:>10.1} {:>10.1} {:>10.2} {:>10.2} {:>10} {:>8} {:>10}",
         r.transport,
         r.agents,
         format!("{}x{}x{}", r.cameras, r.width, r.height),
@@ -36,6 +43,11 @@ pub(super) fn print_row(r: &Row) {
             "-".to_string()
         } else {
             format!("{:.0}", r.render_us)
+        },
+        if r.render_us.is_nan() {
+            "-".to_string()
+        } else {
+            format!("{:.1}", bridge_share(r))
         },
         if r.sdk_us_per_agent_step.is_nan() {
             "-".to_string()
@@ -57,20 +69,39 @@ pub(super) fn size_name(w: u32) -> &'static str {
     }
 }
 
+/// `3x84x84`, `3x320x240`: a many-agent row's images.
+fn many_name(w: u32) -> String {
+    let h = MANY_SIZES.iter().find(|s| s.0 == w).map_or(w, |s| s.1);
+    format!("{CAMERAS}x{w}x{h}")
+}
+
+/// A row of 2 or 3 images per agent by transport, agents and image width (the
+/// vector-env section's rows, one image per agent, are found by [`find_vec`]).
 pub(super) fn find<'a>(rows: &'a [Row], t: &str, agents: u32, w: u32) -> Option<&'a Row> {
     rows.iter()
-        .find(|r| r.transport == t && r.agents == agents && r.width == w)
+        .find(|r| r.transport == t && r.agents == agents && r.width == w && r.cameras > 1)
+}
+
+/// A row of the vector-env section (one 84x84 image per agent) by transport and agents.
+fn find_vec<'a>(rows: &'a [Row], t: &str, agents: u32) -> Option<&'a Row> {
+    rows.iter()
+        .find(|r| r.transport == t && r.agents == agents && r.width == VEC_SIZE && r.cameras == 1)
 }
 
 /// A row by transport, agents and image width.
 type Key = (&'static str, u32, u32);
 
 /// The ratio of two rows' p50s, if both were measured.
-fn p50_ratio(rows: &[Row], (t, a, w): Key, (u, b, x): Key) -> Option<f64> {
-    match (find(rows, t, a, w), find(rows, u, b, x)) {
+fn ratio(num: Option<&Row>, den: Option<&Row>) -> Option<f64> {
+    match (num, den) {
         (Some(n), Some(d)) if d.p50_us > 0.0 => Some(n.p50_us / d.p50_us),
         _ => None,
     }
+}
+
+/// The ratio of two rows' p50s (see [`find`]), if both were measured.
+fn p50_ratio(rows: &[Row], (t, a, w): Key, (u, b, x): Key) -> Option<f64> {
+    ratio(find(rows, t, a, w), find(rows, u, b, x))
 }
 
 /// Prints the ratio table: each line's figure, and its target or "report".
@@ -167,17 +198,28 @@ pub(super) fn ratio_lines(rows: &[Row]) -> Vec<(String, Option<f64>, &'static st
     for a in VEC_AGENTS {
         let target = |at16: &'static str| if a == 16 { at16 } else { "report" };
         let what = format!("python-vec / shm (Rust agents), {a} agents, 1x84x84");
-        let vec_ratio = p(("python-vec", a, VEC_SIZE), ("shm", a, VEC_SIZE));
+        let vec_ratio = ratio(find_vec(rows, "python-vec", a), find_vec(rows, "shm", a));
         v.push((what, vec_ratio, target("<= 1.0")));
         let what = format!("python-vec SDK µs per agent-step, {a} agents");
-        let sdk = find(rows, "python-vec", a, VEC_SIZE).map(|r| r.sdk_us_per_agent_step);
+        let sdk = find_vec(rows, "python-vec", a).map(|r| r.sdk_us_per_agent_step);
         v.push((what, sdk, target("<= 5")));
         let what = format!("shm / floor-shm, {a} agents, 1x84x84");
-        v.push((
-            what,
-            p(("shm", a, VEC_SIZE), ("floor-shm", a, VEC_SIZE)),
-            "report",
-        ));
+        let floor_ratio = ratio(find_vec(rows, "shm", a), find_vec(rows, "floor-shm", a));
+        v.push((what, floor_ratio, "report"));
+    }
+    // Many agents on one host: the bridge against its floor, and its share of a simulated
+    // cycle (the rest is rendering).
+    for (w, _) in MANY_SIZES {
+        for a in MANY_AGENTS {
+            let size = many_name(w);
+            let what = format!("shm / floor-shm, {a} agents, {size}");
+            v.push((what, p(("shm", a, w), ("floor-shm", a, w)), "report"));
+            let what = format!("bridge % of bridge + render, {a} agents, {size}");
+            let share = find(rows, "shm", a, w)
+                .map(bridge_share)
+                .filter(|s| !s.is_nan());
+            v.push((what, share, "report"));
+        }
     }
     let max_allocs = rows
         .iter()

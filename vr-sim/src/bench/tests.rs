@@ -183,3 +183,76 @@ fn the_ratio_table_divides_the_named_rows_p50s_and_skips_missing_rows() {
     assert_eq!(value("shm / floor-shm, 4 agent(s), 3x1920x1080"), None);
     assert_eq!(value("tcp / shm, 1 agent(s), 3x1920x1080"), None);
 }
+
+#[test]
+fn many_agent_rows_are_told_apart_from_the_vector_env_rows_and_show_the_bridge_share() {
+    let mut h = histogram().unwrap();
+    h.record(1000).unwrap();
+    let row_of = |transport: &'static str, agents: u32, cameras: u32, p50_us: f64, render_us| {
+        let case = Case {
+            transport,
+            agents,
+            cameras,
+            width: VEC_SIZE,
+            height: VEC_SIZE,
+            warmup: 1,
+            cycles: 1,
+        };
+        let mut r = row(&case, &Measured::new(h.clone(), 0.0, 0.0));
+        r.p50_us = p50_us;
+        r.render_us = render_us;
+        r
+    };
+    // The many-agent rows (3 images) come first in a run, then the vector env's (1 image)
+    // at the same agent count and width.
+    let rows = [
+        row_of("shm", 16, CAMERAS, 400.0, 1600.0),
+        row_of("floor-shm", 16, CAMERAS, 200.0, f64::NAN),
+        row_of("python-vec", 16, 1, 50.0, f64::NAN),
+        row_of("shm", 16, 1, 100.0, f64::NAN),
+        row_of("floor-shm", 16, 1, 80.0, f64::NAN),
+    ];
+    let lines = report::ratio_lines(&rows);
+    let value = |what: &str| {
+        lines
+            .iter()
+            .find(|(w, _, _)| w == what)
+            .unwrap_or_else(|| panic!("no line {what:?}"))
+            .1
+    };
+    assert_eq!(
+        value("python-vec / shm (Rust agents), 16 agents, 1x84x84"),
+        Some(0.5)
+    );
+    assert_eq!(value("shm / floor-shm, 16 agents, 1x84x84"), Some(1.25));
+    assert_eq!(value("shm / floor-shm, 16 agents, 3x84x84"), Some(2.0));
+    // 400 µs of bridge cycle next to 1600 µs of rendering: 20 %.
+    assert_eq!(
+        value("bridge % of bridge + render, 16 agents, 3x84x84"),
+        Some(20.0)
+    );
+    assert_eq!(value("shm / floor-shm, 64 agents, 3x84x84"), None);
+    assert_eq!(
+        value("bridge % of bridge + render, 16 agents, 3x320x240"),
+        None
+    );
+    assert!(report::bridge_share(&rows[1]).is_nan());
+}
+
+#[test]
+fn a_64_agent_case_has_a_world_to_render() {
+    let case = Case {
+        transport: "shm",
+        agents: 64,
+        cameras: CAMERAS,
+        width: 320,
+        height: 240,
+        warmup: 1,
+        cycles: 1,
+    };
+    let text = config_text(&case, "bench-test-many", Path::new("/nonexistent"));
+    let config = Config::from_toml_str(&text, Path::new("<test>")).unwrap();
+    let world = crate::world::World::from_config(&config).unwrap();
+    assert_eq!(world.bodies().len(), 64);
+    assert!(world.bodies().iter().all(|b| b.cameras().len() == 3));
+}

@@ -4,19 +4,33 @@
 use super::floor::loopback_endpoint;
 use super::*;
 
-/// Renders agent 0's frame `n` times into a loaned (never published) sample: what the
-/// simulator would add to each cycle per agent.
-pub(super) fn measure_render(config: &Config, host: &mut Host, n: u32) -> anyhow::Result<f64> {
+/// Render work per measurement of [`measure_render`]: about this many rays (at least one
+/// cycle, at most five).
+const RENDER_RAYS: u64 = 40_000_000;
+
+/// Renders every agent's frame into loaned (never published) samples, a few times: what
+/// the simulator would add to each cycle, µs per cycle.
+pub(super) fn measure_render(config: &Config, host: &mut Host) -> anyhow::Result<f64> {
     let world = crate::world::World::from_config(config)?;
     let mut renderer = crate::render::Renderer::new(0)?;
+    let rays: u64 = world
+        .bodies()
+        .iter()
+        .flat_map(|b| b.cameras())
+        .map(|c| u64::from(c.width_px) * u64::from(c.height_px))
+        .sum();
+    let n = (RENDER_RAYS / rays.max(1)).clamp(1, 5) as u32;
+    let ids: Vec<u32> = host.agent_ids().collect();
     let mut total = Duration::ZERO;
     for _ in 0..n {
-        let mut frame = host.loan_frame(0)?;
-        let t0 = Instant::now();
-        renderer.render_agent(&world, 0, frame.images_mut());
-        total += t0.elapsed();
+        for &id in &ids {
+            let mut frame = host.loan_frame(id)?;
+            let t0 = Instant::now();
+            renderer.render_agent(&world, id, frame.images_mut());
+            total += t0.elapsed();
+        }
     }
-    Ok(total.as_secs_f64() * 1e6 / f64::from(n.max(1)))
+    Ok(total.as_secs_f64() * 1e6 / f64::from(n))
 }
 
 /// A CA and one certificate (naming 127.0.0.1, for server and client use) for the
@@ -145,8 +159,8 @@ pub(super) fn bench_vrsync(
     let path = dir.join(format!("{session}.toml"));
     std::fs::write(&path, config.to_toml_string()).context("write the bench config")?;
     // Before the agents exist: nothing else competes for the cores (spinning agents would).
-    let render_us = if render && case.agents == 1 {
-        measure_render(&config, &mut host, 5)?
+    let render_us = if render {
+        measure_render(&config, &mut host)?
     } else {
         f64::NAN
     };
