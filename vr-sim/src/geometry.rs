@@ -106,7 +106,9 @@ impl Camera {
     /// axis-aligned box: `None` when it is wholly behind the near plane or off screen, the
     /// whole image when only some corners are behind.
     /// Conservative: the projection of a convex body lies inside the hull of its corners'
-    /// projections when all of them are in front of the camera.
+    /// projections when all of them are in front of the camera. (The renderer's brute-force
+    /// reference uses it; the renderer clips boxes that reach behind the camera instead.)
+    #[cfg(test)]
     pub fn screen_rect(&self, min: Vec3, max: Vec3) -> Option<(u32, u32, u32, u32)> {
         let (w, h) = (self.width_px as f32, self.height_px as f32);
         let full = Some((0, self.width_px - 1, 0, self.height_px - 1));

@@ -83,20 +83,35 @@ struct Prim {
     y1: u32,
     /// No hit on it is nearer than this (ray parameter = depth along the optical axis).
     near: f32,
-    /// Its place in collection order (objects, then bodies, in the world's order): on
-    /// equal depth the lower one is seen.
+    /// Its place in collection order (objects, then bodies, in the world's order; its
+    /// index in the image's list): on equal depth the lower one is seen.
     index: u32,
 }
 
 /// Per-tile lists of primitives: tile `i` (row-major, [`Tiles::size`] pixels square)
-/// holds `items[start[i]..start[i + 1]]`, indices into the image's primitives, which are
-/// sorted by nearest depth.
+/// holds `items[start[i]..start[i + 1]]`, sorted by nearest depth (then collection
+/// order).
 #[derive(Debug, Default)]
 struct Tiles {
     size: u32,
     cols: u32,
     start: Vec<u32>,
-    items: Vec<u32>,
+    items: Vec<Entry>,
+    /// Scratch: the primitives' indices by nearest depth.
+    order: Vec<u32>,
+}
+
+/// A primitive in a tile's list: what a pixel checks before it loads the primitive.
+#[derive(Debug, Clone, Copy, Default)]
+struct Entry {
+    /// [`Prim::near`].
+    near: f32,
+    /// The primitive's index in the image's list (collection order).
+    index: u32,
+    x0: u16,
+    x1: u16,
+    y0: u16,
+    y1: u16,
 }
 
 /// Tiles are 8 pixels square, or larger so that an image has at most this many.
@@ -188,13 +203,28 @@ impl Renderer {
         draw(&view, &desc, format, image.data, self.pool.as_ref());
     }
 
+    /// The objects and bodies (not `me`'s) whose [`clipped_rect`] overlaps the image, in
+    /// collection order.
     fn collect_prims(&mut self, world: &World, me: &Body, cam: &Camera) {
         self.prims.clear();
+        let prims = &mut self.prims;
+        let mut push = |kind: PrimKind, color: [u8; 3], min: Vec3, max: Vec3| {
+            if let Some(((x0, x1, y0, y1), near)) = clipped_rect(cam, min, max) {
+                let index = prims.len() as u32;
+                prims.push(Prim {
+                    kind,
+                    color: rgb(color),
+                    x0,
+                    x1,
+                    y0,
+                    y1,
+                    near,
+                    index,
+                });
+            }
+        };
         for o in world.objects() {
             let (min, max) = o.bounds();
-            let Some((x0, x1, y0, y1)) = cam.screen_rect(min, max) else {
-                continue;
-            };
             let kind = match o.shape {
                 Shape::Sphere { radius } => PrimKind::Sphere {
                     center: o.position,
@@ -202,16 +232,7 @@ impl Renderer {
                 },
                 Shape::Box { .. } => PrimKind::Box { min, max },
             };
-            self.prims.push(Prim {
-                kind,
-                color: rgb(o.color),
-                x0,
-                x1,
-                y0,
-                y1,
-                near: near_depth(cam, min, max),
-                index: self.prims.len() as u32,
-            });
+            push(kind, o.color, min, max);
         }
         let cfg = world.config();
         let (r, h) = (cfg.agent_radius, cfg.body_height);
@@ -219,34 +240,30 @@ impl Renderer {
             if b.id == me.id {
                 continue;
             }
-            let min = b.position - Vec3::new(r, 0.0, r);
-            let max = b.position + Vec3::new(r, h, r);
-            let Some((x0, x1, y0, y1)) = cam.screen_rect(min, max) else {
-                continue;
+            let kind = PrimKind::Body {
+                base: b.position,
+                radius: r,
+                height: h,
             };
-            self.prims.push(Prim {
-                kind: PrimKind::Body {
-                    base: b.position,
-                    radius: r,
-                    height: h,
-                },
-                color: rgb(AGENT_COLORS[b.id as usize % AGENT_COLORS.len()]),
-                x0,
-                x1,
-                y0,
-                y1,
-                near: near_depth(cam, min, max),
-                index: self.prims.len() as u32,
-            });
+            let color = AGENT_COLORS[b.id as usize % AGENT_COLORS.len()];
+            let (min, max) = (
+                b.position - Vec3::new(r, 0.0, r),
+                b.position + Vec3::new(r, h, r),
+            );
+            push(kind, color, min, max);
         }
     }
 
-    /// Sorts the primitives by nearest depth (then collection order) and lists them per
-    /// tile, in that order.
+    /// Lists the primitives per tile, each list by nearest depth (then collection order).
     fn bin_prims(&mut self, cam: &Camera) {
-        self.prims
-            .sort_unstable_by(|a, b| a.near.total_cmp(&b.near).then(a.index.cmp(&b.index)));
+        let prims = &self.prims;
         let t = &mut self.tiles;
+        t.order.clear();
+        t.order.extend(0..prims.len() as u32);
+        t.order.sort_unstable_by(|&a, &b| {
+            let (a, b) = (&prims[a as usize], &prims[b as usize]);
+            a.near.total_cmp(&b.near).then(a.index.cmp(&b.index))
+        });
         t.size = 8;
         while cam.width_px.div_ceil(t.size) * cam.height_px.div_ceil(t.size) > MAX_TILES {
             t.size *= 2;
@@ -255,11 +272,11 @@ impl Renderer {
         let n = (t.cols * cam.height_px.div_ceil(t.size)) as usize;
         t.start.clear();
         t.start.resize(n + 1, 0);
-        let tile_range =
-            |p: &Prim, size: u32| (p.x0 / size..=p.x1 / size, p.y0 / size..=p.y1 / size);
+        let size = t.size;
+        let tile_range = |p: &Prim| (p.x0 / size..=p.x1 / size, p.y0 / size..=p.y1 / size);
         // Count per tile (shifted by one), prefix-sum into starts, then fill.
-        for p in &self.prims {
-            let (xs, ys) = tile_range(p, t.size);
+        for p in prims {
+            let (xs, ys) = tile_range(p);
             for ty in ys {
                 for tx in xs.clone() {
                     t.start[(ty * t.cols + tx) as usize + 1] += 1;
@@ -270,15 +287,25 @@ impl Renderer {
             t.start[i + 1] += t.start[i];
         }
         t.items.clear();
-        t.items.resize(t.start[n] as usize, 0);
+        t.items.resize(t.start[n] as usize, Entry::default());
         // `start[i]` is the fill cursor of tile i; afterwards it is tile i + 1's start,
         // so shift back.
-        for (k, p) in self.prims.iter().enumerate() {
-            let (xs, ys) = tile_range(p, t.size);
+        for &k in &t.order {
+            let p = &prims[k as usize];
+            // Rectangles are clamped to the image, whose sides are at most 8192 pixels.
+            let entry = Entry {
+                near: p.near,
+                index: p.index,
+                x0: p.x0 as u16,
+                x1: p.x1 as u16,
+                y0: p.y0 as u16,
+                y1: p.y1 as u16,
+            };
+            let (xs, ys) = tile_range(p);
             for ty in ys {
                 for tx in xs.clone() {
                     let i = (ty * t.cols + tx) as usize;
-                    t.items[t.start[i] as usize] = k as u32;
+                    t.items[t.start[i] as usize] = entry;
                     t.start[i] += 1;
                 }
             }
@@ -327,14 +354,79 @@ fn view_of<'a>(world: &World, cam: Camera, prims: &'a [Prim], tiles: &'a Tiles) 
     }
 }
 
-/// A lower bound of the depth (ray parameter) of any hit on what lies in the box
-/// `min..max`: the nearest corner's depth along the optical axis, less a margin far above
-/// the rounding error of the hit tests (about 1e-6 relative).
-fn near_depth(cam: &Camera, min: Vec3, max: Vec3) -> f32 {
-    let a = (min - cam.origin) * cam.forward;
-    let b = (max - cam.origin) * cam.forward;
-    let z = a.min(b).element_sum();
-    z - 1e-3 * (1.0 + z.abs())
+/// A pixel rectangle `(x0, x1, y0, y1)`, inclusive.
+type Rect = (u32, u32, u32, u32);
+
+/// The pixel rectangle (inclusive, clamped) that can show a hit on what lies in the
+/// axis-aligned box `min..max`, and a lower bound of such a hit's depth (ray parameter);
+/// `None` when no pixel can show one. The rectangle holds the projections of the box's
+/// corners, widened by a pixel on every side; when the box reaches behind the near plane,
+/// of the part of the box in front of half the near distance (the corners there and
+/// where the box's edges cross that plane), not the whole image: a hit is beyond the near
+/// plane, so in that part, whose projection lies in the hull of those points'. The depth
+/// bound is the nearest corner's depth less a margin far above the hit tests' rounding
+/// error (about 1e-6 relative).
+fn clipped_rect(cam: &Camera, min: Vec3, max: Vec3) -> Option<(Rect, f32)> {
+    // Each corner's coordinates along right, up and forward are sums of one term per
+    // axis, taken from the box's min or max.
+    let (a, b) = (min - cam.origin, max - cam.origin);
+    let terms = |v: Vec3| [a * v, b * v];
+    let (rx, uy, fz) = (terms(cam.right), terms(cam.up), terms(cam.forward));
+    let coord = |t: &[Vec3; 2], i: usize| t[i & 1].x + t[(i >> 1) & 1].y + t[(i >> 2) & 1].z;
+    let mut p = [Vec3::ZERO; 8];
+    let (mut near, mut far) = (f32::MAX, f32::MIN);
+    for (i, p) in p.iter_mut().enumerate() {
+        *p = Vec3::new(coord(&rx, i), coord(&uy, i), coord(&fz, i));
+        near = near.min(p.z);
+        far = far.max(p.z);
+    }
+    if far < NEAR_M || far.is_nan() {
+        return None;
+    }
+    let (mut u0, mut u1, mut v0, mut v1) = (f32::MAX, f32::MIN, f32::MAX, f32::MIN);
+    let mut add = |q: Vec3, depth: f32| {
+        let s = 1.0 / depth;
+        let (u, v) = (q.x * s, q.y * s);
+        u0 = u0.min(u);
+        u1 = u1.max(u);
+        v0 = v0.min(v);
+        v1 = v1.max(v);
+    };
+    let clip = 0.5 * NEAR_M;
+    if near >= clip {
+        for q in p {
+            add(q, q.z);
+        }
+    } else {
+        for i in 0..8 {
+            if p[i].z >= clip {
+                add(p[i], p[i].z);
+            }
+            // The edges to the corners that differ in one coordinate (each edge once).
+            for axis in 0..3 {
+                let j = i ^ (1 << axis);
+                if j > i && (p[i].z >= clip) != (p[j].z >= clip) {
+                    let s = (clip - p[i].z) / (p[j].z - p[i].z);
+                    add(p[i] + (p[j] - p[i]) * s, clip);
+                }
+            }
+        }
+    }
+    let (w, h) = (cam.width_px as f32, cam.height_px as f32);
+    let x0 = ((u0 / cam.tan_half_h + 1.0) * 0.5 * w).floor() - 1.0;
+    let x1 = ((u1 / cam.tan_half_h + 1.0) * 0.5 * w).ceil() + 1.0;
+    let y0 = ((1.0 - v1 / cam.tan_half_v) * 0.5 * h).floor() - 1.0;
+    let y1 = ((1.0 - v0 / cam.tan_half_v) * 0.5 * h).ceil() + 1.0;
+    if !(x1 >= 0.0 && y1 >= 0.0 && x0 < w && y0 < h) {
+        return None;
+    }
+    let rect = (
+        x0.max(0.0) as u32,
+        x1.min(w - 1.0) as u32,
+        y0.max(0.0) as u32,
+        y1.min(h - 1.0) as u32,
+    );
+    Some((rect, near - 1e-3 * (1.0 + near.abs())))
 }
 
 /// Shades every row of one image into `data`.
@@ -462,25 +554,24 @@ fn shade_row_as(
         // the room, so that no primitive at the room's depth replaces it).
         let mut nearest = usize::MAX;
         let mut nearest_index = 0;
-        let xs = x as u32;
         let tile = tile_row + x / tiles.size as usize;
         let list = &tiles.items[tiles.start[tile] as usize..tiles.start[tile + 1] as usize];
-        for &k in list {
-            let p = &view.prims[k as usize];
-            if p.near > t {
+        let (xe, ye) = (x as u16, y as u16);
+        for e in list {
+            if e.near > t {
                 // This one and all after it are farther than the hit.
                 break;
             }
-            if xs >= p.x0
-                && xs <= p.x1
-                && y >= p.y0
-                && y <= p.y1
-                && let Some(th) = hit_prim(p, o, d, inv)
-                && (th < t || (th == t && p.index < nearest_index))
+            if xe >= e.x0
+                && xe <= e.x1
+                && ye >= e.y0
+                && ye <= e.y1
+                && let Some(th) = hit_prim(&view.prims[e.index as usize], o, d, inv)
+                && (th < t || (th == t && e.index < nearest_index))
             {
                 t = th;
-                nearest = k as usize;
-                nearest_index = p.index;
+                nearest = e.index as usize;
+                nearest_index = e.index;
             }
         }
         let hit = (nearest != usize::MAX)

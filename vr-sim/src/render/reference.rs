@@ -6,9 +6,64 @@
 use glam::Vec3;
 use vrsync_bridge::{ImageMut, PixelFormat};
 
-use super::{Renderer, View, floor_i32, hit_prim, normal_at, shade};
-use crate::geometry::{exit_box, recip};
+#[cfg(doc)]
+use super::Renderer;
+use super::{AGENT_COLORS, Prim, PrimKind, View, floor_i32, hit_prim, normal_at, rgb, shade};
+use crate::geometry::{Camera, exit_box, recip};
 use crate::world::{Body, World};
+use crate::world_config::Shape;
+
+/// The objects and bodies whose screen rectangle ([`Camera::screen_rect`]: the whole image
+/// for a box reaching behind the near plane) overlaps the image, in collection order.
+fn collect_prims(world: &World, me: &Body, cam: &Camera) -> Vec<Prim> {
+    let mut prims = Vec::new();
+    let mut push = |kind: PrimKind, color: [u8; 3], min: Vec3, max: Vec3| {
+        if let Some((x0, x1, y0, y1)) = cam.screen_rect(min, max) {
+            let index = prims.len() as u32;
+            prims.push(Prim {
+                kind,
+                color: rgb(color),
+                x0,
+                x1,
+                y0,
+                y1,
+                near: f32::NEG_INFINITY,
+                index,
+            });
+        }
+    };
+    for o in world.objects() {
+        let (min, max) = o.bounds();
+        let kind = match o.shape {
+            Shape::Sphere { radius } => PrimKind::Sphere {
+                center: o.position,
+                radius,
+            },
+            Shape::Box { .. } => PrimKind::Box { min, max },
+        };
+        push(kind, o.color, min, max);
+    }
+    let cfg = world.config();
+    let (r, h) = (cfg.agent_radius, cfg.body_height);
+    for b in world.bodies() {
+        if b.id == me.id {
+            continue;
+        }
+        let kind = PrimKind::Body {
+            base: b.position,
+            radius: r,
+            height: h,
+        };
+        let color = AGENT_COLORS[b.id as usize % AGENT_COLORS.len()];
+        push(
+            kind,
+            color,
+            b.position - Vec3::new(r, 0.0, r),
+            b.position + Vec3::new(r, h, r),
+        );
+    }
+    prims
+}
 
 /// Renders one image like [`Renderer::render_image`], on the calling thread, the slow way.
 pub(super) fn render_image(world: &World, body: &Body, image: ImageMut<'_>) {
@@ -17,10 +72,9 @@ pub(super) fn render_image(world: &World, body: &Body, image: ImageMut<'_>) {
         return;
     }
     let cam = super::camera_of(world, body, &desc);
-    let mut r = Renderer::new(1).expect("a renderer without a pool");
-    r.collect_prims(world, body, &cam);
+    let prims = collect_prims(world, body, &cam);
     let tiles = super::Tiles::default();
-    let view = super::view_of(world, cam, &r.prims, &tiles);
+    let view = super::view_of(world, cam, &prims, &tiles);
     let stride = desc.stride_bytes as usize;
     let format = desc.pixel_format().unwrap_or_default();
     for (y, row) in image
