@@ -14,9 +14,10 @@
 //! every rectangle covering the pixel in collection order gives (the nearest hit; on equal
 //! depth, the first object in the world's order, objects before bodies).
 //!
-//! Rows are shaded in parallel on a rayon pool when it has more than one thread. Every
-//! pixel is a pure function of the world, so the images do not depend on the number of
-//! threads.
+//! Rows are shaded in parallel on a rayon pool when it has more than one thread and the
+//! image has at least [`MIN_POOL_PIXELS`] pixels (a smaller one costs less than waking the
+//! pool; with many agent processes on few cores, far less). Every pixel is a pure function
+//! of the world, so the images do not depend on the number of threads.
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -429,6 +430,9 @@ fn clipped_rect(cam: &Camera, min: Vec3, max: Vec3) -> Option<(Rect, f32)> {
     Some((rect, near - 1e-3 * (1.0 + near.abs())))
 }
 
+/// Images with fewer pixels are shaded on the calling thread.
+const MIN_POOL_PIXELS: u32 = 4096;
+
 /// Shades every row of one image into `data`.
 fn draw(
     view: &View<'_>,
@@ -440,12 +444,7 @@ fn draw(
     let stride = desc.stride_bytes as usize;
     let rows = data.chunks_exact_mut(stride).take(desc.height_px as usize);
     match pool {
-        None => {
-            for (y, row) in rows.enumerate() {
-                shade_row(view, y as u32, format, row);
-            }
-        }
-        Some(pool) => {
+        Some(pool) if desc.width_px * desc.height_px >= MIN_POOL_PIXELS => {
             let height = desc.height_px as usize;
             pool.install(|| {
                 data[..stride * height]
@@ -454,6 +453,11 @@ fn draw(
                     .enumerate()
                     .for_each(|(y, row)| shade_row(view, y as u32, format, row));
             });
+        }
+        _ => {
+            for (y, row) in rows.enumerate() {
+                shade_row(view, y as u32, format, row);
+            }
         }
     }
 }
