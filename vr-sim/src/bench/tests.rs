@@ -122,6 +122,30 @@ fn a_vector_env_case_configures_one_camera_per_agent() {
 }
 
 #[test]
+fn the_zenoh_tls_rows_use_mutual_tls_and_a_long_lease() {
+    let case = Case {
+        transport: "zenoh-tls",
+        agents: 4,
+        cameras: CAMERAS,
+        width: 1920,
+        height: 1080,
+        warmup: 1,
+        cycles: 1,
+    };
+    let dir = tempfile::tempdir().unwrap();
+    super::vrsync::make_certificates(dir.path()).unwrap();
+    let text = config_text(&case, "bench-test-tls", dir.path());
+    let config = Config::from_toml_str(&text, Path::new("<test>")).unwrap();
+    let z = &config.transport.zenoh;
+    assert!(z.tls.mtls, "{text}");
+    assert_eq!(z.lease, Duration::from_secs_f64(super::vrsync::TLS_LEASE_S));
+    assert!(
+        z.listen.iter().all(|e| e.starts_with("tls/127.0.0.1:")),
+        "{text}"
+    );
+}
+
+#[test]
 fn a_mixed_case_puts_its_agents_on_shm_tcp_and_zenoh_of_one_host() {
     let case = Case {
         transport: "mixed",

@@ -64,6 +64,9 @@ pub(super) fn make_certificates(dir: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `transport.zenoh.lease` of the `zenoh-tls` rows, s (the default is 2).
+pub(super) const TLS_LEASE_S: f64 = 10.0;
+
 /// The `mixed` rows' transports, agent by agent (cycling): one host serving agents over
 /// shared memory, TCP and zenoh at once.
 pub(super) const MIXED: [&str; 4] = ["shm", "shm", "tcp", "zenoh"];
@@ -87,11 +90,14 @@ pub(super) fn config_text(case: &Case, session: &str, certs: &Path) -> String {
         // of a port-0 listener), scouting off (the default).
         let endpoint = loopback_endpoint().unwrap_or_default();
         if case.transport == "zenoh-tls" {
-            // Mutual TLS: host and agents share the config, hence the certificate.
+            // Mutual TLS: host and agents share the config, hence the certificate. A 10 s
+            // lease: at 4 agents x 3x1920x1080 (56 MB per frame, every byte encrypted, 5
+            // processes on 2 cores) some cycles take over 2 s (p99 2.6 s measured), and with
+            // the default 2 s lease an agent's link was closed mid-run in 3 of 4 runs.
             let file = |name: &str| certs.join(name).display().to_string();
             s += &format!(
                 "[transport.zenoh]\nlisten = [{:?}]\ntls_ca = {:?}\ntls_cert = {:?}\n\
-                 tls_key = {:?}\nmtls = true\n",
+                 tls_key = {:?}\nmtls = true\nlease = {TLS_LEASE_S:.1}\n",
                 endpoint.replacen("tcp/", "tls/", 1),
                 file("ca.pem"),
                 file("bench.pem"),
