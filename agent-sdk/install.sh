@@ -34,7 +34,7 @@ done
 [[ -n "$prefix" ]] || usage
 
 if ((build)); then
-    args=(build -p vrsync-agent --lib)
+    args=(build -p vrsync-agent-ffi --lib)
     [[ "$profile" == release ]] && args+=(--release)
     (cd "$workspace" && cargo "${args[@]}")
 fi
@@ -43,7 +43,7 @@ if [[ -z "$lib_dir" ]]; then
 fi
 for f in libvrsync_agent.so libvrsync_agent.a; do
     if [[ ! -f "$lib_dir/$f" ]]; then
-        echo "install.sh: $lib_dir/$f not found (build with: cargo build --release -p vrsync-agent)" >&2
+        echo "install.sh: $lib_dir/$f not found (build with: cargo build --release -p vrsync-agent-ffi)" >&2
         exit 1
     fi
 done

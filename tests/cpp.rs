@@ -10,7 +10,7 @@
 //! `PREFIX/lib/libvrsync_agent.so` (found through their RUNPATH, as a user's program finds
 //! it), not the one of the folders `cargo test` puts first in `LD_LIBRARY_PATH`
 //! (`target/<profile>`): Cargo updates `target/<profile>/libvrsync_agent.so` only when it
-//! builds `vrsync-agent` itself (`cargo test --workspace`), not for a `cargo test -p
+//! builds `vrsync-agent-ffi` itself (`cargo test --workspace`), not for a `cargo test -p
 //! vrsync-tests`, so after a protocol change the examples would load an old library and
 //! their session would close right after connecting.
 

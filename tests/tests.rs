@@ -17,6 +17,7 @@ mod legacy;
 mod liveness;
 mod logs;
 mod netns;
+mod packages;
 mod replay;
 mod sync;
 mod world;

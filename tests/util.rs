@@ -39,7 +39,7 @@ pub fn bin_dir() -> PathBuf {
 }
 
 /// The folder holding `libvrsync_agent.so` and `libvrsync_agent.a` (the C ABI library the
-/// C/C++ tests install): `target/<profile>/deps`. `vrsync-agent` is a dev-dependency of
+/// C/C++ tests install): `target/<profile>/deps`. `vrsync-agent-ffi` is a dev-dependency of
 /// this package, so Cargo builds its library, with every crate type, for these tests.
 pub fn lib_dir() -> PathBuf {
     profile_dir().join("deps")

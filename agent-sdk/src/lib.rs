@@ -27,9 +27,17 @@
 //! # Ok(())
 //! # }
 //! ```
+//!
+//! # Transports and the `zenoh` feature
+//!
+//! The config file says which transport the agent uses (`[[agent]] transport`): shared
+//! memory and TCP are always built; the zenoh transport, for agents on other machines,
+//! comes with this crate's `zenoh` feature (off by default: zenoh and its async runtime are
+//! the largest part of a build). Without it, [`Agent::connect`] with a config that puts
+//! the agent on zenoh fails with an error naming the feature. The C ABI over this SDK, for
+//! C and C++ agents, is the `vrsync-agent-ffi` package (`libvrsync_agent`).
 
 mod agent;
-pub mod ffi;
 pub mod log;
 
 pub use agent::{

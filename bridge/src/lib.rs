@@ -113,11 +113,17 @@ pub mod tcp {
 
 /// The original system's protobuf/TCP protocol, served to agents written for it, with its
 /// codec (what the fuzz target and the legacy bench client use).
+///
+/// Only with the `legacy` cargo feature; without it, this module holds uninhabited
+/// stand-ins whose `LegacyHost::create` fails with an error naming the feature.
 pub mod legacy {
     pub use crate::transport::legacy::*;
 }
 
 /// The zenoh transport: agents on other machines (keys, hello, liveliness, validation).
+///
+/// Only with the `zenoh` cargo feature; without it, this module holds uninhabited stand-ins
+/// whose `ZenohHost::create` and agent `connect` fail with an error that names the feature.
 pub mod zenoh {
     pub use crate::transport::zenoh::*;
 }

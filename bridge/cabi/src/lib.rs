@@ -1,7 +1,7 @@
 //! # vrsync-cabi
 //!
 //! The plumbing that both vrsync C ABIs need, written once: the agent SDK's
-//! (`vrsync_agent::ffi`, header `agent-sdk/include/vrsync.h`) and the host's
+//! (`vrsync-agent-ffi`, header `agent-sdk/include/vrsync.h`) and the host's
 //! (`vrsync-host-ffi`, header `bridge/ffi/include/vrsync_host.h`). Internal: its items
 //! serve those two crates and may change with them; nothing here is exported to C (no
 //! `extern "C"` function), so linking both libraries into one program clashes nowhere.

@@ -13,6 +13,7 @@
 //! [`HOST_LIVENESS_PERIOD`]), and [`retry_until`] (connect-retry with back-off while the
 //! host is not there yet).
 
+pub(crate) mod absent;
 pub mod any_agent;
 pub mod legacy;
 pub(crate) mod mixed;
@@ -21,6 +22,12 @@ pub(crate) mod registry;
 pub mod shm;
 pub mod tcp;
 pub(crate) mod wait;
+#[cfg(feature = "zenoh")]
+pub mod zenoh;
+/// Without the `zenoh` feature, the zenoh entry of the registry: stand-ins whose host and
+/// agent constructors fail with an error naming the feature.
+#[cfg(not(feature = "zenoh"))]
+#[path = "zenoh_off.rs"]
 pub mod zenoh;
 
 use std::time::{Duration, Instant};

@@ -100,6 +100,8 @@ pub(crate) fn write_all_until<S: Write + AsRawFd>(
 ///
 /// # Errors
 /// `poll(2)`'s error (an interruption is a return without readiness).
+// Used by the zenoh transport only (through `WakeFd`), absent without its feature.
+#[cfg_attr(not(feature = "zenoh"), allow(dead_code))]
 pub(crate) fn readable_any(fds: &[RawFd], timeout: Duration) -> io::Result<bool> {
     let mut pfds = [libc::pollfd {
         fd: -1,
@@ -220,8 +222,10 @@ impl EpollSet {
 
 /// An `eventfd`: written by callbacks on other threads (zenoh's), waited on like a socket.
 #[derive(Debug)]
+#[cfg_attr(not(feature = "zenoh"), allow(dead_code))]
 pub(crate) struct WakeFd(OwnedFd);
 
+#[cfg_attr(not(feature = "zenoh"), allow(dead_code))]
 impl WakeFd {
     /// A new, unwoken descriptor.
     ///

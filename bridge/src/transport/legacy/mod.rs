@@ -41,9 +41,39 @@
 //! transport's [`super::HostTransport::activity_fd`]: a host serving agents over several
 //! transports waits for all of them at once.
 
+//!
+//! The host side and the codec need the `legacy` cargo feature of vrsync-bridge (prost and
+//! png come with it); without it the host side is a stand-in whose `create` fails with an
+//! error naming the feature. The agent side is a stand-in in every build.
+
 mod agent;
+#[cfg(feature = "legacy")]
 pub mod codec;
+#[cfg(feature = "legacy")]
 mod host;
 
 pub use agent::{LegacyAgent, LegacyFrame};
+#[cfg(feature = "legacy")]
 pub use host::*;
+
+#[cfg(not(feature = "legacy"))]
+crate::transport::absent::absent_host!(
+    LegacyHost,
+    LegacyFrameLoan,
+    LegacyHostCreateError,
+    "legacy",
+    "legacy"
+);
+
+#[cfg(all(test, not(feature = "legacy")))]
+mod tests {
+    use crate::config::TransportKind;
+    use crate::transport::absent::host_create_error;
+
+    #[test]
+    fn a_host_with_legacy_agents_is_told_the_build_has_no_legacy() {
+        let err = host_create_error(TransportKind::Legacy);
+        assert!(err.contains("the legacy transport"), "{err}");
+        assert!(err.contains("`legacy` cargo feature"), "{err}");
+    }
+}

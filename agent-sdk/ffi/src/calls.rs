@@ -9,7 +9,7 @@ use vrsync_cabi::{ArgError, c_name, log_filter, str_arg, write_opt, write_requir
 
 use super::state::{AGENTS, AgentState, FfiError, with_agent};
 use super::types::*;
-use crate::agent::{AgentBuilder, Frame, SignalHandling};
+use sdk::{AgentBuilder, Frame, SignalHandling};
 
 // ---------------------------------------------------------------------------------------
 // Helpers
@@ -287,7 +287,7 @@ pub(super) fn init_logging_impl(filter: *const c_char) -> Result<(), FfiError> {
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
-        .with_ansi(crate::log::ansi_on_stderr())
+        .with_ansi(vrsync_bridge::ansi_on_stderr())
         .try_init()
         .map_err(|_| FfiError::LoggingAlreadySet)
 }

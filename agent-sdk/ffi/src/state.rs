@@ -12,7 +12,7 @@ use vrsync_cabi::handles::LocalMap;
 use vrsync_cabi::{AbiError, ArgError, HandleError, HandleKind, LastError, Registry};
 
 use super::types::{vrs_agent_t, vrs_status_t};
-use crate::agent::{Agent, AgentConnectError, Frame, SendError, StopError, WaitStartError};
+use sdk::{Agent, AgentConnectError, Frame, SendError, StopError, WaitStartError};
 
 // ---------------------------------------------------------------------------------------
 // Errors

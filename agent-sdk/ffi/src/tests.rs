@@ -74,14 +74,14 @@ fn header_is_up_to_date() {
     let mut generated = Vec::new();
     cbindgen::Builder::new()
         .with_config(config)
-        .with_src(dir.join("../bridge/cabi/src/sensors.rs"))
-        .with_src(dir.join("src/ffi/types.rs"))
-        .with_src(dir.join("src/ffi/exports.rs"))
-        .with_src(dir.join("src/ffi/send.rs"))
+        .with_src(dir.join("../../bridge/cabi/src/sensors.rs"))
+        .with_src(dir.join("src/types.rs"))
+        .with_src(dir.join("src/exports.rs"))
+        .with_src(dir.join("src/send.rs"))
         .generate()
         .expect("cbindgen")
         .write(&mut generated);
-    let path = dir.join("include/vrsync.h");
+    let path = dir.join("../include/vrsync.h");
     if std::env::var_os("VRSYNC_UPDATE_HEADER").is_some() {
         std::fs::write(&path, &generated).unwrap();
         return;
@@ -89,8 +89,8 @@ fn header_is_up_to_date() {
     let committed = std::fs::read(&path).unwrap_or_default();
     assert!(
         committed == generated,
-        "{} is out of date with src/ffi/; regenerate it with \
-         `VRSYNC_UPDATE_HEADER=1 cargo test -p vrsync-agent header` and commit it",
+        "{} is out of date with agent-sdk/ffi/src/; regenerate it with \
+         `VRSYNC_UPDATE_HEADER=1 cargo test -p vrsync-agent-ffi header` and commit it",
         path.display()
     );
 }

@@ -1,0 +1,217 @@
+//! Stand-ins for a transport side that does not exist: the registry ([`super::registry`])
+//! names five types per transport, and a side that is not there still needs them.
+//!
+//! - [`absent_agent!`]: an agent side that never connects (the legacy transport has no
+//!   vrsync agent; zenoh's is missing without its cargo feature). `connect` fails with the
+//!   given detail.
+//! - [`absent_host!`]: a host side compiled out with its cargo feature (`legacy`, `zenoh`);
+//!   `create` fails with an error naming the feature.
+//!
+//! The types are uninhabited: no value of them exists, so every method but the
+//! constructors is unreachable by construction, and the generic routing over the registry
+//! (`mixed.rs`, `any_agent.rs`) compiles unchanged.
+
+/// Declares the uninhabited agent `$agent` and its frame `$frame`; `connect` fails with
+/// `AgentConnectError::Transport` and `$detail` (an expression of type `String`).
+macro_rules! absent_agent {
+    ($(#[$doc:meta])* $agent:ident, $frame:ident, $detail:expr) => {
+        $(#[$doc])*
+        #[derive(Debug)]
+        pub enum $agent {}
+
+        #[doc = concat!("The frame of a [`", stringify!($agent), "`]. Uninhabited.")]
+        #[derive(Debug)]
+        pub enum $frame {}
+
+        impl $crate::transport::AgentFrame for $frame {
+            fn header(&self) -> &$crate::wire::SensorHeader {
+                match *self {}
+            }
+
+            fn payload(&self) -> &[u8] {
+                match *self {}
+            }
+        }
+
+        impl $crate::transport::AgentTransport for $agent {
+            type Frame = $frame;
+
+            /// Always fails, saying why.
+            fn connect(
+                config: &$crate::config::Config,
+                id: u32,
+                _timeout: ::std::time::Duration,
+                _signals: $crate::signal::SignalHandling,
+            ) -> Result<Self, $crate::transport::AgentConnectError> {
+                Err($crate::transport::AgentConnectError::Transport {
+                    session: config.session.clone(),
+                    agent: id,
+                    detail: $detail,
+                })
+            }
+
+            fn try_receive_newest(
+                &mut self,
+            ) -> Result<Option<$frame>, $crate::transport::AgentReceiveError> {
+                match *self {}
+            }
+
+            fn wait_readable(&mut self, _timeout: ::std::time::Duration) {
+                match *self {}
+            }
+
+            fn discard_wakeups(&mut self) {
+                match *self {}
+            }
+
+            fn host_liveness(&mut self, _check_process: bool) -> $crate::transport::HostLiveness {
+                match *self {}
+            }
+
+            fn send_batch(
+                &mut self,
+                _header: &$crate::wire::MotorHeader,
+                _commands: &[$crate::wire::MotorCommand],
+            ) -> Result<(), $crate::transport::AgentSendError> {
+                match *self {}
+            }
+
+            fn termination_requested(&self) -> bool {
+                match *self {}
+            }
+        }
+    };
+}
+
+/// Declares the uninhabited host `$host` of the transport `$name`, its loan `$loan` and
+/// its create error `$error`, whose only variant `NotBuilt` names the cargo feature
+/// `$feature` of vrsync-bridge. (Unused in a build with every transport feature.)
+#[cfg_attr(all(feature = "legacy", feature = "zenoh"), allow(unused_macros))]
+macro_rules! absent_host {
+    ($host:ident, $loan:ident, $error:ident, $name:literal, $feature:literal) => {
+        #[doc = concat!(
+                    "Why the ", $name, " host could not be created: in this build, always [`",
+                    stringify!($error), "::NotBuilt`]."
+                )]
+        #[derive(Debug, thiserror::Error)]
+        #[non_exhaustive]
+        pub enum $error {
+            /// The config gives agents this transport, which this build does not have.
+            #[error(
+                "the config gives agents the {} transport, but this build has none (it was \
+                 compiled without the `{}` cargo feature of vrsync-bridge)",
+                $name,
+                $feature
+            )]
+            NotBuilt,
+        }
+
+        #[doc = concat!(
+                    "The ", $name, " host of a build without the `", $feature,
+                    "` feature: `create` says why there is none. Uninhabited."
+                )]
+        #[derive(Debug)]
+        pub enum $host {}
+
+        #[doc = concat!("The loan of a [`", stringify!($host), "`]. Uninhabited.")]
+        #[derive(Debug)]
+        pub enum $loan {}
+
+        impl $host {
+            /// Always fails: this build does not have the transport.
+            ///
+            /// # Errors
+            #[doc = concat!("[`", stringify!($error), "::NotBuilt`].")]
+            pub fn create(
+                _config: &$crate::config::Config,
+                _signals: $crate::signal::SignalHandling,
+            ) -> Result<Self, $error> {
+                Err($error::NotBuilt)
+            }
+        }
+
+        impl $crate::transport::FrameLoanMut for $loan {
+            fn parts_mut(&mut self) -> (&mut $crate::wire::SensorHeader, &mut [u8]) {
+                match *self {}
+            }
+
+            fn header(&self) -> &$crate::wire::SensorHeader {
+                match *self {}
+            }
+        }
+
+        impl $crate::transport::HostTransport for $host {
+            type Loan = $loan;
+
+            fn is_connected(&self, _slot: usize) -> bool {
+                match *self {}
+            }
+
+            fn loan(
+                &mut self,
+                _slot: usize,
+            ) -> Result<$loan, $crate::transport::HostTransportError> {
+                match *self {}
+            }
+
+            fn publish(
+                &mut self,
+                _slot: usize,
+                frame: $loan,
+            ) -> Result<bool, $crate::transport::HostTransportError> {
+                match frame {}
+            }
+
+            fn signal_start(&mut self) -> Result<(), $crate::transport::HostTransportError> {
+                match *self {}
+            }
+
+            fn drain(
+                &mut self,
+                _sink: &mut $crate::transport::BatchSink<'_>,
+            ) -> Result<(), $crate::transport::HostTransportError> {
+                match *self {}
+            }
+
+            fn update_connections(&mut self) -> Result<(), $crate::transport::HostTransportError> {
+                match *self {}
+            }
+
+            fn termination_requested(&self) -> bool {
+                match *self {}
+            }
+
+            fn activity_fd(&self) -> ::std::os::fd::RawFd {
+                match *self {}
+            }
+        }
+    };
+}
+
+pub(crate) use absent_agent;
+#[cfg_attr(all(feature = "legacy", feature = "zenoh"), allow(unused_imports))]
+pub(crate) use absent_host;
+
+/// The embedded default config with every agent on `kind`, in a session of this test
+/// process: what the stand-ins' tests create hosts and connect agents with (in a build
+/// without some transport feature).
+#[cfg(all(test, not(all(feature = "legacy", feature = "zenoh"))))]
+pub(crate) fn config_all_on(kind: crate::config::TransportKind) -> crate::config::Config {
+    #[allow(clippy::unwrap_used)]
+    let mut config = crate::config::Config::embedded_default().unwrap();
+    config.session = format!("absent-{}-{}", kind.as_str(), std::process::id());
+    for a in &mut config.agents {
+        a.transport = kind;
+    }
+    config
+}
+
+/// The error of creating a host for [`config_all_on`]`(kind)`.
+#[cfg(all(test, not(all(feature = "legacy", feature = "zenoh"))))]
+pub(crate) fn host_create_error(kind: crate::config::TransportKind) -> String {
+    use crate::signal::SignalHandling;
+    match super::mixed::Transports::create(&config_all_on(kind), SignalHandling::Leave) {
+        Ok(_) => panic!("a host for {} agents was created", kind.as_str()),
+        Err(e) => e.to_string(),
+    }
+}
