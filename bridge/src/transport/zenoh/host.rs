@@ -78,6 +78,15 @@ pub struct ZenohHostStats {
 /// on different zenoh channels, so the deletion may overtake the batch).
 const LEAVE_AFTER_TOKEN: Duration = Duration::from_secs(2);
 
+/// How long a connection that ended without a leave batch (its token vanished, or its
+/// sensor subscriber went) still counts as connected for the host: an agent that leaves
+/// sends its leave batch and then closes its session, and the token's deletion or the
+/// subscriber's end, on other zenoh channels, may overtake the batch. Reporting the agent
+/// lost at once would make a graceful leave look like a crash (the host evicts it, and
+/// with nobody attached stops cycling before the batch is read); within this grace the
+/// batch is taken as the leave it is. A crashed agent is seen lost this much later.
+const LOSS_GRACE: Duration = Duration::from_secs(1);
+
 #[derive(Debug)]
 struct SlotState {
     id: u32,
@@ -93,11 +102,26 @@ struct SlotState {
     /// When the admitted connection's token vanished: its leave batch, racing the deletion
     /// on another zenoh channel, is still taken for [`LEAVE_AFTER_TOKEN`].
     gone_at: Option<Instant>,
+    /// When the connection stopped being connected without a leave batch (token deleted,
+    /// subscriber gone); cleared by a leave batch or a new admission. See [`LOSS_GRACE`].
+    lost_at: Option<Instant>,
 }
 
 impl SlotState {
     fn connected(&self) -> bool {
         self.admitted.is_some() && self.alive && self.matched
+    }
+
+    /// Connected, or lost without a leave less than [`LOSS_GRACE`] ago: what the host sees.
+    fn connected_for_host(&self) -> bool {
+        self.connected() || self.lost_at.is_some_and(|t| t.elapsed() < LOSS_GRACE)
+    }
+
+    /// Records that a connection ends now without a leave batch (if it was connected).
+    fn lose(&mut self, was_connected: bool) {
+        if was_connected && !self.leave_queued {
+            self.lost_at = Some(Instant::now());
+        }
     }
 }
 
@@ -221,6 +245,7 @@ impl Shared {
         s.admitted = Some((nonce, Instant::now()));
         s.alive = false;
         s.gone_at = None;
+        s.lost_at = None;
         let body_len = self.frame_bodies.get(slot).copied().unwrap_or(HEADER);
         Ok((nonce, body_len))
     }
@@ -282,6 +307,8 @@ impl Shared {
             }
             SampleKind::Delete if current == Some(nonce) => {
                 let s = &mut st.slots[slot];
+                let was_connected = s.connected();
+                s.lose(was_connected);
                 s.admitted = None;
                 s.alive = false;
                 s.gone_at = Some(Instant::now());
@@ -312,7 +339,9 @@ impl Shared {
         // Not connected any more, but its token vanished just now: only a leave batch is
         // taken (checked below).
         let just_gone = |s: &SlotState| {
-            !s.connected() && s.gone_at.is_some_and(|t| t.elapsed() < LEAVE_AFTER_TOKEN)
+            !s.connected()
+                && (s.gone_at.is_some_and(|t| t.elapsed() < LEAVE_AFTER_TOKEN)
+                    || s.lost_at.is_some_and(|t| t.elapsed() < LEAVE_AFTER_TOKEN))
         };
         let Some(slot) = slot.filter(|&s| st.slots[s].connected() || just_gone(&st.slots[s]))
         else {
@@ -390,6 +419,7 @@ impl Shared {
             s.admitted = None;
             s.alive = false;
             s.leave_queued = true;
+            s.lost_at = None;
             drop(st);
             info!(agent = id, "zenoh agent left");
             self.wake.wake();
@@ -537,6 +567,7 @@ impl ZenohHost {
                         queue: VecDeque::with_capacity(MAX_QUEUED_BATCHES),
                         leave_queued: false,
                         gone_at: None,
+                        lost_at: None,
                     })
                     .collect(),
                 next_nonce: 1,
@@ -570,7 +601,11 @@ impl ZenohHost {
                 .matching_listener()
                 .callback(move |status| {
                     if let Some(s) = lock(&sh.state).slots.get_mut(slot) {
+                        let was_connected = s.connected();
                         s.matched = status.matching();
+                        if !s.matched {
+                            s.lose(was_connected);
+                        }
                     }
                     sh.wake.wake();
                 })
@@ -662,7 +697,7 @@ impl HostTransport for ZenohHost {
         lock(&self.shared.state)
             .slots
             .get(slot)
-            .is_some_and(SlotState::connected)
+            .is_some_and(SlotState::connected_for_host)
     }
 
     fn loan(&mut self, slot: usize) -> Result<ZenohFrameLoan, HostTransportError> {
@@ -757,7 +792,64 @@ impl HostTransport for ZenohHost {
         self.shared.wake.raw()
     }
 
+    /// The end of a [`LOSS_GRACE`]: the host then sees that connection lost.
+    fn next_deadline(&self) -> Option<Instant> {
+        lock(&self.shared.state)
+            .slots
+            .iter()
+            .filter_map(|s| s.lost_at.map(|t| t + LOSS_GRACE))
+            .filter(|&end| end > Instant::now())
+            .min()
+    }
+
     fn after_wait(&mut self) {
         self.shared.wake.clear();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn connected_slot() -> SlotState {
+        SlotState {
+            id: 0,
+            admitted: Some((1, Instant::now())),
+            alive: true,
+            matched: true,
+            queue: VecDeque::new(),
+            leave_queued: false,
+            gone_at: None,
+            lost_at: None,
+        }
+    }
+
+    #[test]
+    fn a_connection_lost_without_a_leave_stays_connected_for_the_host_during_the_grace() {
+        // The token vanished before any leave batch: lost for the transport, not yet for
+        // the host (the batch may follow).
+        let mut s = connected_slot();
+        s.lose(s.connected());
+        s.admitted = None;
+        s.alive = false;
+        assert!(!s.connected());
+        assert!(s.connected_for_host());
+        // After the grace: lost.
+        s.lost_at = Instant::now().checked_sub(LOSS_GRACE);
+        assert!(!s.connected_for_host());
+
+        // A leave batch queued first: the end is a leave, no grace.
+        let mut s = connected_slot();
+        s.leave_queued = true;
+        s.lose(s.connected());
+        s.matched = false;
+        assert!(!s.connected_for_host());
+
+        // Never connected (welcomed, no subscriber yet): nothing to wait for.
+        let mut s = connected_slot();
+        s.matched = false;
+        s.lose(s.connected());
+        assert!(s.lost_at.is_none());
+        assert!(!s.connected_for_host());
     }
 }
