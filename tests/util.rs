@@ -396,8 +396,11 @@ impl Events {
     }
 }
 
-/// Waits until the `vr-agent --log-cycles` file at `path` holds a line for `cycle` (the
-/// agent writes and flushes it before it sends its stop); panics after `timeout`.
+/// Waits until the `vr-agent --log-cycles` file at `path` holds a line for `cycle` or a
+/// later one (the agent writes and flushes it before it sends its stop): the agent has
+/// got that far. A later one counts because an agent may skip frames (after a stall,
+/// late, or when the host is faster than it), so a line for exactly `cycle` may never
+/// come. Panics after `timeout`.
 pub fn wait_for_cycle_line(path: &Path, cycle: u64, timeout: Duration) {
     let deadline = Instant::now() + timeout;
     loop {
@@ -406,7 +409,7 @@ pub fn wait_for_cycle_line(path: &Path, cycle: u64, timeout: Duration) {
         let seen = complete
             .lines()
             .filter_map(|l| l.split(' ').next()?.parse::<u64>().ok())
-            .any(|c| c == cycle);
+            .any(|c| c >= cycle);
         if seen {
             return;
         }
