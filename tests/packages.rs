@@ -1,5 +1,7 @@
 //! What a user's build links: the agent SDK's own dependency tree, as `cargo tree` (the
-//! cargo running these tests, offline, from the committed `Cargo.lock`) reports it.
+//! cargo running these tests, from the committed `Cargo.lock`) reports it. (Not
+//! `--offline`: after a build everything it reads is in cargo's cache, and where a cache
+//! lacks a manifest, cargo may fetch it from the registry.)
 
 use std::process::Command;
 use std::time::Duration;
@@ -13,7 +15,6 @@ fn sdk_packages(features: &str) -> Vec<String> {
     let mut cmd = Command::new(cargo);
     cmd.current_dir(util::workspace()).args([
         "tree",
-        "--offline",
         "--locked",
         "-p",
         "vrsync-agent",
