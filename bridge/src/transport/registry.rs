@@ -22,8 +22,10 @@
 //!
 //! Adding a transport: its folder under `transport/` (host and agent side; a transport
 //! without an agent side, like legacy, gives an uninhabited agent whose `connect` says
-//! why), one entry here, its config section if it has keys, and its line in the
-//! conformance suite.
+//! why: `absent.rs`'s `absent_agent!`), one entry here, its config section if it has keys,
+//! and its line in the conformance suite. A transport behind a cargo feature (zenoh,
+//! legacy) keeps its entry in every build: without the feature its types are stand-ins
+//! (`absent_host!`, `absent_agent!`) whose constructors fail naming the feature.
 //!
 //! # Why a macro and not trait objects
 //!
