@@ -792,7 +792,7 @@ impl HostTransport for ZenohHost {
         self.shared.wake.raw()
     }
 
-    /// The end of a [`LOSS_GRACE`]: the host then sees that connection lost.
+    /// The end of a loss grace (`LOSS_GRACE`): the host then sees that connection lost.
     fn next_deadline(&self) -> Option<Instant> {
         lock(&self.shared.state)
             .slots
