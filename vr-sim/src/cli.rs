@@ -155,6 +155,7 @@ pub struct DemoArgs {
 
 /// `vr-sim run`.
 #[derive(Debug, Args)]
+#[command(group(clap::ArgGroup::new("rerun_sink").args(["rerun", "rrd"]).multiple(true)))]
 pub struct RunArgs {
     /// Config file (see config/default.toml for every key).
     #[arg(long, value_name = "FILE")]
@@ -208,6 +209,24 @@ pub struct RunArgs {
     /// do not depend on it.
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub render_threads: usize,
+    /// Show the run live in a Rerun viewer: the one listening on port 9876, else a new
+    /// `rerun` process from PATH (`pip install rerun-sdk==0.36.3` installs it). Logged:
+    /// every agent's camera images, its body, eyes (camera frustums) and trajectory in the
+    /// 3D room (walls, objects, goals), its commands and action statuses, collisions and
+    /// rewards; the host's wait per cycle and stop timeouts; timelines `cycle` and
+    /// `sim_time` (README: "Live view and recording in Rerun"). Needs a vr-sim built with
+    /// the `rerun` cargo feature (else exit 2).
+    #[arg(long)]
+    pub rerun: bool,
+    /// Save the same Rerun log as a recording (`rerun FILE.rrd` opens it; the Python
+    /// `rerun-sdk` reads it). With --rerun: both. Needs the `rerun` feature (else exit 2).
+    #[arg(long, value_name = "FILE.rrd")]
+    pub rrd: Option<PathBuf>,
+    /// With --rerun/--rrd: log the camera images of every N-th cycle only (0, N, 2N, ...),
+    /// for long runs; poses, text and scalars are logged every cycle.
+    #[arg(long, value_name = "N", default_value_t = 1, requires = "rerun_sink",
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub rerun_every: u64,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,

@@ -8,6 +8,7 @@ mod picture;
 mod record;
 mod render;
 mod replay;
+mod rerun_log;
 mod run;
 mod spawn;
 mod world;
@@ -74,6 +75,7 @@ fn main() -> ExitCode {
                 || e.downcast_ref::<vrsync_bridge::ShmBudgetError>().is_some()
                 || e.downcast_ref::<world_config::WorldConfigError>().is_some()
                 || e.downcast_ref::<replay::RecordReadError>().is_some()
+                || e.downcast_ref::<rerun_log::RerunUnavailable>().is_some()
             {
                 ExitCode::from(EXIT_USAGE)
             } else {
@@ -171,6 +173,7 @@ fn demo(args: DemoArgs) -> anyhow::Result<ExitCode> {
             // Four moments of the run.
             dump_frames: Some((frames_dir.clone(), (args.frames / 4).max(1))),
             render_threads: args.render_threads,
+            rerun: None,
         },
         &mut events::Events::disabled(),
     )?;
@@ -244,6 +247,11 @@ fn run_with_events(args: &RunArgs, events: &mut events::Events) -> anyhow::Resul
             map: args.map.clone(),
             dump_frames: args.dump_frames.clone().map(|d| (d, args.every)),
             render_threads: args.render_threads,
+            rerun: (args.rerun || args.rrd.is_some()).then(|| rerun_log::RerunOptions {
+                viewer: args.rerun,
+                rrd: args.rrd.clone(),
+                image_every: args.rerun_every,
+            }),
         },
         events,
     )?;

@@ -66,6 +66,27 @@ pub fn write_png(
     writer.finish().map_err(png_err)
 }
 
+/// The pixels of `image`, rows tightly packed (copied only when the stride has padding).
+pub fn packed_pixels<'a>(image: &'a ImageMut<'_>) -> std::borrow::Cow<'a, [u8]> {
+    let d = image.desc;
+    let (w, h) = (d.width_px as usize, d.height_px as usize);
+    let row = w * d.pixel_format().unwrap_or_default().bytes_per_pixel();
+    let stride = d.stride_bytes as usize;
+    if stride == row {
+        std::borrow::Cow::Borrowed(&image.data[..stride * h])
+    } else {
+        std::borrow::Cow::Owned(
+            image
+                .data
+                .chunks_exact(stride)
+                .take(h)
+                .flat_map(|r| &r[..row])
+                .copied()
+                .collect(),
+        )
+    }
+}
+
 /// Writes one camera image of a frame as `DIR/c<cycle>_a<agent>_<camera>.png`. Depth
 /// images become 16-bit grey in millimetres (0 to 65.535 m).
 ///
@@ -81,22 +102,8 @@ pub fn dump_image(
     let path = dir.join(format!("c{cycle:06}_a{agent}_{}.png", d.name()));
     let (w, h) = (d.width_px, d.height_px);
     let format = d.pixel_format().unwrap_or_default();
-    let bpp = format.bytes_per_pixel();
-    let stride = d.stride_bytes as usize;
-    // PNG wants tightly packed rows; copy only when the stride has padding.
-    let packed: std::borrow::Cow<'_, [u8]> = if stride == w as usize * bpp {
-        std::borrow::Cow::Borrowed(&image.data[..stride * h as usize])
-    } else {
-        std::borrow::Cow::Owned(
-            image
-                .data
-                .chunks_exact(stride)
-                .take(h as usize)
-                .flat_map(|row| &row[..w as usize * bpp])
-                .copied()
-                .collect(),
-        )
-    };
+    // PNG wants tightly packed rows.
+    let packed = packed_pixels(image);
     match format {
         PixelFormat::Rgb8 => write_png(
             &path,
@@ -369,6 +376,26 @@ struct Map {
     scale_bar: ScaleBar,
 }
 
+/// The goals' labels, in config order: `G<n> REGION +<reward>` or `G<n> <ACTION>
+/// #<object> +<reward>` (the map's legend, the Rerun log's goals).
+pub fn goal_labels(cfg: &crate::world_config::WorldConfig) -> Vec<String> {
+    cfg.goals
+        .iter()
+        .enumerate()
+        .map(|(i, g)| match g.kind {
+            GoalKind::Region { .. } => format!("G{} REGION {:+}", i + 1, g.reward),
+            GoalKind::Object { object, action } => {
+                format!(
+                    "G{} {} #{object} {:+}",
+                    i + 1,
+                    action_name(action),
+                    g.reward
+                )
+            }
+        })
+        .collect()
+}
+
 /// The name of a goal's action in the legend.
 fn action_name(a: GoalAction) -> &'static str {
     match a {
@@ -398,22 +425,7 @@ fn render_map(world: &World, trails: &Trails) -> Map {
         .iter()
         .map(|(id, _)| (*id, format!("AGENT {id}")))
         .collect();
-    let goal_rows: Vec<String> = cfg
-        .goals
-        .iter()
-        .enumerate()
-        .map(|(i, g)| match g.kind {
-            GoalKind::Region { .. } => format!("G{} REGION {:+}", i + 1, g.reward),
-            GoalKind::Object { object, action } => {
-                format!(
-                    "G{} {} #{object} {:+}",
-                    i + 1,
-                    action_name(action),
-                    g.reward
-                )
-            }
-        })
-        .collect();
+    let goal_rows = goal_labels(cfg);
     let marker_rows = ["START", "END, TICK = HEADING"];
     let objects_row = "#N = OBJECT ID";
     let grid_row = "GRID 1 M";

@@ -15,6 +15,7 @@ use crate::events::{CYCLE_EVENT_EVERY, Event, Events};
 use crate::picture::{Trails, dump_image, write_map};
 use crate::record::{self, AgentLine, Sent};
 use crate::render::Renderer;
+use crate::rerun_log::{CycleData, RerunLog, RerunOptions};
 use crate::spawn::{Agents, PrivateConfig};
 use crate::world::World;
 
@@ -49,6 +50,8 @@ pub struct RunOptions {
     pub dump_frames: Option<(PathBuf, u64)>,
     /// Threads shading image rows (1: the host thread only; 0: one per core).
     pub render_threads: usize,
+    /// Live view and/or recording in Rerun (`--rerun`, `--rrd`).
+    pub rerun: Option<RerunOptions>,
 }
 
 /// Runs the world until `frames` cycles are done (or Ctrl-C).
@@ -83,6 +86,8 @@ struct Run {
     record: Option<BufWriter<File>>,
     /// Trajectories for the map (`--map`).
     trails: Option<Trails>,
+    /// The Rerun log (`--rerun`, `--rrd`).
+    rerun: Option<RerunLog>,
     agents: Agents,
     /// The config spawned agents read when `tcp_listen` asked for any free port.
     _bound_config: Option<PrivateConfig>,
@@ -97,6 +102,8 @@ struct Run {
     hasher: blake3::Hasher,
     /// Writing sensors and rendering images, summed over the cycles.
     render_time: Duration,
+    /// `render_time` at the start of the current cycle.
+    render_time_at_cycle_start: Duration,
     loop_started: Instant,
     /// Cycles completed.
     done: u64,
@@ -128,15 +135,19 @@ struct CommandTally {
     rejected_per_agent: Vec<(u32, u32)>,
 }
 
-/// One agent's cycle as the recording writes it.
-struct AgentCommands {
-    agent: u32,
-    outcome: vrsync_bridge::AgentOutcome,
+/// One agent's cycle as the recording (and the Rerun log) writes it.
+#[derive(Debug)]
+pub struct AgentCommands {
+    /// The agent.
+    pub agent: u32,
+    /// The barrier's outcome for the agent.
+    pub outcome: vrsync_bridge::AgentOutcome,
     /// Applied commands: name and action id, in the order sent.
-    applied: Vec<(&'static str, u32)>,
-    rejected: u32,
+    pub applied: Vec<(&'static str, u32)>,
+    /// Commands rejected.
+    pub rejected: u32,
     /// Every command, in the order applied, with its arguments and rejection.
-    sent: Vec<Sent>,
+    pub sent: Vec<Sent>,
 }
 
 impl Run {
@@ -151,6 +162,12 @@ impl Run {
         // is started.
         let world = World::from_config(config)?;
         let renderer = Renderer::new(opts.render_threads)?;
+        // Before the host and the agents: a viewer that cannot be started (or a vr-sim
+        // built without the feature) is reported at once.
+        let rerun = match &opts.rerun {
+            Some(r) => Some(RerunLog::open(r, config, &world)?),
+            None => None,
+        };
         if let Some((dir, _)) = &opts.dump_frames {
             std::fs::create_dir_all(dir)
                 .with_context(|| format!("cannot create {}", dir.display()))?;
@@ -196,6 +213,7 @@ impl Run {
             bar,
             record,
             trails,
+            rerun,
             agents,
             _bound_config: bound_config,
             host,
@@ -217,6 +235,7 @@ impl Run {
             },
             hasher: blake3::Hasher::new(),
             render_time: Duration::ZERO,
+            render_time_at_cycle_start: Duration::ZERO,
             loop_started: Instant::now(),
             done: 0,
             interrupted: false,
@@ -364,6 +383,13 @@ impl Run {
                 dump_image(dir, cycle, id, &image)?;
             }
         }
+        if let Some(log) = &mut self.rerun
+            && log.wants_images(cycle)
+        {
+            for image in frame.images_mut() {
+                log.log_image(cycle, id, &image)?;
+            }
+        }
         self.host.publish(frame)?;
         Ok(cycle)
     }
@@ -371,7 +397,10 @@ impl Run {
     /// Frame 2: collect, apply in (agent id, order sent) order, report, advance the world,
     /// record. Breaks on SIGINT/SIGTERM.
     fn frame2(&mut self, mut notable: bool) -> anyhow::Result<ControlFlow<()>> {
-        let report = match self.host.collect() {
+        let wait_started = Instant::now();
+        let collected = self.host.collect();
+        let wait = wait_started.elapsed();
+        let report = match collected {
             Ok(r) => r,
             Err(HostCycleError::Terminated) => {
                 self.interrupted = true;
@@ -390,7 +419,7 @@ impl Run {
             report,
             &mut self.world,
             &mut self.events,
-            self.record.is_some(),
+            self.record.is_some() || self.rerun.is_some(),
         )?;
         for &(id, n) in &self.commands.rejected_per_agent {
             self.host.set_rejected(id, n);
@@ -416,6 +445,19 @@ impl Run {
         if let Some(t) = &mut self.trails {
             t.push(&self.world);
         }
+        if let Some(log) = &mut self.rerun {
+            log.log_cycle(&CycleData {
+                cycle,
+                world: &self.world,
+                commands: &per_agent,
+                agents: &self.roster.ids,
+                sensed: &self.roster.sensed,
+                wait,
+                render: self.render_time - self.render_time_at_cycle_start,
+                stop_timeouts: self.host.stats().stop_timeouts,
+            })?;
+        }
+        self.render_time_at_cycle_start = self.render_time;
         self.write_record(cycle, per_agent)?;
         self.done += 1;
         if let Some(bar) = &self.bar {
@@ -478,6 +520,7 @@ impl Run {
             bar,
             record,
             trails,
+            rerun,
             agents,
             _bound_config,
             host,
@@ -489,6 +532,7 @@ impl Run {
             commands,
             hasher,
             render_time,
+            render_time_at_cycle_start: _,
             loop_started,
             done,
             interrupted,
@@ -513,6 +557,12 @@ impl Run {
                 },
             )?;
             out.flush().context("write record")?;
+        }
+        if let Some(log) = rerun
+            && let Err(e) = log.finish()
+        {
+            // The run itself is done: a viewer closed before the end is no failure.
+            warn!("the Rerun log may be incomplete: {e}");
         }
         if let (Some(path), Some(trails)) = (&opts.map, &trails) {
             write_map(path, &world, trails)?;

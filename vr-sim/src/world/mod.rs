@@ -472,7 +472,8 @@ impl World {
     }
 }
 
-fn describe_collider(id: u32) -> String {
+/// What collider `id` is, in words ("the north wall", "agent 2", "object 7").
+pub fn describe_collider(id: u32) -> String {
     match id {
         WALL_COLLIDER_ID => "the north wall".into(),
         1001 => "the east wall".into(),
