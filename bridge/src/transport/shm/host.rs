@@ -53,6 +53,12 @@ struct HostAgentPorts {
     /// before the host looked) is not this connection. `None` while the connection is not
     /// known by identity (none served yet, or several subscribers attached).
     served: Option<UniqueSubscriberId>,
+    /// The subscriber of a connection the host stopped serving (it left, or was evicted),
+    /// while it may still be attached: an agent that leaves tells the host before its
+    /// ports are gone, so until they are, its subscriber is not a new connection of the
+    /// id (taking it for one, the host would publish the next frame to it and then see
+    /// that connection vanish: an eviction instead of a rejoin).
+    departed: Option<UniqueSubscriberId>,
     /// When `served` was last found attached. Listing subscribers allocates (iceoryx2
     /// copies its container state), so the check runs at most every
     /// [`IDENTITY_CHECK_PERIOD`], not at every look of the host's wait loop.
@@ -231,6 +237,7 @@ impl ShmHost {
                 motor_sub,
                 initialised: Vec::with_capacity(SENSOR_POOL_SAMPLES * 2),
                 served: None,
+                departed: None,
                 verified: Cell::new(None),
             });
         }
@@ -291,7 +298,9 @@ fn is_dyn_connected(p: &HostAgentPorts) -> bool {
     let attached = p.sensor_service.dynamic_config().number_of_subscribers() > 0
         && p.motor_service.dynamic_config().number_of_publishers() > 0;
     let Some(served) = p.served else {
-        return attached;
+        // Not known by identity: connected when a subscriber other than a departed
+        // connection's is attached (listing allocates; only until that one is gone).
+        return attached && p.departed.is_none_or(|d| has_other_subscriber(p, d));
     };
     if !attached {
         return false;
@@ -323,6 +332,21 @@ fn is_attached(p: &HostAgentPorts, id: UniqueSubscriberId) -> bool {
         }
     });
     found
+}
+
+/// Whether a subscriber other than `id` is attached to the agent's sensor service.
+fn has_other_subscriber(p: &HostAgentPorts, id: UniqueSubscriberId) -> bool {
+    use iceoryx2::service::port_factory::PortFactory as _;
+    let mut other = false;
+    p.sensor_service.dynamic_config().list_subscribers(|d| {
+        other = d.subscriber_id != id;
+        if other {
+            CallbackProgression::Stop
+        } else {
+            CallbackProgression::Continue
+        }
+    });
+    other
 }
 
 /// The agent's sensor subscriber when exactly one is attached. With more (a killed
@@ -401,7 +425,10 @@ impl HostTransport for ShmHost {
                 .get()
                 .is_none_or(|t| now.saturating_duration_since(t) >= IDENTITY_CHECK_PERIOD);
             if p.served.is_none() || due {
-                p.served = sole_subscriber(p);
+                p.served = sole_subscriber(p).filter(|&s| Some(s) != p.departed);
+                if p.served.is_some() {
+                    p.departed = None;
+                }
                 p.verified.set(Some(now));
             }
         }
@@ -410,7 +437,7 @@ impl HostTransport for ShmHost {
 
     fn forget_connection(&mut self, slot: usize) {
         if let Some(p) = self.agents.get_mut(slot) {
-            p.served = None;
+            p.departed = p.served.take().or_else(|| sole_subscriber(p));
             p.verified.set(None);
         }
     }
