@@ -112,9 +112,14 @@ impl SlotState {
         self.admitted.is_some() && self.alive && self.matched
     }
 
-    /// Connected, or lost without a leave less than [`LOSS_GRACE`] ago: what the host sees.
+    /// Connected, with a leave batch the host has not drained yet (it learns of the leave
+    /// from the batch, in its cycle report; seen disconnected before, the leave would be
+    /// reported as a loss), or lost without a leave less than [`LOSS_GRACE`] ago: what the
+    /// host sees.
     fn connected_for_host(&self) -> bool {
-        self.connected() || self.lost_at.is_some_and(|t| t.elapsed() < LOSS_GRACE)
+        self.connected()
+            || self.leave_queued
+            || self.lost_at.is_some_and(|t| t.elapsed() < LOSS_GRACE)
     }
 
     /// Records that a connection ends now without a leave batch (if it was connected).
@@ -838,11 +843,15 @@ mod tests {
         s.lost_at = Instant::now().checked_sub(LOSS_GRACE);
         assert!(!s.connected_for_host());
 
-        // A leave batch queued first: the end is a leave, no grace.
+        // A leave batch queued first: the end is a leave, no grace; connected for the
+        // host until it drained the batch.
         let mut s = connected_slot();
         s.leave_queued = true;
         s.lose(s.connected());
         s.matched = false;
+        assert!(s.lost_at.is_none());
+        assert!(s.connected_for_host());
+        s.leave_queued = false;
         assert!(!s.connected_for_host());
 
         // Never connected (welcomed, no subscriber yet): nothing to wait for.
