@@ -321,10 +321,20 @@ fn is_dyn_connected(p: &HostAgentPorts) -> bool {
 
 /// Whether subscriber `id` is attached to the agent's sensor service.
 fn is_attached(p: &HostAgentPorts, id: UniqueSubscriberId) -> bool {
+    any_subscriber(p, |s| s == id)
+}
+
+/// Whether a subscriber other than `id` is attached to the agent's sensor service.
+fn has_other_subscriber(p: &HostAgentPorts, id: UniqueSubscriberId) -> bool {
+    any_subscriber(p, |s| s != id)
+}
+
+/// Whether an attached sensor subscriber satisfies `pred` (listing stops at the first).
+fn any_subscriber(p: &HostAgentPorts, mut pred: impl FnMut(UniqueSubscriberId) -> bool) -> bool {
     use iceoryx2::service::port_factory::PortFactory as _;
     let mut found = false;
     p.sensor_service.dynamic_config().list_subscribers(|d| {
-        found = d.subscriber_id == id;
+        found = pred(d.subscriber_id);
         if found {
             CallbackProgression::Stop
         } else {
@@ -332,21 +342,6 @@ fn is_attached(p: &HostAgentPorts, id: UniqueSubscriberId) -> bool {
         }
     });
     found
-}
-
-/// Whether a subscriber other than `id` is attached to the agent's sensor service.
-fn has_other_subscriber(p: &HostAgentPorts, id: UniqueSubscriberId) -> bool {
-    use iceoryx2::service::port_factory::PortFactory as _;
-    let mut other = false;
-    p.sensor_service.dynamic_config().list_subscribers(|d| {
-        other = d.subscriber_id != id;
-        if other {
-            CallbackProgression::Stop
-        } else {
-            CallbackProgression::Continue
-        }
-    });
-    other
 }
 
 /// The agent's sensor subscriber when exactly one is attached. With more (a killed
