@@ -23,10 +23,17 @@ pub(super) fn measure_render(config: &Config, host: &mut Host) -> anyhow::Result
     let ids: Vec<u32> = host.agent_ids().collect();
     let mut total = Duration::ZERO;
     for _ in 0..n {
-        for &id in &ids {
-            let mut frame = host.loan_frame(id)?;
+        // In batches, as `vr-sim run` renders.
+        for batch in ids.chunks(renderer.agents_per_batch()) {
+            let mut frames = Vec::with_capacity(batch.len());
+            for &id in batch {
+                frames.push((id, host.loan_frame(id)?));
+            }
             let t0 = Instant::now();
-            renderer.render_agent(&world, id, frame.images_mut());
+            renderer.render_agents(
+                &world,
+                frames.iter_mut().map(|(id, f)| (*id, f.images_mut())),
+            );
             total += t0.elapsed();
         }
     }

@@ -193,6 +193,33 @@ fn frames_of(
     frames
 }
 
+/// Every agent's images of [`CAMERAS`], rendered in one [`Renderer::render_images`] batch
+/// (in parallel when the renderer has a pool).
+fn crowd_frames_batched(w: &World, r: &mut Renderer) -> Vec<Vec<u8>> {
+    let descs: Vec<_> =
+        w.bodies()
+            .iter()
+            .flat_map(|body| {
+                CAMERAS.iter().enumerate().map(
+                    move |(camera, &(name, format, width, height, _, _))| {
+                        (body, desc(camera as u32, name, format, width, height))
+                    },
+                )
+            })
+            .collect();
+    let mut frames: Vec<Vec<u8>> = descs
+        .iter()
+        .map(|(_, d)| vec![0xAB; d.len as usize])
+        .collect();
+    let jobs = descs
+        .iter()
+        .zip(&mut frames)
+        .map(|(&(body, desc), buf)| (body, ImageMut { desc, data: buf }))
+        .collect();
+    r.render_images(w, jobs);
+    frames
+}
+
 fn hash(frames: &[Vec<u8>]) -> String {
     let mut h = blake3::Hasher::new();
     for f in frames {
@@ -203,7 +230,8 @@ fn hash(frames: &[Vec<u8>]) -> String {
 
 /// The hash of every image of [`crowd_world`] (64 agents) and [`crowd_world_moved`] (64
 /// and 5 agents), rendered by the renderer of commit "render: a pinned hash of a crowded
-/// scene" (the brute-force loop of [`super::reference`]), on 1 and on 2 threads.
+/// scene" (the brute-force loop of [`super::reference`]), on 1 and on 2 threads, image by
+/// image and in one batch (on 2 threads: images in parallel).
 ///
 /// A bit-exact check: it assumes IEEE f32 arithmetic without fused multiply-adds and the
 /// platform's `sin`/`cos`/`tan` of x86_64 Linux (glibc), as CI has. If it fails elsewhere
@@ -214,19 +242,22 @@ fn crowd_frames_hash_is_unchanged() {
     let worlds = [crowd_world(64), crowd_world_moved(64), crowd_world_moved(5)];
     for threads in [1, 2] {
         let mut r = Renderer::new(threads).unwrap();
-        let mut all = Vec::new();
+        let (mut all, mut batched) = (Vec::new(), Vec::new());
         for w in &worlds {
             all.extend(crowd_frames(w, |w, id, image| {
                 let body = w.bodies().iter().find(|b| b.id == id).unwrap();
                 r.render_image(w, body, image);
             }));
+            batched.extend(crowd_frames_batched(w, &mut r));
         }
         assert_eq!(all.len(), (64 + 64 + 5) * CAMERAS.len());
-        assert_eq!(
-            hash(&all),
-            "35e8de9aabc1e72acc5a6e362cf7022d6f6d72f5f69f63b0443ef75c7c9aac23",
-            "{threads} thread(s): the crowd's frames changed"
-        );
+        for (how, frames) in [("one by one", &all), ("in one batch", &batched)] {
+            assert_eq!(
+                hash(frames),
+                "35e8de9aabc1e72acc5a6e362cf7022d6f6d72f5f69f63b0443ef75c7c9aac23",
+                "{threads} thread(s), {how}: the crowd's frames changed"
+            );
+        }
     }
 }
 
@@ -306,7 +337,7 @@ fn crowd_render_speed() {
     ];
     for agents in [1, 4, 8, 16, 32, 64] {
         let w = crowd_world_with(agents, &cams);
-        let mut r = Renderer::new(1).unwrap();
+        let mut r = super::Scratch::default();
         let (mut prims, mut visited, mut tests, mut rays) = (0usize, 0usize, 0usize, 0usize);
         for body in w.bodies() {
             for spec in body.cameras() {
@@ -365,10 +396,26 @@ fn crowd_render_speed() {
             for _ in 0..3 {
                 let t = std::time::Instant::now();
                 for _ in 0..cycles {
-                    for (i, buf) in bufs.iter_mut().enumerate() {
-                        let (body, camera) = (&w.bodies()[i / 2], i % 2);
-                        let d = desc(camera as u32, cams[camera].0, PixelFormat::Rgb8, 32, 24);
-                        r.render_image(&w, body, ImageMut { desc: d, data: buf });
+                    // In batches of agents, as `vr-sim run` renders.
+                    let mut jobs: Vec<_> = bufs
+                        .iter_mut()
+                        .enumerate()
+                        .map(|(i, buf)| {
+                            let (body, camera) = (&w.bodies()[i / 2], i % 2);
+                            let d = desc(camera as u32, cams[camera].0, PixelFormat::Rgb8, 32, 24);
+                            (
+                                body,
+                                ImageMut {
+                                    desc: d,
+                                    data: buf.as_mut_slice(),
+                                },
+                            )
+                        })
+                        .collect();
+                    while !jobs.is_empty() {
+                        let rest = jobs.split_off(jobs.len().min(2 * r.agents_per_batch()));
+                        r.render_images(&w, jobs);
+                        jobs = rest;
                     }
                 }
                 best = best.min(t.elapsed().as_secs_f64() / f64::from(cycles));

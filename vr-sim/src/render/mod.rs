@@ -14,10 +14,15 @@
 //! every rectangle covering the pixel in collection order gives (the nearest hit; on equal
 //! depth, the first object in the world's order, objects before bodies).
 //!
-//! Rows are shaded in parallel on a rayon pool when it has more than one thread and the
-//! image has at least [`MIN_POOL_PIXELS`] pixels (a smaller one costs less than waking the
-//! pool; with many agent processes on few cores, far less). Every pixel is a pure function
-//! of the world, so the images do not depend on the number of threads.
+//! With a rayon pool of more than one thread, the images of a batch of agents
+//! ([`Renderer::render_agents`]) are shaded in parallel, one image per task, when they have
+//! at least [`MIN_POOL_PIXELS`] pixels together; within an image, rows are shaded in
+//! parallel when it has that many alone. Smaller work costs less than waking the pool
+//! (with many agent processes on few cores, far less), so it stays on the calling thread.
+//! Every pixel is a pure function of the world, so the images do not depend on the number
+//! of threads or on how the images are batched.
+
+use std::sync::{Mutex, PoisonError};
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -135,6 +140,16 @@ struct View<'a> {
 #[derive(Debug)]
 pub struct Renderer {
     pool: Option<rayon::ThreadPool>,
+    /// The calling thread's scratch.
+    scratch: Scratch,
+    /// Each pool thread's scratch, by [`rayon::current_thread_index`] (a lock is only
+    /// ever taken by its own thread, so it never waits).
+    workers: Vec<Mutex<Scratch>>,
+}
+
+/// What one image's set-up fills in, kept between images so that it does not allocate.
+#[derive(Debug, Default)]
+struct Scratch {
     prims: Vec<Prim>,
     tiles: Tiles,
 }
@@ -165,10 +180,13 @@ impl Renderer {
                     .map_err(|error| RendererCreateError::Pool { threads, error })?,
             )
         };
+        let workers = pool
+            .as_ref()
+            .map_or(0, rayon::ThreadPool::current_num_threads);
         Ok(Self {
             pool,
-            prims: Vec::with_capacity(64),
-            tiles: Tiles::default(),
+            scratch: Scratch::default(),
+            workers: (0..workers).map(|_| Mutex::default()).collect(),
         })
     }
 
@@ -179,19 +197,84 @@ impl Renderer {
             .map_or(1, rayon::ThreadPool::current_num_threads)
     }
 
+    /// How many agents' frames to render in one [`Renderer::render_agents`] call: enough
+    /// images to keep every thread busy at once, few enough that the first frames are
+    /// published (and their agents start) while the rest are rendered.
+    pub fn agents_per_batch(&self) -> usize {
+        match self.threads() {
+            1 => 1,
+            n => 8 * n,
+        }
+    }
+
     /// Renders every image of agent `id`'s loaned frame in place.
     pub fn render_agent(&mut self, world: &World, id: u32, images: ImagesMut<'_>) {
-        let Some(body) = world.bodies().iter().find(|b| b.id == id) else {
-            return;
-        };
-        for image in images {
-            self.render_image(world, body, image);
+        self.render_agents(world, [(id, images)]);
+    }
+
+    /// Renders every image of several agents' loaned frames in place: one task per image
+    /// on the pool when the images have at least [`MIN_POOL_PIXELS`] pixels together,
+    /// else one after the other on the calling thread (the pixels are the same either
+    /// way). An id that is not in the world is skipped.
+    pub fn render_agents<'a>(
+        &mut self,
+        world: &World,
+        agents: impl IntoIterator<Item = (u32, ImagesMut<'a>)>,
+    ) {
+        let mut jobs: Vec<(&Body, ImageMut<'a>)> = Vec::new();
+        for (id, images) in agents {
+            if let Some(body) = world.bodies().iter().find(|b| b.id == id) {
+                jobs.extend(images.map(|image| (body, image)));
+            }
+        }
+        self.render_images(world, jobs);
+    }
+
+    /// Renders images of bodies' cameras in place, like [`Renderer::render_agents`] (in
+    /// parallel when they have at least [`MIN_POOL_PIXELS`] pixels together).
+    pub fn render_images(&mut self, world: &World, jobs: Vec<(&Body, ImageMut<'_>)>) {
+        let pixels: u64 = jobs
+            .iter()
+            .map(|(_, i)| u64::from(i.desc.width_px) * u64::from(i.desc.height_px))
+            .sum();
+        match &self.pool {
+            Some(pool) if jobs.len() > 1 && pixels >= u64::from(MIN_POOL_PIXELS) => {
+                let workers = &self.workers;
+                pool.install(|| {
+                    jobs.into_par_iter().for_each(|(body, image)| {
+                        // Always a pool thread here; the index is in range.
+                        let i = rayon::current_thread_index().unwrap_or(0) % workers.len();
+                        let mut scratch = workers[i].lock().unwrap_or_else(PoisonError::into_inner);
+                        scratch.render_image(world, body, image, Some(pool));
+                    });
+                });
+            }
+            pool => {
+                for (body, image) in jobs {
+                    self.scratch.render_image(world, body, image, pool.as_ref());
+                }
+            }
         }
     }
 
     /// Renders one image of `body`'s cameras in place (the camera is chosen by the image's
     /// camera index; its name selects the viewpoint: `left`, `right`, else the head).
     pub fn render_image(&mut self, world: &World, body: &Body, image: ImageMut<'_>) {
+        self.scratch
+            .render_image(world, body, image, self.pool.as_ref());
+    }
+}
+
+impl Scratch {
+    /// Renders one image (see [`Renderer::render_image`]), its rows on `pool` if it is
+    /// large enough.
+    fn render_image(
+        &mut self,
+        world: &World,
+        body: &Body,
+        image: ImageMut<'_>,
+        pool: Option<&rayon::ThreadPool>,
+    ) {
         let desc = image.desc;
         if desc.width_px == 0 || desc.height_px == 0 {
             return;
@@ -201,7 +284,7 @@ impl Renderer {
         self.bin_prims(&cam);
         let view = view_of(world, cam, &self.prims, &self.tiles);
         let format = desc.pixel_format().unwrap_or_default();
-        draw(&view, &desc, format, image.data, self.pool.as_ref());
+        draw(&view, &desc, format, image.data, pool);
     }
 
     /// The objects and bodies (not `me`'s) whose [`clipped_rect`] overlaps the image, in
@@ -209,7 +292,14 @@ impl Renderer {
     fn collect_prims(&mut self, world: &World, me: &Body, cam: &Camera) {
         self.prims.clear();
         let prims = &mut self.prims;
-        let mut push = |kind: PrimKind, color: [u8; 3], min: Vec3, max: Vec3| {
+        let frustum = Frustum::new(cam);
+        // `ball` (centre, radius) holds the primitive: when no pixel's ray can reach it,
+        // the primitive is left out before its rectangle is computed (it would never be
+        // hit, so leaving it out changes no pixel, nor the order of the others).
+        let mut push = |kind: PrimKind, color: [u8; 3], min: Vec3, max: Vec3, ball: (Vec3, f32)| {
+            if frustum.misses_ball(ball.0, ball.1) {
+                return;
+            }
             if let Some(((x0, x1, y0, y1), near)) = clipped_rect(cam, min, max) {
                 let index = prims.len() as u32;
                 prims.push(Prim {
@@ -226,17 +316,25 @@ impl Renderer {
         };
         for o in world.objects() {
             let (min, max) = o.bounds();
-            let kind = match o.shape {
-                Shape::Sphere { radius } => PrimKind::Sphere {
-                    center: o.position,
-                    radius,
-                },
-                Shape::Box { .. } => PrimKind::Box { min, max },
+            let (kind, ball) = match o.shape {
+                Shape::Sphere { radius } => (
+                    PrimKind::Sphere {
+                        center: o.position,
+                        radius,
+                    },
+                    (o.position, radius),
+                ),
+                Shape::Box { .. } => (
+                    PrimKind::Box { min, max },
+                    (0.5 * (min + max), 0.5 * (max - min).length()),
+                ),
             };
-            push(kind, o.color, min, max);
+            push(kind, o.color, min, max, ball);
         }
         let cfg = world.config();
         let (r, h) = (cfg.agent_radius, cfg.body_height);
+        let body_ball = Vec3::new(0.0, 0.5 * h, 0.0);
+        let body_ball_radius = (r * r + 0.25 * h * h).sqrt();
         for b in world.bodies() {
             if b.id == me.id {
                 continue;
@@ -251,7 +349,13 @@ impl Renderer {
                 b.position - Vec3::new(r, 0.0, r),
                 b.position + Vec3::new(r, h, r),
             );
-            push(kind, color, min, max);
+            push(
+                kind,
+                color,
+                min,
+                max,
+                (b.position + body_ball, body_ball_radius),
+            );
         }
     }
 
@@ -352,6 +456,42 @@ fn view_of<'a>(world: &World, cam: Camera, prims: &'a [Prim], tiles: &'a Tiles) 
         ceiling: rgb(cfg.ceiling_color),
         prims,
         tiles,
+    }
+}
+
+/// The side planes of a camera's view and its near plane: a cheap first test of whether
+/// a primitive can show up in the image at all.
+#[derive(Debug, Clone, Copy)]
+struct Frustum {
+    origin: Vec3,
+    forward: Vec3,
+    /// Unit normals, pointing out of the view, of the planes through the image's left,
+    /// right, top and bottom edges (every pixel's ray is strictly inside).
+    sides: [Vec3; 4],
+}
+
+impl Frustum {
+    fn new(cam: &Camera) -> Self {
+        let side = |out: Vec3, tan_half: f32| (out - tan_half * cam.forward).normalize_or_zero();
+        Self {
+            origin: cam.origin,
+            forward: cam.forward,
+            sides: [
+                side(-cam.right, cam.tan_half_h),
+                side(cam.right, cam.tan_half_h),
+                side(cam.up, cam.tan_half_v),
+                side(-cam.up, cam.tan_half_v),
+            ],
+        }
+    }
+
+    /// Whether no pixel's ray can hit anything inside the ball: it lies wholly behind the
+    /// near plane or wholly outside a side plane. The radius is widened far beyond the
+    /// rounding error, so a ball that only touches the view is kept.
+    fn misses_ball(&self, center: Vec3, radius: f32) -> bool {
+        let p = center - self.origin;
+        let r = radius * (1.0 + 1e-3) + 1e-3;
+        p.dot(self.forward) + r < NEAR_M || self.sides.iter().any(|n| p.dot(*n) > r)
     }
 }
 

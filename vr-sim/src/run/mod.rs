@@ -323,20 +323,22 @@ impl Run {
     /// number).
     fn frame1(&mut self) -> anyhow::Result<bool> {
         let mut notable = false;
+        let per_batch = self.renderer.agents_per_batch();
+        let mut batch = Vec::with_capacity(per_batch);
         for i in 0..self.roster.ids.len() {
-            let id = self.roster.ids[i];
             self.roster.sensed[i] = false;
             if !self.note_connection(i)? {
                 continue;
             }
             self.roster.sensed[i] = true;
-            let cycle = self.render_and_publish(id)?;
-            if self.roster.evicted[i] && !self.host.is_evicted(id) && !self.host.has_left(id) {
-                self.roster.evicted[i] = false;
-                notable = true;
-                self.events
-                    .emit(Event::AgentRejoined { agent: id, cycle })?;
+            batch.push(i);
+            if batch.len() == per_batch {
+                notable |= self.render_and_publish(&batch)?;
+                batch.clear();
             }
+        }
+        if !batch.is_empty() {
+            notable |= self.render_and_publish(&batch)?;
         }
         self.host.start()?;
         Ok(notable)
@@ -366,32 +368,52 @@ impl Run {
         Ok(now_connected)
     }
 
-    /// Writes agent `id`'s sensors and renders its images into a loaned frame (dumping
-    /// them as PNG every `--dump-frames` cycles), then publishes it. Returns the cycle.
-    fn render_and_publish(&mut self, id: u32) -> anyhow::Result<u64> {
-        let mut frame = self.host.loan_frame(id)?;
-        let cycle = frame.header().cycle;
+    /// Writes the sensors of agents `ids[i]` (`i` in `batch`) and renders their images
+    /// into loaned frames (in parallel, see [`Renderer::render_agents`]), dumping them as
+    /// PNG every `--dump-frames` cycles, then publishes them in order. Returns whether an
+    /// evicted agent rejoined.
+    fn render_and_publish(&mut self, batch: &[usize]) -> anyhow::Result<bool> {
+        let mut frames = Vec::with_capacity(batch.len());
+        for &i in batch {
+            frames.push((i, self.host.loan_frame(self.roster.ids[i])?));
+        }
         let t = Instant::now();
-        let (header, images) = frame.parts_mut();
-        self.world.write_sensors(id, header);
-        self.renderer.render_agent(&self.world, id, images);
+        let mut images = Vec::with_capacity(frames.len());
+        for (i, frame) in &mut frames {
+            let id = self.roster.ids[*i];
+            let (header, frame_images) = frame.parts_mut();
+            self.world.write_sensors(id, header);
+            images.push((id, frame_images));
+        }
+        self.renderer.render_agents(&self.world, images);
         self.render_time += t.elapsed();
-        if let Some((dir, every)) = &self.opts.dump_frames
-            && cycle % every == 0
-        {
-            for image in frame.images_mut() {
-                dump_image(dir, cycle, id, &image)?;
+        let mut rejoined = false;
+        for (i, mut frame) in frames {
+            let id = self.roster.ids[i];
+            let cycle = frame.header().cycle;
+            if let Some((dir, every)) = &self.opts.dump_frames
+                && cycle % every == 0
+            {
+                for image in frame.images_mut() {
+                    dump_image(dir, cycle, id, &image)?;
+                }
+            }
+            if let Some(log) = &mut self.rerun
+                && log.wants_images(cycle)
+            {
+                for image in frame.images_mut() {
+                    log.log_image(cycle, id, &image)?;
+                }
+            }
+            self.host.publish(frame)?;
+            if self.roster.evicted[i] && !self.host.is_evicted(id) && !self.host.has_left(id) {
+                self.roster.evicted[i] = false;
+                rejoined = true;
+                self.events
+                    .emit(Event::AgentRejoined { agent: id, cycle })?;
             }
         }
-        if let Some(log) = &mut self.rerun
-            && log.wants_images(cycle)
-        {
-            for image in frame.images_mut() {
-                log.log_image(cycle, id, &image)?;
-            }
-        }
-        self.host.publish(frame)?;
-        Ok(cycle)
+        Ok(rejoined)
     }
 
     /// Frame 2: collect, apply in (agent id, order sent) order, report, advance the world,
