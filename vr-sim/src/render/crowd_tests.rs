@@ -231,7 +231,8 @@ fn hash(frames: &[Vec<u8>]) -> String {
 /// The hash of every image of [`crowd_world`] (64 agents) and [`crowd_world_moved`] (64
 /// and 5 agents), rendered by the renderer of commit "render: a pinned hash of a crowded
 /// scene" (the brute-force loop of [`super::reference`]), on 1 and on 2 threads, image by
-/// image and in one batch (on 2 threads: images in parallel).
+/// image and in one batch (on 2 threads: images in parallel), with the row shader for
+/// this CPU (AVX2 where it has it) and with the baseline one.
 ///
 /// A bit-exact check: it assumes IEEE f32 arithmetic without fused multiply-adds and the
 /// platform's `sin`/`cos`/`tan` of x86_64 Linux (glibc), as CI has. If it fails elsewhere
@@ -240,8 +241,11 @@ fn hash(frames: &[Vec<u8>]) -> String {
 #[test]
 fn crowd_frames_hash_is_unchanged() {
     let worlds = [crowd_world(64), crowd_world_moved(64), crowd_world_moved(5)];
-    for threads in [1, 2] {
+    for (threads, baseline) in [(1, false), (2, false), (1, true), (2, true)] {
         let mut r = Renderer::new(threads).unwrap();
+        if baseline {
+            r.use_baseline_isa();
+        }
         let (mut all, mut batched) = (Vec::new(), Vec::new());
         for w in &worlds {
             all.extend(crowd_frames(w, |w, id, image| {
@@ -255,7 +259,8 @@ fn crowd_frames_hash_is_unchanged() {
             assert_eq!(
                 hash(frames),
                 "35e8de9aabc1e72acc5a6e362cf7022d6f6d72f5f69f63b0443ef75c7c9aac23",
-                "{threads} thread(s), {how}: the crowd's frames changed"
+                "{threads} thread(s), {how}, baseline instructions only: {baseline}: the \
+                 crowd's frames changed"
             );
         }
     }

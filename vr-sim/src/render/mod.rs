@@ -145,6 +145,8 @@ pub struct Renderer {
     /// Each pool thread's scratch, by [`rayon::current_thread_index`] (a lock is only
     /// ever taken by its own thread, so it never waits).
     workers: Vec<Mutex<Scratch>>,
+    /// The row shader for this CPU ([`row_shader`]).
+    shader: RowShader,
 }
 
 /// What one image's set-up fills in, kept between images so that it does not allocate.
@@ -187,6 +189,7 @@ impl Renderer {
             pool,
             scratch: Scratch::default(),
             workers: (0..workers).map(|_| Mutex::default()).collect(),
+            shader: row_shader(),
         })
     }
 
@@ -205,6 +208,13 @@ impl Renderer {
             1 => 1,
             n => 8 * n,
         }
+    }
+
+    /// Shades with the baseline instruction set even where the CPU has more (to test
+    /// that both give the same bytes).
+    #[cfg(test)]
+    pub(crate) fn use_baseline_isa(&mut self) {
+        self.shader = shade_row;
     }
 
     /// Renders every image of agent `id`'s loaned frame in place.
@@ -239,19 +249,20 @@ impl Renderer {
             .sum();
         match &self.pool {
             Some(pool) if jobs.len() > 1 && pixels >= u64::from(MIN_POOL_PIXELS) => {
-                let workers = &self.workers;
+                let (workers, shader) = (&self.workers, self.shader);
                 pool.install(|| {
                     jobs.into_par_iter().for_each(|(body, image)| {
                         // Always a pool thread here; the index is in range.
                         let i = rayon::current_thread_index().unwrap_or(0) % workers.len();
                         let mut scratch = workers[i].lock().unwrap_or_else(PoisonError::into_inner);
-                        scratch.render_image(world, body, image, Some(pool));
+                        scratch.render_image(world, body, image, Some(pool), shader);
                     });
                 });
             }
             pool => {
                 for (body, image) in jobs {
-                    self.scratch.render_image(world, body, image, pool.as_ref());
+                    self.scratch
+                        .render_image(world, body, image, pool.as_ref(), self.shader);
                 }
             }
         }
@@ -261,7 +272,7 @@ impl Renderer {
     /// camera index; its name selects the viewpoint: `left`, `right`, else the head).
     pub fn render_image(&mut self, world: &World, body: &Body, image: ImageMut<'_>) {
         self.scratch
-            .render_image(world, body, image, self.pool.as_ref());
+            .render_image(world, body, image, self.pool.as_ref(), self.shader);
     }
 }
 
@@ -274,6 +285,7 @@ impl Scratch {
         body: &Body,
         image: ImageMut<'_>,
         pool: Option<&rayon::ThreadPool>,
+        shader: RowShader,
     ) {
         let desc = image.desc;
         if desc.width_px == 0 || desc.height_px == 0 {
@@ -284,7 +296,7 @@ impl Scratch {
         self.bin_prims(&cam);
         let view = view_of(world, cam, &self.prims, &self.tiles);
         let format = desc.pixel_format().unwrap_or_default();
-        draw(&view, &desc, format, image.data, pool);
+        draw(&view, &desc, format, image.data, pool, shader);
     }
 
     /// The objects and bodies (not `me`'s) whose [`clipped_rect`] overlaps the image, in
@@ -586,10 +598,10 @@ fn draw(
     format: PixelFormat,
     data: &mut [u8],
     pool: Option<&rayon::ThreadPool>,
+    shade_row: RowShader,
 ) {
     let stride = desc.stride_bytes as usize;
     let rows = data.chunks_exact_mut(stride).take(desc.height_px as usize);
-    let shade_row = row_shader();
     match pool {
         Some(pool) if desc.width_px * desc.height_px >= MIN_POOL_PIXELS => {
             let height = desc.height_px as usize;
