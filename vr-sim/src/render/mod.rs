@@ -103,8 +103,9 @@ struct Tiles {
     cols: u32,
     start: Vec<u32>,
     items: Vec<Entry>,
-    /// Scratch: the primitives' indices by nearest depth.
-    order: Vec<u32>,
+    /// Scratch: the primitives by nearest depth (sort keys: `f32::total_cmp` order of
+    /// the depth in the high half, the index in the low half).
+    order: Vec<u64>,
 }
 
 /// A primitive in a tile's list: what a pixel checks before it loads the primitive.
@@ -375,12 +376,14 @@ impl Scratch {
     fn bin_prims(&mut self, cam: &Camera) {
         let prims = &self.prims;
         let t = &mut self.tiles;
+        // Sort keys: nearest depth (in `f32::total_cmp` order) above the index.
         t.order.clear();
-        t.order.extend(0..prims.len() as u32);
-        t.order.sort_unstable_by(|&a, &b| {
-            let (a, b) = (&prims[a as usize], &prims[b as usize]);
-            a.near.total_cmp(&b.near).then(a.index.cmp(&b.index))
-        });
+        t.order.extend(prims.iter().map(|p| {
+            let bits = p.near.to_bits() as i32;
+            let ordered = (bits ^ (((bits >> 31) as u32) >> 1) as i32) as u32 ^ 0x8000_0000;
+            (u64::from(ordered) << 32) | u64::from(p.index)
+        }));
+        t.order.sort_unstable();
         t.size = 8;
         const _: () = assert!(8 % LANES == 0, "a packet must not straddle two tiles");
         while cam.width_px.div_ceil(t.size) * cam.height_px.div_ceil(t.size) > MAX_TILES {
@@ -408,8 +411,8 @@ impl Scratch {
         t.items.resize(t.start[n] as usize, Entry::default());
         // `start[i]` is the fill cursor of tile i; afterwards it is tile i + 1's start,
         // so shift back.
-        for &k in &t.order {
-            let p = &prims[k as usize];
+        for &key in &t.order {
+            let p = &prims[key as u32 as usize];
             // Rectangles are clamped to the image, whose sides are at most 8192 pixels.
             let entry = Entry {
                 near: p.near,
