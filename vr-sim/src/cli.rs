@@ -80,7 +80,8 @@ pub struct ReplayArgs {
     /// Write a top-down PNG map of the replayed trajectories (as `run --map`).
     #[arg(long, value_name = "FILE.png")]
     pub map: Option<PathBuf>,
-    /// Threads shading image rows (1: the calling thread only; 0: one per core).
+    /// Render threads, shading the rows of images of 4,096 pixels or more (1: the calling
+    /// thread only; 0: one per core).
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub render_threads: usize,
 }
@@ -148,7 +149,8 @@ pub struct DemoArgs {
     #[arg(long, value_name = "NAME", default_value = "wander",
           value_parser = ["wander", "seek", "idle", "circle"])]
     pub policy: String,
-    /// Threads shading image rows (1: the host thread only; 0: one per core).
+    /// Render threads: the images of up to 8 agents per thread at once, and the rows of
+    /// large images (1: the host thread only; 0: one per core).
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub render_threads: usize,
 }
@@ -205,8 +207,9 @@ pub struct RunArgs {
     #[arg(long, value_name = "K", default_value_t = 1, requires = "dump_frames",
           value_parser = clap::value_parser!(u64).range(1..))]
     pub every: u64,
-    /// Threads shading image rows (1: the host thread only; 0: one per core). The images
-    /// do not depend on it.
+    /// Render threads: the images of up to 8 agents per thread at once (rendered, then
+    /// published in agent order), and the rows of large images (1: the host thread only;
+    /// 0: one per core). The images do not depend on it.
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub render_threads: usize,
     /// Show the run live in a Rerun viewer: the one listening on port 9876, else a new
