@@ -97,6 +97,8 @@ struct Run {
     opts: RunOptions,
     events: Events,
     roster: Roster,
+    /// Scratch of [`Run::frame1`]: the roster indices of the agents rendered together.
+    batch: Vec<usize>,
     commands: CommandTally,
     /// Every agent's pose and status after every cycle.
     hasher: blake3::Hasher,
@@ -227,6 +229,7 @@ impl Run {
                 sensed: vec![false; agent_count],
                 evicted: vec![false; agent_count],
             },
+            batch: Vec::with_capacity(agent_count),
             commands: CommandTally {
                 applied: 0,
                 rejected: 0,
@@ -322,15 +325,18 @@ impl Run {
     /// start. Returns whether an agent rejoined (the cycle is then reported whatever its
     /// number).
     fn frame1(&mut self) -> anyhow::Result<bool> {
+        // Connections first, then the frames: the events come in the same order
+        // whatever the batch size (the number of render threads).
+        for i in 0..self.roster.ids.len() {
+            self.roster.sensed[i] = self.note_connection(i)?;
+        }
         let mut notable = false;
         let per_batch = self.renderer.agents_per_batch();
-        let mut batch = Vec::with_capacity(per_batch);
+        let mut batch = std::mem::take(&mut self.batch);
         for i in 0..self.roster.ids.len() {
-            self.roster.sensed[i] = false;
-            if !self.note_connection(i)? {
+            if !self.roster.sensed[i] {
                 continue;
             }
-            self.roster.sensed[i] = true;
             batch.push(i);
             if batch.len() == per_batch {
                 notable |= self.render_and_publish(&batch)?;
@@ -339,7 +345,9 @@ impl Run {
         }
         if !batch.is_empty() {
             notable |= self.render_and_publish(&batch)?;
+            batch.clear();
         }
+        self.batch = batch;
         self.host.start()?;
         Ok(notable)
     }
@@ -551,6 +559,7 @@ impl Run {
             opts,
             events: _,
             roster,
+            batch: _,
             commands,
             hasher,
             render_time,
