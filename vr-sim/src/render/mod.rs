@@ -103,9 +103,8 @@ struct Tiles {
     cols: u32,
     start: Vec<u32>,
     items: Vec<Entry>,
-    /// Scratch: the primitives by nearest depth (sort keys: `f32::total_cmp` order of
-    /// the depth in the high half, the index in the low half).
-    order: Vec<u64>,
+    /// Scratch: the primitives' nearest depths and indices, sorted.
+    order: Vec<(f32, u32)>,
 }
 
 /// A primitive in a tile's list: what a pixel checks before it loads the primitive.
@@ -376,14 +375,10 @@ impl Scratch {
     fn bin_prims(&mut self, cam: &Camera) {
         let prims = &self.prims;
         let t = &mut self.tiles;
-        // Sort keys: nearest depth (in `f32::total_cmp` order) above the index.
         t.order.clear();
-        t.order.extend(prims.iter().map(|p| {
-            let bits = p.near.to_bits() as i32;
-            let ordered = (bits ^ (((bits >> 31) as u32) >> 1) as i32) as u32 ^ 0x8000_0000;
-            (u64::from(ordered) << 32) | u64::from(p.index)
-        }));
-        t.order.sort_unstable();
+        t.order.extend(prims.iter().map(|p| (p.near, p.index)));
+        t.order
+            .sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         t.size = 8;
         const _: () = assert!(8 % LANES == 0, "a packet must not straddle two tiles");
         while cam.width_px.div_ceil(t.size) * cam.height_px.div_ceil(t.size) > MAX_TILES {
@@ -411,8 +406,8 @@ impl Scratch {
         t.items.resize(t.start[n] as usize, Entry::default());
         // `start[i]` is the fill cursor of tile i; afterwards it is tile i + 1's start,
         // so shift back.
-        for &key in &t.order {
-            let p = &prims[key as u32 as usize];
+        for &(_, k) in &t.order {
+            let p = &prims[k as usize];
             // Rectangles are clamped to the image, whose sides are at most 8192 pixels.
             let entry = Entry {
                 near: p.near,
