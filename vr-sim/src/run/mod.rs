@@ -386,14 +386,15 @@ impl Run {
             frames.push((i, self.host.loan_frame(self.roster.ids[i])?));
         }
         let t = Instant::now();
-        let mut images = Vec::with_capacity(frames.len());
         for (i, frame) in &mut frames {
-            let id = self.roster.ids[*i];
-            let (header, frame_images) = frame.parts_mut();
-            self.world.write_sensors(id, header);
-            images.push((id, frame_images));
+            self.world
+                .write_sensors(self.roster.ids[*i], frame.header_mut());
         }
-        self.renderer.render_agents(&self.world, images);
+        let ids = &self.roster.ids;
+        self.renderer.render_agents(
+            &self.world,
+            frames.iter_mut().map(|(i, f)| (ids[*i], f.images_mut())),
+        );
         self.render_time += t.elapsed();
         let mut rejoined = false;
         for (i, mut frame) in frames {
