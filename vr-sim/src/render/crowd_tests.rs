@@ -112,7 +112,12 @@ fn crowd_world_with(agents: u32, cameras: &[Cam]) -> World {
 /// walked towards the centre (bodies close to other cameras, partly behind their near
 /// planes).
 pub(super) fn crowd_world_moved(agents: u32) -> World {
-    let mut w = crowd_world(agents);
+    crowd_world_moved_with(agents, &CAMERAS)
+}
+
+/// [`crowd_world_moved`] with other cameras.
+fn crowd_world_moved_with(agents: u32, cameras: &[Cam]) -> World {
+    let mut w = crowd_world_with(agents, cameras);
     for id in 0..agents {
         let command = match id % 4 {
             0 => Command::Turn {
@@ -196,11 +201,17 @@ fn frames_of(
 /// Every agent's images of [`CAMERAS`], rendered in one [`Renderer::render_images`] batch
 /// (in parallel when the renderer has a pool).
 fn crowd_frames_batched(w: &World, r: &mut Renderer) -> Vec<Vec<u8>> {
+    frames_batched(w, &CAMERAS, r)
+}
+
+/// Every agent's images of `cameras` (the world's), rendered in one
+/// [`Renderer::render_images`] batch.
+fn frames_batched(w: &World, cameras: &[Cam], r: &mut Renderer) -> Vec<Vec<u8>> {
     let descs: Vec<_> =
         w.bodies()
             .iter()
             .flat_map(|body| {
-                CAMERAS.iter().enumerate().map(
+                cameras.iter().enumerate().map(
                     move |(camera, &(name, format, width, height, _, _))| {
                         (body, desc(camera as u32, name, format, width, height))
                     },
@@ -262,6 +273,67 @@ fn crowd_frames_hash_is_unchanged() {
                 "{threads} thread(s), {how}, baseline instructions only: {baseline}: the \
                  crowd's frames changed"
             );
+        }
+    }
+}
+
+/// An agent's two eyes looking the same way are rendered with one set-up (the primitives
+/// listed once, for both): every byte is still what the brute-force loop gives, for the
+/// crowd as it starts (every agent's eyes pair up) and after moving (some agents turned
+/// their eyes apart: those render each eye alone), small and large images (bodies close
+/// to the eyes, partly behind their near planes), on 1 and 2 threads.
+#[test]
+fn eyes_sharing_their_set_up_give_the_brute_force_bytes() {
+    let small: [Cam; 2] = [
+        ("left", PixelFormat::Rgb8, 32, 24, 120.0, 90.0),
+        ("right", PixelFormat::Rgb8, 32, 24, 120.0, 90.0),
+    ];
+    let large: [Cam; 2] = [
+        ("left", PixelFormat::Depth32f, 160, 120, 100.0, 75.0),
+        ("right", PixelFormat::Depth32f, 160, 120, 100.0, 75.0),
+    ];
+    let worlds = [
+        (crowd_world_with(64, &small), &small, 64),
+        (crowd_world_moved_with(64, &small), &small, 48),
+        (crowd_world_with(16, &large), &large, 16),
+        (crowd_world_moved_with(16, &large), &large, 12),
+    ];
+    for (k, (w, cams, pairs)) in worlds.iter().enumerate() {
+        let want = frames_of(w, &cams[..], |w, id, image| {
+            let body = w.bodies().iter().find(|b| b.id == id).unwrap();
+            super::reference::render_image(w, body, image);
+        });
+        // How many images were grouped: the test must exercise the shared set-up.
+        let mut bufs: Vec<Vec<u8>> = want.iter().map(|f| vec![0; f.len()]).collect();
+        let jobs: Vec<_> = bufs
+            .iter_mut()
+            .enumerate()
+            .map(|(i, buf)| {
+                let (body, c) = (&w.bodies()[i / 2], &cams[i % 2]);
+                let desc = desc((i % 2) as u32, c.0, c.1, c.2, c.3);
+                (
+                    body,
+                    ImageMut {
+                        desc,
+                        data: buf.as_mut_slice(),
+                    },
+                )
+            })
+            .collect();
+        let groups = super::group_images(w, jobs);
+        let paired = groups.iter().filter(|g| g.second.is_some()).count();
+        assert_eq!(paired, *pairs, "world {k}: eye pairs sharing a set-up");
+        for threads in [1, 2] {
+            let mut r = Renderer::new(threads).unwrap();
+            let got = frames_batched(w, &cams[..], &mut r);
+            for (i, (g, e)) in got.iter().zip(&want).enumerate() {
+                let differ = g.iter().zip(e).filter(|(a, b)| a != b).count();
+                assert!(
+                    differ == 0,
+                    "world {k}, image {i} ({threads} thread(s)): {differ} bytes differ from \
+                     the brute-force loop"
+                );
+            }
         }
     }
 }
@@ -347,7 +419,7 @@ fn crowd_render_speed() {
         for body in w.bodies() {
             for spec in body.cameras() {
                 let cam = w.camera(body, spec);
-                r.collect_prims(&w, body, &cam);
+                r.collect_prims(&w, body, &cam, Vec3::ZERO);
                 r.bin_prims(&cam);
                 prims += r.prims.len();
                 let (room_min, room_max) = w.room_bounds();
@@ -386,7 +458,7 @@ fn crowd_render_speed() {
                 for body in w.bodies() {
                     for spec in body.cameras() {
                         let cam = w.camera(body, spec);
-                        r.collect_prims(&w, body, &cam);
+                        r.collect_prims(&w, body, &cam, Vec3::ZERO);
                         r.bin_prims(&cam);
                     }
                 }

@@ -14,10 +14,14 @@
 //! every rectangle covering the pixel in collection order gives (the nearest hit; on equal
 //! depth, the first object in the world's order, objects before bodies).
 //!
+//! An agent's two eyes, when they look the same way with the same image size and field of
+//! view, share that set-up: the list is made once, for boxes stretched by the distance
+//! between the eyes, and both images are traced from it (see `Group`).
+//!
 //! With a rayon pool of more than one thread, the images of a batch of agents
-//! ([`Renderer::render_agents`]) are shaded in parallel, one image per task, when they have
-//! at least [`MIN_POOL_PIXELS`] pixels together; within an image, rows are shaded in
-//! parallel when it has that many alone. Smaller work costs less than waking the pool
+//! ([`Renderer::render_agents`]) are shaded in parallel, one image (or eye pair) per task,
+//! when they have at least [`MIN_POOL_PIXELS`] pixels together; within an image, rows are
+//! shaded in parallel when it has that many alone. Smaller work costs less than waking the pool
 //! (with many agent processes on few cores, far less), so it stays on the calling thread.
 //! Every pixel is a pure function of the world, so the images do not depend on the number
 //! of threads or on how the images are batched.
@@ -223,9 +227,9 @@ impl Renderer {
     }
 
     /// Renders every image of several agents' loaned frames in place: one task per image
-    /// on the pool when the images have at least [`MIN_POOL_PIXELS`] pixels together,
-    /// else one after the other on the calling thread (the pixels are the same either
-    /// way). An id that is not in the world is skipped.
+    /// (or eye pair) on the pool when the images have at least [`MIN_POOL_PIXELS`] pixels
+    /// together, else one after the other on the calling thread (the pixels are the same
+    /// either way). An id that is not in the world is skipped.
     pub fn render_agents<'a>(
         &mut self,
         world: &World,
@@ -241,28 +245,32 @@ impl Renderer {
     }
 
     /// Renders images of bodies' cameras in place, like [`Renderer::render_agents`] (in
-    /// parallel when they have at least [`MIN_POOL_PIXELS`] pixels together).
+    /// parallel when they have at least [`MIN_POOL_PIXELS`] pixels together). Two
+    /// neighbouring images of one body through cameras that differ only in their position
+    /// (an agent's two eyes looking the same way) share their set-up ([`Group`]).
     pub fn render_images(&mut self, world: &World, jobs: Vec<(&Body, ImageMut<'_>)>) {
         let pixels: u64 = jobs
             .iter()
             .map(|(_, i)| u64::from(i.desc.width_px) * u64::from(i.desc.height_px))
             .sum();
+        let parallel = jobs.len() > 1 && pixels >= u64::from(MIN_POOL_PIXELS);
+        let groups = group_images(world, jobs);
         match &self.pool {
-            Some(pool) if jobs.len() > 1 && pixels >= u64::from(MIN_POOL_PIXELS) => {
+            Some(pool) if parallel => {
                 let (workers, shader) = (&self.workers, self.shader);
                 pool.install(|| {
-                    jobs.into_par_iter().for_each(|(body, image)| {
+                    groups.into_par_iter().for_each(|group| {
                         // Always a pool thread here; the index is in range.
                         let i = rayon::current_thread_index().unwrap_or(0) % workers.len();
                         let mut scratch = workers[i].lock().unwrap_or_else(PoisonError::into_inner);
-                        scratch.render_image(world, body, image, Some(pool), shader);
+                        scratch.render_group(world, group, Some(pool), shader);
                     });
                 });
             }
             pool => {
-                for (body, image) in jobs {
+                for group in groups {
                     self.scratch
-                        .render_image(world, body, image, pool.as_ref(), self.shader);
+                        .render_group(world, group, pool.as_ref(), self.shader);
                 }
             }
         }
@@ -271,47 +279,113 @@ impl Renderer {
     /// Renders one image of `body`'s cameras in place (the camera is chosen by the image's
     /// camera index; its name selects the viewpoint: `left`, `right`, else the head).
     pub fn render_image(&mut self, world: &World, body: &Body, image: ImageMut<'_>) {
+        let group = Group {
+            body,
+            first: (camera_of(world, body, &image.desc), image),
+            second: None,
+        };
         self.scratch
-            .render_image(world, body, image, self.pool.as_ref(), self.shader);
+            .render_group(world, group, self.pool.as_ref(), self.shader);
     }
 }
 
+/// One image, or two of one body whose cameras differ only in their origin, rendered
+/// with one set-up: the primitives are collected and listed for the first camera with
+/// their boxes stretched by the offset between the two origins, so that each rectangle
+/// and nearest depth also bounds what the second camera sees (the second camera sees a
+/// box where the first sees it moved back by the offset). Each image is still traced
+/// from its own origin, so its pixels are what rendering it alone gives.
+struct Group<'b, 'i> {
+    body: &'b Body,
+    first: (Camera, ImageMut<'i>),
+    second: Option<(Camera, ImageMut<'i>)>,
+}
+
+/// Two cameras farther apart than this are not grouped (their rectangles would grow).
+const MAX_GROUP_OFFSET_M: f32 = 0.5;
+
+/// `jobs` as [`Group`]s: neighbours of one body with cameras that differ only in their
+/// origin (by less than [`MAX_GROUP_OFFSET_M`]) in pairs, the others alone.
+fn group_images<'b, 'i>(world: &World, jobs: Vec<(&'b Body, ImageMut<'i>)>) -> Vec<Group<'b, 'i>> {
+    let mut groups: Vec<Group<'b, 'i>> = Vec::with_capacity(jobs.len());
+    for (body, image) in jobs {
+        let cam = camera_of(world, body, &image.desc);
+        if let Some(last) = groups.last_mut()
+            && last.second.is_none()
+            && std::ptr::eq(last.body, body)
+            && same_view_but_origin(&last.first.0, &cam)
+            && (cam.origin - last.first.0.origin).length() < MAX_GROUP_OFFSET_M
+        {
+            last.second = Some((cam, image));
+            continue;
+        }
+        groups.push(Group {
+            body,
+            first: (cam, image),
+            second: None,
+        });
+    }
+    groups
+}
+
+/// Whether two cameras look the same way with the same image (all but the origin equal).
+fn same_view_but_origin(a: &Camera, b: &Camera) -> bool {
+    a.forward == b.forward
+        && a.right == b.right
+        && a.up == b.up
+        && a.tan_half_h == b.tan_half_h
+        && a.tan_half_v == b.tan_half_v
+        && a.width_px == b.width_px
+        && a.height_px == b.height_px
+}
+
 impl Scratch {
-    /// Renders one image (see [`Renderer::render_image`]), its rows on `pool` if it is
-    /// large enough.
-    fn render_image(
+    /// Renders a [`Group`]'s images (see [`Renderer::render_image`]), each one's rows on
+    /// `pool` if it is large enough.
+    fn render_group(
         &mut self,
         world: &World,
-        body: &Body,
-        image: ImageMut<'_>,
+        group: Group<'_, '_>,
         pool: Option<&rayon::ThreadPool>,
         shader: RowShader,
     ) {
-        let desc = image.desc;
-        if desc.width_px == 0 || desc.height_px == 0 {
+        let Group {
+            body,
+            first: (cam, image),
+            second,
+        } = group;
+        if cam.width_px == 0 || cam.height_px == 0 {
             return;
         }
-        let cam = camera_of(world, body, &desc);
-        self.collect_prims(world, body, &cam);
+        let offset = second
+            .as_ref()
+            .map_or(Vec3::ZERO, |(c, _)| c.origin - cam.origin);
+        self.collect_prims(world, body, &cam, offset);
         self.bin_prims(&cam);
-        let view = view_of(world, cam, &self.prims, &self.tiles);
-        let format = desc.pixel_format().unwrap_or_default();
-        draw(&view, &desc, format, image.data, pool, shader);
+        for (cam, image) in std::iter::once((cam, image)).chain(second) {
+            let view = view_of(world, cam, &self.prims, &self.tiles);
+            let format = image.desc.pixel_format().unwrap_or_default();
+            draw(&view, &image.desc, format, image.data, pool, shader);
+        }
     }
 
     /// The objects and bodies (not `me`'s) whose [`clipped_rect`] overlaps the image, in
-    /// collection order.
-    fn collect_prims(&mut self, world: &World, me: &Body, cam: &Camera) {
+    /// collection order: seen through `cam`, and through `cam` moved by `offset` (each
+    /// box is stretched to also hold itself moved back by `offset`, each bounding ball
+    /// grown by its length; with a zero offset both are unchanged).
+    fn collect_prims(&mut self, world: &World, me: &Body, cam: &Camera, offset: Vec3) {
         self.prims.clear();
         let prims = &mut self.prims;
         let frustum = Frustum::new(cam);
         // `ball` (centre, radius) holds the primitive: when no pixel's ray can reach it,
         // the primitive is left out before its rectangle is computed (it would never be
         // hit, so leaving it out changes no pixel, nor the order of the others).
+        let grow = offset.length();
         let mut push = |kind: PrimKind, color: [u8; 3], min: Vec3, max: Vec3, ball: (Vec3, f32)| {
-            if frustum.misses_ball(ball.0, ball.1) {
+            if frustum.misses_ball(ball.0, ball.1 + grow) {
                 return;
             }
+            let (min, max) = (min.min(min - offset), max.max(max - offset));
             if let Some(((x0, x1, y0, y1), near)) = clipped_rect(cam, min, max) {
                 let index = prims.len() as u32;
                 prims.push(Prim {
