@@ -330,13 +330,10 @@ fn group_images<'b, 'i>(world: &World, jobs: Vec<(&'b Body, ImageMut<'i>)>) -> V
 
 /// Whether two cameras look the same way with the same image (all but the origin equal).
 fn same_view_but_origin(a: &Camera, b: &Camera) -> bool {
-    a.forward == b.forward
-        && a.right == b.right
-        && a.up == b.up
-        && a.tan_half_h == b.tan_half_h
-        && a.tan_half_v == b.tan_half_v
-        && a.width_px == b.width_px
-        && a.height_px == b.height_px
+    Camera {
+        origin: b.origin,
+        ..*a
+    } == *b
 }
 
 impl Scratch {
