@@ -582,13 +582,21 @@ impl Frustum {
     }
 }
 
+/// How far (in pixels) outside a box's projection a pixel's centre may be and still be
+/// in its rectangle: far above the rounding error of the projection and of the pixels'
+/// rays and hit tests (a hit that rounding puts just outside a silhouette is off by
+/// about 1e-7 of the distance over the size; a quarter pixel of a 8,192-pixel-wide
+/// 120° image is 8e-5 rad).
+const RECT_MARGIN_PX: f32 = 0.25;
+
 /// A pixel rectangle `(x0, x1, y0, y1)`, inclusive.
 type Rect = (u32, u32, u32, u32);
 
 /// The pixel rectangle (inclusive, clamped) that can show a hit on what lies in the
 /// axis-aligned box `min..max`, and a lower bound of such a hit's depth (ray parameter);
-/// `None` when no pixel can show one. The rectangle holds the projections of the box's
-/// corners, widened by a pixel on every side; when the box reaches behind the near plane,
+/// `None` when no pixel can show one. The rectangle holds the pixels whose centre (where
+/// their ray goes through) is in the hull of the projections of the box's corners, or
+/// within [`RECT_MARGIN_PX`] of it; when the box reaches behind the near plane,
 /// of the part of the box in front of half the near distance (the corners there and
 /// where the box's edges cross that plane), not the whole image: a hit is beyond the near
 /// plane, so in that part, whose projection lies in the hull of those points'. The depth
@@ -641,11 +649,15 @@ fn clipped_rect(cam: &Camera, min: Vec3, max: Vec3) -> Option<(Rect, f32)> {
         }
     }
     let (w, h) = (cam.width_px as f32, cam.height_px as f32);
-    let x0 = floor_f32((u0 / cam.tan_half_h + 1.0) * 0.5 * w) - 1.0;
-    let x1 = -floor_f32(-(u1 / cam.tan_half_h + 1.0) * 0.5 * w) + 1.0;
-    let y0 = floor_f32((1.0 - v1 / cam.tan_half_v) * 0.5 * h) - 1.0;
-    let y1 = -floor_f32(-(1.0 - v0 / cam.tan_half_v) * 0.5 * h) + 1.0;
-    if !(x1 >= 0.0 && y1 >= 0.0 && x0 < w && y0 < h) {
+    // Pixel x's ray is at x + 0.5 in these coordinates; keep the pixels whose centre is
+    // within RECT_MARGIN_PX of the projection.
+    let lo = |c: f32| -floor_f32(-(c - 0.5 - RECT_MARGIN_PX));
+    let hi = |c: f32| floor_f32(c - 0.5 + RECT_MARGIN_PX);
+    let x0 = lo((u0 / cam.tan_half_h + 1.0) * 0.5 * w);
+    let x1 = hi((u1 / cam.tan_half_h + 1.0) * 0.5 * w);
+    let y0 = lo((1.0 - v1 / cam.tan_half_v) * 0.5 * h);
+    let y1 = hi((1.0 - v0 / cam.tan_half_v) * 0.5 * h);
+    if !(x1 >= 0.0 && y1 >= 0.0 && x0 < w && y0 < h && x0 <= x1 && y0 <= y1) {
         return None;
     }
     let rect = (
@@ -813,6 +825,27 @@ struct Rays {
     dz: [f32; LANES],
 }
 
+/// The rays of one image row: pixel `x`'s is `row_dir + (u0 + x · du) · right`
+/// (computed this way, in this order, by every pixel).
+#[derive(Debug, Clone, Copy)]
+struct RowRays {
+    row_dir: Vec3,
+    u0: f32,
+    du: f32,
+}
+
+impl RowRays {
+    #[inline(always)]
+    fn of(cam: &Camera, y: u32) -> Self {
+        let du = 2.0 * cam.tan_half_h / cam.width_px as f32;
+        Self {
+            row_dir: cam.forward + cam.v_of(y as f32 + 0.5) * cam.up,
+            u0: -cam.tan_half_h + 0.5 * du,
+            du,
+        }
+    }
+}
+
 /// [`hit_cylinder`]'s depth for every lane at once, `f32::INFINITY` where it has none:
 /// the same operations in the same order on every lane (so the same bits), the branches
 /// turned into selects.
@@ -856,9 +889,7 @@ fn shade_row_as(
     write: impl Fn(&mut [u8], Vec3, f32),
 ) {
     let cam = &view.cam;
-    let row_dir = cam.forward + cam.v_of(y as f32 + 0.5) * cam.up;
-    let du = 2.0 * cam.tan_half_h / cam.width_px as f32;
-    let u0 = -cam.tan_half_h + 0.5 * du;
+    let RowRays { row_dir, u0, du } = RowRays::of(cam, y);
     let o = cam.origin;
     let tiles = view.tiles;
     let tile_row = (y / tiles.size * tiles.cols) as usize;
@@ -952,6 +983,8 @@ fn shade_row_as(
 
 #[cfg(test)]
 mod crowd_tests;
+#[cfg(test)]
+mod rect_tests;
 #[cfg(test)]
 mod reference;
 #[cfg(test)]
