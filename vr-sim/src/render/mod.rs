@@ -33,7 +33,7 @@ use rayon::prelude::*;
 use vrsync_bridge::{ImageDesc, PixelFormat};
 use vrsync_bridge::{ImageMut, ImagesMut};
 
-use crate::geometry::{Camera, NEAR_M, enter_box, exit_box, hit_cylinder, hit_sphere, recip};
+use crate::geometry::{Camera, NEAR_M, enter_box, hit_cylinder, hit_sphere, recip};
 use crate::world::{Body, CameraSpec, World};
 use crate::world_config::Shape;
 
@@ -133,12 +133,30 @@ struct View<'a> {
     cam: Camera,
     room_min: Vec3,
     room_max: Vec3,
-    floor: [Vec3; 2],
-    walls: [Vec3; 4],
-    ceiling: Vec3,
+    /// The shaded colour (at most 255) of every [`RoomFace`], by its index.
+    room_colors: [Vec3; ROOM_FACES],
     prims: &'a [Prim],
     tiles: &'a Tiles,
 }
+
+/// What a ray that hits nothing in the room sees where it leaves the room: the floor's
+/// two colours (by checker parity), the ceiling and the four walls. [`room_exit_lanes`]
+/// gives the index; [`View::room_colors`] the colour.
+#[derive(Debug, Clone, Copy)]
+#[repr(u32)]
+enum RoomFace {
+    /// The floor squares of even parity; odd ones are `Floor + 1`.
+    Floor = 0,
+    Ceiling = 2,
+    /// The wall at the room's largest x (seen facing +x).
+    MaxX = 3,
+    MinX = 4,
+    MaxZ = 5,
+    MinZ = 6,
+}
+
+/// How many colours the room shows ([`RoomFace`]).
+const ROOM_FACES: usize = 7;
 
 /// The renderer: a thread pool (or none) and scratch space reused every cycle.
 #[derive(Debug)]
@@ -529,13 +547,26 @@ fn camera_of(world: &World, body: &Body, desc: &ImageDesc) -> Camera {
 fn view_of<'a>(world: &World, cam: Camera, prims: &'a [Prim], tiles: &'a Tiles) -> View<'a> {
     let cfg = world.config();
     let (room_min, room_max) = world.room_bounds();
+    let (floor, walls, ceiling) = (
+        cfg.floor_colors.map(rgb),
+        cfg.wall_colors.map(rgb),
+        rgb(cfg.ceiling_color),
+    );
+    let room_colors = [
+        shade(floor[0], Vec3::Y),
+        shade(floor[1], Vec3::Y),
+        ceiling,
+        shade(walls[1], Vec3::NEG_X),
+        shade(walls[3], Vec3::X),
+        shade(walls[0], Vec3::NEG_Z),
+        shade(walls[2], Vec3::Z),
+    ]
+    .map(|c| c.min(Vec3::splat(255.0)));
     View {
         cam,
         room_min,
         room_max,
-        floor: cfg.floor_colors.map(rgb),
-        walls: cfg.wall_colors.map(rgb),
-        ceiling: rgb(cfg.ceiling_color),
+        room_colors,
         prims,
         tiles,
     }
@@ -735,21 +766,21 @@ fn shade_row(view: &View<'_>, y: u32, format: PixelFormat, row: &mut [u8]) {
 #[inline(always)]
 fn shade_row_inline(view: &View<'_>, y: u32, format: PixelFormat, row: &mut [u8]) {
     match format {
-        PixelFormat::Rgb8 => shade_row_as(view, y, row, 3, |px, c, _| {
+        PixelFormat::Rgb8 => shade_row_as::<true>(view, y, row, 3, |px, c, _| {
             px[0] = c.x as u8;
             px[1] = c.y as u8;
             px[2] = c.z as u8;
         }),
-        PixelFormat::Rgba8 => shade_row_as(view, y, row, 4, |px, c, _| {
+        PixelFormat::Rgba8 => shade_row_as::<true>(view, y, row, 4, |px, c, _| {
             px[0] = c.x as u8;
             px[1] = c.y as u8;
             px[2] = c.z as u8;
             px[3] = 255;
         }),
-        PixelFormat::Gray8 => shade_row_as(view, y, row, 1, |px, c, _| {
+        PixelFormat::Gray8 => shade_row_as::<true>(view, y, row, 1, |px, c, _| {
             px[0] = (0.299 * c.x + 0.587 * c.y + 0.114 * c.z) as u8;
         }),
-        PixelFormat::Depth32f => shade_row_as(view, y, row, 4, |px, _, depth| {
+        PixelFormat::Depth32f => shade_row_as::<false>(view, y, row, 4, |px, _, depth| {
             px.copy_from_slice(&depth.to_ne_bytes());
         }),
     }
@@ -763,11 +794,12 @@ fn floor_f32(x: f32) -> f32 {
     if x.is_nan() { x } else { floor_i32(x) as f32 }
 }
 
-/// `x.floor() as i32` without a libm call.
+/// `x.floor() as i32` without a libm call (saturating beyond `i32`'s range, 0 for NaN;
+/// never panics).
 #[inline(always)]
 fn floor_i32(x: f32) -> i32 {
     let i = x as i32;
-    if (i as f32) > x { i - 1 } else { i }
+    if (i as f32) > x { i.wrapping_sub(1) } else { i }
 }
 
 /// Where a ray hits a primitive (`t` at unit depth), if in front of the near plane.
@@ -846,6 +878,51 @@ impl RowRays {
     }
 }
 
+/// Where every lane's ray leaves the room `min..max` (from `o` inside it), the same bits
+/// as [`exit_box`](crate::geometry::exit_box) gives, and the [`RoomFace`] it sees there: the same operations in the
+/// same order on every lane, the branches turned into selects.
+#[inline(always)]
+fn room_exit_lanes(o: Vec3, rays: &Rays, min: Vec3, max: Vec3) -> ([f32; LANES], [u32; LANES]) {
+    let mut t = [0.0f32; LANES];
+    let mut face = [0u32; LANES];
+    for k in 0..LANES {
+        let (dx, dy, dz) = (rays.dx[k], rays.dy[k], rays.dz[k]);
+        let (ix, iy, iz) = (1.0 / dx, 1.0 / dy, 1.0 / dz);
+        let (px, py, pz) = (ix >= 0.0, iy >= 0.0, iz >= 0.0);
+        let tx = (if px { max.x } else { min.x } - o.x) * ix;
+        let ty = (if py { max.y } else { min.y } - o.y) * iy;
+        let tz = (if pz { max.z } else { min.z } - o.z) * iz;
+        let on_x = tx <= ty && tx <= tz;
+        let on_y = !on_x && ty <= tz;
+        let tk = if on_x {
+            tx
+        } else if on_y {
+            ty
+        } else {
+            tz
+        };
+        // Where it meets the floor (the floor's square; computed for every lane).
+        let (qx, qz) = (o.x + tk * dx, o.z + tk * dz);
+        let parity = (floor_i32(qx).wrapping_add(floor_i32(qz)) & 1) as u32;
+        let wall = |positive: bool, plus: RoomFace, minus: RoomFace| {
+            if positive { plus } else { minus }
+        };
+        face[k] = if on_x {
+            wall(px, RoomFace::MaxX, RoomFace::MinX) as u32
+        } else if on_y {
+            if py {
+                RoomFace::Ceiling as u32
+            } else {
+                RoomFace::Floor as u32 + parity
+            }
+        } else {
+            wall(pz, RoomFace::MaxZ, RoomFace::MinZ) as u32
+        };
+        t[k] = tk;
+    }
+    (t, face)
+}
+
 /// [`hit_cylinder`]'s depth for every lane at once, `f32::INFINITY` where it has none:
 /// the same operations in the same order on every lane (so the same bits), the branches
 /// turned into selects.
@@ -873,7 +950,9 @@ fn hit_cylinder_lanes(o: Vec3, rays: &Rays, base: Vec3, radius: f32, height: f32
     out
 }
 
-/// Shades row `y`: `write(pixel bytes, colour 0..=255, depth m)` stores one pixel.
+/// Shades row `y`: `write(pixel bytes, colour 0..=255, depth m)` stores one pixel; the
+/// colour is only computed when `COLOR` (a depth image has none), and a colour image's
+/// bytes for each [`RoomFace`] are written once per row, then copied.
 ///
 /// The row is traced in packets of [`LANES`] pixels. A packet walks its tile's list until
 /// every one of its rays has a hit nearer than the next entry; a ray keeps being tested
@@ -881,7 +960,7 @@ fn hit_cylinder_lanes(o: Vec3, rays: &Rays, base: Vec3, radius: f32, height: f32
 /// nearer than its hit (the list is by nearest possible depth), so every pixel is what
 /// tracing it alone gives.
 #[inline(always)]
-fn shade_row_as(
+fn shade_row_as<const COLOR: bool>(
     view: &View<'_>,
     y: u32,
     row: &mut [u8],
@@ -895,18 +974,23 @@ fn shade_row_as(
     let tile_row = (y / tiles.size * tiles.cols) as usize;
     let width = cam.width_px as usize;
     let ye = y as u16;
+    let mut room_px = [[0u8; 4]; ROOM_FACES];
+    if COLOR {
+        for (px, &c) in room_px.iter_mut().zip(&view.room_colors) {
+            write(&mut px[..bpp], c, 0.0);
+        }
+    }
     let mut rays = Rays::default();
     for x0 in (0..width).step_by(LANES) {
         let n = LANES.min(width - x0);
-        let mut t = [0.0f32; LANES];
-        let mut exit = [(0usize, false); LANES];
         for k in 0..LANES {
-            let d = row_dir + (u0 + (x0 + k) as f32 * du) * cam.right;
-            (rays.dx[k], rays.dy[k], rays.dz[k]) = (d.x, d.y, d.z);
-            let (tk, axis, positive) = exit_box(o, recip(d), view.room_min, view.room_max);
-            t[k] = tk;
-            exit[k] = (axis, positive);
+            // `row_dir + s · right`, component by component.
+            let s = u0 + (x0 + k) as f32 * du;
+            rays.dx[k] = row_dir.x + s * cam.right.x;
+            rays.dy[k] = row_dir.y + s * cam.right.y;
+            rays.dz[k] = row_dir.z + s * cam.right.z;
         }
+        let (mut t, face) = room_exit_lanes(o, &rays, view.room_min, view.room_max);
         let ray = |k: usize| Vec3::new(rays.dx[k], rays.dy[k], rays.dz[k]);
         // Per lane, the nearest hit so far (`u32::MAX`: the room) and its collection
         // index (0 for the room, so that no primitive at the room's depth replaces it).
@@ -955,27 +1039,18 @@ fn shade_row_as(
             }
         }
         for k in 0..n {
-            let (d, t) = (ray(k), t[k]);
-            let color = if nearest[k] != u32::MAX {
-                let p = &view.prims[nearest[k] as usize];
-                shade(p.color, normal_at(p, o, d, recip(d), t))
-            } else {
-                let q = o + t * d;
-                match exit[k] {
-                    (1, false) => {
-                        let parity = (floor_i32(q.x) + floor_i32(q.z)) & 1;
-                        shade(view.floor[parity as usize], Vec3::Y)
-                    }
-                    (1, true) => view.ceiling,
-                    (0, true) => shade(view.walls[1], Vec3::NEG_X),
-                    (0, false) => shade(view.walls[3], Vec3::X),
-                    (_, true) => shade(view.walls[0], Vec3::NEG_Z),
-                    (_, false) => shade(view.walls[2], Vec3::Z),
-                }
-            };
             let at = (x0 + k) * bpp;
-            if let Some(px) = row.get_mut(at..at + bpp) {
-                write(px, color.min(Vec3::splat(255.0)), t);
+            let Some(px) = row.get_mut(at..at + bpp) else {
+                continue;
+            };
+            if !COLOR {
+                write(px, Vec3::ZERO, t[k]);
+            } else if let Some(p) = view.prims.get(nearest[k] as usize) {
+                let d = ray(k);
+                let color = shade(p.color, normal_at(p, o, d, recip(d), t[k]));
+                write(px, color.min(Vec3::splat(255.0)), t[k]);
+            } else {
+                px.copy_from_slice(&room_px[face[k] as usize % ROOM_FACES][..bpp]);
             }
         }
     }

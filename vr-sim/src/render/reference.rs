@@ -75,6 +75,12 @@ pub(super) fn render_image(world: &World, body: &Body, image: ImageMut<'_>) {
     let prims = collect_prims(world, body, &cam);
     let tiles = super::Tiles::default();
     let view = super::view_of(world, cam, &prims, &tiles);
+    let cfg = world.config();
+    let room = Room {
+        floor: cfg.floor_colors.map(super::rgb),
+        walls: cfg.wall_colors.map(super::rgb),
+        ceiling: super::rgb(cfg.ceiling_color),
+    };
     let stride = desc.stride_bytes as usize;
     let format = desc.pixel_format().unwrap_or_default();
     for (y, row) in image
@@ -85,31 +91,39 @@ pub(super) fn render_image(world: &World, body: &Body, image: ImageMut<'_>) {
     {
         let y = y as u32;
         match format {
-            PixelFormat::Rgb8 => shade_row_as(&view, y, row, 3, |px, c, _| {
+            PixelFormat::Rgb8 => shade_row_as(&view, &room, y, row, 3, |px, c, _| {
                 px[0] = c.x as u8;
                 px[1] = c.y as u8;
                 px[2] = c.z as u8;
             }),
-            PixelFormat::Rgba8 => shade_row_as(&view, y, row, 4, |px, c, _| {
+            PixelFormat::Rgba8 => shade_row_as(&view, &room, y, row, 4, |px, c, _| {
                 px[0] = c.x as u8;
                 px[1] = c.y as u8;
                 px[2] = c.z as u8;
                 px[3] = 255;
             }),
-            PixelFormat::Gray8 => shade_row_as(&view, y, row, 1, |px, c, _| {
+            PixelFormat::Gray8 => shade_row_as(&view, &room, y, row, 1, |px, c, _| {
                 px[0] = (0.299 * c.x + 0.587 * c.y + 0.114 * c.z) as u8;
             }),
-            PixelFormat::Depth32f => shade_row_as(&view, y, row, 4, |px, _, depth| {
+            PixelFormat::Depth32f => shade_row_as(&view, &room, y, row, 4, |px, _, depth| {
                 px.copy_from_slice(&depth.to_ne_bytes());
             }),
         }
     }
 }
 
+/// The room's colours, from the config.
+struct Room {
+    floor: [Vec3; 2],
+    walls: [Vec3; 4],
+    ceiling: Vec3,
+}
+
 /// Shades row `y`: `write(pixel bytes, colour 0..=255, depth m)` stores one pixel.
 #[inline(always)]
 fn shade_row_as(
     view: &View<'_>,
+    room: &Room,
     y: u32,
     row: &mut [u8],
     bpp: usize,
@@ -171,13 +185,13 @@ fn shade_row_as(
                 match (axis, positive) {
                     (1, false) => {
                         let parity = (floor_i32(q.x) + floor_i32(q.z)) & 1;
-                        shade(view.floor[parity as usize], Vec3::Y)
+                        shade(room.floor[parity as usize], Vec3::Y)
                     }
-                    (1, true) => view.ceiling,
-                    (0, true) => shade(view.walls[1], Vec3::NEG_X),
-                    (0, false) => shade(view.walls[3], Vec3::X),
-                    (_, true) => shade(view.walls[0], Vec3::NEG_Z),
-                    (_, false) => shade(view.walls[2], Vec3::Z),
+                    (1, true) => room.ceiling,
+                    (0, true) => shade(room.walls[1], Vec3::NEG_X),
+                    (0, false) => shade(room.walls[3], Vec3::X),
+                    (_, true) => shade(room.walls[0], Vec3::NEG_Z),
+                    (_, false) => shade(room.walls[2], Vec3::Z),
                 }
             }
         };
