@@ -923,6 +923,72 @@ fn room_exit_lanes(o: Vec3, rays: &Rays, min: Vec3, max: Vec3) -> ([f32; LANES],
     (t, face)
 }
 
+/// The shaded colours (at most 255) of the lanes whose nearest hit is a body.
+#[derive(Debug, Default)]
+struct BodyColors {
+    /// Whether the lane's nearest hit is a body (else its colour is meaningless).
+    hit: [bool; LANES],
+    /// Red, green and blue, by lane.
+    rgb: [[f32; LANES]; 3],
+}
+
+/// [`shade`] of [`normal_at`] for every lane whose nearest hit (`nearest`, an index into
+/// `prims`, at depth `t`) is a body, at once: the same operations in the same order on
+/// every lane (so the same bits), the branches turned into selects.
+#[inline(always)]
+fn body_colors_lanes(
+    o: Vec3,
+    rays: &Rays,
+    t: &[f32; LANES],
+    nearest: &[u32; LANES],
+    prims: &[Prim],
+) -> BodyColors {
+    let mut out = BodyColors::default();
+    // Each lane's body (a harmless one where there is none).
+    let (mut bx, mut bz, mut top, mut radius) =
+        ([0.0f32; LANES], [0.0; LANES], [0.0; LANES], [1.0; LANES]);
+    let mut color = [[0.0f32; LANES]; 3];
+    for k in 0..LANES {
+        if let Some(&Prim {
+            kind:
+                PrimKind::Body {
+                    base,
+                    radius: r,
+                    height,
+                },
+            color: c,
+            ..
+        }) = prims.get(nearest[k] as usize)
+        {
+            out.hit[k] = true;
+            (bx[k], bz[k], radius[k]) = (base.x, base.z, r);
+            top[k] = base.y + height - 1e-4;
+            (color[0][k], color[1][k], color[2][k]) = (c.x, c.y, c.z);
+        }
+    }
+    for k in 0..LANES {
+        let tk = t[k];
+        let (qx, qy, qz) = (
+            o.x + tk * rays.dx[k],
+            o.y + tk * rays.dy[k],
+            o.z + tk * rays.dz[k],
+        );
+        let cap = qy >= top[k];
+        let r = radius[k];
+        let (nx, ny, nz) = if cap {
+            (0.0, 1.0, 0.0)
+        } else {
+            ((qx - bx[k]) / r, 0.0 / r, (qz - bz[k]) / r)
+        };
+        let s = 0.7 + 0.3 * ((nx * LIGHT.x) + (ny * LIGHT.y) + (nz * LIGHT.z));
+        for (rgb, c) in out.rgb.iter_mut().zip(&color) {
+            let v = c[k] * s;
+            rgb[k] = if v < 255.0 { v } else { 255.0 };
+        }
+    }
+    out
+}
+
 /// [`hit_cylinder`]'s depth for every lane at once, `f32::INFINITY` where it has none:
 /// the same operations in the same order on every lane (so the same bits), the branches
 /// turned into selects.
@@ -996,7 +1062,9 @@ fn shade_row_as<const COLOR: bool>(
         // index (0 for the room, so that no primitive at the room's depth replaces it).
         let mut nearest = [u32::MAX; LANES];
         let mut nearest_index = [0u32; LANES];
-        let far = |t: &[f32; LANES]| t[..n].iter().fold(f32::MIN, |m, &v| m.max(v));
+        // Lanes past the image's edge are never hit (and never drawn).
+        t[n..].fill(f32::NEG_INFINITY);
+        let far = |t: &[f32; LANES]| t.iter().fold(f32::MIN, |m, &v| m.max(v));
         let mut t_far = far(&t);
         let tile = tile_row + x0 / tiles.size as usize;
         let list = &tiles.items[tiles.start[tile] as usize..tiles.start[tile + 1] as usize];
@@ -1038,6 +1106,11 @@ fn shade_row_as<const COLOR: bool>(
                 t_far = far(&t);
             }
         }
+        let bodies = if COLOR && nearest.iter().any(|&i| i != u32::MAX) {
+            body_colors_lanes(o, &rays, &t, &nearest, view.prims)
+        } else {
+            BodyColors::default()
+        };
         for k in 0..n {
             let at = (x0 + k) * bpp;
             let Some(px) = row.get_mut(at..at + bpp) else {
@@ -1045,6 +1118,9 @@ fn shade_row_as<const COLOR: bool>(
             };
             if !COLOR {
                 write(px, Vec3::ZERO, t[k]);
+            } else if bodies.hit[k] {
+                let c = Vec3::new(bodies.rgb[0][k], bodies.rgb[1][k], bodies.rgb[2][k]);
+                write(px, c, t[k]);
             } else if let Some(p) = view.prims.get(nearest[k] as usize) {
                 let d = ray(k);
                 let color = shade(p.color, normal_at(p, o, d, recip(d), t[k]));
