@@ -879,8 +879,9 @@ impl RowRays {
 }
 
 /// Where every lane's ray leaves the room `min..max` (from `o` inside it), the same bits
-/// as [`exit_box`](crate::geometry::exit_box) gives, and the [`RoomFace`] it sees there: the same operations in the
-/// same order on every lane, the branches turned into selects.
+/// as [`exit_box`](crate::geometry::exit_box) gives, and the [`RoomFace`] it sees there
+/// (the floor's even squares for the whole floor: [`floor_face`] tells the square): the
+/// same operations in the same order on every lane, the branches turned into selects.
 #[inline(always)]
 fn room_exit_lanes(o: Vec3, rays: &Rays, min: Vec3, max: Vec3) -> ([f32; LANES], [u32; LANES]) {
     let mut t = [0.0f32; LANES];
@@ -901,9 +902,6 @@ fn room_exit_lanes(o: Vec3, rays: &Rays, min: Vec3, max: Vec3) -> ([f32; LANES],
         } else {
             tz
         };
-        // Where it meets the floor (the floor's square; computed for every lane).
-        let (qx, qz) = (o.x + tk * dx, o.z + tk * dz);
-        let parity = (floor_i32(qx).wrapping_add(floor_i32(qz)) & 1) as u32;
         let wall = |positive: bool, plus: RoomFace, minus: RoomFace| {
             if positive { plus } else { minus }
         };
@@ -913,7 +911,7 @@ fn room_exit_lanes(o: Vec3, rays: &Rays, min: Vec3, max: Vec3) -> ([f32; LANES],
             if py {
                 RoomFace::Ceiling as u32
             } else {
-                RoomFace::Floor as u32 + parity
+                RoomFace::Floor as u32
             }
         } else {
             wall(pz, RoomFace::MaxZ, RoomFace::MinZ) as u32
@@ -921,6 +919,14 @@ fn room_exit_lanes(o: Vec3, rays: &Rays, min: Vec3, max: Vec3) -> ([f32; LANES],
         t[k] = tk;
     }
     (t, face)
+}
+
+/// The floor's [`RoomFace`] where a ray from `o` along `d` meets it at depth `t`: its
+/// square's parity.
+#[inline(always)]
+fn floor_face(o: Vec3, d: Vec3, t: f32) -> usize {
+    let q = o + t * d;
+    RoomFace::Floor as usize + ((floor_i32(q.x).wrapping_add(floor_i32(q.z)) & 1) as usize)
 }
 
 /// The shaded colours (at most 255) of the lanes whose nearest hit is a body.
@@ -1051,7 +1057,8 @@ fn shade_row_as<const COLOR: bool>(
         let n = LANES.min(width - x0);
         for k in 0..LANES {
             // `row_dir + s · right`, component by component.
-            let s = u0 + (x0 + k) as f32 * du;
+            // (As i32: the same value, converted by one instruction.)
+            let s = u0 + (x0 + k) as i32 as f32 * du;
             rays.dx[k] = row_dir.x + s * cam.right.x;
             rays.dy[k] = row_dir.y + s * cam.right.y;
             rays.dz[k] = row_dir.z + s * cam.right.z;
@@ -1126,7 +1133,11 @@ fn shade_row_as<const COLOR: bool>(
                 let color = shade(p.color, normal_at(p, o, d, recip(d), t[k]));
                 write(px, color.min(Vec3::splat(255.0)), t[k]);
             } else {
-                px.copy_from_slice(&room_px[face[k] as usize % ROOM_FACES][..bpp]);
+                let face = match face[k] as usize {
+                    f if f == RoomFace::Floor as usize => floor_face(o, ray(k), t[k]),
+                    f => f % ROOM_FACES,
+                };
+                px.copy_from_slice(&room_px[face][..bpp]);
             }
         }
     }
