@@ -98,12 +98,14 @@ struct Prim {
     index: u32,
 }
 
-/// Per-tile lists of primitives: tile `i` (row-major, [`Tiles::size`] pixels square)
-/// holds `items[start[i]..start[i + 1]]`, sorted by nearest depth (then collection
-/// order).
-#[derive(Debug, Default)]
+/// Per-tile lists of primitives: tile `i` (row-major, [`Tiles::width`] ×
+/// [`Tiles::height`] pixels) holds `items[start[i]..start[i + 1]]`, sorted by nearest
+/// depth (then collection order).
+#[derive(Debug, Default, Clone)]
 struct Tiles {
-    size: u32,
+    /// A multiple of [`LANES`], so that a packet never straddles two tiles.
+    width: u32,
+    height: u32,
     cols: u32,
     start: Vec<u32>,
     items: Vec<Entry>,
@@ -468,17 +470,18 @@ impl Scratch {
         t.order.extend(prims.iter().map(|p| (p.near, p.index)));
         t.order
             .sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        t.size = 8;
+        (t.width, t.height) = (8, 8);
         const _: () = assert!(8 % LANES == 0, "a packet must not straddle two tiles");
-        while cam.width_px.div_ceil(t.size) * cam.height_px.div_ceil(t.size) > MAX_TILES {
-            t.size *= 2;
+        while cam.width_px.div_ceil(t.width) * cam.height_px.div_ceil(t.height) > MAX_TILES {
+            t.width *= 2;
+            t.height *= 2;
         }
-        t.cols = cam.width_px.div_ceil(t.size);
-        let n = (t.cols * cam.height_px.div_ceil(t.size)) as usize;
+        t.cols = cam.width_px.div_ceil(t.width);
+        let n = (t.cols * cam.height_px.div_ceil(t.height)) as usize;
         t.start.clear();
         t.start.resize(n + 1, 0);
-        let size = t.size;
-        let tile_range = |p: &Prim| (p.x0 / size..=p.x1 / size, p.y0 / size..=p.y1 / size);
+        let (w, h) = (t.width, t.height);
+        let tile_range = |p: &Prim| (p.x0 / w..=p.x1 / w, p.y0 / h..=p.y1 / h);
         // Count per tile (shifted by one), prefix-sum into starts, then fill.
         for p in prims {
             let (xs, ys) = tile_range(p);
@@ -1043,7 +1046,7 @@ fn shade_row_as<const COLOR: bool>(
     let RowRays { row_dir, u0, du } = RowRays::of(cam, y);
     let o = cam.origin;
     let tiles = view.tiles;
-    let tile_row = (y / tiles.size * tiles.cols) as usize;
+    let tile_row = (y / tiles.height * tiles.cols) as usize;
     let width = cam.width_px as usize;
     let ye = y as u16;
     let mut room_px = [[0u8; 4]; ROOM_FACES];
@@ -1073,7 +1076,7 @@ fn shade_row_as<const COLOR: bool>(
         t[n..].fill(f32::NEG_INFINITY);
         let far = |t: &[f32; LANES]| t.iter().fold(f32::MIN, |m, &v| m.max(v));
         let mut t_far = far(&t);
-        let tile = tile_row + x0 / tiles.size as usize;
+        let tile = tile_row + x0 / tiles.width as usize;
         let list = &tiles.items[tiles.start[tile] as usize..tiles.start[tile + 1] as usize];
         let (first, last) = (x0 as u16, (x0 + n - 1) as u16);
         for e in list {
