@@ -538,7 +538,7 @@ fn crowd_per_ray_floor() {
         // Per image: camera, primitives, the renderer's tiles, the floor's tiles.
         let mut images = Vec::new();
         let mut scratch = Scratch::default();
-        let (mut listed, mut seen) = (0usize, 0usize);
+        let (mut listed, mut seen, mut seeing) = (0usize, 0usize, 0usize);
         for body in w.bodies() {
             for (i, spec) in body.cameras().iter().enumerate() {
                 let cam = w.camera(body, spec);
@@ -610,6 +610,7 @@ fn crowd_per_ray_floor() {
                     }
                 }
                 seen += floor.items.len();
+                seeing += lists.iter().filter(|l| !l.is_empty()).count();
                 let d = desc(i as u32, cams[i].0, PixelFormat::Rgb8, 32, 24);
                 images.push((cam, prims, scratch.tiles.clone(), floor, d));
             }
@@ -656,9 +657,10 @@ fn crowd_per_ray_floor() {
         println!(
             "{agents:>2} agents: set-up {setup:.2} ns/ray (per image, eyes not shared), trace \
              {traced:.2} ns/ray ({:.2} list entries per packet, at most), floor {floor:.2} ns/ray \
-             ({:.2} seen primitives per packet)",
+             ({:.2} seen primitives per packet, {:.0}% of packets see one)",
             listed as f64 / pixels * 8.0,
             seen as f64 / pixels * 8.0,
+            seeing as f64 / pixels * 800.0,
         );
     }
 }
