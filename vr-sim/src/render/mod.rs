@@ -398,12 +398,9 @@ impl Scratch {
         // the primitive is left out before its rectangle is computed (it would never be
         // hit, so leaving it out changes no pixel, nor the order of the others).
         let grow = offset.length();
-        let mut push = |kind: PrimKind, color: [u8; 3], min: Vec3, max: Vec3, ball: (Vec3, f32)| {
-            if frustum.misses_ball(ball.0, ball.1 + grow) {
-                return;
-            }
-            let (min, max) = (min.min(min - offset), max.max(max - offset));
-            if let Some(((x0, x1, y0, y1), near)) = clipped_rect(cam, min, max) {
+        let stretch = |min: Vec3, max: Vec3| (min.min(min - offset), max.max(max - offset));
+        let mut push = |kind: PrimKind, color: [u8; 3], rect: Option<(Rect, f32)>| {
+            if let Some(((x0, x1, y0, y1), near)) = rect {
                 let index = prims.len() as u32;
                 prims.push(Prim {
                     kind,
@@ -432,33 +429,50 @@ impl Scratch {
                     (0.5 * (min + max), 0.5 * (max - min).length()),
                 ),
             };
-            push(kind, o.color, min, max, ball);
+            if !frustum.misses_ball(ball.0, ball.1 + grow) {
+                let (min, max) = stretch(min, max);
+                push(kind, o.color, clipped_rect(cam, min, max));
+            }
         }
+        // The bodies, [`LANES`] at a time: their rectangles at once
+        // ([`clipped_rects_lanes`]), kept for those whose ball is in view.
         let cfg = world.config();
         let (r, h) = (cfg.agent_radius, cfg.body_height);
         let body_ball = Vec3::new(0.0, 0.5 * h, 0.0);
         let body_ball_radius = (r * r + 0.25 * h * h).sqrt();
-        for b in world.bodies() {
-            if b.id == me.id {
-                continue;
+        let mut boxes = BoxLanes::default();
+        let mut chunk: [Option<&Body>; LANES] = [None; LANES];
+        let mut n = 0;
+        let others = world.bodies().iter().filter(|b| b.id != me.id);
+        for b in others.map(Some).chain(std::iter::once(None)) {
+            if let Some(b) = b {
+                let (min, max) = stretch(
+                    b.position - Vec3::new(r, 0.0, r),
+                    b.position + Vec3::new(r, h, r),
+                );
+                boxes.set(n, min, max);
+                chunk[n] = Some(b);
+                n += 1;
+                if n < LANES {
+                    continue;
+                }
             }
-            let kind = PrimKind::Body {
-                base: b.position,
-                radius: r,
-                height: h,
-            };
-            let color = AGENT_COLORS[b.id as usize % AGENT_COLORS.len()];
-            let (min, max) = (
-                b.position - Vec3::new(r, 0.0, r),
-                b.position + Vec3::new(r, h, r),
-            );
-            push(
-                kind,
-                color,
-                min,
-                max,
-                (b.position + body_ball, body_ball_radius),
-            );
+            if n == 0 {
+                break;
+            }
+            let rects = clipped_rects_lanes(cam, &boxes, n);
+            for (b, rect) in chunk[..n].iter().flatten().zip(rects) {
+                if frustum.misses_ball(b.position + body_ball, body_ball_radius + grow) {
+                    continue;
+                }
+                let kind = PrimKind::Body {
+                    base: b.position,
+                    radius: r,
+                    height: h,
+                };
+                push(kind, AGENT_COLORS[b.id as usize % AGENT_COLORS.len()], rect);
+            }
+            n = 0;
         }
     }
 
@@ -682,6 +696,13 @@ fn clipped_rect(cam: &Camera, min: Vec3, max: Vec3) -> Option<(Rect, f32)> {
             }
         }
     }
+    rect_of(cam, near, (u0, u1, v0, v1))
+}
+
+/// The rectangle and depth bound of [`clipped_rect`] from the bounds `(u0, u1, v0, v1)` of
+/// the projection (at unit depth) and the nearest corner's depth.
+#[inline(always)]
+fn rect_of(cam: &Camera, near: f32, (u0, u1, v0, v1): (f32, f32, f32, f32)) -> Option<(Rect, f32)> {
     let (w, h) = (cam.width_px as f32, cam.height_px as f32);
     // Pixel x's ray is at x + 0.5 in these coordinates; keep the pixels whose centre is
     // within RECT_MARGIN_PX of the projection.
@@ -701,6 +722,80 @@ fn clipped_rect(cam: &Camera, min: Vec3, max: Vec3) -> Option<(Rect, f32)> {
         y1.min(h - 1.0) as u32,
     );
     Some((rect, near - 1e-3 * (1.0 + near.abs())))
+}
+
+/// Up to [`LANES`] axis-aligned boxes, by lane (structure of arrays).
+#[derive(Debug, Default)]
+struct BoxLanes {
+    min: [[f32; LANES]; 3],
+    max: [[f32; LANES]; 3],
+}
+
+impl BoxLanes {
+    fn set(&mut self, k: usize, min: Vec3, max: Vec3) {
+        for axis in 0..3 {
+            (self.min[axis][k], self.max[axis][k]) = (min[axis], max[axis]);
+        }
+    }
+}
+
+/// [`clipped_rect`] of the first `n` boxes of `boxes`, the same value for each: the
+/// corners' projections and bounds of every box at once (the same operations in the
+/// same order on every lane), [`clipped_rect`] itself for a box that reaches behind half
+/// the near distance.
+fn clipped_rects_lanes(cam: &Camera, boxes: &BoxLanes, n: usize) -> [Option<(Rect, f32)>; LANES] {
+    let o = cam.origin;
+    // Per axis, the box's min and max less the origin, times each camera axis' component.
+    let mut lo = [[[0.0f32; LANES]; 3]; 3];
+    let mut hi = [[[0.0f32; LANES]; 3]; 3];
+    for (c, dir) in [cam.right, cam.up, cam.forward].into_iter().enumerate() {
+        for axis in 0..3 {
+            for k in 0..LANES {
+                lo[c][axis][k] = (boxes.min[axis][k] - o[axis]) * dir[axis];
+                hi[c][axis][k] = (boxes.max[axis][k] - o[axis]) * dir[axis];
+            }
+        }
+    }
+    let coord = |c: usize, i: usize, k: usize| {
+        let pick = |axis: usize| {
+            if (i >> axis) & 1 == 0 {
+                lo[c][axis][k]
+            } else {
+                hi[c][axis][k]
+            }
+        };
+        pick(0) + pick(1) + pick(2)
+    };
+    let (mut near, mut far) = ([f32::MAX; LANES], [f32::MIN; LANES]);
+    let (mut u0, mut u1, mut v0, mut v1) = (
+        [f32::MAX; LANES],
+        [f32::MIN; LANES],
+        [f32::MAX; LANES],
+        [f32::MIN; LANES],
+    );
+    for i in 0..8 {
+        for k in 0..LANES {
+            let (x, y, z) = (coord(0, i, k), coord(1, i, k), coord(2, i, k));
+            near[k] = near[k].min(z);
+            far[k] = far[k].max(z);
+            let s = 1.0 / z;
+            let (u, v) = (x * s, y * s);
+            u0[k] = u0[k].min(u);
+            u1[k] = u1[k].max(u);
+            v0[k] = v0[k].min(v);
+            v1[k] = v1[k].max(v);
+        }
+    }
+    std::array::from_fn(|k| {
+        if k >= n || far[k] < NEAR_M || far[k].is_nan() {
+            None
+        } else if near[k] >= 0.5 * NEAR_M {
+            rect_of(cam, near[k], (u0[k], u1[k], v0[k], v1[k]))
+        } else {
+            let corner = |c: &[[f32; LANES]; 3]| Vec3::new(c[0][k], c[1][k], c[2][k]);
+            clipped_rect(cam, corner(&boxes.min), corner(&boxes.max))
+        }
+    })
 }
 
 /// Images with fewer pixels are shaded on the calling thread.

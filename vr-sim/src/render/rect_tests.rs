@@ -6,7 +6,10 @@
 use glam::Vec3;
 use proptest::prelude::*;
 
-use super::{LANES, PrimKind, Rays, RowRays, clipped_rect, hit_cylinder_lanes, hit_prim};
+use super::{
+    BoxLanes, LANES, PrimKind, Rays, RowRays, clipped_rect, clipped_rects_lanes,
+    hit_cylinder_lanes, hit_prim,
+};
 use crate::geometry::{Camera, recip};
 
 /// A primitive and the axis-aligned box the renderer bounds it with.
@@ -109,6 +112,36 @@ proptest! {
                 );
                 prop_assert!(t >= near, "pixel ({x}, {y}) hits {kind:?} at {t} < bound {near}");
             }
+        }
+    }
+
+    #[test]
+    fn the_rectangles_of_boxes_in_lanes_are_each_boxs_own(
+        (yaw, pitch) in (0.0f32..360.0, -80.0f32..80.0),
+        (fov_h, fov_v) in (20.0f32..160.0, 20.0f32..140.0),
+        (width, height) in (1u32..72, 1u32..56),
+        n in 1usize..=LANES,
+        // Around the camera, in front, beside and behind it, some reaching behind the
+        // near plane or holding the camera.
+        boxes in prop::collection::vec(
+            ((-4.0f32..4.0, -2.0f32..2.0, -4.0f32..4.0), (0.01f32..1.5, 0.01f32..1.5, 0.01f32..1.5)),
+            LANES,
+        ),
+    ) {
+        let cam = Camera::new(Vec3::new(0.3, 1.6, -0.2), yaw, pitch, fov_h, fov_v, width, height);
+        let mut lanes = BoxLanes::default();
+        let mut each = Vec::new();
+        for (k, (c, h)) in boxes.into_iter().enumerate() {
+            let (c, h) = (cam.origin + Vec3::new(c.0, c.1, c.2), Vec3::new(h.0, h.1, h.2));
+            lanes.set(k, c - h, c + h);
+            each.push(clipped_rect(&cam, c - h, c + h));
+        }
+        let got = clipped_rects_lanes(&cam, &lanes, n);
+        for k in 0..LANES {
+            let want = if k < n { each[k] } else { None };
+            // Bounds compared by their bits.
+            let bits = |r: Option<(super::Rect, f32)>| r.map(|(r, near)| (r, near.to_bits()));
+            prop_assert_eq!(bits(got[k]), bits(want), "box {}", k);
         }
     }
 }
