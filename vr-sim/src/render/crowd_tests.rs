@@ -538,7 +538,7 @@ fn crowd_per_ray_floor() {
         // Per image: camera, primitives, the renderer's tiles, the floor's tiles.
         let mut images = Vec::new();
         let mut scratch = Scratch::default();
-        let (mut listed, mut seen, mut seeing) = (0usize, 0usize, 0usize);
+        let (mut listed, mut tested, mut hit, mut seen, mut seeing) = (0usize, 0, 0, 0, 0);
         for body in w.bodies() {
             for (i, spec) in body.cameras().iter().enumerate() {
                 let cam = w.camera(body, spec);
@@ -550,6 +550,8 @@ fn crowd_per_ray_floor() {
                 // on equal depth the first.
                 let packets = cam.width_px.div_ceil(8);
                 let mut lists: Vec<Vec<u32>> = vec![Vec::new(); (packets * cam.height_px) as usize];
+                // Per packet, every primitive some pixel's ray hits (seen or hidden).
+                let mut hit_lists = lists.clone();
                 for y in 0..cam.height_px {
                     let rr = RowRays::of(&cam, y);
                     for x in 0..cam.width_px {
@@ -559,13 +561,18 @@ fn crowd_per_ray_floor() {
                         let mut t =
                             crate::geometry::exit_box(cam.origin, inv, room_min, room_max).0;
                         let mut nearest = None;
+                        let hit_list = &mut hit_lists[(y * packets + x / 8) as usize];
                         for p in &prims {
                             if (p.x0..=p.x1).contains(&x)
                                 && (p.y0..=p.y1).contains(&y)
                                 && let Some(th) = hit_prim(p, cam.origin, d, inv)
-                                && th < t
                             {
-                                (t, nearest) = (th, Some(p.index));
+                                if !hit_list.contains(&p.index) {
+                                    hit_list.push(p.index);
+                                }
+                                if th < t {
+                                    (t, nearest) = (th, Some(p.index));
+                                }
                             }
                         }
                         let list = &mut lists[(y * packets + x / 8) as usize];
@@ -601,15 +608,55 @@ fn crowd_per_ray_floor() {
                     }));
                     floor.start.push(floor.items.len() as u32);
                 }
-                // Entries a packet walks (at most; it stops at the first beyond its hits).
+                // Entries a packet walks (at most; it stops at the first beyond its hits),
+                // and those it tests: walking its list as the renderer does.
                 let t = &scratch.tiles;
                 for y in 0..cam.height_px {
-                    for x in (0..cam.width_px).step_by(8) {
-                        let tile = (y / t.height * t.cols + x / t.width) as usize;
-                        listed += (t.start[tile + 1] - t.start[tile]) as usize;
+                    let rr = RowRays::of(&cam, y);
+                    for x0 in (0..cam.width_px).step_by(8) {
+                        let tile = (y / t.height * t.cols + x0 / t.width) as usize;
+                        let list = &t.items[t.start[tile] as usize..t.start[tile + 1] as usize];
+                        listed += list.len();
+                        let rays: Vec<(u32, glam::Vec3)> = (x0..(x0 + 8).min(cam.width_px))
+                            .map(|x| {
+                                (
+                                    x,
+                                    rr.row_dir + (rr.u0 + x as i32 as f32 * rr.du) * cam.right,
+                                )
+                            })
+                            .collect();
+                        let mut depth: Vec<f32> = rays
+                            .iter()
+                            .map(|&(_, d)| {
+                                let inv = crate::geometry::recip(d);
+                                crate::geometry::exit_box(cam.origin, inv, room_min, room_max).0
+                            })
+                            .collect();
+                        for e in list {
+                            if e.near > depth.iter().fold(f32::MIN, |m, &v| m.max(v)) {
+                                break;
+                            }
+                            let (y, first, last) =
+                                (y as u16, x0 as u16, rays[rays.len() - 1].0 as u16);
+                            if y < e.y0 || y > e.y1 || last < e.x0 || first > e.x1 {
+                                continue;
+                            }
+                            tested += 1;
+                            let p = &prims[e.index as usize];
+                            for (&(x, d), t) in rays.iter().zip(&mut depth) {
+                                if (p.x0..=p.x1).contains(&x)
+                                    && let Some(th) =
+                                        hit_prim(p, cam.origin, d, crate::geometry::recip(d))
+                                    && th < *t
+                                {
+                                    *t = th;
+                                }
+                            }
+                        }
                     }
                 }
                 seen += floor.items.len();
+                hit += hit_lists.iter().map(Vec::len).sum::<usize>();
                 seeing += lists.iter().filter(|l| !l.is_empty()).count();
                 let d = desc(i as u32, cams[i].0, PixelFormat::Rgb8, 32, 24);
                 images.push((cam, prims, scratch.tiles.clone(), floor, d));
@@ -656,9 +703,12 @@ fn crowd_per_ray_floor() {
         let floor = best(&mut || trace(&mut floor_bufs, true));
         println!(
             "{agents:>2} agents: set-up {setup:.2} ns/ray (per image, eyes not shared), trace \
-             {traced:.2} ns/ray ({:.2} list entries per packet, at most), floor {floor:.2} ns/ray \
-             ({:.2} seen primitives per packet, {:.0}% of packets see one)",
+             {traced:.2} ns/ray (per packet: {:.2} list entries at most, {:.2} tested, {:.2} \
+             hit by some ray), floor {floor:.2} ns/ray ({:.2} seen primitives per packet, \
+             {:.0}% of packets see one)",
             listed as f64 / pixels * 8.0,
+            tested as f64 / pixels * 8.0,
+            hit as f64 / pixels * 8.0,
             seen as f64 / pixels * 8.0,
             seeing as f64 / pixels * 800.0,
         );
