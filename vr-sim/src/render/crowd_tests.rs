@@ -595,17 +595,9 @@ fn crowd_per_ray_floor() {
                         let (a, b) = (&prims[a as usize], &prims[b as usize]);
                         a.near.total_cmp(&b.near).then(a.index.cmp(&b.index))
                     });
-                    floor.items.extend(list.iter().map(|&k| {
-                        let p = &prims[k as usize];
-                        Entry {
-                            near: p.near,
-                            index: p.index,
-                            x0: p.x0 as u16,
-                            x1: p.x1 as u16,
-                            y0: p.y0 as u16,
-                            y1: p.y1 as u16,
-                        }
-                    }));
+                    floor
+                        .items
+                        .extend(list.iter().map(|&k| Entry::of(&prims[k as usize])));
                     floor.start.push(floor.items.len() as u32);
                 }
                 // Entries a packet walks (at most; it stops at the first beyond its hits),

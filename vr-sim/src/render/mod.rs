@@ -126,6 +126,20 @@ struct Entry {
     y1: u16,
 }
 
+impl Entry {
+    fn of(p: &Prim) -> Self {
+        // Rectangles are clamped to the image, whose sides are at most 8192 pixels.
+        Self {
+            near: p.near,
+            index: p.index,
+            x0: p.x0 as u16,
+            x1: p.x1 as u16,
+            y0: p.y0 as u16,
+            y1: p.y1 as u16,
+        }
+    }
+}
+
 /// Tiles are 8 pixels square, or larger so that an image has at most this many.
 const MAX_TILES: u32 = 1024;
 
@@ -514,15 +528,7 @@ impl Scratch {
         // so shift back.
         for &(_, k) in &t.order {
             let p = &prims[k as usize];
-            // Rectangles are clamped to the image, whose sides are at most 8192 pixels.
-            let entry = Entry {
-                near: p.near,
-                index: p.index,
-                x0: p.x0 as u16,
-                x1: p.x1 as u16,
-                y0: p.y0 as u16,
-                y1: p.y1 as u16,
-            };
+            let entry = Entry::of(p);
             let (xs, ys) = tile_range(p);
             for ty in ys {
                 for tx in xs.clone() {
