@@ -409,8 +409,8 @@ impl Scratch {
         let prims = &mut self.prims;
         let frustum = Frustum::new(cam);
         // `ball` (centre, radius) holds the primitive: when no pixel's ray can reach it,
-        // the primitive is left out before its rectangle is computed (it would never be
-        // hit, so leaving it out changes no pixel, nor the order of the others).
+        // the primitive is left out (it would never be hit, so leaving it out changes no
+        // pixel, nor the order of the others), an object before its rectangle is computed.
         let grow = offset.length();
         let stretch = |min: Vec3, max: Vec3| (min.min(min - offset), max.max(max - offset));
         let mut push = |kind: PrimKind, color: [u8; 3], rect: Option<(Rect, f32)>| {
@@ -455,27 +455,20 @@ impl Scratch {
         let body_ball = Vec3::new(0.0, 0.5 * h, 0.0);
         let body_ball_radius = (r * r + 0.25 * h * h).sqrt();
         let mut boxes = BoxLanes::default();
-        let mut chunk: [Option<&Body>; LANES] = [None; LANES];
-        let mut n = 0;
-        let others = world.bodies().iter().filter(|b| b.id != me.id);
-        for b in others.map(Some).chain(std::iter::once(None)) {
-            if let Some(b) = b {
+        let mut lanes: [Option<&Body>; LANES] = [None; LANES];
+        for chunk in world.bodies().chunks(LANES) {
+            let mut n = 0;
+            for b in chunk.iter().filter(|b| b.id != me.id) {
                 let (min, max) = stretch(
                     b.position - Vec3::new(r, 0.0, r),
                     b.position + Vec3::new(r, h, r),
                 );
                 boxes.set(n, min, max);
-                chunk[n] = Some(b);
+                lanes[n] = Some(b);
                 n += 1;
-                if n < LANES {
-                    continue;
-                }
-            }
-            if n == 0 {
-                break;
             }
             let rects = clipped_rects_lanes(cam, &boxes, n);
-            for (b, rect) in chunk[..n].iter().flatten().zip(rects) {
+            for (b, rect) in lanes[..n].iter().flatten().zip(rects) {
                 if frustum.misses_ball(b.position + body_ball, body_ball_radius + grow) {
                     continue;
                 }
@@ -486,7 +479,6 @@ impl Scratch {
                 };
                 push(kind, AGENT_COLORS[b.id as usize % AGENT_COLORS.len()], rect);
             }
-            n = 0;
         }
     }
 
@@ -745,10 +737,10 @@ impl BoxLanes {
     }
 }
 
-/// [`clipped_rect`] of the first `n` boxes of `boxes`, the same value for each: the
-/// corners' projections and bounds of every box at once (the same operations in the
-/// same order on every lane), [`clipped_rect`] itself for a box that reaches behind half
-/// the near distance.
+/// For each of the first `n` boxes of `boxes`, what [`clipped_rect`] gives for it (`None`
+/// past `n`): the corners' projections and bounds of every box at once (the same
+/// operations in the same order on every lane), [`clipped_rect`] itself for a box that
+/// reaches behind half the near distance.
 fn clipped_rects_lanes(cam: &Camera, boxes: &BoxLanes, n: usize) -> [Option<(Rect, f32)>; LANES] {
     let o = cam.origin;
     // Per axis, the box's min and max less the origin, times each camera axis' component.
