@@ -693,7 +693,7 @@ mod tests {
     }
 
     #[test]
-    fn default_and_large_room_configs_parse() {
+    fn the_example_configs_parse() {
         let c = Config::embedded_default().unwrap();
         let w = WorldConfig::from_config(&c).unwrap();
         assert!(w.objects.iter().any(|o| o.color == [220, 30, 30]));
@@ -703,6 +703,14 @@ mod tests {
         let w = WorldConfig::from_config(&c).unwrap();
         assert_eq!(c.agents.len(), 4);
         assert!(w.room_width > 10.0);
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/vector-16.toml");
+        let c = Config::load(path).unwrap();
+        WorldConfig::from_config(&c).unwrap();
+        assert_eq!(c.agents.len(), 16);
+        assert!(c.agents.iter().all(|a| {
+            let [cam] = &a.cameras[..] else { return false };
+            (cam.width_px, cam.height_px) == (84, 84)
+        }));
     }
 
     /// The keys a table accepts, from serde's "unknown field" message.
