@@ -221,6 +221,21 @@ pub(crate) fn connect_one(
             Err(AgentConnectError::HostNotFound { .. }) if started.elapsed() < timeout => {
                 py.check_signals()?;
             }
+            Err(AgentConnectError::HostNotFound {
+                session,
+                agent,
+                looked_for,
+                ..
+            }) => {
+                // The last attempt waited one slice; the agent waited since the first.
+                let e = AgentConnectError::HostNotFound {
+                    session,
+                    agent,
+                    waited: started.elapsed(),
+                    looked_for,
+                };
+                return Err(connect_error(py, e, &cfg.session, id));
+            }
             Err(e) => return Err(connect_error(py, e, &cfg.session, id)),
         }
     }

@@ -172,6 +172,8 @@ def test_no_host_names_the_session(tmp_path: Path) -> None:
         vrsync.Agent.connect(config, 0, connect_timeout=0.3)
     assert isinstance(info.value, ConnectionError)
     assert info.value.session == name and name in str(info.value)
+    # How long it waited in all (the connect timeout), not its last attempt.
+    assert info.value.waited >= 0.3
 
 
 def test_an_id_the_host_does_not_serve_names_the_served_ids(tmp_path: Path, start_host) -> None:
