@@ -6,13 +6,13 @@
 
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use vrsync_agent_bin::policy::STATUS_WAIT_CYCLES;
 
 use crate::util::{
     CycleLine, EVENT_DEADLINE, Events, Proc, RUN_DEADLINE, TestConfig, Transport,
-    WAIT_FOR_STOP_TIMEOUT, bin, cycle_log, record, spawn_host, wait_for_cycle_line,
+    WAIT_FOR_STOP_TIMEOUT, bin, cycle_log, record, spawn_host,
 };
 
 /// `Finished` and `Aborted`, as the wire encodes them.
@@ -184,18 +184,29 @@ fn timed_out_cycles(events: &Events) -> usize {
         .count()
 }
 
-/// Sync mode: once the agent logged cycle `at`, it is stopped (SIGSTOP) for three cycles,
-/// each ending by the stop timeout, then continued.
-fn sigstop_for_three_cycles(events: &Events, agent: &Proc, log: &Path, at: u64) {
-    wait_for_cycle_line(log, at, EVENT_DEADLINE);
-    let before = timed_out_cycles(events);
-    agent.signal(libc::SIGSTOP);
-    events.wait_for_match(
-        "cycle",
-        |_| timed_out_cycles(events) >= before + 3,
-        EVENT_DEADLINE,
-    );
-    agent.signal(libc::SIGCONT);
+/// Sync mode: the agent, started with `--sigstop-after` `stalls` cycles, stops itself
+/// (SIGSTOP) after each of them; each time, once it is stopped and three cycles ended by the
+/// stop timeout, it is continued (SIGCONT). Where it stops does not depend on how fast the
+/// machine runs the cycles.
+fn continue_after_three_cycles(events: &Events, agent: &Proc, stalls: usize) {
+    for _ in 0..stalls {
+        let deadline = Instant::now() + EVENT_DEADLINE;
+        while !agent.is_stopped() {
+            assert!(
+                Instant::now() < deadline,
+                "the agent did not stop itself within {EVENT_DEADLINE:?}"
+            );
+            // Another process's state: look again shortly.
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let before = timed_out_cycles(events);
+        events.wait_for_match(
+            "cycle",
+            |_| timed_out_cycles(events) >= before + 3,
+            EVENT_DEADLINE,
+        );
+        agent.signal(libc::SIGCONT);
+    }
 }
 
 /// A world where a move of `circle` (5 cm at 2.5 cm per cycle) takes two cycles: the move
@@ -208,32 +219,15 @@ fn a_stopped_agent_gets_every_event_once(t: Transport) {
     cfg.stop_timeout_s = 0.3;
     cfg.sync_extra = WAIT_FOR_STOP_TIMEOUT.into();
     cfg.extra = SLOW_WORLD.into();
-    every_event_once(&mut cfg, 100, "circle", &[], |events, agent, log| {
-        // Frames `at + 1` and `at + 2` carry the final statuses of the moves sent before the
-        // stall (a move takes two cycles); the test needs the agent to skip one of them.
-        // Over shm and TCP the first stall does (the agent reads the newest frame); over
-        // zenoh the frames sent during the stall reach the agent one by one after SIGCONT
-        // (see `wander_keeps_its_command_rate_after_a_stall`), so it may read both: stall
-        // again, at most four times, until it skipped one.
-        for at in [30, 45, 60, 75] {
-            sigstop_for_three_cycles(events, agent, log, at);
-            wait_for_cycle_line(log, at + 4, EVENT_DEADLINE);
-            let read = cycles_read(log);
-            if !read.contains(&(at + 1)) || !read.contains(&(at + 2)) {
-                break;
-            }
-        }
+    // After a stall at `at`, frames `at + 1` and `at + 2` carry the final statuses of the
+    // moves sent before it (a move takes two cycles); the test needs the agent to skip one
+    // of them. Over shm and TCP every stall does (the agent reads the newest frame); over
+    // zenoh the frames sent during the stall reach the agent one by one after SIGCONT (see
+    // `wander_keeps_its_command_rate_after_a_stall`), so it may read both: four stalls.
+    let args = ["--sigstop-after", "30,45,60,75"];
+    every_event_once(&mut cfg, 100, "circle", &args, |events, agent, _| {
+        continue_after_three_cycles(events, agent, 4);
     });
-}
-
-/// The cycles of the agent's cycle log's complete lines.
-fn cycles_read(log: &Path) -> Vec<u64> {
-    let text = std::fs::read_to_string(log).unwrap_or_default();
-    let complete = text.rfind('\n').map_or("", |end| &text[..end]);
-    complete
-        .lines()
-        .filter_map(|l| l.split(' ').next()?.parse::<u64>().ok())
-        .collect()
 }
 
 fn a_late_agent_gets_every_event_once(t: Transport) {
@@ -266,10 +260,9 @@ fn wander_keeps_its_command_rate_after_a_stall(t: Transport) {
     cfg.stop_timeout_s = 0.3;
     cfg.sync_extra = WAIT_FOR_STOP_TIMEOUT.into();
     let stalls = [30, 53, 76, 99];
-    let cycles = every_event_once(&mut cfg, 160, "wander", &[], |events, agent, log| {
-        for at in stalls {
-            sigstop_for_three_cycles(events, agent, log, at);
-        }
+    let args = ["--sigstop-after", "30,53,76,99"];
+    let cycles = every_event_once(&mut cfg, 160, "wander", &args, |events, agent, _| {
+        continue_after_three_cycles(events, agent, stalls.len());
     });
     let sent: Vec<u64> = cycles
         .iter()

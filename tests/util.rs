@@ -634,6 +634,16 @@ impl Proc {
         }
     }
 
+    /// Whether the process is stopped (by a signal): its state in `/proc/PID/stat` is `T`.
+    pub fn is_stopped(&self) -> bool {
+        let Some(c) = &self.child else { return false };
+        let stat = std::fs::read_to_string(format!("/proc/{}/stat", c.id())).unwrap_or_default();
+        // `PID (COMM) STATE ...`; COMM may hold spaces and parentheses, so after the last ')'.
+        stat.rsplit_once(')')
+            .and_then(|(_, rest)| rest.split_whitespace().next())
+            == Some("T")
+    }
+
     /// Sends a signal.
     pub fn signal(&self, sig: i32) {
         if let Some(c) = &self.child {

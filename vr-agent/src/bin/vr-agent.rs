@@ -80,6 +80,11 @@ struct Args {
     /// cycles are skipped.
     #[arg(long, value_name = "N", hide = true, default_value_t = 1)]
     late_stop_cycles: u32,
+    /// Testing aid: after stopping each of these cycles (comma-separated), stop this
+    /// process (SIGSTOP to itself) until something continues it (SIGCONT): frozen at a
+    /// known cycle, as a debugger or an overloaded machine freezes it.
+    #[arg(long, value_name = "CYCLE", value_delimiter = ',', hide = true)]
+    sigstop_after: Vec<u64>,
 }
 
 fn main() -> ExitCode {
@@ -256,6 +261,9 @@ fn run(args: &Args) -> anyhow::Result<ExitCode> {
             Err(StopError::HostClosed) => break Ok(()),
             Err(e) => return Err(anyhow::Error::new(e).context("stop")),
         }
+        if args.sigstop_after.contains(&cycle) {
+            freeze();
+        }
     };
     report(&agent, cycles);
     match outcome {
@@ -263,6 +271,15 @@ fn run(args: &Args) -> anyhow::Result<ExitCode> {
         Err(e) => {
             Err(anyhow::Error::new(e).context(format!("agent {} after {cycles} cycles", args.id)))
         }
+    }
+}
+
+/// Stops this process until it is continued (SIGCONT).
+fn freeze() {
+    // SAFETY: raise(3) with a valid signal number; SIGSTOP cannot be caught, so no handler
+    // runs, and the process simply resumes here when continued.
+    unsafe {
+        libc::raise(libc::SIGSTOP);
     }
 }
 
