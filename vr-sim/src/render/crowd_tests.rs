@@ -15,6 +15,12 @@ use crate::world::World;
 /// A camera: name, format, width, height, fov h × v.
 type Cam = (&'static str, PixelFormat, u32, u32, f32, f32);
 
+/// The eyes of the speed measurements' crowds: two 32×24 rgb8 cameras, 120° × 90°.
+const CROWD_EYES: [Cam; 2] = [
+    ("left", PixelFormat::Rgb8, 32, 24, 120.0, 90.0),
+    ("right", PixelFormat::Rgb8, 32, 24, 120.0, 90.0),
+];
+
 /// Agent 0's cameras (every agent copies them).
 const CAMERAS: [Cam; 4] = [
     ("left", PixelFormat::Rgb8, 32, 24, 120.0, 90.0),
@@ -408,10 +414,7 @@ fn w_apply(w: &mut World, id: u32, command: Command) {
 #[test]
 #[ignore = "measurement, run by hand in release mode"]
 fn crowd_render_speed() {
-    let cams: [Cam; 2] = [
-        ("left", PixelFormat::Rgb8, 32, 24, 120.0, 90.0),
-        ("right", PixelFormat::Rgb8, 32, 24, 120.0, 90.0),
-    ];
+    let cams = CROWD_EYES;
     for agents in [1, 4, 8, 16, 32, 64] {
         let w = crowd_world_with(agents, &cams);
         let mut r = super::Scratch::default();
@@ -524,10 +527,7 @@ fn crowd_render_speed() {
 #[ignore = "prints timings; run on demand in release mode"]
 fn crowd_per_ray_floor() {
     use super::{Entry, RowRays, Scratch, Tiles, draw, hit_prim, row_shader, view_of};
-    let cams: [Cam; 2] = [
-        ("left", PixelFormat::Rgb8, 32, 24, 120.0, 90.0),
-        ("right", PixelFormat::Rgb8, 32, 24, 120.0, 90.0),
-    ];
+    let cams = CROWD_EYES;
     let shader = row_shader();
     for agents in [1, 4, 16, 64] {
         let w = crowd_world_with(agents, &cams);
@@ -552,8 +552,7 @@ fn crowd_per_ray_floor() {
                 for y in 0..cam.height_px {
                     let rr = RowRays::of(&cam, y);
                     for x in 0..cam.width_px {
-                        let s = rr.u0 + x as i32 as f32 * rr.du;
-                        let d = rr.row_dir + s * cam.right;
+                        let d = rr.dir(cam.right, x);
                         let inv = crate::geometry::recip(d);
                         let mut t =
                             crate::geometry::exit_box(cam.origin, inv, room_min, room_max).0;
@@ -607,12 +606,7 @@ fn crowd_per_ray_floor() {
                         let list = &t.items[t.start[tile] as usize..t.start[tile + 1] as usize];
                         listed += list.len();
                         let rays: Vec<(u32, glam::Vec3)> = (x0..(x0 + 8).min(cam.width_px))
-                            .map(|x| {
-                                (
-                                    x,
-                                    rr.row_dir + (rr.u0 + x as i32 as f32 * rr.du) * cam.right,
-                                )
-                            })
+                            .map(|x| (x, rr.dir(cam.right, x)))
                             .collect();
                         let mut depth: Vec<f32> = rays
                             .iter()

@@ -972,6 +972,12 @@ impl RowRays {
             du,
         }
     }
+
+    /// Pixel `x`'s ray (the row shader computes the same, component by component, per lane).
+    #[cfg(test)]
+    fn dir(&self, right: Vec3, x: u32) -> Vec3 {
+        self.row_dir + (self.u0 + x as i32 as f32 * self.du) * right
+    }
 }
 
 /// Where every lane's ray leaves the room `min..max` (from `o` inside it), the same bits

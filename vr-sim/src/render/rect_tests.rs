@@ -49,8 +49,7 @@ fn prim(kind: u8, center: Vec3, size: Vec3) -> (PrimKind, Vec3, Vec3) {
 
 /// Where pixel (`x`, `y`)'s ray hits the primitive, as the row shader tests it.
 fn hit(cam: &Camera, kind: PrimKind, x: u32, y: u32) -> Option<f32> {
-    let RowRays { row_dir, u0, du } = RowRays::of(cam, y);
-    let d = row_dir + (u0 + x as f32 * du) * cam.right;
+    let d = RowRays::of(cam, y).dir(cam.right, x);
     let t = match kind {
         PrimKind::Body {
             base,
