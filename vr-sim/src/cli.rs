@@ -4,6 +4,8 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 
+use crate::render::Affinity;
+
 /// vr-sim: a headless, deterministic simulator that drives vrsync agents in lock-step.
 ///
 /// Exit codes: 0 success, 1 runtime failure, 2 bad usage or bad config.
@@ -84,6 +86,11 @@ pub struct ReplayArgs {
     /// thread only; 0: one per core).
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub render_threads: usize,
+    /// Bind each render thread to its own CPU. auto: when there is one per CPU (the
+    /// default thread count). A kernel may otherwise run a woken render thread on the CPU
+    /// of the thread that woke it while another CPU idles.
+    #[arg(long, value_enum, value_name = "HOW", default_value_t = Affinity::Auto)]
+    pub render_affinity: Affinity,
 }
 
 /// `WIDTHxHEIGHT`, both at least 1.
@@ -149,10 +156,16 @@ pub struct DemoArgs {
     #[arg(long, value_name = "NAME", default_value = "wander",
           value_parser = ["wander", "seek", "idle", "circle"])]
     pub policy: String,
-    /// Render threads: the images of up to 8 agents per thread at once, and the rows of
-    /// large images (1: the host thread only; 0: one per core).
+    /// Render threads: the images of every agent at once (of up to 8 agents per thread
+    /// when there are fewer threads than CPUs), and the rows of large images (1: the host
+    /// thread only; 0: one per core).
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub render_threads: usize,
+    /// Bind each render thread to its own CPU. auto: when there is one per CPU (the
+    /// default thread count). A kernel may otherwise run a woken render thread on the CPU
+    /// of the thread that woke it while another CPU idles.
+    #[arg(long, value_enum, value_name = "HOW", default_value_t = Affinity::Auto)]
+    pub render_affinity: Affinity,
 }
 
 /// `vr-sim run`.
@@ -207,11 +220,17 @@ pub struct RunArgs {
     #[arg(long, value_name = "K", default_value_t = 1, requires = "dump_frames",
           value_parser = clap::value_parser!(u64).range(1..))]
     pub every: u64,
-    /// Render threads: the images of up to 8 agents per thread at once (rendered, then
-    /// published in agent order), and the rows of large images (1: the host thread only;
-    /// 0: one per core). The images do not depend on it.
+    /// Render threads: the images of every agent at once (of up to 8 agents per thread
+    /// when there are fewer threads than CPUs; rendered, then published in agent order),
+    /// and the rows of large images (1: the host thread only; 0: one per core). The
+    /// images do not depend on it.
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub render_threads: usize,
+    /// Bind each render thread to its own CPU. auto: when there is one per CPU (the
+    /// default thread count). A kernel may otherwise run a woken render thread on the CPU
+    /// of the thread that woke it while another CPU idles.
+    #[arg(long, value_enum, value_name = "HOW", default_value_t = Affinity::Auto)]
+    pub render_affinity: Affinity,
     /// Show the run live in a Rerun viewer: the one listening on port 9876, else a new
     /// `rerun` process from PATH (`pip install rerun-sdk==0.36.3` installs it). Logged:
     /// every agent's camera images, its body, eyes (camera frustums) and trajectory in the

@@ -102,6 +102,7 @@ fn replay_cmd(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         dump_frames: args.dump_frames.clone().map(|d| (d, args.every)),
         map: args.map,
         render_threads: args.render_threads,
+        render_affinity: args.render_affinity,
     })?;
     println!(
         "vr-sim replay: {} cycles of {} agents ({} commands applied, {} rejected) follow {}; \
@@ -173,6 +174,7 @@ fn demo(args: DemoArgs) -> anyhow::Result<ExitCode> {
             // Four moments of the run.
             dump_frames: Some((frames_dir.clone(), (args.frames / 4).max(1))),
             render_threads: args.render_threads,
+            render_affinity: args.render_affinity,
             rerun: None,
         },
         &mut events::Events::disabled(),
@@ -247,6 +249,7 @@ fn run_with_events(args: &RunArgs, events: &mut events::Events) -> anyhow::Resul
             map: args.map.clone(),
             dump_frames: args.dump_frames.clone().map(|d| (d, args.every)),
             render_threads: args.render_threads,
+            render_affinity: args.render_affinity,
             rerun: (args.rerun || args.rrd.is_some()).then(|| rerun_log::RerunOptions {
                 viewer: args.rerun,
                 rrd: args.rrd.clone(),

@@ -44,6 +44,8 @@ pub struct ReplayOptions {
     pub map: Option<PathBuf>,
     /// Threads shading image rows.
     pub render_threads: usize,
+    /// Whether the render threads are bound to CPUs.
+    pub render_affinity: crate::render::Affinity,
 }
 
 /// A record that cannot be replayed: unreadable, malformed, truncated or of another
@@ -201,7 +203,10 @@ pub fn replay(opts: &ReplayOptions) -> anyhow::Result<Replayed> {
         Some((dir, _)) => {
             std::fs::create_dir_all(dir)
                 .with_context(|| format!("cannot create {}", dir.display()))?;
-            Some(Renderer::new(opts.render_threads)?)
+            Some(Renderer::with_affinity(
+                opts.render_threads,
+                opts.render_affinity,
+            )?)
         }
         None => None,
     };

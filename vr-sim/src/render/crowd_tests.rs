@@ -493,7 +493,8 @@ fn crowd_render_speed() {
                         })
                         .collect();
                     while !jobs.is_empty() {
-                        let rest = jobs.split_off(jobs.len().min(2 * r.agents_per_batch()));
+                        let rest =
+                            jobs.split_off(jobs.len().min(r.agents_per_batch().saturating_mul(2)));
                         r.render_images(&w, jobs);
                         jobs = rest;
                     }

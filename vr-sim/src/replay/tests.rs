@@ -106,6 +106,7 @@ fn options(record: &Path) -> ReplayOptions {
         dump_frames: None,
         map: None,
         render_threads: 1,
+        render_affinity: crate::render::Affinity::Auto,
     }
 }
 

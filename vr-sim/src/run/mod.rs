@@ -50,6 +50,8 @@ pub struct RunOptions {
     pub dump_frames: Option<(PathBuf, u64)>,
     /// Threads shading image rows (1: the host thread only; 0: one per core).
     pub render_threads: usize,
+    /// Whether the render threads are bound to CPUs.
+    pub render_affinity: crate::render::Affinity,
     /// Live view and/or recording in Rerun (`--rerun`, `--rrd`).
     pub rerun: Option<RerunOptions>,
 }
@@ -163,7 +165,7 @@ impl Run {
         // The world first: a bad [world] section is a config error, reported before anything
         // is started.
         let world = World::from_config(config)?;
-        let renderer = Renderer::new(opts.render_threads)?;
+        let renderer = Renderer::with_affinity(opts.render_threads, opts.render_affinity)?;
         // Before the host and the agents: a viewer that cannot be started (or a vr-sim
         // built without the feature) is reported at once.
         let rerun = match &opts.rerun {
