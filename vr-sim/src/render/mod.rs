@@ -24,7 +24,8 @@
 //! shaded in parallel when it has that many alone. Smaller work costs less than waking the pool
 //! (with many agent processes on few cores, far less), so it stays on the calling thread.
 //! Every pixel is a pure function of the world, so the images do not depend on the number
-//! of threads or on how the images are batched.
+//! of threads or on how the images are batched. With a pool thread for every CPU, each is
+//! bound to its own CPU (see [`affinity`]).
 
 use std::sync::{Mutex, PoisonError};
 
