@@ -9,7 +9,7 @@ use vrsync_bridge::{
 };
 pub use vrsync_bridge::{AgentConnectError, SignalHandling};
 use vrsync_bridge::{
-    AgentFrame, AgentReceiveError, AgentSendError, AgentTransport, AgentWaitError,
+    AgentFrame, AgentReceiveError, AgentSendError, AgentTransport, AgentWaitError, HostLiveness,
     wait_for_newer_frame,
 };
 use vrsync_bridge::{AnyAgent, AnyFrame};
@@ -665,7 +665,9 @@ impl Agent {
         self.leave();
     }
 
-    /// Sends the leave batch once (errors ignored: a host that is gone needs no goodbye).
+    /// Sends the leave batch once (errors ignored), unless the host closed the session or
+    /// is gone: it needs no goodbye then (and a host closing its zenoh session would log
+    /// the late batch as data for a key expression it no longer knows).
     fn leave(&mut self) {
         if core::mem::replace(&mut self.closed, true) {
             return;
@@ -683,7 +685,9 @@ impl Agent {
             command_count: 0,
             ack_cycle: self.last_cycle.unwrap_or(0),
         };
-        let _ = self.backend.send_batch(&header, &[]);
+        if matches!(self.backend.host_liveness(false), HostLiveness::Alive) {
+            let _ = self.backend.send_batch(&header, &[]);
+        }
         note_left(&self.session, self.id);
     }
 }
