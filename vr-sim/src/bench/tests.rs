@@ -138,11 +138,36 @@ fn the_zenoh_tls_rows_use_mutual_tls_and_a_long_lease() {
     let config = Config::from_toml_str(&text, Path::new("<test>")).unwrap();
     let z = &config.transport.zenoh;
     assert!(z.tls.mtls, "{text}");
-    assert_eq!(z.lease, Duration::from_secs_f64(super::vrsync::TLS_LEASE_S));
+    assert_eq!(
+        z.lease,
+        Duration::from_secs_f64(super::vrsync::ZENOH_LEASE_S)
+    );
     assert!(
         z.listen.iter().all(|e| e.starts_with("tls/127.0.0.1:")),
         "{text}"
     );
+}
+
+#[test]
+fn the_plain_zenoh_and_mixed_rows_use_the_long_lease_too() {
+    for transport in ["zenoh", "mixed"] {
+        let case = Case {
+            transport,
+            agents: 4,
+            cameras: CAMERAS,
+            width: 1920,
+            height: 1080,
+            warmup: 1,
+            cycles: 1,
+        };
+        let text = config_text(&case, "bench-test-lease", Path::new("/nonexistent"));
+        let config = Config::from_toml_str(&text, Path::new("<test>")).unwrap();
+        assert_eq!(
+            config.transport.zenoh.lease,
+            Duration::from_secs_f64(super::vrsync::ZENOH_LEASE_S),
+            "{text}"
+        );
+    }
 }
 
 #[test]

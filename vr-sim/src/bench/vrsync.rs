@@ -71,8 +71,12 @@ pub(super) fn make_certificates(dir: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `transport.zenoh.lease` of the `zenoh-tls` rows, s (the default is 2).
-pub(super) const TLS_LEASE_S: f64 = 10.0;
+/// `transport.zenoh.lease` of every case with zenoh agents (`zenoh`, `zenoh-tls`,
+/// `mixed`), s: zenoh's own default, as in `floor-zenoh` (vrsync's default is 2). At 4
+/// agents x 3x1920x1080 (56 MB per frame, 5 processes on 2 cores) some cycles take over
+/// 2 s (p99 2.6 s measured with TLS): with a 2 s lease an agent's link was closed mid-run
+/// in 3 of 4 `zenoh-tls` runs, and once in a plain `zenoh` run, which failed the bench.
+pub(super) const ZENOH_LEASE_S: f64 = 10.0;
 
 /// The `mixed` rows' transports, agent by agent (cycling): one host serving agents over
 /// shared memory, TCP and zenoh at once.
@@ -96,22 +100,19 @@ pub(super) fn config_text(case: &Case, session: &str, certs: &Path) -> String {
         // Loopback, a port free a moment ago (zenoh's stable API cannot report the port
         // of a port-0 listener), scouting off (the default).
         let endpoint = loopback_endpoint().unwrap_or_default();
+        s += &format!("[transport.zenoh]\nlease = {ZENOH_LEASE_S:.1}\n");
         if case.transport == "zenoh-tls" {
-            // Mutual TLS: host and agents share the config, hence the certificate. A 10 s
-            // lease: at 4 agents x 3x1920x1080 (56 MB per frame, every byte encrypted, 5
-            // processes on 2 cores) some cycles take over 2 s (p99 2.6 s measured), and with
-            // the default 2 s lease an agent's link was closed mid-run in 3 of 4 runs.
+            // Mutual TLS: host and agents share the config, hence the certificate.
             let file = |name: &str| certs.join(name).display().to_string();
             s += &format!(
-                "[transport.zenoh]\nlisten = [{:?}]\ntls_ca = {:?}\ntls_cert = {:?}\n\
-                 tls_key = {:?}\nmtls = true\nlease = {TLS_LEASE_S:.1}\n",
+                "listen = [{:?}]\ntls_ca = {:?}\ntls_cert = {:?}\ntls_key = {:?}\nmtls = true\n",
                 endpoint.replacen("tcp/", "tls/", 1),
                 file("ca.pem"),
                 file("bench.pem"),
                 file("bench.key")
             );
         } else {
-            s += &format!("[transport.zenoh]\nlisten = [{endpoint:?}]\n");
+            s += &format!("listen = [{endpoint:?}]\n");
         }
     }
     for id in 0..case.agents {
