@@ -54,7 +54,7 @@ enum vrs_status_t
   VRS_ERROR_CONFIG = -4,
   // Connecting failed (no host, protocol mismatch, agent id already in use, …).
   VRS_ERROR_CONNECT = -5,
-  // The host process died without closing the session.
+  // The host is gone without closing the session (its process died, or the link broke).
   VRS_ERROR_HOST_GONE = -6,
   // The host sent a frame that violates the protocol.
   VRS_ERROR_PROTOCOL = -7,

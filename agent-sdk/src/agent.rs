@@ -37,11 +37,15 @@ pub enum WaitStartError {
     /// The host closed the session (a clean end of the run).
     #[error("the host closed the session")]
     HostClosed,
-    /// The host process is gone without closing the session (crashed or killed).
-    #[error("the host is gone: its process died without closing session {session:?}")]
+    /// The host is gone without closing the session: its process crashed or was killed,
+    /// or the link to it broke (`reason` says which the transport saw).
+    #[error("the host of session {session:?} is gone without closing it: {reason}")]
     HostGone {
         /// The session.
         session: String,
+        /// What the transport saw: "its process died", "connection closed without
+        /// shutdown", "the host's zenoh liveliness token vanished (...)", ...
+        reason: String,
     },
     /// The frame violates the protocol (corrupt image table, wrong agent, wrong version).
     #[error("invalid sensor frame for cycle {cycle}: {reason}")]
@@ -548,8 +552,9 @@ impl Agent {
                 last_cycle: self.last_cycle,
             },
             AgentWaitError::HostClosed => WaitStartError::HostClosed,
-            AgentWaitError::HostGone { .. } => WaitStartError::HostGone {
+            AgentWaitError::HostGone { reason } => WaitStartError::HostGone {
                 session: self.session.clone(),
+                reason,
             },
             AgentWaitError::Receive(AgentReceiveError::TooManyFramesHeld { max }) => {
                 WaitStartError::TooManyFramesHeld { max }

@@ -501,10 +501,13 @@ fn a_killed_host_is_seen_as_gone(kind: &str, test: &str) {
     assert_eq!(agent.wait_start(Some(WAIT)).unwrap().cycle(), 0);
     child.kill();
     let err = agent.wait_start(Some(WAIT)).unwrap_err();
-    assert!(
-        matches!(err, WaitStartError::HostGone { .. }),
-        "{kind}: a killed host must be gone, not closed or silent: {err:?}"
-    );
+    let WaitStartError::HostGone { session, reason } = &err else {
+        panic!("{kind}: a killed host must be gone, not closed or silent: {err:?}");
+    };
+    // The error names the session and what the transport saw.
+    assert_eq!(session, &config.session);
+    assert!(!reason.is_empty());
+    assert!(err.to_string().ends_with(reason.as_str()), "{err}");
     vrsync_bridge::shm::cleanup_dead_nodes(&config.session);
 }
 

@@ -73,7 +73,8 @@ class HostClosedError(VrsyncError):
 
 
 class HostGoneError(VrsyncError, ConnectionError):
-    """The host process died without closing the session (crashed or killed)."""
+    """The host is gone without closing the session: its process crashed or was killed, or
+    the link to it broke (the message says what the transport saw)."""
 
 
 class WaitTimeoutError(VrsyncError, TimeoutError):
