@@ -39,7 +39,7 @@ pub enum WaitStartError {
     HostClosed,
     /// The host is gone without closing the session: its process crashed or was killed,
     /// or the link to it broke (`reason` says which the transport saw).
-    #[error("the host of session {session:?} is gone without closing it: {reason}")]
+    #[error("the host is gone without closing session {session:?}: {reason}")]
     HostGone {
         /// The session.
         session: String,
