@@ -4,6 +4,19 @@ use super::vrsync::config_text;
 
 use super::*;
 
+/// A case of one warm-up and one measured cycle, with the bench's cameras per agent.
+fn one_cycle_case(transport: &'static str, agents: u32, width: u32, height: u32) -> Case {
+    Case {
+        transport,
+        agents,
+        cameras: CAMERAS,
+        width,
+        height,
+        warmup: 1,
+        cycles: 1,
+    }
+}
+
 #[test]
 fn median_of_round_p50s_ignores_one_disturbed_round() {
     assert_eq!(median(&[5.0, 4.0, 400.0, 4.5, 5.5]), 5.0);
@@ -123,15 +136,7 @@ fn a_vector_env_case_configures_one_camera_per_agent() {
 
 #[test]
 fn the_zenoh_tls_rows_use_mutual_tls_and_a_long_lease() {
-    let case = Case {
-        transport: "zenoh-tls",
-        agents: 4,
-        cameras: CAMERAS,
-        width: 1920,
-        height: 1080,
-        warmup: 1,
-        cycles: 1,
-    };
+    let case = one_cycle_case("zenoh-tls", 4, 1920, 1080);
     let dir = tempfile::tempdir().unwrap();
     super::vrsync::make_certificates(dir.path()).unwrap();
     let text = config_text(&case, "bench-test-tls", dir.path());
@@ -151,15 +156,7 @@ fn the_zenoh_tls_rows_use_mutual_tls_and_a_long_lease() {
 #[test]
 fn the_plain_zenoh_and_mixed_rows_use_the_long_lease_too() {
     for transport in ["zenoh", "mixed"] {
-        let case = Case {
-            transport,
-            agents: 4,
-            cameras: CAMERAS,
-            width: 1920,
-            height: 1080,
-            warmup: 1,
-            cycles: 1,
-        };
+        let case = one_cycle_case(transport, 4, 1920, 1080);
         let text = config_text(&case, "bench-test-lease", Path::new("/nonexistent"));
         let config = Config::from_toml_str(&text, Path::new("<test>")).unwrap();
         assert_eq!(
@@ -172,15 +169,7 @@ fn the_plain_zenoh_and_mixed_rows_use_the_long_lease_too() {
 
 #[test]
 fn a_mixed_case_puts_its_agents_on_shm_tcp_and_zenoh_of_one_host() {
-    let case = Case {
-        transport: "mixed",
-        agents: 4,
-        cameras: CAMERAS,
-        width: 320,
-        height: 240,
-        warmup: 1,
-        cycles: 1,
-    };
+    let case = one_cycle_case("mixed", 4, 320, 240);
     let text = config_text(&case, "bench-test-mixed", Path::new("/nonexistent"));
     let config = Config::from_toml_str(&text, Path::new("<test>")).unwrap();
     let kinds: Vec<&str> = config.agents.iter().map(|a| a.transport.as_str()).collect();
@@ -195,15 +184,7 @@ fn the_ratio_table_divides_the_named_rows_p50s_and_skips_missing_rows() {
     let mut h = histogram().unwrap();
     h.record(1000).unwrap();
     let row_of = |transport: &'static str, width: u32, p50_us: f64| {
-        let case = Case {
-            transport,
-            agents: 1,
-            cameras: CAMERAS,
-            width,
-            height: 240,
-            warmup: 1,
-            cycles: 1,
-        };
+        let case = one_cycle_case(transport, 1, width, 240);
         let mut r = row(&case, &Measured::new(h.clone(), 0.0, 0.0));
         r.p50_us = p50_us;
         r
@@ -290,15 +271,7 @@ fn many_agent_rows_are_told_apart_from_the_vector_env_rows_and_show_the_bridge_s
 
 #[test]
 fn a_64_agent_case_has_a_world_to_render() {
-    let case = Case {
-        transport: "shm",
-        agents: 64,
-        cameras: CAMERAS,
-        width: 320,
-        height: 240,
-        warmup: 1,
-        cycles: 1,
-    };
+    let case = one_cycle_case("shm", 64, 320, 240);
     let text = config_text(&case, "bench-test-many", Path::new("/nonexistent"));
     let config = Config::from_toml_str(&text, Path::new("<test>")).unwrap();
     let world = crate::world::World::from_config(&config).unwrap();
