@@ -132,21 +132,17 @@ mod tests {
     #[test]
     fn a_bound_render_pool_has_each_thread_on_its_cpu_and_a_free_one_anywhere() {
         let cpus = allowed_cpus().unwrap();
-        let bound = crate::render::Renderer::with_affinity(3, Affinity::Bind).unwrap();
-        let seen = bound
-            .pool
-            .as_ref()
-            .unwrap()
-            .broadcast(|_| allowed_cpus().unwrap());
+        // Each pool thread's CPU mask, by thread index.
+        let masks = |affinity| {
+            let r = crate::render::Renderer::with_affinity(3, affinity).unwrap();
+            r.pool
+                .as_ref()
+                .unwrap()
+                .broadcast(|_| allowed_cpus().unwrap())
+        };
         let want: Vec<Vec<usize>> = (0..3).map(|i| vec![cpus[i % cpus.len()]]).collect();
-        assert_eq!(seen, want);
-        let free = crate::render::Renderer::with_affinity(3, Affinity::Free).unwrap();
-        let seen = free
-            .pool
-            .as_ref()
-            .unwrap()
-            .broadcast(|_| allowed_cpus().unwrap());
-        assert_eq!(seen, vec![cpus.clone(); 3]);
+        assert_eq!(masks(Affinity::Bind), want);
+        assert_eq!(masks(Affinity::Free), vec![cpus.clone(); 3]);
     }
 
     #[test]
