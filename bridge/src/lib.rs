@@ -66,14 +66,15 @@ mod wire;
 pub use barrier::AgentOutcome;
 pub use colour::ansi_on_stderr;
 pub use config::{
-    AgentConfig, AgentLostPolicy, CameraConfig, Config, ConfigLoadError, DEFAULT_CONFIG_TOML,
-    DEFAULT_SPIN_BEFORE_BLOCK_US, DEFAULT_ZENOH_ENDPOINT, LegacyConfig, LegacyDialect,
-    MAX_AGENT_ID, MAX_CONFIG_BYTES, MAX_IMAGE_SIDE_PX, PngCompression, SyncConfig, TransportConfig,
-    TransportKind, WaitForStop, WaitMode, ZenohConfig, ZenohTls, derived_height,
+    ActionConfig, ActionSpace, AgentConfig, AgentLostPolicy, CameraConfig, Config, ConfigLoadError,
+    DEFAULT_CONFIG_TOML, DEFAULT_SPIN_BEFORE_BLOCK_US, DEFAULT_ZENOH_ENDPOINT, LegacyConfig,
+    LegacyDialect, MAX_AGENT_ID, MAX_CONFIG_BYTES, MAX_IMAGE_SIDE_PX, PngCompression, SyncConfig,
+    TransportConfig, TransportKind, VectorConfig, WaitForStop, WaitMode, ZenohConfig, ZenohTls,
+    derived_height,
 };
 pub use host::{
-    AgentReport, CycleReport, Host, HostBuilder, HostCreateError, HostCycleError, HostStats,
-    HostWaitError, ImageMut, ImagesMut, REAP_PERIOD, SensorFrameMut,
+    ActionValue, AgentReport, CycleReport, Host, HostBuilder, HostCreateError, HostCycleError,
+    HostStats, HostWaitError, INTERRUPT_PERIOD, ImageMut, ImagesMut, REAP_PERIOD, SensorFrameMut,
 };
 pub use logging::{QUIET_ZENOH, default_log_filter};
 pub use rounded::Rounded;
@@ -88,11 +89,13 @@ pub use transport::{
     Refusals, retry_until, wait_for_newer_frame,
 };
 pub use wire::{
-    ActionState, ActionStatus, CAMERA_NAME_LEN, Collision, Command, CommandDecodeError,
-    EyePosition, GridPosition, HeadMotion, IMAGE_ALIGN, ImageDesc, LAYOUT_HASH, MAX_CAMERAS,
-    MAX_COLLISIONS, MAX_STATUSES, MAX_TOKEN, MOTOR_FLAG_ACK, MOTOR_FLAG_LEAVE, MOTOR_FLAG_STOP,
-    MotorCommand, MotorHeader, PROTOCOL_VERSION, PixelFormat, Pose, SENSOR_FLAG_SYNC_MODE,
-    SensorHeader, WireOutcome, image_layout, kind as command_kind, kind_name,
+    ACTION_CHUNK, ACTION_KIND, ActionDesc, ActionState, ActionStatus, CAMERA_NAME_LEN,
+    CHANNEL_NAME_LEN, Collision, Command, CommandDecodeError, EyePosition, GridPosition,
+    HeadMotion, IMAGE_ALIGN, ImageDesc, LAYOUT_HASH, MAX_ACTION_LEN, MAX_ACTIONS, MAX_CAMERAS,
+    MAX_COLLISIONS, MAX_STATUSES, MAX_TOKEN, MAX_VECTOR_LEN, MAX_VECTORS, MOTOR_FLAG_ACK,
+    MOTOR_FLAG_LEAVE, MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION, PixelFormat,
+    Pose, SENSOR_FLAG_SYNC_MODE, SensorHeader, VectorDesc, WireOutcome, action_chunks, bounds_hash,
+    discrete_action_chunk, image_layout, kind as command_kind, kind_name, vector_layout,
 };
 
 /// The shared-memory transport (iceoryx2): agents on this machine, zero copy.

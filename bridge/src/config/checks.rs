@@ -33,7 +33,12 @@ impl Ctx<'_> {
             + 1
     }
 
-    fn invalid(&self, span: Range<usize>, key: &str, reason: impl Into<String>) -> ConfigLoadError {
+    pub(super) fn invalid(
+        &self,
+        span: Range<usize>,
+        key: &str,
+        reason: impl Into<String>,
+    ) -> ConfigLoadError {
         ConfigLoadError::Invalid {
             path: self.path.to_path_buf(),
             line: self.line_of(span),
@@ -497,13 +502,30 @@ impl Ctx<'_> {
             let cam = self.camera(c.into_inner(), id, &mut names)?;
             cameras.push(cam);
         }
+        let transport = a.transport.unwrap_or(kind);
+        let has_channels = !a.vector.is_empty() || !a.action.is_empty();
+        let vectors = self.vectors(a.vector, id)?;
+        let actions = self.actions(a.action, id)?;
+        if has_channels && transport == TransportKind::Legacy {
+            return Err(self.invalid(
+                agent_span,
+                "agent.transport",
+                format!(
+                    "agent {id} is served over the original protocol (legacy), which has no \
+                     channels: remove its [[agent.vector]] / [[agent.action]] entries or \
+                     give it another transport"
+                ),
+            ));
+        }
         Ok(AgentConfig {
             id,
-            transport: a.transport.unwrap_or(kind),
-            wait_for_stop: a.wait_for_stop.unwrap_or_else(|| {
-                WaitForStop::default_for(sync.wait_for_stop, a.transport.unwrap_or(kind))
-            }),
+            transport,
+            wait_for_stop: a
+                .wait_for_stop
+                .unwrap_or_else(|| WaitForStop::default_for(sync.wait_for_stop, transport)),
             cameras,
+            vectors,
+            actions,
         })
     }
 }

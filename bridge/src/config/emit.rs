@@ -3,7 +3,9 @@
 
 use std::fmt::Write;
 
-use super::{AgentConfig, AgentLostPolicy, Config, SyncConfig, TransportConfig, WaitMode};
+use super::{
+    ActionSpace, AgentConfig, AgentLostPolicy, Config, SyncConfig, TransportConfig, WaitMode,
+};
 
 impl Config {
     /// The config as TOML again (for handing the effective config to spawned agents).
@@ -130,6 +132,44 @@ fn write_agent(s: &mut String, a: &AgentConfig) {
             f64::from(c.fov_vertical_deg)
         );
     }
+    write_channels(s, a);
+}
+
+/// The `[[agent.vector]]` and `[[agent.action]]` entries of an agent.
+fn write_channels(s: &mut String, a: &AgentConfig) {
+    for v in &a.vectors {
+        let _ = writeln!(
+            s,
+            "[[agent.vector]]\nname = {}\nlen = {}\nlow = {}\nhigh = {}",
+            toml_string(&v.name),
+            v.len,
+            toml_floats(&v.low),
+            toml_floats(&v.high)
+        );
+    }
+    for act in &a.actions {
+        let _ = writeln!(s, "[[agent.action]]\nname = {}", toml_string(&act.name));
+        let _ = match &act.space {
+            ActionSpace::Box { low, high } => writeln!(
+                s,
+                "len = {}\nlow = {}\nhigh = {}",
+                low.len(),
+                toml_floats(low),
+                toml_floats(high)
+            ),
+            ActionSpace::Discrete { n } => writeln!(s, "n = {n}"),
+        };
+    }
+}
+
+/// A TOML array of floats (`inf` and `-inf` are TOML).
+fn toml_floats(v: &[f32]) -> String {
+    toml::Value::Array(
+        v.iter()
+            .map(|&x| toml::Value::Float(f64::from(x)))
+            .collect(),
+    )
+    .to_string()
 }
 
 /// `s` as a TOML string value. (Rust's `{:?}` is not TOML: it writes `\u{7f}`.)

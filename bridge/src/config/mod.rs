@@ -15,14 +15,20 @@ use std::time::Duration;
 
 use serde::Deserialize;
 
-use crate::wire::{ImageDesc, MAX_CAMERAS, PixelFormat};
+use crate::wire::{
+    ActionDesc, ImageDesc, MAX_ACTIONS, MAX_CAMERAS, MAX_VECTORS, PixelFormat, VectorDesc,
+};
 
+#[cfg(test)]
+mod channel_tests;
+mod channels;
 mod checks;
 mod emit;
 mod raw;
 #[cfg(test)]
 mod tests;
 
+pub use channels::{ActionConfig, ActionSpace, VectorConfig};
 use checks::{Ctx, valid_session};
 
 /// Default of `[sync] spin_before_block_us`.
@@ -175,6 +181,12 @@ pub struct AgentConfig {
     pub wait_for_stop: WaitForStop,
     /// Cameras, in image order.
     pub cameras: Vec<CameraConfig>,
+    /// Float vectors the host writes beside the images (`[[agent.vector]]`), in payload
+    /// order.
+    pub vectors: Vec<VectorConfig>,
+    /// What the agent sends back each cycle (`[[agent.action]]`), in config order (an
+    /// action's index here is its wire index).
+    pub actions: Vec<ActionConfig>,
 }
 
 impl AgentConfig {
@@ -188,9 +200,33 @@ impl AgentConfig {
         )
     }
 
-    /// Bytes of all images of one sensor frame of this agent.
+    /// The vector table of this agent's sensor frames (vectors after the images) and the
+    /// whole payload size in bytes (see [`crate::wire::vector_layout`]).
+    pub fn vector_layout(&self) -> ([VectorDesc; MAX_VECTORS], usize) {
+        crate::wire::vector_layout(
+            self.image_layout().1,
+            self.vectors.iter().map(|v| (v.name.as_str(), v.len)),
+        )
+    }
+
+    /// The action table of this agent's sensor frames (what the host expects back).
+    pub fn action_table(&self) -> [ActionDesc; MAX_ACTIONS] {
+        let mut table = [ActionDesc::default(); MAX_ACTIONS];
+        for (d, a) in table.iter_mut().zip(&self.actions) {
+            *d = a.desc();
+        }
+        table
+    }
+
+    /// The index of the action called `name`.
+    pub fn action_index(&self, name: &str) -> Option<usize> {
+        self.actions.iter().position(|a| a.name == name)
+    }
+
+    /// Bytes of the payload of one sensor frame of this agent: every image, then every
+    /// vector.
     pub fn frame_bytes(&self) -> usize {
-        self.image_layout().1
+        self.vector_layout().1
     }
 }
 
@@ -533,11 +569,13 @@ impl Config {
     }
 
     /// Resizes the agent list to `count` agents with ids `0..count`: existing entries keep
-    /// their cameras, new ones copy the cameras of the last configured agent. Used by
-    /// `--agents` / `--spawn-agents`.
+    /// their cameras and channels, new ones copy the cameras and channels (vectors,
+    /// actions) of the last configured agent. Used by `--agents` / `--spawn-agents`.
     ///
     /// # Errors
-    /// [`ConfigLoadError::Invalid`] if `count` is 0 or larger than the id space.
+    /// [`ConfigLoadError::Invalid`] if `count` is 0 or larger than the id space, or if a
+    /// new agent would be served over the original protocol (`[transport] kind =
+    /// "legacy"`) with the channels it copies, which that protocol cannot carry.
     pub fn with_agent_count(mut self, count: u32) -> Result<Self, ConfigLoadError> {
         if count == 0 || count > MAX_AGENT_ID + 1 {
             return Err(ConfigLoadError::Invalid {
@@ -553,26 +591,40 @@ impl Config {
         let template = self
             .agents
             .last()
-            .map(|a| a.cameras.clone())
-            .unwrap_or_default();
+            .map(|a| (a.cameras.clone(), a.vectors.clone(), a.actions.clone()));
         let mut agents = Vec::with_capacity(count as usize);
         for id in 0..count {
-            let (cameras, transport, wait_for_stop) = self.agent(id).map_or_else(
-                || {
-                    (
-                        template.clone(),
-                        self.transport.kind,
-                        WaitForStop::default_for(self.sync.wait_for_stop, self.transport.kind),
-                    )
-                },
-                |a| (a.cameras.clone(), a.transport, a.wait_for_stop),
-            );
-            agents.push(AgentConfig {
-                id,
-                transport,
-                wait_for_stop,
-                cameras,
-            });
+            let agent = match self.agent(id) {
+                Some(a) => a.clone(),
+                None => {
+                    let (cameras, vectors, actions) = template.clone().unwrap_or_default();
+                    AgentConfig {
+                        id,
+                        transport: self.transport.kind,
+                        wait_for_stop: WaitForStop::default_for(
+                            self.sync.wait_for_stop,
+                            self.transport.kind,
+                        ),
+                        cameras,
+                        vectors,
+                        actions,
+                    }
+                }
+            };
+            if agent.transport == TransportKind::Legacy
+                && !(agent.vectors.is_empty() && agent.actions.is_empty())
+            {
+                return Err(ConfigLoadError::Invalid {
+                    path: self.source.clone(),
+                    line: 1,
+                    key: "agent".into(),
+                    reason: format!(
+                        "added agent {id} would copy the channels of the last agent but is \
+                         served over the original protocol (legacy), which has no channels"
+                    ),
+                });
+            }
+            agents.push(agent);
         }
         self.agents = agents;
         Ok(self)

@@ -4,6 +4,7 @@
 use serde::Deserialize;
 use toml::Spanned;
 
+use super::channels::{RawAction, RawVector};
 use super::{AgentLostPolicy, LegacyDialect, PngCompression, TransportKind, WaitForStop, WaitMode};
 
 #[derive(Deserialize)]
@@ -83,6 +84,10 @@ pub(super) struct RawAgent {
     pub(super) wait_for_stop: Option<WaitForStop>,
     #[serde(default)]
     pub(super) camera: Vec<Spanned<RawCamera>>,
+    #[serde(default)]
+    pub(super) vector: Vec<Spanned<RawVector>>,
+    #[serde(default)]
+    pub(super) action: Vec<Spanned<RawAction>>,
 }
 
 #[derive(Deserialize)]

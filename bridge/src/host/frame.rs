@@ -48,6 +48,8 @@ pub struct SensorFrameMut<L = AnyLoan> {
     pub(super) loan: L,
     pub(super) descs: [ImageDesc; MAX_CAMERAS],
     pub(super) image_count: usize,
+    pub(super) vectors: [VectorDesc; MAX_VECTORS],
+    pub(super) vector_count: usize,
 }
 
 impl<L: FrameLoanMut> SensorFrameMut<L> {
@@ -69,6 +71,21 @@ impl<L: FrameLoanMut> SensorFrameMut<L> {
     /// The images, writable, in camera order.
     pub fn images_mut(&mut self) -> ImagesMut<'_> {
         self.parts_mut().1
+    }
+
+    /// The vector (`[[agent.vector]]`) called `name`, writable, straight in the frame's
+    /// memory (shared memory on the shm transport); `None` if the agent has no such
+    /// vector.
+    pub fn vector_mut(&mut self, name: &str) -> Option<&mut [f32]> {
+        let d = *self.vectors[..self.vector_count]
+            .iter()
+            .find(|d| d.name() == name)?;
+        d.values_mut(self.loan.parts_mut().1)
+    }
+
+    /// The vector descriptions of this frame, in payload order.
+    pub fn vector_descs(&self) -> &[VectorDesc] {
+        &self.vectors[..self.vector_count]
     }
 
     /// Header and images at once (to render while reading the pose from the header).

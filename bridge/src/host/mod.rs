@@ -22,16 +22,19 @@ use crate::signal::SignalHandling;
 use crate::transport::mixed::{AnyLoan, Transports};
 use crate::transport::{FrameLoanMut, HostTransport, HostTransportError, PeerRefusal};
 use crate::wire::{
-    ActionState, ImageDesc, MAX_CAMERAS, MotorCommand, PROTOCOL_VERSION, SENSOR_FLAG_SYNC_MODE,
-    SensorHeader, WireOutcome,
+    ActionDesc, ActionState, ImageDesc, MAX_ACTIONS, MAX_CAMERAS, MAX_VECTORS, MotorCommand,
+    PROTOCOL_VERSION, SENSOR_FLAG_SYNC_MODE, SensorHeader, VectorDesc, WireOutcome,
 };
 
+mod actions;
 mod errors;
 mod frame;
 mod report;
 #[cfg(test)]
 mod tests;
 
+pub use actions::ActionValue;
+use actions::AgentActions;
 pub use errors::*;
 pub use frame::*;
 pub use report::*;
@@ -86,6 +89,10 @@ impl<T: HostTransport> Host<T> {
                     id: a.id,
                     descs,
                     image_count: a.cameras.len().min(MAX_CAMERAS),
+                    vectors: a.vector_layout().0,
+                    vector_count: a.vectors.len().min(MAX_VECTORS),
+                    actions: a.action_table(),
+                    action_count: a.actions.len().min(MAX_ACTIONS),
                     last_outcome: WireOutcome::None,
                     last_rejected: 0,
                     evicted: false,
@@ -113,6 +120,7 @@ impl<T: HostTransport> Host<T> {
                 left: false,
                 slow: false,
                 commands: Vec::with_capacity(cap),
+                actions: AgentActions::new(&a.actions),
             })
             .collect();
         let dt_ns = config.sync.simulation_time_per_frame.as_nanos() as u64;
@@ -144,6 +152,7 @@ impl<T: HostTransport> Host<T> {
             evicted_hook: None,
             refused_hook: None,
             slow_hook: None,
+            interrupt: None,
             wait_started: None,
             config,
         }
@@ -155,6 +164,10 @@ struct SlotState {
     id: u32,
     descs: [ImageDesc; MAX_CAMERAS],
     image_count: usize,
+    vectors: [VectorDesc; MAX_VECTORS],
+    vector_count: usize,
+    actions: [ActionDesc; MAX_ACTIONS],
+    action_count: usize,
     last_outcome: WireOutcome,
     last_rejected: u32,
     /// Evicted and not yet back.
@@ -180,6 +193,10 @@ struct SlotState {
     left_in: Option<u64>,
 }
 
+/// The longest the host waits between two calls of its interrupt hook
+/// ([`Host::set_interrupt`]).
+pub const INTERRUPT_PERIOD: Duration = Duration::from_millis(50);
+
 /// How often the host looks for dead agent processes while it waits.
 pub const REAP_PERIOD: Duration = Duration::from_millis(100);
 
@@ -202,6 +219,7 @@ pub struct Host<T: HostTransport = Transports> {
     evicted_hook: Option<Box<dyn FnMut(u32, u64)>>,
     refused_hook: Option<RefusedHook>,
     slow_hook: Option<SlowHook>,
+    interrupt: Option<Box<dyn FnMut() -> bool>>,
     /// When the current wait for agents began (a caller may wait in slices).
     wait_started: Option<Instant>,
 }
@@ -302,6 +320,33 @@ impl<T: HostTransport> Host<T> {
         self.refused_hook = Some(Box::new(hook));
     }
 
+    /// Lets `hook` end the host's waits: while [`Host::wait_for_agents`] and
+    /// [`Host::collect`] block, the host calls it at least every [`INTERRUPT_PERIOD`], and
+    /// when it returns `true` the wait ends with the `Terminated` error, as after SIGINT
+    /// with [`SignalHandling::Install`]. For embedders that keep their own signal
+    /// handling (a Python interpreter checks for Ctrl-C here). A cycle whose collect was
+    /// interrupted is abandoned: its commands are lost.
+    pub fn set_interrupt(&mut self, hook: impl FnMut() -> bool + 'static) {
+        self.interrupt = Some(Box::new(hook));
+    }
+
+    /// Waits for transport activity for up to `timeout`, in slices of
+    /// [`INTERRUPT_PERIOD`] when an interrupt hook is set (see [`Host::set_interrupt`]).
+    fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
+        let Some(hook) = &mut self.interrupt else {
+            return self.backend.wait_activity(timeout);
+        };
+        if hook() {
+            return Err(HostTransportError::Terminated);
+        }
+        self.backend.wait_activity(timeout.min(INTERRUPT_PERIOD))?;
+        let interrupted = self.interrupt.as_mut().is_some_and(|hook| hook());
+        if interrupted {
+            return Err(HostTransportError::Terminated);
+        }
+        Ok(())
+    }
+
     /// Takes the transports' refusals into the stats and the hook.
     fn take_refusals(&mut self) {
         let stats = &mut self.stats;
@@ -389,10 +434,7 @@ impl<T: HostTransport> Host<T> {
             }
             // Agents notify the stop event once their ports exist; the 1 s cap only paces
             // the log line above.
-            match self
-                .backend
-                .wait_activity((deadline - now).min(Duration::from_secs(1)))
-            {
+            match self.wait_activity((deadline - now).min(Duration::from_secs(1))) {
                 Ok(()) => self.take_refusals(),
                 Err(HostTransportError::Terminated) => return Err(HostWaitError::Terminated),
                 Err(e) => return Err(e.into()),
@@ -421,6 +463,10 @@ impl<T: HostTransport> Host<T> {
         };
         h.image_count = s.image_count as u32;
         h.images = s.descs;
+        h.vector_count = s.vector_count as u32;
+        h.vectors = s.vectors;
+        h.action_count = s.action_count as u32;
+        h.actions = s.actions;
         h.previous_outcome = s.last_outcome as u32;
         h.previous_rejected = s.last_rejected;
         // The simulator adds this cycle's events; publish adds the unacknowledged ones.
@@ -433,6 +479,8 @@ impl<T: HostTransport> Host<T> {
             loan,
             descs: s.descs,
             image_count: s.image_count,
+            vectors: s.vectors,
+            vector_count: s.vector_count,
         })
     }
 
@@ -514,6 +562,7 @@ impl<T: HostTransport> Host<T> {
         self.report.late_batches = 0;
         for a in &mut self.report.agents {
             a.commands.clear();
+            a.actions.begin_cycle();
             a.outcome = AgentOutcome::NotAwaited;
         }
         if self.config.sync.sync_mode {
@@ -573,8 +622,16 @@ impl<T: HostTransport> Host<T> {
                     };
                     let room = a.commands.capacity() - a.commands.len();
                     let take = commands.len().min(room);
-                    a.commands.extend_from_slice(&commands[..take]);
-                    stats.commands_received += take as u64;
+                    for c in &commands[..take] {
+                        if c.is_action_chunk() {
+                            if !a.actions.take(c) {
+                                stats.actions_rejected += 1;
+                            }
+                        } else {
+                            a.commands.push(*c);
+                            stats.commands_received += 1;
+                        }
+                    }
                     if take < commands.len() {
                         stats.commands_overflowed += (commands.len() - take) as u64;
                         warn!(
@@ -611,7 +668,8 @@ impl<T: HostTransport> Host<T> {
             // its next frame (an agent that waits for its action's end must not wait in
             // vain, e.g. after its batch came late).
             if let Some(s) = slots.get_mut(slot) {
-                for c in commands.get(applied..).unwrap_or(&[]) {
+                let dropped = commands.get(applied..).unwrap_or(&[]);
+                for c in dropped.iter().filter(|c| !c.is_action_chunk()) {
                     if s.events
                         .push_status(c.action_id, ActionState::Aborted as u32, cycle + 1)
                     {
@@ -753,8 +811,7 @@ impl<T: HostTransport> Host<T> {
                 }
                 wake = next_report;
             }
-            self.backend
-                .wait_activity(wake.min(next_reap).saturating_duration_since(now))?;
+            self.wait_activity(wake.min(next_reap).saturating_duration_since(now))?;
         }
         self.handle_lost()
     }
@@ -843,8 +900,7 @@ impl<T: HostTransport> Host<T> {
                                 waited: started.elapsed(),
                             });
                         }
-                        self.backend
-                            .wait_activity(left.min(Duration::from_secs(1)))?;
+                        self.wait_activity(left.min(Duration::from_secs(1)))?;
                     }
                 }
                 self.backend.update_connections()?;

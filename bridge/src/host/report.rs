@@ -29,6 +29,7 @@ pub struct AgentReport {
     /// and it stayed connected): a slow agent, reported, not timed out.
     pub slow: bool,
     pub(super) commands: Vec<MotorCommand>,
+    pub(super) actions: AgentActions,
 }
 
 impl AgentReport {
@@ -36,6 +37,26 @@ impl AgentReport {
     /// [`MotorCommand::decode`]; the simulator decides what is out of range.
     pub fn commands(&self) -> &[MotorCommand] {
         &self.commands
+    }
+
+    /// The value of the action (`[[agent.action]]`) called `name` this cycle: the last
+    /// complete value the agent sent in this cycle; `None` if it sent none (or `name` is
+    /// not one of its actions). Values the config's bounds refuse never show up here
+    /// ([`AgentReport::actions_rejected`]).
+    pub fn action(&self, name: &str) -> Option<ActionValue<'_>> {
+        self.actions.get(name)
+    }
+
+    /// Every action of the agent in config order, with its value this cycle (as
+    /// [`AgentReport::action`]).
+    pub fn actions(&self) -> impl Iterator<Item = (&str, Option<ActionValue<'_>>)> {
+        self.actions.iter()
+    }
+
+    /// Action chunks refused this cycle: an unknown action, a value of the wrong length,
+    /// out of its bounds or not finite, a choice out of range. None of it was applied.
+    pub fn actions_rejected(&self) -> u32 {
+        self.actions.rejected
     }
 }
 
@@ -114,6 +135,8 @@ pub struct HostStats {
     pub future_batches: u64,
     /// Commands received and handed over.
     pub commands_received: u64,
+    /// Action chunks refused (see [`AgentReport::actions_rejected`]).
+    pub actions_rejected: u64,
     /// Commands dropped because an agent exceeded `max_commands_per_cycle`.
     pub commands_overflowed: u64,
     /// Frames that reached no agent (not connected, or async TCP with a full socket).

@@ -13,7 +13,9 @@ const _: () = {
     assert!(size_of::<ActionStatus>() == 16 && align_of::<ActionStatus>() == 8);
     assert!(size_of::<Collision>() == 16 && align_of::<Collision>() == 8);
     assert!(size_of::<ImageDesc>() == 56 && align_of::<ImageDesc>() == 8);
-    assert!(size_of::<SensorHeader>() == 784 && align_of::<SensorHeader>() == 8);
+    assert!(size_of::<SensorHeader>() == 1304 && align_of::<SensorHeader>() == 8);
+    assert!(size_of::<VectorDesc>() == 32 && align_of::<VectorDesc>() == 8);
+    assert!(size_of::<ActionDesc>() == 32 && align_of::<ActionDesc>() == 8);
     assert!(size_of::<MotorHeader>() == 32 && align_of::<MotorHeader>() == 8);
     assert!(size_of::<MotorCommand>() == 32 && align_of::<MotorCommand>() == 4);
 };
@@ -29,7 +31,7 @@ const fn fnv1a(mut hash: u64, value: u64) -> u64 {
 }
 
 pub(super) const fn layout_hash() -> u64 {
-    let items: [usize; 47] = [
+    let items: [usize; 61] = [
         size_of::<SensorHeader>(),
         offset_of!(SensorHeader, protocol_version),
         offset_of!(SensorHeader, agent_id),
@@ -49,6 +51,17 @@ pub(super) const fn layout_hash() -> u64 {
         offset_of!(SensorHeader, images),
         offset_of!(SensorHeader, previous_outcome),
         offset_of!(SensorHeader, previous_rejected),
+        offset_of!(SensorHeader, vector_count),
+        offset_of!(SensorHeader, action_count),
+        offset_of!(SensorHeader, vectors),
+        offset_of!(SensorHeader, actions),
+        size_of::<VectorDesc>(),
+        offset_of!(VectorDesc, offset),
+        offset_of!(VectorDesc, len),
+        size_of::<ActionDesc>(),
+        offset_of!(ActionDesc, len),
+        offset_of!(ActionDesc, n),
+        offset_of!(ActionDesc, bounds_hash),
         size_of::<ImageDesc>(),
         offset_of!(ImageDesc, camera),
         offset_of!(ImageDesc, format),
@@ -77,6 +90,9 @@ pub(super) const fn layout_hash() -> u64 {
         MAX_STATUSES,
         MAX_COLLISIONS,
         CAMERA_NAME_LEN,
+        MAX_VECTORS,
+        MAX_ACTIONS,
+        CHANNEL_NAME_LEN,
     ];
     let mut hash = 0xcbf2_9ce4_8422_2325_u64;
     let mut i = 0;

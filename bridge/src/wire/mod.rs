@@ -17,7 +17,7 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 /// Version of the vrsync protocol. Bumped on every incompatible change of the wire types
 /// or of the cycle semantics.
-pub const PROTOCOL_VERSION: u32 = 2;
+pub const PROTOCOL_VERSION: u32 = 3;
 
 /// Maximum number of cameras (images) per agent and sensor frame.
 pub const MAX_CAMERAS: usize = 4;
@@ -293,9 +293,7 @@ pub fn image_layout<'a>(
     for (i, (d, (cam_name, width_px, height_px, format))) in
         descs.iter_mut().zip(cameras).enumerate()
     {
-        let mut name = [0u8; CAMERA_NAME_LEN];
-        let n = cam_name.len().min(CAMERA_NAME_LEN);
-        name[..n].copy_from_slice(&cam_name.as_bytes()[..n]);
+        let name = channels::padded_name(cam_name);
         let stride = width_px as usize * format.bytes_per_pixel();
         let len = stride * height_px as usize;
         *d = ImageDesc {
@@ -360,12 +358,7 @@ pub struct ImageDesc {
 impl ImageDesc {
     /// The camera name as a string (up to the first zero byte; invalid UTF-8 gives `""`).
     pub fn name(&self) -> &str {
-        let end = self
-            .name
-            .iter()
-            .position(|&b| b == 0)
-            .unwrap_or(CAMERA_NAME_LEN);
-        core::str::from_utf8(&self.name[..end]).unwrap_or("")
+        channels::padded_str(&self.name)
     }
 
     /// The pixel format, `None` if the value is unknown.
@@ -406,7 +399,7 @@ pub enum WireOutcome {
     Immutable,
     KnownLayout,
 )]
-#[type_name("vrsync::SensorHeader/v2")]
+#[type_name("vrsync::SensorHeader/v3")]
 pub struct SensorHeader {
     /// [`PROTOCOL_VERSION`] of the writer.
     pub protocol_version: u32,
@@ -446,6 +439,14 @@ pub struct SensorHeader {
     pub previous_outcome: u32,
     /// Number of this agent's commands the host rejected in the previous cycle.
     pub previous_rejected: u32,
+    /// Number of valid entries in `vectors`.
+    pub vector_count: u32,
+    /// Number of valid entries in `actions`.
+    pub action_count: u32,
+    /// Vector table: the `[[agent.vector]]` channels in the payload after the images.
+    pub vectors: [VectorDesc; MAX_VECTORS],
+    /// Action table: the `[[agent.action]]` channels the host expects from the agent.
+    pub actions: [ActionDesc; MAX_ACTIONS],
 }
 
 impl SensorHeader {
@@ -506,9 +507,11 @@ impl SensorHeader {
     }
 }
 
+mod channels;
 mod layout;
 mod motor;
 
+pub use channels::*;
 pub use layout::LAYOUT_HASH;
 pub use motor::*;
 
