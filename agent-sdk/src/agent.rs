@@ -366,6 +366,7 @@ impl<'c> AgentBuilder<'c> {
             last_event_seq: 0,
             action_states: ActionStates::new(),
             closed: false,
+            channels: Channels::new(self.config.agent(self.id)),
         })
     }
 }
@@ -423,6 +424,8 @@ pub struct Agent {
     action_states: ActionStates,
     /// The leave was sent ([`Agent::close`]).
     closed: bool,
+    /// Its vectors and actions, as its config declares them.
+    channels: Channels,
 }
 
 /// How many actions [`Agent::action_state`] remembers; beyond, the one whose status came
@@ -571,6 +574,7 @@ impl Agent {
         let h = inner.header();
         let cycle = h.cycle;
         validate(h, inner.payload().len(), self.id)
+            .and_then(|()| self.channels.check(h, inner.payload().len()))
             .map_err(|reason| WaitStartError::BadFrame { cycle, reason })?;
         if let Some(last) = self.last_cycle {
             self.frames_skipped += cycle - last - 1;
@@ -704,5 +708,9 @@ impl Drop for Agent {
     }
 }
 
+mod channels;
 #[cfg(test)]
 mod tests;
+
+pub use channels::ActError;
+use channels::Channels;

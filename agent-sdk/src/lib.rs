@@ -41,13 +41,15 @@ mod agent;
 pub mod log;
 
 pub use agent::{
-    ACTION_STATES_CAPACITY, Agent, AgentBuilder, AgentConnectError, Frame, HOST_LIVENESS_PERIOD,
-    Image, REJOIN_GRACE, SendError, SignalHandling, StopError, WaitStartError,
+    ACTION_STATES_CAPACITY, ActError, Agent, AgentBuilder, AgentConnectError, Frame,
+    HOST_LIVENESS_PERIOD, Image, REJOIN_GRACE, SendError, SignalHandling, StopError,
+    WaitStartError,
 };
 /// The [glam](https://docs.rs/glam) this SDK uses for poses and targets ([`Pose::position`],
 /// [`Command::MoveTo`]): use `vrsync_agent::glam` instead of pinning the same version.
 pub use glam;
 pub use vrsync_bridge::{
-    ActionState, ActionStatus, Collision, Command, PixelFormat, Pose, SensorHeader,
+    ActionConfig, ActionSpace, ActionState, ActionStatus, Collision, Command, PixelFormat, Pose,
+    SensorHeader, VectorConfig, VectorDesc,
 };
 pub use vrsync_bridge::{Config, WaitForStop};

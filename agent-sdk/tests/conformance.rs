@@ -16,7 +16,10 @@
 //! - a dead peer is detected both ways: an agent that goes away is evicted without waiting
 //!   for the stop timeout; an agent sees a killed host as gone (not closed) and a host that
 //!   closed the session as closed;
-//! - termination: with `SignalHandling::Install`, SIGTERM ends the agent's wait.
+//! - termination: with `SignalHandling::Install`, SIGTERM ends the agent's wait;
+//! - channels: vectors arrive in the frame, each cycle's actions in that cycle's report
+//!   (the last value sent wins), malformed ones are counted and never applied, and configs
+//!   that disagree on a channel are refused naming it.
 //!
 //! Each `on_agent_lost` policy and the timeout naming the late agents are unit-tested over a
 //! fake transport in `bridge/src/host.rs`; the frame-holding limit and the connect errors in
@@ -35,8 +38,8 @@ use std::time::{Duration, Instant};
 
 use vrsync_agent::{AgentBuilder, Command, SignalHandling, WaitStartError};
 use vrsync_bridge::{
-    AgentFrame, AgentOutcome, AgentTransport, Config, Host, MOTOR_FLAG_STOP, MotorCommand,
-    MotorHeader, PROTOCOL_VERSION, wait_for_newer_frame,
+    ActionValue, AgentFrame, AgentOutcome, AgentTransport, Config, Host, MOTOR_FLAG_STOP,
+    MotorCommand, MotorHeader, PROTOCOL_VERSION, wait_for_newer_frame,
 };
 
 const WAIT: Duration = Duration::from_secs(20);
@@ -546,6 +549,123 @@ fn sigterm_ends_an_agents_wait(kind: &str, test: &str) {
     host.join().unwrap();
 }
 
+/// The config of [`config`] with channels on agent 4: two vectors, a continuous action
+/// of 6 values (two chunks on the wire) and a discrete one.
+fn config_with_channels(kind: &str, joints: u32) -> Config {
+    let base = config(kind, true);
+    let text = format!(
+        "{}[[agent.vector]]\nname = \"joints\"\nlen = {joints}\n\
+         [[agent.vector]]\nname = \"speed\"\nlen = 1\n\
+         [[agent.action]]\nname = \"torque\"\nlen = 6\nlow = -100.0\nhigh = 100.0\n\
+         [[agent.action]]\nname = \"gear\"\nn = 3\n",
+        base.to_toml_string()
+    );
+    Config::from_toml_str(&text, Path::new("<conformance>")).unwrap()
+}
+
+/// Vectors reach the agent in its frame; each cycle's actions reach the host in that
+/// cycle's report (the last value sent wins, none when none was sent); malformed chunks
+/// are counted and never applied.
+fn channels_carry_vectors_and_actions_each_cycle(kind: &str) {
+    const CYCLES: u64 = 30;
+    let (config, host) = with_host(config_with_channels(kind, 6), |host| {
+        for cycle in 0..CYCLES {
+            let mut frame = host.loan_frame(4).unwrap();
+            let joints = frame.vector_mut("joints").unwrap();
+            for (i, v) in joints.iter_mut().enumerate() {
+                *v = cycle as f32 + i as f32 * 0.5;
+            }
+            frame.vector_mut("speed").unwrap()[0] = -(cycle as f32);
+            assert!(frame.vector_mut("nope").is_none());
+            host.publish(frame).unwrap();
+            host.start().unwrap();
+            let report = host.collect().unwrap();
+            let a = &report.agents()[0];
+            assert_eq!(a.outcome, AgentOutcome::Stopped, "cycle {cycle}");
+            if cycle % 5 == 4 {
+                assert_eq!(a.action("torque"), None, "cycle {cycle}: none sent");
+                assert_eq!(a.action("gear"), None, "cycle {cycle}: none sent");
+            } else {
+                let want: Vec<f32> = (0..6)
+                    .map(|i| 2.0 * (cycle as f32 + i as f32 * 0.5))
+                    .collect();
+                assert_eq!(
+                    a.action("torque"),
+                    Some(ActionValue::Box(&want)),
+                    "cycle {cycle}"
+                );
+                assert_eq!(
+                    a.action("gear"),
+                    Some(ActionValue::Discrete((cycle % 3) as u32)),
+                    "cycle {cycle}"
+                );
+            }
+            assert_eq!(a.actions_rejected(), u32::from(cycle == 7), "cycle {cycle}");
+            // Action chunks are not commands; the command beside them is.
+            assert_eq!(a.commands().len(), 1, "cycle {cycle}");
+        }
+        assert_eq!(host.stats().actions_rejected, 1);
+        assert_eq!(host.stats().stop_timeouts, 0);
+    });
+    let mut agent = AgentBuilder::new(&config, 4).connect().unwrap();
+    for cycle in 0..CYCLES {
+        let frame = agent.wait_start(Some(WAIT)).unwrap();
+        assert_eq!(frame.cycle(), cycle);
+        let joints = frame.vector("joints").unwrap().to_vec();
+        assert_eq!(joints.len(), 6);
+        assert_eq!(joints[1], cycle as f32 + 0.5);
+        assert_eq!(frame.vector("speed").unwrap(), [-(cycle as f32)]);
+        assert!(frame.vector("nope").is_none());
+        drop(frame);
+        if cycle % 5 != 4 {
+            // A first value, then the one that counts.
+            agent.act("torque", &[0.0; 6]).unwrap();
+            let torque: Vec<f32> = joints.iter().map(|j| 2.0 * j).collect();
+            agent.act("torque", &torque).unwrap();
+            agent.act_discrete("gear", (cycle % 3) as u32).unwrap();
+        }
+        if cycle == 7 {
+            // Out of bounds: refused at the agent, and refused by the host when sent raw.
+            let err = agent.act("torque", &[500.0; 6]).unwrap_err();
+            assert!(err.to_string().contains("torque"), "{err}");
+            let mut raw: Vec<MotorCommand> = vrsync_bridge::action_chunks(0, &[500.0; 6]).collect();
+            agent.send_wire(raw.remove(0)).unwrap();
+        }
+        agent.send(Command::CancelMove).unwrap();
+        agent.stop().unwrap();
+    }
+    host.join().unwrap();
+}
+
+/// A host and an agent whose configs disagree on a channel refuse each other at the first
+/// frame, and the error names the channel.
+fn a_channel_mismatch_is_refused_naming_the_channel(kind: &str) {
+    let (done_tx, done_rx) = channel::<()>();
+    let (config, host) = with_host(config_with_channels(kind, 6), move |host| {
+        let frame = host.loan_frame(4).unwrap();
+        host.publish(frame).unwrap();
+        host.start().unwrap();
+        // The host stays until the agent has read the frame.
+        done_rx.recv_timeout(WAIT).unwrap();
+    });
+    // The same session and endpoints, one vector longer.
+    let mut theirs = config.clone();
+    let joints = &mut theirs.agents[0].vectors[0];
+    joints.len = 7;
+    joints.low.push(f32::NEG_INFINITY);
+    joints.high.push(f32::INFINITY);
+    let mut agent = AgentBuilder::new(&theirs, 4).connect().unwrap();
+    let err = agent.wait_start(Some(WAIT)).unwrap_err();
+    let message = err.to_string();
+    assert!(
+        matches!(err, WaitStartError::BadFrame { .. }) && message.contains("\"joints\""),
+        "{kind}: {message}"
+    );
+    done_tx.send(()).unwrap();
+    drop(agent);
+    host.join().unwrap();
+}
+
 macro_rules! conformance {
     ($($kind:ident => $agent:ty),* $(,)?) => {$(
         mod $kind {
@@ -585,6 +705,14 @@ macro_rules! conformance {
                     stringify!($kind),
                     concat!(stringify!($kind), "::a_killed_host_is_seen_as_gone"),
                 );
+            }
+            #[test]
+            fn channels_carry_vectors_and_actions_each_cycle() {
+                super::channels_carry_vectors_and_actions_each_cycle(stringify!($kind));
+            }
+            #[test]
+            fn a_channel_mismatch_is_refused_naming_the_channel() {
+                super::a_channel_mismatch_is_refused_naming_the_channel(stringify!($kind));
             }
             #[test]
             fn sigterm_ends_an_agents_wait() {

@@ -60,6 +60,16 @@ struct AgentShared {
     keys: Keys,
 }
 
+/// Whether the frame whose first bytes are `frame` carries vectors (`[[agent.vector]]`):
+/// read from its header's `vector_count`, wherever the bytes lie.
+fn has_vectors(frame: &[u8]) -> bool {
+    let at = core::mem::offset_of!(SensorHeader, vector_count);
+    frame
+        .get(at..at + 4)
+        .and_then(|b| <[u8; 4]>::try_from(b).ok())
+        .is_some_and(|b| u32::from_ne_bytes(b) != 0)
+}
+
 impl AgentShared {
     fn on_frame(&self, sample: &Sample) {
         let payload = sample.payload();
@@ -77,13 +87,19 @@ impl AgentShared {
             }
             return;
         }
-        let body = if payload.slices().count() == 1 {
-            // In one piece: kept as zenoh delivered it, read in place.
+        let in_place = payload.slices().count() == 1
+            && payload
+                .slices()
+                .next()
+                .is_some_and(|s| (s.as_ptr() as usize).is_multiple_of(8) || !has_vectors(s));
+        let body = if in_place {
+            // In one piece (and aligned, when it carries vectors, whose `f32`s are read
+            // in place): kept as zenoh delivered it, read in place.
             drop(st);
             Body::Zenoh(payload.clone())
         } else {
-            // In pieces: copied outside the lock into a pooled buffer of the largest
-            // frame's size.
+            // In pieces (or misaligned): copied outside the lock into a pooled buffer of
+            // the largest frame's size.
             let mut buf = st.pool.pop().unwrap_or_default();
             let max = st.max_frame_body;
             drop(st);
