@@ -68,6 +68,11 @@ fn default_toml_documents_every_key() {
         "format",
         "fov_horizontal_deg",
         "fov_vertical_deg",
+        "[[agent.vector]]",
+        "[[agent.action]]",
+        "len",
+        "low",
+        "high",
     ] {
         assert!(
             text.contains(key),
