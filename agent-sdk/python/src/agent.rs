@@ -12,6 +12,7 @@ use vrsync_agent::{
 };
 use vrsync_bridge::{Config, WaitForStop};
 
+use crate::channels::{PyAction, PyVector, channels_of};
 use crate::commands::PyCommand;
 use crate::errors::{error, obj};
 use crate::frame::{Graveyard, PyFrame};
@@ -122,6 +123,8 @@ pub(crate) struct PyAgent {
     simulation_time_per_frame: Duration,
     max_commands: u32,
     cameras: Vec<PyCamera>,
+    vectors: Vec<PyVector>,
+    actions: Vec<PyAction>,
 }
 
 /// How long an env waits for its next frame by default. Without limit when the host may
@@ -345,6 +348,7 @@ impl PyAgent {
         let agent_transport = agent_cfg.transport;
         let wait_for_stop = agent_cfg.wait_for_stop;
         let cameras = cameras_of(agent_cfg);
+        let (vectors, actions) = channels_of(agent_cfg);
         let agent = AgentCell(connect_one(py, &cfg, id, timeout)?);
         Ok(Self {
             agent: Some(agent),
@@ -361,6 +365,8 @@ impl PyAgent {
             simulation_time_per_frame: cfg.sync.simulation_time_per_frame,
             max_commands: cfg.transport.max_commands_per_cycle,
             cameras,
+            vectors,
+            actions,
         })
     }
 
@@ -426,6 +432,19 @@ impl PyAgent {
         agent
             .send_with_id(action_id, cmd)
             .map_err(|e| send_error(py, e, id))
+    }
+
+    /// Queues the value of action `name` (`[[agent.action]]`) for this cycle: a sequence of
+    /// floats (a list, a numpy array) for a continuous action, an int for a discrete one.
+    /// It reaches the host with `stop()`; the host takes the last value sent in a cycle.
+    ///
+    /// Raises `ActionError` (a `ValueError`) naming the action when the name is unknown or
+    /// the value has the wrong length, lies outside the bounds, is not finite or is not a
+    /// valid choice (nothing is queued then); `QueueFullError` beyond
+    /// `max_commands_per_cycle` (a continuous action takes one entry per 4 values).
+    fn act(&mut self, py: Python<'_>, name: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
+        let agent = self.enter()?;
+        crate::channels::act(py, agent, name, value)
     }
 
     /// Sends the queued commands with the *stop* flag: this agent is done with the cycle
@@ -523,6 +542,20 @@ impl PyAgent {
     #[getter]
     fn cameras(&self) -> Vec<PyCamera> {
         self.cameras.clone()
+    }
+
+    /// The agent's vectors (`[[agent.vector]]`) as configured: what `Frame.vector(name)`
+    /// returns, in payload order.
+    #[getter]
+    fn vector_specs(&self) -> Vec<PyVector> {
+        self.vectors.clone()
+    }
+
+    /// The agent's actions (`[[agent.action]]`) as configured: what `act(name, value)`
+    /// takes, in config order.
+    #[getter]
+    fn action_specs(&self) -> Vec<PyAction> {
+        self.actions.clone()
     }
 
     /// The cycle of the newest frame received, or `None` before the first.

@@ -293,6 +293,54 @@ impl PyFrame {
         Ok(d)
     }
 
+    /// Vector names (`[[agent.vector]]`), in payload order.
+    #[getter]
+    fn vector_names(&self) -> Vec<String> {
+        self.frame()
+            .vector_descs()
+            .iter()
+            .map(|d| d.name().to_owned())
+            .collect()
+    }
+
+    /// The vector `name` (`[[agent.vector]]`) as a read-only 1-d `float32` numpy array
+    /// viewing the frame's memory (no copy). The array keeps this frame alive.
+    ///
+    /// Raises `KeyError` for an unknown vector.
+    fn vector<'py>(slf: &Bound<'py, Self>, name: &str) -> PyResult<Bound<'py, PyAny>> {
+        let me = slf.get();
+        let values = me.frame().vector(name).ok_or_else(|| {
+            PyKeyError::new_err(format!(
+                "no vector {name:?} in this frame (vectors: {:?})",
+                me.vector_names()
+            ))
+        })?;
+        let buffer = Bound::new(
+            slf.py(),
+            ImageBuffer {
+                _frame: slf.clone().unbind(),
+                ptr: values.as_ptr() as usize,
+                len: (values.len() * 4) as isize,
+                format: c"f",
+                itemsize: 4,
+                ndim: 1,
+                shape: [values.len() as isize, 0, 0],
+                strides: [4, 0, 0],
+            },
+        )?;
+        as_array(slf.py(), buffer)
+    }
+
+    /// Every vector by name (see `vector`), in payload order.
+    #[getter]
+    fn vectors<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(slf.py());
+        for name in slf.get().vector_names() {
+            d.set_item(&name, Self::vector(slf, &name)?)?;
+        }
+        Ok(d)
+    }
+
     /// The address range `(start, end)` of this frame's images in memory. For checking
     /// that image arrays are views (their data pointer lies inside it), not copies.
     #[getter]
@@ -389,7 +437,10 @@ impl ImageBuffer {
         }
         let me = slf.get();
         let contiguous_row = me.shape[1] * me.itemsize * me.shape[2].max(1);
-        if flags & ffi::PyBUF_STRIDES != ffi::PyBUF_STRIDES && me.strides[0] != contiguous_row {
+        if flags & ffi::PyBUF_STRIDES != ffi::PyBUF_STRIDES
+            && me.ndim > 1
+            && me.strides[0] != contiguous_row
+        {
             return Err(PyBufferError::new_err(
                 "this image has padded rows: request a strided buffer (numpy does)",
             ));

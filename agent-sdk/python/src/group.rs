@@ -19,8 +19,13 @@ use crate::agent::{
     PyCamera, SameThread, cameras_of, connect_one, default_frame_wait, load_config, secs,
     send_error, stop_error, wait_error,
 };
+use crate::channels::{PyAction, PyVector};
 use crate::commands::{MoveAhead, PyCommand, heading_deg};
 use crate::errors::{error, obj};
+
+mod channels;
+
+use channels::{GroupChannels, VectorSink, act_row, check_vectors, write_vectors};
 
 /// The longest the GIL is released in one go while waiting: Ctrl-C is seen within this.
 const WAIT_SLICE: Duration = Duration::from_millis(50);
@@ -98,6 +103,7 @@ struct Sink {
     outcomes: usize,
     rejected: usize,
     skipped: usize,
+    vectors: Vec<VectorSink>,
 }
 
 /// What one agent's frame must look like, checked before it is copied.
@@ -124,7 +130,7 @@ fn check_frame(sink: &Sink, frame: &Frame) -> Result<(), String> {
             ));
         }
     }
-    Ok(())
+    check_vectors(&sink.vectors, frame)
 }
 
 impl Sink {
@@ -172,6 +178,7 @@ impl Sink {
             *(self.outcomes as *mut u8).add(k) = outcome_code(h.previous_outcome);
             *(self.rejected as *mut u32).add(k) = h.previous_rejected;
             *(self.skipped as *mut u64).add(k) = skipped;
+            write_vectors(&self.vectors, k, frame);
         }
     }
 }
@@ -232,6 +239,7 @@ pub(crate) struct AgentGroup {
     sink: Sink,
     images: Vec<(String, Out)>,
     outs: Vec<(&'static str, Out)>,
+    channels: GroupChannels,
     sdk_ns: u64,
     wait_ns: u64,
     steps: u64,
@@ -539,6 +547,7 @@ impl AgentGroup {
             |msg: String| error(py, "ConfigError", msg, &[("path", obj(py, config.clone()))]);
         let mut cameras: Option<Vec<PyCamera>> = None;
         let mut transports = Vec::with_capacity(ids.len());
+        let mut agent_cfgs = Vec::with_capacity(ids.len());
         for id in &ids {
             let a = cfg.agents.iter().find(|a| a.id == *id).ok_or_else(|| {
                 let all: Vec<u32> = cfg.agents.iter().map(|a| a.id).collect();
@@ -548,6 +557,7 @@ impl AgentGroup {
                 ))
             })?;
             transports.push(a.transport.as_str());
+            agent_cfgs.push(a);
             let c = cameras_of(a);
             match &cameras {
                 None => cameras = Some(c),
@@ -564,6 +574,8 @@ impl AgentGroup {
         }
         let cameras = cameras.unwrap_or_default();
         let n = ids.len();
+        let channels = GroupChannels::new(py, &agent_cfgs, n)?
+            .map_err(|e| config_error(format!("{}: {e}", config.display())))?;
         let numpy = py.import("numpy")?;
         let mut images = Vec::new();
         let mut image_sinks = Vec::new();
@@ -609,6 +621,7 @@ impl AgentGroup {
             outcomes: outs[6].1.ptr,
             rejected: outs[7].1.ptr,
             skipped: outs[8].1.ptr,
+            vectors: channels.sinks.clone(),
         };
         let timeout = secs("connect_timeout", connect_timeout)?.unwrap_or(cfg.sync.connect_timeout);
         let step_timeout = match step_timeout {
@@ -637,6 +650,7 @@ impl AgentGroup {
             sink,
             images,
             outs,
+            channels,
             sdk_ns: 0,
             wait_ns: 0,
             steps: 0,
@@ -782,6 +796,76 @@ impl AgentGroup {
                     "no camera {name:?} (cameras: {names:?})"
                 ))
             })
+    }
+
+    /// The stacked vectors (`[[agent.vector]]`): `{name: (N, len) float32}`, row `k` for
+    /// `ids[k]`, overwritten in place by every step (as `images`).
+    #[getter]
+    fn vectors<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        self.channels.vectors_dict(py)
+    }
+
+    /// The stacked vector `name` (see `vectors`).
+    fn vector<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyAny>> {
+        self.channels.vector(py, name)
+    }
+
+    /// The agents' `[[agent.vector]]` entries (the same for every agent).
+    #[getter]
+    fn vector_specs(&self) -> Vec<PyVector> {
+        self.channels.vectors.clone()
+    }
+
+    /// The agents' `[[agent.action]]` entries (the same for every agent).
+    #[getter]
+    fn action_specs(&self) -> Vec<PyAction> {
+        self.channels.actions.clone()
+    }
+
+    /// One lock-step cycle with channel actions: `values` maps an action's name to every
+    /// agent's value, `(N, len)` floats for a continuous action, `(N,)` ints for a
+    /// discrete one (an action left out is not sent); each agent sends its row and its
+    /// stop (agents with `reset[k]` true send a reset of `reset_kind` instead, agents
+    /// with `active[k]` false only their stop: their rows are ignored), then every
+    /// agent's next frame is written into the output arrays.
+    ///
+    /// Raises `UsageError` before the first `reset()`, `KeyError` for an unknown action,
+    /// `ValueError` for the wrong number of values, `ActionError` for a value out of its
+    /// bounds (nothing is sent then), and the errors of `Agent.wait`/`Agent.stop`.
+    #[pyo3(signature = (values, *, reset = None, reset_kind = "trial", active = None))]
+    fn step_actions(
+        &mut self,
+        py: Python<'_>,
+        values: &Bound<'_, PyAny>,
+        reset: Option<&Bound<'_, PyAny>>,
+        reset_kind: &str,
+        active: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        let n = self.ids.len();
+        let reset = mask(reset, n)?;
+        let active = match active {
+            Some(a) => mask(Some(a), n)?,
+            None => vec![true; n],
+        };
+        let active: Vec<bool> = (0..n).map(|k| active[k] && !reset[k]).collect();
+        let rows = self.channels.rows(py, values, &self.ids, &active)?;
+        let reset_cmd = reset_command(reset_kind)?;
+        if self.primed.iter().any(|p| !p) {
+            return Err(self.not_primed(py));
+        }
+        let specs = self.channels.actions.clone();
+        for (k, agent) in self.agents()?.iter_mut().enumerate() {
+            if active[k] {
+                act_row(py, agent, &specs, &rows, k)?;
+            }
+        }
+        self.run(py, |k, _| {
+            Some(if reset[k] {
+                vec![reset_cmd]
+            } else {
+                Vec::new()
+            })
+        })
     }
 
     /// Body positions `(N, 3)` `float32`, metres.

@@ -18,6 +18,7 @@
 //! environments and the original client's names.
 
 mod agent;
+mod channels;
 mod commands;
 mod errors;
 mod frame;
@@ -57,6 +58,7 @@ fn _vrsync(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<frame::ImageBuffer>()?;
     sensors::register(m)?;
     commands::register(m)?;
+    channels::register(m)?;
     m.add_function(wrap_pyfunction!(_leak_nodes_for_tests, m)?)?;
     m.add_function(wrap_pyfunction!(_dead_nodes_for_tests, m)?)?;
     m.add_function(wrap_pyfunction!(_remove_dead_nodes_for_tests, m)?)?;

@@ -31,6 +31,7 @@ from . import errors
 from ._vrsync import (
     MAX_FRAMES_HELD,
     PROTOCOL_VERSION,
+    Action,
     ActionState,
     ActionStatus,
     Agent,
@@ -59,10 +60,12 @@ from ._vrsync import (
     Pose,
     TrialReset,
     Turn,
+    Vector,
     __version__,
     config_agent_ids,
 )
 from .errors import (
+    ActionError,
     AgentIdInUseError,
     AgentIdNotServedError,
     ConfigError,
@@ -83,6 +86,8 @@ from .errors import (
 __all__ = [
     "MAX_FRAMES_HELD",
     "PROTOCOL_VERSION",
+    "Action",
+    "ActionError",
     "ActionState",
     "ActionStatus",
     "Agent",
@@ -123,6 +128,7 @@ __all__ = [
     "TrialReset",
     "Turn",
     "UsageError",
+    "Vector",
     "VersionMismatchError",
     "VrsyncError",
     "WaitTimeoutError",

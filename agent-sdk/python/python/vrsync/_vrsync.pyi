@@ -4,6 +4,7 @@ from collections.abc import Iterator, Sequence
 from os import PathLike
 from typing import Any, final
 
+import numpy as np
 import numpy.typing as npt
 
 PROTOCOL_VERSION: int
@@ -114,6 +115,39 @@ class Camera:
     def dtype(self) -> str:
         """``"uint8"`` or ``"float32"``."""
 
+class Vector:
+    """A float32 vector the host writes into every frame (``[[agent.vector]]``)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def len(self) -> int: ...
+    @property
+    def low(self) -> list[float]:
+        """Lower bound per value (``-inf`` when not configured)."""
+    @property
+    def high(self) -> list[float]:
+        """Upper bound per value (``inf`` when not configured)."""
+
+class Action:
+    """What the agent sends back each cycle (``[[agent.action]]``)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def kind(self) -> str:
+        """``"box"`` (continuous, within ``low``/``high``) or ``"discrete"`` (0..n)."""
+    @property
+    def len(self) -> int:
+        """Number of values (1 for a discrete action)."""
+    @property
+    def n(self) -> int | None:
+        """Number of choices of a discrete action, else ``None``."""
+    @property
+    def low(self) -> list[float]: ...
+    @property
+    def high(self) -> list[float]: ...
+
 @final
 class Frame:
     """One sensor frame. Image arrays are read-only views of its memory and keep it alive;
@@ -165,6 +199,15 @@ class Frame:
     @property
     def images(self) -> dict[str, npt.NDArray[Any]]:
         """Every image by camera name, in camera order."""
+    @property
+    def vector_names(self) -> list[str]: ...
+    def vector(self, name: str) -> npt.NDArray[np.float32]:
+        """Vector ``name`` (``[[agent.vector]]``) as a read-only 1-d float32 view.
+
+        Raises ``KeyError`` for an unknown vector."""
+    @property
+    def vectors(self) -> dict[str, npt.NDArray[np.float32]]:
+        """Every vector by name, in payload order."""
     @property
     def memory_range(self) -> tuple[int, int]:
         """Address range of this frame's images (to check that arrays are views)."""
@@ -343,6 +386,9 @@ class Agent:
         """Queues ``command``; returns its action id."""
     def send_with_id(self, action_id: int, command: Command) -> None:
         """Queues ``command`` with an action id of your choice."""
+    def act(self, name: str, value: Sequence[float] | npt.NDArray[Any] | int) -> None:
+        """Queues the value of action ``name`` (floats, or an int for a discrete action);
+        raises ``ActionError`` naming the action when it does not fit."""
     def stop(self) -> None:
         """Sends the queued commands with the stop for this cycle."""
     def close(self) -> None:
@@ -371,6 +417,12 @@ class Agent:
     def max_commands_per_cycle(self) -> int: ...
     @property
     def cameras(self) -> list[Camera]: ...
+    @property
+    def vector_specs(self) -> list[Vector]:
+        """The agent's ``[[agent.vector]]`` entries (``Frame.vector`` reads them)."""
+    @property
+    def action_specs(self) -> list[Action]:
+        """The agent's ``[[agent.action]]`` entries (``act`` sends them)."""
     @property
     def last_cycle(self) -> int | None: ...
     @property
@@ -433,6 +485,24 @@ class AgentGroup:
     def images(self) -> dict[str, npt.NDArray[Any]]:
         """Camera name → (N, H, W[, C]) array."""
     def image(self, name: str) -> npt.NDArray[Any]: ...
+    def step_actions(
+        self,
+        values: dict[str, npt.ArrayLike],
+        *,
+        reset: Sequence[bool] | npt.NDArray[np.bool_] | None = None,
+        reset_kind: str = "trial",
+        active: Sequence[bool] | npt.NDArray[np.bool_] | None = None,
+    ) -> None:
+        """One cycle with channel actions: ``{name: (N, len) floats or (N,) ints}``;
+        agents with ``active[k]`` false only stop."""
+    @property
+    def vectors(self) -> dict[str, npt.NDArray[np.float32]]:
+        """Stacked vectors ``{name: (N, len) float32}``, overwritten by every step."""
+    def vector(self, name: str) -> npt.NDArray[np.float32]: ...
+    @property
+    def vector_specs(self) -> list[Vector]: ...
+    @property
+    def action_specs(self) -> list[Action]: ...
     @property
     def positions(self) -> npt.NDArray[Any]:
         """(N, 3) float32."""

@@ -25,6 +25,7 @@ __all__ = [
     "UsageError",
     "ProtocolError",
     "TransportError",
+    "ActionError",
 ]
 
 
@@ -105,3 +106,14 @@ class ProtocolError(VrsyncError):
 
 class TransportError(VrsyncError):
     """The transport failed in a way not covered by a more specific error."""
+
+
+class ActionError(VrsyncError, ValueError):
+    """``Agent.act`` refused a value: an unknown action, the wrong length, a value outside
+    the action's bounds or not finite, or a choice out of range. Nothing was queued.
+
+    ``action`` is the action's name, ``agent_id`` the agent.
+    """
+
+    action: str | None = None
+    agent_id: int | None = None

@@ -19,6 +19,11 @@ the observation. ``reset`` sends the protocol's trial reset (or, with
 ``options={"reset": "environment"}``, the environment reset) and returns the frame in
 which the reset is done.
 
+Channels: when the config gives the agent ``[[agent.action]]`` entries, the action space is
+theirs (one action: its ``Box`` or ``Discrete``; several: a ``Dict`` by name) and each step
+sends the action as channel values (continuous values clipped to their bounds) instead of
+commands; ``[[agent.vector]]`` entries join the ``"dict"`` observation as ``Box`` entries.
+
 The world's randomness comes from the host's config (``seed``); ``reset(seed=…)`` seeds
 only this env's ``np_random`` (for your sampling), as Gymnasium asks.
 """
@@ -38,6 +43,7 @@ from gymnasium import spaces
 
 from . import (
     MAX_FRAMES_HELD,
+    _channels,
     Agent,
     Command,
     EnvironmentReset,
@@ -92,7 +98,8 @@ class VrsyncEnv(gymnasium.Env[dict[str, Any], Any]):
         config: the vrsync config file the host runs with.
         agent_id: which agent of the config this env drives.
         actions: the discrete action set (see :data:`DEFAULT_ACTIONS`); ignored when
-            ``action_space`` and ``action_fn`` are given.
+            ``action_space`` and ``action_fn`` are given, or when the config declares
+            ``[[agent.action]]`` channels for the agent (their space is the action space).
         action_space: a custom action space; requires ``action_fn``.
         action_fn: ``action_fn(action, frame) -> Command | list[Command] | None``.
         terminated_fn: ``terminated_fn(frame) -> bool``; default: never terminates
@@ -149,8 +156,16 @@ class VrsyncEnv(gymnasium.Env[dict[str, Any], Any]):
         )
         self._actions = tuple(actions)
         self._action_fn = action_fn
+        # The config's [[agent.action]] channels, when it declares some and no custom
+        # action space replaces them: the action goes to the host as channel values.
+        self._channel_actions = self.agent.action_specs if action_space is None else []
+        channel_space = _channels.action_space(self._channel_actions)
         self.action_space = (
-            action_space if action_space is not None else spaces.Discrete(len(self._actions))
+            action_space
+            if action_space is not None
+            else channel_space
+            if channel_space is not None
+            else spaces.Discrete(len(self._actions))
         )
         self._terminated_fn = terminated_fn
         self._copy = copy_observations
@@ -174,6 +189,7 @@ class VrsyncEnv(gymnasium.Env[dict[str, Any], Any]):
                     **cams,
                     "position": spaces.Box(-_FAR_M, _FAR_M, shape=(3,), dtype=np.float32),
                     "rotation": spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32),
+                    **_channels.vector_spaces(self.agent.vector_specs),
                 }
             )
         self.frame: Frame | None = None
@@ -194,6 +210,8 @@ class VrsyncEnv(gymnasium.Env[dict[str, Any], Any]):
         pose = frame.pose
         obs["position"] = np.array(pose.position, dtype=np.float32)
         obs["rotation"] = np.clip(np.array(pose.rotation, dtype=np.float32), -1.0, 1.0)
+        for name, values in frame.vectors.items():
+            obs[name] = np.array(values) if self._copy else values
         return obs
 
     def _info(self, frame: Frame) -> dict[str, Any]:
@@ -208,6 +226,9 @@ class VrsyncEnv(gymnasium.Env[dict[str, Any], Any]):
         }
 
     def _commands(self, action: Any, frame: Frame) -> list[Command]:
+        if self._channel_actions:
+            _channels.act(self.agent, self._channel_actions, action)
+            return []
         if self._action_fn is not None:
             out = self._action_fn(action, frame)
         else:

@@ -42,7 +42,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from . import AgentGroup
+from . import AgentGroup, _channels
 from .gym import DEFAULT_ACTIONS, ActionEntry
 from .vector import OUTCOMES, _observation_spaces
 
@@ -129,13 +129,18 @@ class VrsyncParallelEnv(ParallelEnv[str, Any, Any]):
         try:
             self.group.set_action_table(list(actions))
             self._obs_space, self._camera = _observation_spaces(
-                self.group.cameras, observation, camera
+                self.group.cameras, observation, camera, self.group.vector_specs
             )
         except BaseException:
             self.group.close()
             raise
         self._actions_given = list(actions)
-        self._act_space = spaces.Discrete(len(actions))
+        # The config's [[agent.action]] channels replace the action table when there
+        # are some (as in the vector env).
+        self._channel_actions = self.group.action_specs
+        self._act_space: spaces.Space[Any] = _channels.action_space(
+            self._channel_actions
+        ) or spaces.Discrete(len(actions))
         self.possible_agents = [f"agent_{i}" for i in self.group.ids]
         self._index = {a: k for k, a in enumerate(self.possible_agents)}
         self.agents: list[str] = []
@@ -166,6 +171,8 @@ class VrsyncParallelEnv(ParallelEnv[str, Any, Any]):
         obs = {name: (a[k].copy() if self._copy else a[k]) for name, a in g.images.items()}
         obs["position"] = g.positions[k].copy()
         obs["rotation"] = g.rotations[k].copy()
+        for name, a in g.vectors.items():
+            obs[name] = a[k].copy()
         return obs
 
     def _info(self, k: int) -> dict[str, Any]:
@@ -212,7 +219,9 @@ class VrsyncParallelEnv(ParallelEnv[str, Any, Any]):
             raise ValueError(f"actions for agents that are not live: {sorted(unknown)}")
         live = set(self.agents)
         n = len(self.possible_agents)
-        if len(actions) == n:
+        if self._channel_actions:
+            self._step_channels(actions)
+        elif len(actions) == n:
             self.group.step(np.fromiter((actions[a] for a in self.possible_agents), np.int64, n))
         else:
             table = self._actions_given
@@ -241,6 +250,20 @@ class VrsyncParallelEnv(ParallelEnv[str, Any, Any]):
             infos[a] = self._info(k)
         self.agents = [a for a in self.agents if not (terminations[a] or truncations[a])]
         return observations, rew, terminations, truncations, infos
+
+    def _step_channels(self, actions: Mapping[str, Any]) -> None:
+        """One cycle with channel actions; agents without an action only stop."""
+        active = np.array([a in actions for a in self.possible_agents], dtype=np.bool_)
+        space = self._act_space
+        filler = _channels.zero(space)  # the rows of agents that only stop: ignored
+        rows = [actions.get(a, filler) for a in self.possible_agents]
+        if isinstance(space, spaces.Dict):
+            batch: Any = {name: np.stack([r[name] for r in rows]) for name in space.spaces}
+        else:
+            batch = np.stack([np.asarray(r) for r in rows])
+        self.group.step_actions(
+            _channels.batched_values(self._channel_actions, batch), active=active
+        )
 
     def close(self) -> None:
         """Disconnects every agent (each leaves the session)."""

@@ -35,7 +35,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from . import AgentGroup, Command, EnvironmentReset, TrialReset
+from . import AgentGroup, Command, EnvironmentReset, TrialReset, _channels
 from .gym import _FAR_M, DEFAULT_ACTIONS, ActionEntry, _box_for
 
 __all__ = ["VrsyncVectorEnv", "OUTCOMES"]
@@ -45,7 +45,10 @@ OUTCOMES = ("none", "stopped", "timed_out")
 
 
 def _observation_spaces(
-    cameras: Sequence[Any], observation: str, camera: str | None
+    cameras: Sequence[Any],
+    observation: str,
+    camera: str | None,
+    vectors: Sequence[Any] = (),
 ) -> tuple[spaces.Space[Any], str | None]:
     """The single-agent observation space, and the camera of ``observation="camera"``."""
     if observation == "dict":
@@ -58,6 +61,7 @@ def _observation_spaces(
                     **cams,
                     "position": spaces.Box(-_FAR_M, _FAR_M, shape=(3,), dtype=np.float32),
                     "rotation": spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32),
+                    **_channels.vector_spaces(vectors),
                 }
             ),
             None,
@@ -95,7 +99,12 @@ class VrsyncVectorEnv(VectorEnv):  # type: ignore[type-arg]
         actions: the discrete action table, one entry per action: ``None``, a
             :class:`vrsync.Command`, a :class:`vrsync.MoveAhead` or a sequence of those
             (default :data:`vrsync.gym.DEFAULT_ACTIONS`). Entries are built into a table in
-            Rust once; a step passes only the N indices.
+            Rust once; a step passes only the N indices. Ignored when the config gives
+            the agents ``[[agent.action]]`` channels: their space (``Box``,
+            ``Discrete``, or a ``Dict`` of several) is then the action space, and each
+            step sends the batched values (continuous ones clipped to their bounds) with
+            :meth:`vrsync.AgentGroup.step_actions`. ``[[agent.vector]]`` entries join the
+            ``"dict"`` observation, stacked ``(N, len)``.
         action_space, action_fn: a custom single-agent action space and
             ``action_fn(actions) -> sequence of N entries`` (each as in ``actions``),
             given the batched actions; give both or neither.
@@ -173,15 +182,21 @@ class VrsyncVectorEnv(VectorEnv):  # type: ignore[type-arg]
         )
         """The :class:`vrsync.AgentGroup` that drives the agents."""
         try:
-            if action_fn is None:
+            # The config's [[agent.action]] channels, unless a custom action space
+            # replaces them: each step sends them as channel values.
+            self._channel_actions = self.group.action_specs if action_fn is None else []
+            channel_space = _channels.action_space(self._channel_actions)
+            if channel_space is not None:
+                single_action: spaces.Space[Any] = channel_space
+            elif action_fn is None:
                 self.group.set_action_table(list(actions))
-                single_action: spaces.Space[Any] = spaces.Discrete(len(actions))
+                single_action = spaces.Discrete(len(actions))
             else:
                 assert action_space is not None
                 single_action = action_space
             self._action_fn = action_fn
             self.single_observation_space, self._camera = _observation_spaces(
-                self.group.cameras, observation, camera
+                self.group.cameras, observation, camera, self.group.vector_specs
             )
         except BaseException:
             self.group.close()
@@ -217,6 +232,8 @@ class VrsyncVectorEnv(VectorEnv):  # type: ignore[type-arg]
         obs = {name: (a.copy() if self._copy else a) for name, a in g.images.items()}
         obs["position"] = g.positions.copy() if self._copy else g.positions
         obs["rotation"] = g.rotations.copy() if self._copy else g.rotations
+        for name, a in g.vectors.items():
+            obs[name] = a.copy() if self._copy else a
         return obs
 
     def _infos(self, step_cycles: int = 1) -> dict[str, Any]:
@@ -277,7 +294,13 @@ class VrsyncVectorEnv(VectorEnv):  # type: ignore[type-arg]
 
     def _cycle(self, actions: Any, reset: np.ndarray | None) -> None:
         """One cycle: `actions` for every agent, the reset for those in `reset`."""
-        if self._action_fn is not None:
+        if self._channel_actions:
+            self.group.step_actions(
+                _channels.batched_values(self._channel_actions, actions),
+                reset=reset,
+                reset_kind=self._reset_kind,
+            )
+        elif self._action_fn is not None:
             self.group.step_commands(self._entries(actions, reset))
         elif reset is not None and reset.any():
             self.group.step(actions, reset=reset, reset_kind=self._reset_kind)
