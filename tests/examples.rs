@@ -76,4 +76,48 @@ fn minimal_agent_runs_against_vr_sim(transport: Transport) {
     );
 }
 
-for_each_transport!(minimal_agent_runs_against_vr_sim);
+/// `channel_agent` reads its vectors and sends its actions every cycle through a whole
+/// `vr-sim run` (whose world has no use for them: the vectors arrive zeroed, the actions
+/// are received, checked and left alone) and ends cleanly when the host closes.
+fn channel_agent_runs_against_vr_sim(transport: Transport) {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = TestConfig::with_transport("channel-agent", 2, transport);
+    cfg.agent_extra = "[[agent.vector]]\nname = \"joints\"\nlen = 7\n\
+                       [[agent.action]]\nname = \"torque\"\nlen = 7\nlow = -2.0\nhigh = 2.0\n\
+                       [[agent.action]]\nname = \"gear\"\nn = 3\n"
+        .into();
+    let path = cfg.write(dir.path());
+    let events = Events::in_dir(dir.path());
+    let s = dir.path().join("summary.json");
+    let host = spawn_host(
+        &path,
+        &events,
+        &["--frames", "40", "--summary-json", s.to_str().unwrap()],
+    );
+    cfg.follow_host(&events, &path);
+    let agents: Vec<Proc> = (0..2)
+        .map(|id| {
+            let id = id.to_string();
+            Proc::spawn(
+                &example("channel_agent"),
+                &[path.to_str().unwrap(), &id, "3"],
+            )
+        })
+        .collect();
+    events.wait_for("all_agents_connected", EVENT_DEADLINE);
+    let host_out = host.wait(RUN_DEADLINE);
+    assert_eq!(host_out.code(), Some(0), "vr-sim: {}", host_out.stderr);
+    for agent in agents {
+        let out = agent.wait(RUN_DEADLINE);
+        assert_eq!(out.code(), Some(0), "channel_agent: {}", out.stderr);
+    }
+    let sum = summary(&s);
+    assert_eq!(sum["frames"], 40, "{sum}");
+    assert_eq!(sum["stop_timeouts"], 0, "{sum}");
+    assert_eq!(sum["frames_read"], 80, "{sum}");
+}
+
+for_each_transport!(
+    minimal_agent_runs_against_vr_sim,
+    channel_agent_runs_against_vr_sim
+);

@@ -216,6 +216,8 @@ pub struct TestConfig {
     pub extra: String,
     /// Lines appended to the `[sync]` table.
     pub sync_extra: String,
+    /// Lines appended to every `[[agent]]` table (after its cameras).
+    pub agent_extra: String,
 }
 
 impl TestConfig {
@@ -242,6 +244,7 @@ impl TestConfig {
             width: 64,
             extra: String::new(),
             sync_extra: String::new(),
+            agent_extra: String::new(),
         }
     }
 
@@ -273,8 +276,9 @@ impl TestConfig {
         for id in 0..self.agents {
             s += &format!(
                 "\n[[agent]]\nid = {id}\n[[agent.camera]]\nname = \"left\"\nwidth = {w}\n\
-                 [[agent.camera]]\nname = \"right\"\nwidth = {w}\n",
-                w = self.width
+                 [[agent.camera]]\nname = \"right\"\nwidth = {w}\n{extra}",
+                w = self.width,
+                extra = self.agent_extra
             );
         }
         s

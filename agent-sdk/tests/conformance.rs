@@ -666,6 +666,76 @@ fn a_channel_mismatch_is_refused_naming_the_channel(kind: &str) {
     host.join().unwrap();
 }
 
+/// One world, one agent per transport, each with channels: every agent's vectors and
+/// actions go through its own transport in the same cycles.
+#[test]
+fn channels_over_every_transport_in_one_world() {
+    const CYCLES: u64 = 15;
+    let zenoh = config("zenoh", true).to_toml_string();
+    let endpoint = zenoh
+        .lines()
+        .find(|l| l.starts_with("listen = "))
+        .unwrap()
+        .to_owned();
+    let channels = "[[agent.vector]]\nname = \"joints\"\nlen = 5\n\
+                    [[agent.action]]\nname = \"torque\"\nlen = 5\nlow = -1e6\nhigh = 1e6\n";
+    let agents: String = [(1, "shm"), (2, "tcp"), (3, "zenoh")]
+        .iter()
+        .map(|(id, t)| format!("[[agent]]\nid = {id}\ntransport = {t:?}\n{channels}"))
+        .collect();
+    let text = format!(
+        "session = \"chmix{}\"\n[transport]\ntcp_listen = \"127.0.0.1:0\"\n\
+         [transport.zenoh]\n{endpoint}\n{agents}",
+        std::process::id()
+    );
+    let config = Config::from_toml_str(&text, Path::new("<mixed>")).unwrap();
+    let (config, host) = with_host(config, |host| {
+        for cycle in 0..CYCLES {
+            for id in 1..=3 {
+                let mut frame = host.loan_frame(id).unwrap();
+                for (i, v) in frame.vector_mut("joints").unwrap().iter_mut().enumerate() {
+                    *v = (id * 100) as f32 + cycle as f32 + i as f32;
+                }
+                host.publish(frame).unwrap();
+            }
+            host.start().unwrap();
+            let report = host.collect().unwrap();
+            for a in report.agents() {
+                let want: Vec<f32> = (0..5)
+                    .map(|i| -((a.agent_id * 100) as f32 + cycle as f32 + i as f32))
+                    .collect();
+                assert_eq!(a.outcome, AgentOutcome::Stopped, "agent {}", a.agent_id);
+                assert_eq!(
+                    a.action("torque"),
+                    Some(ActionValue::Box(&want)),
+                    "agent {} cycle {cycle}",
+                    a.agent_id
+                );
+            }
+        }
+    });
+    let threads: Vec<JoinHandle<()>> = (1..=3)
+        .map(|id| {
+            let config = config.clone();
+            std::thread::spawn(move || {
+                let mut agent = AgentBuilder::new(&config, id).connect().unwrap();
+                for _ in 0..CYCLES {
+                    let frame = agent.wait_start(Some(WAIT)).unwrap();
+                    let torque: Vec<f32> =
+                        frame.vector("joints").unwrap().iter().map(|v| -v).collect();
+                    drop(frame);
+                    agent.act("torque", &torque).unwrap();
+                    agent.stop().unwrap();
+                }
+            })
+        })
+        .collect();
+    for t in threads {
+        t.join().unwrap();
+    }
+    host.join().unwrap();
+}
+
 macro_rules! conformance {
     ($($kind:ident => $agent:ty),* $(,)?) => {$(
         mod $kind {
