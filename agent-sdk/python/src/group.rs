@@ -8,24 +8,29 @@
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use pyo3::buffer::PyUntypedBuffer;
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
-use vrsync_agent::{Agent, Frame, PixelFormat, WaitStartError};
-use vrsync_bridge::{Command, Config, WireOutcome};
+use vrsync_agent::{Agent, PixelFormat, WaitStartError};
+use vrsync_bridge::{Command, Config};
 
 use crate::agent::{
     PyCamera, SameThread, cameras_of, connect_one, default_frame_wait, load_config, secs,
     send_error, stop_error, wait_error,
 };
 use crate::channels::{PyAction, PyVector};
-use crate::commands::{MoveAhead, PyCommand, heading_deg};
+use crate::commands::heading_deg;
 use crate::errors::{error, obj};
 
+mod args;
 mod channels;
+mod sink;
+mod wait;
 
-use channels::{GroupChannels, VectorSink, act_row, check_vectors, write_vectors};
+use args::{Planned, indices, mask, planned, reset_command};
+use channels::{GroupChannels, act_row};
+use sink::{ImageSink, Out, Sink};
+use wait::{Waited, wait_all};
 
 /// The longest the GIL is released in one go while waiting: Ctrl-C is seen within this.
 const WAIT_SLICE: Duration = Duration::from_millis(50);
@@ -40,167 +45,6 @@ struct Agents(Vec<Agent>);
 unsafe impl Send for Agents {}
 // SAFETY: as above; there is no shared (`&`) use of the agents.
 unsafe impl Sync for Agents {}
-
-/// One command of an action-table entry.
-#[derive(Debug, Clone, Copy)]
-enum Planned {
-    Fixed(Command),
-    Ahead(MoveAhead),
-}
-
-/// A writable, C-contiguous numpy array owned by the group, with its buffer export held
-/// (numpy cannot resize or free it while exported).
-struct Out {
-    array: Py<PyAny>,
-    _export: PyUntypedBuffer,
-    ptr: usize,
-}
-
-impl Out {
-    fn new(
-        py: Python<'_>,
-        numpy: &Bound<'_, PyModule>,
-        shape: &[usize],
-        dtype: &str,
-    ) -> PyResult<Self> {
-        let array = numpy.call_method1("zeros", (PyTuple::new(py, shape)?, dtype))?;
-        let export = PyUntypedBuffer::get(&array)?;
-        if export.readonly() || !export.is_c_contiguous() {
-            return Err(PyValueError::new_err(
-                "numpy.zeros returned a read-only or non-contiguous array",
-            ));
-        }
-        let ptr = export.buf_ptr() as usize;
-        Ok(Self {
-            array: array.unbind(),
-            _export: export,
-            ptr,
-        })
-    }
-}
-
-/// Where one camera's images go: `(N, H, W[, C])`.
-#[derive(Debug, Clone)]
-struct ImageSink {
-    name: String,
-    width: u32,
-    height: u32,
-    format: PixelFormat,
-    row_bytes: usize,
-    ptr: usize,
-}
-
-/// Raw pointers into the output arrays, for writing with the GIL released.
-#[derive(Debug, Clone)]
-struct Sink {
-    images: Vec<ImageSink>,
-    positions: usize,
-    rotations: usize,
-    rewards: usize,
-    sim_time_ns: usize,
-    cycles: usize,
-    collisions: usize,
-    outcomes: usize,
-    rejected: usize,
-    skipped: usize,
-    vectors: Vec<VectorSink>,
-}
-
-/// What one agent's frame must look like, checked before it is copied.
-fn check_frame(sink: &Sink, frame: &Frame) -> Result<(), String> {
-    if frame.image_count() != sink.images.len() {
-        return Err(format!(
-            "the frame has {} images, the config {}",
-            frame.image_count(),
-            sink.images.len()
-        ));
-    }
-    for (img, s) in frame.images().zip(&sink.images) {
-        if img.width() != s.width || img.height() != s.height || img.format() != s.format {
-            return Err(format!(
-                "image {:?} is {}x{} {:?}, the config says {:?} {}x{} {:?}",
-                img.name(),
-                img.width(),
-                img.height(),
-                img.format(),
-                s.name,
-                s.width,
-                s.height,
-                s.format
-            ));
-        }
-    }
-    check_vectors(&sink.vectors, frame)
-}
-
-impl Sink {
-    /// Copies agent `k`'s `frame` into row `k` of every output array.
-    ///
-    /// # Safety
-    /// The pointers must point to the group's live output arrays (shapes as built in
-    /// `AgentGroup::connect`), `k` < N, and `check_frame` must have passed.
-    unsafe fn write(&self, k: usize, frame: &Frame, skipped: u64) {
-        let h = frame.header();
-        // SAFETY (whole block): row `k` of each array lies inside it (k < N, shapes as
-        // built); the arrays are C-contiguous and aligned for their dtype (numpy).
-        unsafe {
-            for (img, s) in frame.images().zip(&self.images) {
-                let dst = (s.ptr as *mut u8).add(k * s.row_bytes * s.height as usize);
-                let data = img.data();
-                let stride = img.stride();
-                if stride == s.row_bytes {
-                    let n = s.row_bytes * s.height as usize;
-                    std::ptr::copy_nonoverlapping(data.as_ptr(), dst, n.min(data.len()));
-                } else {
-                    for y in 0..s.height as usize {
-                        if let Some(row) = data.get(y * stride..y * stride + s.row_bytes) {
-                            std::ptr::copy_nonoverlapping(
-                                row.as_ptr(),
-                                dst.add(y * s.row_bytes),
-                                s.row_bytes,
-                            );
-                        }
-                    }
-                }
-            }
-            let pos = (self.positions as *mut f32).add(3 * k);
-            for (i, v) in h.pose.position.iter().enumerate() {
-                *pos.add(i) = *v;
-            }
-            let rot = (self.rotations as *mut f32).add(4 * k);
-            for (i, v) in h.pose.rotation.iter().enumerate() {
-                *rot.add(i) = v.clamp(-1.0, 1.0);
-            }
-            *(self.rewards as *mut f32).add(k) = h.reward;
-            *(self.sim_time_ns as *mut u64).add(k) = h.sim_time_ns;
-            *(self.cycles as *mut u64).add(k) = h.cycle;
-            *(self.collisions as *mut u32).add(k) = frame.collisions().len() as u32;
-            *(self.outcomes as *mut u8).add(k) = outcome_code(h.previous_outcome);
-            *(self.rejected as *mut u32).add(k) = h.previous_rejected;
-            *(self.skipped as *mut u64).add(k) = skipped;
-            write_vectors(&self.vectors, k, frame);
-        }
-    }
-}
-
-/// `previous_outcome` as a small integer: 0 none, 1 stopped, 2 timed out.
-fn outcome_code(v: u32) -> u8 {
-    match v {
-        x if x == WireOutcome::Stopped as u32 => 1,
-        x if x == WireOutcome::TimedOut as u32 => 2,
-        _ => 0,
-    }
-}
-
-/// How one wait phase ended.
-enum Waited {
-    /// Every pending agent got its frame.
-    Done,
-    /// The slice ended with agents still pending.
-    Pending,
-    /// Agent `k` failed.
-    Failed(usize, WaitStartError),
-}
 
 /// N agents of one session, driven in lock-step from one process with one call per step.
 ///
@@ -243,91 +87,6 @@ pub(crate) struct AgentGroup {
     sdk_ns: u64,
     wait_ns: u64,
     steps: u64,
-}
-
-/// Parses one action-table entry or one agent's commands: `None`, a command, a
-/// `MoveAhead`, or a sequence of those.
-fn planned(entry: &Bound<'_, PyAny>) -> PyResult<Vec<Planned>> {
-    if entry.is_none() {
-        return Ok(Vec::new());
-    }
-    let one = |e: &Bound<'_, PyAny>| -> PyResult<Planned> {
-        if let Ok(c) = e.cast::<PyCommand>() {
-            return Ok(Planned::Fixed(c.get().command));
-        }
-        if let Ok(a) = e.cast::<MoveAhead>() {
-            return Ok(Planned::Ahead(*a.get()));
-        }
-        Err(PyTypeError::new_err(format!(
-            "expected a vrsync Command, a MoveAhead, or None, got {}: a function of the \
-             frame cannot run inside the batched step (map actions to commands in Python \
-             and use step_commands, or action_fn in the envs)",
-            e.repr().map_or_else(|_| "?".to_owned(), |r| r.to_string())
-        )))
-    };
-    if entry.cast::<PyCommand>().is_ok() || entry.cast::<MoveAhead>().is_ok() || entry.is_callable()
-    {
-        return Ok(vec![one(entry)?]);
-    }
-    let mut v = Vec::new();
-    for e in entry.try_iter().map_err(|_| {
-        PyTypeError::new_err(format!(
-            "expected a vrsync Command, a MoveAhead, a sequence of them, or None, got {}",
-            entry
-                .repr()
-                .map_or_else(|_| "?".to_owned(), |r| r.to_string())
-        ))
-    })? {
-        v.push(one(&e?)?);
-    }
-    Ok(v)
-}
-
-/// Integers from a numpy array (any integer dtype) or a sequence.
-fn indices(values: &Bound<'_, PyAny>, n: usize, what: &str) -> PyResult<Vec<i64>> {
-    let v: Vec<i64> = match pyo3::buffer::PyBuffer::<i64>::get(values) {
-        Ok(b) if b.dimensions() == 1 => b.to_vec(values.py())?,
-        _ => values.extract::<Vec<i64>>().map_err(|_| {
-            PyTypeError::new_err(format!(
-                "{what} must be {n} integers (a numpy array or a sequence)"
-            ))
-        })?,
-    };
-    if v.len() != n {
-        return Err(PyValueError::new_err(format!(
-            "{what} has {} entries for {n} agents",
-            v.len()
-        )));
-    }
-    Ok(v)
-}
-
-/// Booleans from a numpy array or a sequence (`None`: all false).
-fn mask(values: Option<&Bound<'_, PyAny>>, n: usize) -> PyResult<Vec<bool>> {
-    let Some(values) = values.filter(|v| !v.is_none()) else {
-        return Ok(vec![false; n]);
-    };
-    let v: Vec<bool> = values
-        .try_iter()?
-        .map(|x| x?.is_truthy())
-        .collect::<PyResult<_>>()?;
-    if v.len() != n {
-        return Err(PyValueError::new_err(format!(
-            "reset has {} entries for {n} agents",
-            v.len()
-        )));
-    }
-    Ok(v)
-}
-
-fn reset_command(kind: &str) -> PyResult<Command> {
-    match kind {
-        "trial" => Ok(Command::TrialReset { reset_type: 0 }),
-        "environment" => Ok(Command::EnvironmentReset { reset_type: 0 }),
-        other => Err(PyValueError::new_err(format!(
-            "reset kind must be \"trial\" or \"environment\", got {other:?}"
-        ))),
-    }
 }
 
 impl AgentGroup {
@@ -431,68 +190,6 @@ impl AgentGroup {
         self.steps += 1;
         Ok(())
     }
-}
-
-/// Receives the next frame of every agent in `pending` until `slice_end`, copying each
-/// into the outputs and dropping it; removes the agents done from `pending`. Agents are
-/// taken in order (the host publishes in that order): a non-blocking try first, then a
-/// blocking wait only if the frame is not there yet, so each agent costs at most two
-/// calls. Returns the outcome and the nanoseconds spent in tries that found no frame and
-/// in blocking waits (the time waited for the host, not spent in the SDK).
-fn wait_all(
-    agents: &mut [Agent],
-    pending: &mut Vec<usize>,
-    rotations: &mut [[f32; 4]],
-    sink: &Sink,
-    slice_end: Instant,
-) -> (Waited, u64) {
-    let mut blocked = 0u64;
-    let ns = |since: Instant| u64::try_from(since.elapsed().as_nanos()).unwrap_or(u64::MAX);
-    let mut done = 0;
-    let mut outcome = Waited::Done;
-    for &k in pending.iter() {
-        let Some(agent) = agents.get_mut(k) else {
-            done += 1;
-            continue;
-        };
-        let tried = Instant::now();
-        let mut r = agent.wait_start(Some(Duration::ZERO));
-        if matches!(r, Err(WaitStartError::Timeout { .. })) {
-            let now = Instant::now();
-            if now >= slice_end {
-                blocked += ns(tried);
-                outcome = Waited::Pending;
-                break;
-            }
-            r = agent.wait_start(Some(slice_end - now));
-            blocked += ns(tried);
-        }
-        match r {
-            Ok(frame) => {
-                if let Err(reason) = check_frame(sink, &frame) {
-                    let cycle = frame.cycle();
-                    outcome = Waited::Failed(k, WaitStartError::BadFrame { cycle, reason });
-                    break;
-                }
-                let skipped = agent.frames_skipped();
-                // SAFETY: the sink points to the group's output arrays (alive: the group
-                // holds them and is exclusively borrowed), k < N, and the frame was checked.
-                unsafe { sink.write(k, &frame, skipped) };
-                rotations[k] = frame.header().pose.rotation;
-                done += 1;
-            }
-            Err(WaitStartError::Timeout { .. }) => {
-                outcome = Waited::Pending;
-                break;
-            }
-            Err(e) => {
-                outcome = Waited::Failed(k, e);
-                break;
-            }
-        }
-    }
-    pending.drain(..done);
-    (outcome, blocked)
 }
 
 #[pymethods]
@@ -705,7 +402,7 @@ impl AgentGroup {
     ) -> PyResult<()> {
         let n = self.ids.len();
         let actions = indices(actions, n, "actions")?;
-        let reset = mask(reset, n)?;
+        let reset = mask(reset, n, "reset")?;
         let reset_cmd = reset_command(reset_kind)?;
         if self.primed.iter().any(|p| !p) {
             return Err(self.not_primed(py));
@@ -842,9 +539,9 @@ impl AgentGroup {
         active: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<()> {
         let n = self.ids.len();
-        let reset = mask(reset, n)?;
+        let reset = mask(reset, n, "reset")?;
         let active = match active {
-            Some(a) => mask(Some(a), n)?,
+            Some(a) => mask(Some(a), n, "active")?,
             None => vec![true; n],
         };
         let active: Vec<bool> = (0..n).map(|k| active[k] && !reset[k]).collect();

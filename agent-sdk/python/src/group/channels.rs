@@ -8,7 +8,7 @@ use pyo3::types::PyDict;
 use vrsync_agent::{ActError, Agent, Frame};
 use vrsync_bridge::AgentConfig;
 
-use super::Out;
+use super::sink::Out;
 use crate::channels::{PyAction, PyVector, channels_of};
 use crate::errors::{error, obj};
 

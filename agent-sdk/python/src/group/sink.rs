@@ -1,0 +1,154 @@
+//! The group's output arrays and the copy of a frame into row `k` of each.
+
+use pyo3::buffer::PyUntypedBuffer;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyTuple;
+use vrsync_agent::{Frame, PixelFormat};
+use vrsync_bridge::WireOutcome;
+
+use super::channels::{VectorSink, check_vectors, write_vectors};
+
+/// A writable, C-contiguous numpy array owned by the group, with its buffer export held
+/// (numpy cannot resize or free it while exported).
+pub(super) struct Out {
+    pub(super) array: Py<PyAny>,
+    pub(super) _export: PyUntypedBuffer,
+    pub(super) ptr: usize,
+}
+
+impl Out {
+    pub(super) fn new(
+        py: Python<'_>,
+        numpy: &Bound<'_, PyModule>,
+        shape: &[usize],
+        dtype: &str,
+    ) -> PyResult<Self> {
+        let array = numpy.call_method1("zeros", (PyTuple::new(py, shape)?, dtype))?;
+        let export = PyUntypedBuffer::get(&array)?;
+        if export.readonly() || !export.is_c_contiguous() {
+            return Err(PyValueError::new_err(
+                "numpy.zeros returned a read-only or non-contiguous array",
+            ));
+        }
+        let ptr = export.buf_ptr() as usize;
+        Ok(Self {
+            array: array.unbind(),
+            _export: export,
+            ptr,
+        })
+    }
+}
+
+/// Where one camera's images go: `(N, H, W[, C])`.
+#[derive(Debug, Clone)]
+pub(super) struct ImageSink {
+    pub(super) name: String,
+    pub(super) width: u32,
+    pub(super) height: u32,
+    pub(super) format: PixelFormat,
+    pub(super) row_bytes: usize,
+    pub(super) ptr: usize,
+}
+
+/// Raw pointers into the output arrays, for writing with the GIL released.
+#[derive(Debug, Clone)]
+pub(super) struct Sink {
+    pub(super) images: Vec<ImageSink>,
+    pub(super) positions: usize,
+    pub(super) rotations: usize,
+    pub(super) rewards: usize,
+    pub(super) sim_time_ns: usize,
+    pub(super) cycles: usize,
+    pub(super) collisions: usize,
+    pub(super) outcomes: usize,
+    pub(super) rejected: usize,
+    pub(super) skipped: usize,
+    pub(super) vectors: Vec<VectorSink>,
+}
+
+/// What one agent's frame must look like, checked before it is copied.
+pub(super) fn check_frame(sink: &Sink, frame: &Frame) -> Result<(), String> {
+    if frame.image_count() != sink.images.len() {
+        return Err(format!(
+            "the frame has {} images, the config {}",
+            frame.image_count(),
+            sink.images.len()
+        ));
+    }
+    for (img, s) in frame.images().zip(&sink.images) {
+        if img.width() != s.width || img.height() != s.height || img.format() != s.format {
+            return Err(format!(
+                "image {:?} is {}x{} {:?}, the config says {:?} {}x{} {:?}",
+                img.name(),
+                img.width(),
+                img.height(),
+                img.format(),
+                s.name,
+                s.width,
+                s.height,
+                s.format
+            ));
+        }
+    }
+    check_vectors(&sink.vectors, frame)
+}
+
+impl Sink {
+    /// Copies agent `k`'s `frame` into row `k` of every output array.
+    ///
+    /// # Safety
+    /// The pointers must point to the group's live output arrays (shapes as built in
+    /// `AgentGroup::connect`), `k` < N, and `check_frame` must have passed.
+    pub(super) unsafe fn write(&self, k: usize, frame: &Frame, skipped: u64) {
+        let h = frame.header();
+        // SAFETY (whole block): row `k` of each array lies inside it (k < N, shapes as
+        // built); the arrays are C-contiguous and aligned for their dtype (numpy).
+        unsafe {
+            for (img, s) in frame.images().zip(&self.images) {
+                let dst = (s.ptr as *mut u8).add(k * s.row_bytes * s.height as usize);
+                let data = img.data();
+                let stride = img.stride();
+                if stride == s.row_bytes {
+                    let n = s.row_bytes * s.height as usize;
+                    std::ptr::copy_nonoverlapping(data.as_ptr(), dst, n.min(data.len()));
+                } else {
+                    for y in 0..s.height as usize {
+                        if let Some(row) = data.get(y * stride..y * stride + s.row_bytes) {
+                            std::ptr::copy_nonoverlapping(
+                                row.as_ptr(),
+                                dst.add(y * s.row_bytes),
+                                s.row_bytes,
+                            );
+                        }
+                    }
+                }
+            }
+            let pos = (self.positions as *mut f32).add(3 * k);
+            for (i, v) in h.pose.position.iter().enumerate() {
+                *pos.add(i) = *v;
+            }
+            let rot = (self.rotations as *mut f32).add(4 * k);
+            for (i, v) in h.pose.rotation.iter().enumerate() {
+                *rot.add(i) = v.clamp(-1.0, 1.0);
+            }
+            *(self.rewards as *mut f32).add(k) = h.reward;
+            *(self.sim_time_ns as *mut u64).add(k) = h.sim_time_ns;
+            *(self.cycles as *mut u64).add(k) = h.cycle;
+            *(self.collisions as *mut u32).add(k) = frame.collisions().len() as u32;
+            *(self.outcomes as *mut u8).add(k) = outcome_code(h.previous_outcome);
+            *(self.rejected as *mut u32).add(k) = h.previous_rejected;
+            *(self.skipped as *mut u64).add(k) = skipped;
+            write_vectors(&self.vectors, k, frame);
+        }
+    }
+}
+
+/// `previous_outcome` as a small integer: 0 none, 1 stopped, 2 timed out.
+pub(super) fn outcome_code(v: u32) -> u8 {
+    match v {
+        x if x == WireOutcome::Stopped as u32 => 1,
+        x if x == WireOutcome::TimedOut as u32 => 2,
+        _ => 0,
+    }
+}
