@@ -275,6 +275,21 @@ impl RecordedCommand {
     }
 }
 
+/// One agent's cycle as the recording (and the Rerun log) writes it.
+#[derive(Debug)]
+pub struct AgentCommands {
+    /// The agent.
+    pub agent: u32,
+    /// The barrier's outcome for the agent.
+    pub outcome: vrsync_bridge::AgentOutcome,
+    /// Applied commands: name and action id, in the order sent.
+    pub applied: Vec<(&'static str, u32)>,
+    /// Commands rejected.
+    pub rejected: u32,
+    /// Every command, in the order applied, with its arguments and rejection.
+    pub sent: Vec<Sent>,
+}
+
 /// One command of an agent's cycle as recorded in `sent`: its kind and arguments (or
 /// `"kind":"undecoded"` and the wire tag), and why it was rejected if it was.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -77,7 +77,7 @@ pub struct CycleData<'a> {
     /// The world after the cycle.
     pub world: &'a crate::world::World,
     /// Every agent's commands of the cycle (as recorded).
-    pub commands: &'a [crate::run::AgentCommands],
+    pub commands: &'a [crate::record::AgentCommands],
     /// The agents, in the config's order.
     pub agents: &'a [u32],
     /// Whether the host wrote agent `agents[i]`'s sensor frame at the start of the cycle

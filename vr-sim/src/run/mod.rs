@@ -13,7 +13,7 @@ use vrsync_bridge::{Config, CycleReport, Host, HostCycleError, HostWaitError, Si
 
 use crate::events::{CYCLE_EVENT_EVERY, Event, Events};
 use crate::picture::{Trails, dump_image, write_map};
-use crate::record::{self, AgentLine, Sent};
+use crate::record::{self, AgentCommands, AgentLine, Sent};
 use crate::render::Renderer;
 use crate::rerun_log::{CycleData, RerunLog, RerunOptions};
 use crate::spawn::{Agents, PrivateConfig};
@@ -137,21 +137,6 @@ struct CommandTally {
     logged: BTreeSet<(u32, &'static str)>,
     /// Reused every cycle: no allocation per cycle in the steady state.
     rejected_per_agent: Vec<(u32, u32)>,
-}
-
-/// One agent's cycle as the recording (and the Rerun log) writes it.
-#[derive(Debug)]
-pub struct AgentCommands {
-    /// The agent.
-    pub agent: u32,
-    /// The barrier's outcome for the agent.
-    pub outcome: vrsync_bridge::AgentOutcome,
-    /// Applied commands: name and action id, in the order sent.
-    pub applied: Vec<(&'static str, u32)>,
-    /// Commands rejected.
-    pub rejected: u32,
-    /// Every command, in the order applied, with its arguments and rejection.
-    pub sent: Vec<Sent>,
 }
 
 impl Run {
