@@ -9,20 +9,20 @@
 //! thread may *read* a frame: the header and the pixels are plain memory that nobody
 //! writes while the frame is held.
 
-use std::ffi::{CStr, c_int, c_void};
+use std::ffi::c_int;
 use std::mem::ManuallyDrop;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::{self, ThreadId};
 
-use pyo3::exceptions::{PyBufferError, PyKeyError};
+use pyo3::exceptions::PyKeyError;
 use pyo3::ffi;
 use pyo3::prelude::*;
-use pyo3::sync::PyOnceLock;
 use pyo3::types::PyDict;
-use vrsync_agent::{Frame, PixelFormat};
+use vrsync_agent::Frame;
 use vrsync_bridge::{ActionState, WireOutcome};
 
+use crate::buffer::{Layout, as_array, fill};
 use crate::sensors::{
     PyActionState, PyActionStatus, PyCollision, PyEyePosition, PyGridPosition, PyHeadMotion, PyPose,
 };
@@ -135,14 +135,6 @@ fn outcome_name(v: u32) -> &'static str {
         x if x == WireOutcome::TimedOut as u32 => "timed_out",
         _ => "none",
     }
-}
-
-fn as_array<'py>(py: Python<'py>, buffer: Bound<'py, ImageBuffer>) -> PyResult<Bound<'py, PyAny>> {
-    static ASARRAY: PyOnceLock<Py<PyAny>> = PyOnceLock::new();
-    let asarray = ASARRAY.get_or_try_init(py, || {
-        Ok::<_, PyErr>(py.import("numpy")?.getattr("asarray")?.unbind())
-    })?;
-    asarray.bind(py).call1((buffer,))
 }
 
 #[pymethods]
@@ -320,15 +312,11 @@ impl PyFrame {
             ImageBuffer {
                 _frame: slf.clone().unbind(),
                 ptr: values.as_ptr() as usize,
-                len: (values.len() * 4) as isize,
-                format: c"f",
-                itemsize: 4,
-                ndim: 1,
-                shape: [values.len() as isize, 0, 0],
-                strides: [4, 0, 0],
+                len: std::mem::size_of_val(values),
+                layout: Layout::vector(values.len()),
             },
         )?;
-        as_array(slf.py(), buffer)
+        as_array(buffer.into_any())
     }
 
     /// Every vector by name (see `vector`), in payload order.
@@ -373,47 +361,27 @@ fn image_at<'py>(frame: &Bound<'py, PyFrame>, index: usize) -> PyResult<Bound<'p
         .frame()
         .image(index)
         .ok_or_else(|| PyKeyError::new_err(format!("no image {index} in this frame")))?;
-    let (w, h, stride) = (
-        img.width() as isize,
-        img.height() as isize,
-        img.stride() as isize,
-    );
-    let format = img.format();
-    let (fmt, itemsize, ndim, shape, strides): (&'static CStr, isize, c_int, _, _) = match format {
-        PixelFormat::Rgb8 => (c"B", 1, 3, [h, w, 3], [stride, 3, 1]),
-        PixelFormat::Rgba8 => (c"B", 1, 3, [h, w, 4], [stride, 4, 1]),
-        PixelFormat::Gray8 => (c"B", 1, 2, [h, w, 0], [stride, 1, 0]),
-        PixelFormat::Depth32f => (c"f", 4, 2, [h, w, 0], [stride, 4, 0]),
-    };
     let data = img.data();
     let buffer = Bound::new(
         py,
         ImageBuffer {
             _frame: frame.clone().unbind(),
             ptr: data.as_ptr() as usize,
-            len: data.len() as isize,
-            format: fmt,
-            itemsize,
-            ndim,
-            shape,
-            strides,
+            len: data.len(),
+            layout: Layout::image(img.format(), img.width(), img.height(), img.stride()),
         },
     )?;
-    as_array(py, buffer)
+    as_array(buffer.into_any())
 }
 
-/// The memory of one image, exported through the buffer protocol as a read-only
+/// The memory of one image or vector, exported through the buffer protocol as a read-only
 /// N-dimensional view (what numpy wraps without copying). Keeps its frame alive.
 #[pyclass(module = "vrsync._vrsync", frozen)]
 pub(crate) struct ImageBuffer {
     _frame: Py<PyFrame>,
     ptr: usize,
-    len: isize,
-    format: &'static CStr,
-    itemsize: isize,
-    ndim: c_int,
-    shape: [isize; 3],
-    strides: [isize; 3],
+    len: usize,
+    layout: Layout,
 }
 
 #[pymethods]
@@ -427,56 +395,23 @@ impl ImageBuffer {
         view: *mut ffi::Py_buffer,
         flags: c_int,
     ) -> PyResult<()> {
-        if view.is_null() {
-            return Err(PyBufferError::new_err("null Py_buffer"));
-        }
-        if flags & ffi::PyBUF_WRITABLE == ffi::PyBUF_WRITABLE {
-            return Err(PyBufferError::new_err(
-                "vrsync images are read-only views of shared memory; copy the array to modify it",
-            ));
-        }
         let me = slf.get();
-        let contiguous_row = me.shape[1] * me.itemsize * me.shape[2].max(1);
-        if flags & ffi::PyBUF_STRIDES != ffi::PyBUF_STRIDES
-            && me.ndim > 1
-            && me.strides[0] != contiguous_row
-        {
-            return Err(PyBufferError::new_err(
-                "this image has padded rows: request a strided buffer (numpy does)",
-            ));
-        }
-        // SAFETY: `view` is valid (checked non-null, guaranteed by the protocol). The
-        // pointers stored in it (`buf`, `format`, `shape`, `strides`) point into the frame
-        // (kept alive by `_frame`) and into this object (kept alive by `obj`).
+        let (ptr, len) = (me.ptr as *mut u8, me.len);
+        // SAFETY: the pixels lie in the frame, which `_frame` keeps alive and nobody
+        // writes while it is held (read-only export); the layout lives in `slf`.
         unsafe {
-            (*view).buf = me.ptr as *mut c_void;
-            (*view).len = me.len;
-            (*view).readonly = 1;
-            (*view).itemsize = me.itemsize;
-            (*view).format = if flags & ffi::PyBUF_FORMAT == ffi::PyBUF_FORMAT {
-                me.format.as_ptr().cast_mut()
-            } else {
-                std::ptr::null_mut()
-            };
-            if flags & ffi::PyBUF_ND == ffi::PyBUF_ND {
-                (*view).ndim = me.ndim;
-                (*view).shape = me.shape.as_ptr().cast_mut();
-            } else {
-                // A simple request: one dimension of `len` bytes.
-                (*view).ndim = 1;
-                (*view).itemsize = 1;
-                (*view).shape = std::ptr::null_mut();
-            }
-            (*view).strides = if flags & ffi::PyBUF_STRIDES == ffi::PyBUF_STRIDES {
-                me.strides.as_ptr().cast_mut()
-            } else {
-                std::ptr::null_mut()
-            };
-            (*view).suboffsets = std::ptr::null_mut();
-            (*view).internal = std::ptr::null_mut();
-            (*view).obj = slf.into_any().into_ptr();
+            fill(
+                view,
+                flags,
+                ptr,
+                len,
+                &me.layout,
+                Some(
+                    "vrsync images are read-only views of shared memory; copy the array to modify it",
+                ),
+                slf.clone().into_any(),
+            )
         }
-        Ok(())
     }
 
     unsafe fn __releasebuffer__(&self, _view: *mut ffi::Py_buffer) {}

@@ -18,6 +18,7 @@
 //! environments and the original client's names.
 
 mod agent;
+mod buffer;
 mod channels;
 mod commands;
 mod errors;
