@@ -451,3 +451,71 @@ pub(crate) fn heading_deg(rotation: [f32; 4]) -> f32 {
         .to_degrees()
         .rem_euclid(360.0)
 }
+
+/// `command` as an instance of its class (`Move`, `Turn`, …), as `Agent.send` takes it:
+/// what `vrsync.Host` reports an agent sent. Not checked again: the values are what the
+/// agent sent (finite, as decoding checked), and range checks are the simulator's.
+pub(crate) fn to_object(py: Python<'_>, command: Command) -> PyResult<Bound<'_, PyAny>> {
+    fn new<'py, T>(py: Python<'py>, me: T, command: Command) -> PyResult<Bound<'py, PyAny>>
+    where
+        T: PyClass<BaseType = PyCommand>,
+    {
+        Ok(Bound::new(py, sub(me, PyCommand { command }))?.into_any())
+    }
+    use Command as C;
+    match command {
+        C::Move {
+            heading_deg,
+            distance,
+        } => new(
+            py,
+            Move {
+                heading_deg,
+                distance_m: distance,
+            },
+            command,
+        ),
+        C::Turn { angle_deg } => new(py, Turn { angle_deg }, command),
+        C::MoveTo { target: t } => new(
+            py,
+            MoveTo {
+                x: t.x,
+                y: t.y,
+                z: t.z,
+            },
+            command,
+        ),
+        C::CancelMove => new(py, CancelMove, command),
+        C::EyeMovement {
+            pan_left_deg,
+            pan_right_deg,
+            tilt_deg,
+        } => new(
+            py,
+            EyeMovement {
+                pan_left_deg,
+                pan_right_deg,
+                tilt_deg,
+            },
+            command,
+        ),
+        C::EyeFixation { target: t } => new(
+            py,
+            EyeFixation {
+                x: t.x,
+                y: t.y,
+                z: t.z,
+            },
+            command,
+        ),
+        C::GraspId { object_id } => new(py, GraspId { object_id }, command),
+        C::GraspPos { x_px, y_px } => new(py, GraspPos { x_px, y_px }, command),
+        C::PointId { object_id } => new(py, PointId { object_id }, command),
+        C::PointPos { x_px, y_px } => new(py, PointPos { x_px, y_px }, command),
+        C::InteractId { object_id } => new(py, InteractId { object_id }, command),
+        C::InteractPos { x_px, y_px } => new(py, InteractPos { x_px, y_px }, command),
+        C::GraspRelease => new(py, GraspRelease, command),
+        C::EnvironmentReset { reset_type } => new(py, EnvironmentReset { reset_type }, command),
+        C::TrialReset { reset_type } => new(py, TrialReset { reset_type }, command),
+    }
+}

@@ -11,6 +11,10 @@
 //! - `group::AgentGroup` drives N agents of one session with one call per lock-step
 //!   cycle, writing every frame into stacked numpy arrays (the batched vector envs' core).
 //! - `commands` holds one small class per command of the catalogue, checked when built.
+//! - `host::PyHost` is the other side: a simulator written in Python serves agents
+//!   through the Rust host, writing each agent's images straight into its loaned frame
+//!   through writable numpy views (`host::PyHostFrame`).
+//! - `buffer` exports frame memory through the buffer protocol (both sides).
 //! - Errors are the exception classes of `vrsync.errors` (pure Python, so that they can
 //!   inherit from both `VrsyncError` and the matching built-in such as `TimeoutError`).
 //!
@@ -24,6 +28,7 @@ mod commands;
 mod errors;
 mod frame;
 mod group;
+mod host;
 mod sensors;
 
 use pyo3::exceptions::PyRuntimeError;
@@ -55,6 +60,7 @@ fn _remove_dead_nodes_for_tests(prefix: &str) -> u64 {
 fn _vrsync(m: &Bound<'_, PyModule>) -> PyResult<()> {
     agent::register(m)?;
     group::register(m)?;
+    host::register(m)?;
     m.add_class::<frame::PyFrame>()?;
     m.add_class::<frame::ImageBuffer>()?;
     sensors::register(m)?;

@@ -23,6 +23,20 @@ Also here: :mod:`vrsync.gym` (a Gymnasium env), :mod:`vrsync.vector` (a batched 
 vector env over N agents of one world), :mod:`vrsync.sb3` (a Stable-Baselines3 ``VecEnv``
 on the same core), :mod:`vrsync.pettingzoo` (a PettingZoo parallel env) and
 :mod:`vrsync.compat` (the original ``Annar4Interface`` names).
+
+:class:`Host` is the other side, for simulators written in Python: it serves agents
+(Rust, C++, Python, ...) over the config's transports, and each agent's images are
+written straight into its frame through writable numpy views::
+
+    with vrsync.Host("world.toml") as host:
+        host.wait_for_agents()
+        for cycle in range(1000):
+            for agent_id in host.agent_ids:
+                frame = host.loan(agent_id)
+                frame.image("left")[:] = render(agent_id)   # or render(out=view)
+                host.publish(frame)                         # no view may be alive here
+            host.start()
+            report = host.collect()                         # each agent's commands
 """
 
 from __future__ import annotations
@@ -36,10 +50,12 @@ from ._vrsync import (
     ActionStatus,
     Agent,
     AgentGroup,
+    AgentReport,
     Camera,
     CancelMove,
     Collision,
     Command,
+    CycleReport,
     EnvironmentReset,
     EyeFixation,
     EyeMovement,
@@ -50,6 +66,8 @@ from ._vrsync import (
     GraspRelease,
     GridPosition,
     HeadMotion,
+    Host,
+    HostFrame,
     InteractId,
     InteractPos,
     Move,
@@ -68,11 +86,14 @@ from .errors import (
     ActionError,
     AgentIdInUseError,
     AgentIdNotServedError,
+    AgentLostError,
     ConfigError,
     ConnectionRefusedByHostError,
+    FrameInUseError,
     HostClosedError,
     HostGoneError,
     HostNotFoundError,
+    HostWaitTimeout,
     ProtocolError,
     QueueFullError,
     TooManyFramesHeldError,
@@ -94,25 +115,32 @@ __all__ = [
     "AgentGroup",
     "AgentIdInUseError",
     "AgentIdNotServedError",
+    "AgentLostError",
+    "AgentReport",
     "Camera",
     "CancelMove",
     "Collision",
     "Command",
     "ConfigError",
     "ConnectionRefusedByHostError",
+    "CycleReport",
     "EnvironmentReset",
     "EyeFixation",
     "EyeMovement",
     "EyePosition",
     "Frame",
+    "FrameInUseError",
     "GraspId",
     "GraspPos",
     "GraspRelease",
     "GridPosition",
     "HeadMotion",
+    "Host",
     "HostClosedError",
+    "HostFrame",
     "HostGoneError",
     "HostNotFoundError",
+    "HostWaitTimeout",
     "InteractId",
     "InteractPos",
     "Move",

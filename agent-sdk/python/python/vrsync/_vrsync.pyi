@@ -560,3 +560,139 @@ class AgentGroup:
     @property
     def closed(self) -> bool: ...
 
+
+@final
+class HostFrame:
+    """One agent's sensor frame of the current cycle, loaned by ``Host.loan``: write its
+    images (writable numpy views of the frame's memory, no copy), pose and reward, then
+    ``Host.publish`` it. ``publish`` raises ``FrameInUseError`` while any view of the frame
+    is alive: ``del`` the views first. Used only on the thread that loaned it."""
+
+    @property
+    def agent_id(self) -> int: ...
+    @property
+    def cycle(self) -> int: ...
+    @property
+    def sim_time_ns(self) -> int: ...
+    @property
+    def camera_names(self) -> list[str]: ...
+    @property
+    def published(self) -> bool: ...
+    @property
+    def views(self) -> int:
+        """Numpy views of this frame alive now (``Host.publish`` requires 0)."""
+    def image(self, name: str) -> npt.NDArray[Any]:
+        """Camera ``name`` as a WRITABLE view of the frame: H×W×3/H×W×4/H×W uint8 or H×W
+        float32. Raises ``KeyError`` for an unknown camera, ``UsageError`` after publish."""
+    @property
+    def images(self) -> dict[str, npt.NDArray[Any]]:
+        """Every image by camera name (writable views), in camera order."""
+    def set_pose(self, position: Sequence[float], rotation: Sequence[float]) -> None:
+        """Body pose the agent reads: position (x, y, z) metres, rotation quaternion (x, y, z, w)."""
+    @property
+    def reward(self) -> float: ...
+    @reward.setter
+    def reward(self, value: float) -> None: ...
+    @property
+    def memory_range(self) -> tuple[int, int]:
+        """Address range of this frame's images (to check that arrays are views)."""
+
+@final
+class AgentReport:
+    """One agent's part of a cycle (``CycleReport.agents``)."""
+
+    @property
+    def agent_id(self) -> int: ...
+    @property
+    def outcome(self) -> str:
+        """``"stopped"``, ``"timed_out"``, ``"not_awaited"``, ``"async"``, ``"evicted"`` or ``"left"``."""
+    @property
+    def read_cycle(self) -> int | None: ...
+    @property
+    def evicted(self) -> bool: ...
+    @property
+    def rejoined(self) -> bool: ...
+    @property
+    def left(self) -> bool: ...
+    @property
+    def slow(self) -> bool: ...
+    @property
+    def commands(self) -> list[Command]:
+        """The commands it sent this cycle, in order, as command objects (undecodable ones left out)."""
+    @property
+    def action_ids(self) -> list[int]:
+        """The action id of each of ``commands``."""
+    @property
+    def invalid_commands(self) -> int:
+        """Commands sent this cycle that do not decode (unknown kind, NaN/∞ argument)."""
+
+@final
+class CycleReport:
+    """What ``Host.collect`` returns: the cycle and every agent's report."""
+
+    @property
+    def cycle(self) -> int: ...
+    @property
+    def sim_time_ns(self) -> int: ...
+    @property
+    def timed_out(self) -> bool: ...
+    @property
+    def late_batches(self) -> int: ...
+    @property
+    def agents(self) -> list[AgentReport]: ...
+    def agent(self, agent_id: int) -> AgentReport:
+        """The report of agent ``agent_id`` (``KeyError`` for an unknown id)."""
+
+@final
+class Host:
+    """The simulator side of a vrsync session, for simulators written in Python: serves
+    the config's agents over their transports. Per cycle: ``loan`` → write → ``publish``
+    for each agent, ``start``, ``collect``. Used only on the thread that created it."""
+
+    def __init__(
+        self,
+        config: str | PathLike[str],
+        *,
+        session: str | None = None,
+        agents: int | None = None,
+    ) -> None: ...
+    def wait_for_agents(self, timeout: float | None = None) -> None:
+        """Waits until every agent is connected (``HostWaitTimeout`` after ``timeout`` s)."""
+    def loan(self, agent_id: int) -> HostFrame:
+        """Agent ``agent_id``'s frame for the current cycle."""
+    def publish(self, frame: HostFrame) -> None:
+        """Sends ``frame`` (``FrameInUseError`` while views of it are alive)."""
+    def start(self) -> None:
+        """Signals start to every agent, after the cycle's frames are published."""
+    def collect(self) -> CycleReport:
+        """Ends the cycle (waits for the stops, or the tick in async mode; Ctrl-C ends it)."""
+    def set_rejected(self, agent_id: int, rejected: int) -> None:
+        """How many of the agent's commands of this cycle the simulator rejected."""
+    def is_connected(self, agent_id: int) -> bool: ...
+    def stats(self) -> dict[str, int]:
+        """Counters since the host was created."""
+    def cameras(self, agent_id: int) -> list[Camera]:
+        """Agent ``agent_id``'s cameras as configured, in image order."""
+    def close(self) -> None:
+        """Ends the session (idempotent)."""
+    def __enter__(self) -> Host: ...
+    def __exit__(self, *args: object) -> bool: ...
+    @property
+    def agent_ids(self) -> list[int]: ...
+    @property
+    def session(self) -> str: ...
+    @property
+    def config_path(self) -> str: ...
+    @property
+    def sync_mode(self) -> bool: ...
+    @property
+    def simulation_time_per_frame(self) -> float: ...
+    @property
+    def cycle(self) -> int: ...
+    @property
+    def sim_time_ns(self) -> int: ...
+    @property
+    def tcp_address(self) -> str | None:
+        """``"host:port"`` where TCP agents connect (the bound port), or ``None``."""
+    @property
+    def closed(self) -> bool: ...

@@ -2,8 +2,9 @@
 
 Every one is a :class:`VrsyncError`; where a built-in fits, it is that too, so generic
 handlers work: :class:`HostGoneError` is a :class:`ConnectionError`,
-:class:`WaitTimeoutError` a :class:`TimeoutError`, :class:`ConfigError` a
-:class:`ValueError`. Most carry the ``session`` and ``agent_id`` they concern as
+:class:`WaitTimeoutError` and :class:`HostWaitTimeout` a :class:`TimeoutError`,
+:class:`ConfigError` a :class:`ValueError`, :class:`FrameInUseError` a
+:class:`BufferError`. Most carry the ``session`` and ``agent_id`` they concern as
 attributes.
 """
 
@@ -26,6 +27,9 @@ __all__ = [
     "ProtocolError",
     "TransportError",
     "ActionError",
+    "HostWaitTimeout",
+    "FrameInUseError",
+    "AgentLostError",
 ]
 
 
@@ -117,3 +121,31 @@ class ActionError(VrsyncError, ValueError):
 
     action: str | None = None
     agent_id: int | None = None
+
+
+class HostWaitTimeout(VrsyncError, TimeoutError):
+    """``Host.wait_for_agents`` timed out: ``missing`` lists the agents not connected
+    (``left``: those of them that had connected and left again), ``waited`` the seconds."""
+
+    missing: list[int] | None = None
+    left: list[int] | None = None
+    waited: float | None = None
+
+
+class FrameInUseError(VrsyncError, BufferError):
+    """``Host.publish`` of a frame while numpy views of it are alive.
+
+    A published frame's memory belongs to its agent (and then to later cycles): a view
+    kept past publish would write into it. ``del`` every array ``HostFrame.image`` returned
+    (and the arrays made from them), then publish again; nothing was published. ``views``
+    is how many were alive, ``cycle`` the frame's cycle.
+    """
+
+    cycle: int | None = None
+    views: int | None = None
+
+
+class AgentLostError(VrsyncError, ConnectionError):
+    """The host lost an agent (its process died or its connection dropped) and the config
+    says not to go on without it: ``on_agent_lost = "abort"``, or ``"wait"`` and it did
+    not come back within ``connect_timeout``."""

@@ -1,0 +1,367 @@
+//! `vrsync.HostFrame`: a sensor frame loaned for one agent, written from Python in place.
+//!
+//! # Views and publish
+//! `image(name)` returns a writable numpy array over the loaned memory itself (the
+//! agent's shared-memory sample, or the transport's pooled send buffer). `publish` hands
+//! that memory to the transport, after which it may be read by the agent, reused for
+//! another cycle, or unmapped: a write through an old array would corrupt a frame or
+//! crash. So the frame counts the buffers it exported (each array, and each array made
+//! from it, holds one export until it is freed), and `Host.publish` refuses, with
+//! `FrameInUseError`, a frame of which any view is alive. After publish the frame exports
+//! nothing any more (`image` raises `UsageError`).
+//!
+//! # Threads
+//! The loan belongs to the host's transports, which are not thread-safe (iceoryx2
+//! `ipc::Service` ports): frames and their buffers are `unsendable` classes, usable only on
+//! the thread that loaned them (PyO3 raises on any other).
+
+use std::cell::Cell;
+use std::ffi::c_int;
+use std::rc::Rc;
+
+use pyo3::exceptions::{PyBufferError, PyKeyError, PyValueError};
+use pyo3::ffi;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use vrsync_bridge::{Pose, SensorFrameMut};
+
+use crate::buffer::{Layout, as_array, fill};
+use crate::errors::{error, obj};
+
+/// One agent's sensor frame of the current cycle, loaned by `Host.loan(agent_id)`:
+/// write the images (`image(name)` is a writable numpy view of the frame's memory, no
+/// copy), the pose and the reward, then `Host.publish(frame)`.
+///
+/// A view must not outlive the publish: `publish` raises `FrameInUseError` while any
+/// array viewing this frame is alive (`del` them first; arrays made from a view, such as
+/// slices, count too). Render into the view (`renderer.render(out=view)`, `view[:] = ...`)
+/// and drop it. A frame that is dropped without being published returns its memory
+/// unpublished.
+///
+/// Used only on the thread that loaned it.
+#[pyclass(module = "vrsync._vrsync", name = "HostFrame", unsendable)]
+pub(crate) struct PyHostFrame {
+    frame: Option<SensorFrameMut>,
+    /// Buffers exported and not released yet.
+    exports: Rc<Cell<usize>>,
+    /// The `Host` that loaned it.
+    host: u64,
+    agent_id: u32,
+    cycle: u64,
+    sim_time_ns: u64,
+    /// Camera names, in image order.
+    cameras: Vec<String>,
+}
+
+impl PyHostFrame {
+    pub(crate) fn new(frame: SensorFrameMut, host: u64) -> Self {
+        let h = frame.header();
+        let cameras = h
+            .images
+            .iter()
+            .take(h.image_count as usize)
+            .map(|d| d.name().to_owned())
+            .collect();
+        Self {
+            agent_id: frame.agent_id(),
+            cycle: h.cycle,
+            sim_time_ns: h.sim_time_ns,
+            frame: Some(frame),
+            exports: Rc::default(),
+            host,
+            cameras,
+        }
+    }
+
+    /// Takes the loan out for `Host.publish` of host `host`.
+    ///
+    /// # Errors
+    /// `FrameInUseError` while views are alive; `UsageError` for a frame published already
+    /// or loaned by another host.
+    pub(crate) fn take(&mut self, py: Python<'_>, host: u64) -> PyResult<SensorFrameMut> {
+        if host != self.host {
+            return Err(self.usage(py, "this frame was loaned by another vrsync.Host"));
+        }
+        if self.frame.is_none() {
+            return Err(self.usage(py, "this frame was published already"));
+        }
+        let views = self.exports.get();
+        if views > 0 {
+            return Err(error(
+                py,
+                "FrameInUseError",
+                format!(
+                    "cannot publish the frame of agent {} (cycle {}): {views} numpy view(s) of \
+                     it are still alive, and its memory belongs to the agent once published; \
+                     `del` every array returned by image() (and arrays made from them) first",
+                    self.agent_id, self.cycle
+                ),
+                &[
+                    ("agent_id", obj(py, self.agent_id)),
+                    ("cycle", obj(py, self.cycle)),
+                    ("views", obj(py, views)),
+                ],
+            ));
+        }
+        self.frame
+            .take()
+            .ok_or_else(|| self.usage(py, "this frame was published already"))
+    }
+
+    fn usage(&self, py: Python<'_>, what: &str) -> PyErr {
+        error(
+            py,
+            "UsageError",
+            format!("{what} (agent {}, cycle {})", self.agent_id, self.cycle),
+            &[("agent_id", obj(py, self.agent_id))],
+        )
+    }
+
+    fn loaned(&mut self, py: Python<'_>) -> PyResult<&mut SensorFrameMut> {
+        match self.frame.as_mut() {
+            Some(f) => Ok(f),
+            None => Err(error(
+                py,
+                "UsageError",
+                format!(
+                    "the frame of agent {} (cycle {}) was published: its memory is the \
+                     agent's now; loan the next one",
+                    self.agent_id, self.cycle
+                ),
+                &[("agent_id", obj(py, self.agent_id))],
+            )),
+        }
+    }
+
+    fn camera_index(&self, name: &str) -> PyResult<usize> {
+        self.cameras.iter().position(|c| c == name).ok_or_else(|| {
+            PyKeyError::new_err(format!(
+                "agent {} has no camera {name:?} (its cameras: {:?})",
+                self.agent_id, self.cameras
+            ))
+        })
+    }
+
+    /// Where image `index` is and how it is shaped.
+    fn image_memory(&mut self, index: usize) -> PyResult<(*mut u8, usize, Layout)> {
+        let frame = self
+            .frame
+            .as_mut()
+            .ok_or_else(|| PyBufferError::new_err("the frame was published"))?;
+        let img = frame
+            .images_mut()
+            .nth(index)
+            .ok_or_else(|| PyBufferError::new_err(format!("no image {index} in this frame")))?;
+        let format = img.desc.pixel_format().ok_or_else(|| {
+            PyBufferError::new_err(format!("image {index} has an unknown pixel format"))
+        })?;
+        let layout = Layout::image(
+            format,
+            img.desc.width_px,
+            img.desc.height_px,
+            img.desc.stride_bytes as usize,
+        );
+        Ok((img.data.as_mut_ptr(), img.data.len(), layout))
+    }
+}
+
+fn image_at<'py>(frame: &Bound<'py, PyHostFrame>, index: usize) -> PyResult<Bound<'py, PyAny>> {
+    let py = frame.py();
+    let (layout, exports) = {
+        let mut me = frame.try_borrow_mut()?;
+        me.loaned(py)?;
+        let (_, _, layout) = me.image_memory(index)?;
+        (layout, me.exports.clone())
+    };
+    let buffer = Bound::new(
+        py,
+        HostBuffer {
+            frame: frame.clone().unbind(),
+            image: index,
+            layout,
+            exports,
+        },
+    )?;
+    as_array(buffer.into_any())
+}
+
+fn triple(name: &str, v: &[f64], n: usize) -> PyResult<Vec<f32>> {
+    if v.len() != n || v.iter().any(|x| !x.is_finite()) {
+        return Err(PyValueError::new_err(format!(
+            "{name} must be {n} finite numbers, got {v:?}"
+        )));
+    }
+    Ok(v.iter().map(|&x| x as f32).collect())
+}
+
+#[pymethods]
+impl PyHostFrame {
+    /// The agent this frame is for.
+    #[getter]
+    fn agent_id(&self) -> u32 {
+        self.agent_id
+    }
+
+    /// The cycle this frame belongs to.
+    #[getter]
+    fn cycle(&self) -> u64 {
+        self.cycle
+    }
+
+    /// Simulated time at the start of this frame's cycle, in nanoseconds.
+    #[getter]
+    fn sim_time_ns(&self) -> u64 {
+        self.sim_time_ns
+    }
+
+    /// Camera names, in image order.
+    #[getter]
+    fn camera_names(&self) -> Vec<String> {
+        self.cameras.clone()
+    }
+
+    /// Whether the frame was published (its memory is the agent's then).
+    #[getter]
+    fn published(&self) -> bool {
+        self.frame.is_none()
+    }
+
+    /// How many buffers of this frame are exported now (each numpy array viewing it holds
+    /// one); `Host.publish` requires 0.
+    #[getter]
+    fn views(&self) -> usize {
+        self.exports.get()
+    }
+
+    /// The image of camera `name` as a WRITABLE numpy array over the frame's memory (no
+    /// copy): H×W×3 (rgb8) or H×W×4 (rgba8) `uint8`, H×W `uint8` (gray8), H×W `float32`
+    /// (depth32f, metres). Rows are top to bottom. Its contents are whatever the memory
+    /// held (the previous use of the sample): write every pixel.
+    ///
+    /// The array must be gone before `Host.publish(frame)` (see the class docs).
+    ///
+    /// Raises `KeyError` for an unknown camera, `UsageError` after publish.
+    fn image<'py>(slf: &Bound<'py, Self>, name: &str) -> PyResult<Bound<'py, PyAny>> {
+        let index = slf.try_borrow()?.camera_index(name)?;
+        image_at(slf, index)
+    }
+
+    /// Every image by camera name (see `image`), in camera order.
+    #[getter]
+    fn images<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyDict>> {
+        let py = slf.py();
+        let d = PyDict::new(py);
+        let names = slf.try_borrow()?.cameras.clone();
+        for (i, name) in names.into_iter().enumerate() {
+            d.set_item(name, image_at(slf, i)?)?;
+        }
+        Ok(d)
+    }
+
+    /// Sets the body pose the agent reads: `position` (x, y, z) in metres, `rotation` a
+    /// unit quaternion (x, y, z, w). Default: what the sample held before, so set it
+    /// every cycle.
+    fn set_pose(&mut self, py: Python<'_>, position: Vec<f64>, rotation: Vec<f64>) -> PyResult<()> {
+        let p = triple("position", &position, 3)?;
+        let r = triple("rotation", &rotation, 4)?;
+        let frame = self.loaned(py)?;
+        frame.header_mut().pose = Pose {
+            position: [p[0], p[1], p[2]],
+            rotation: [r[0], r[1], r[2], r[3]],
+        };
+        Ok(())
+    }
+
+    /// The reward the agent reads in this frame.
+    #[getter]
+    fn get_reward(&mut self, py: Python<'_>) -> PyResult<f32> {
+        Ok(self.loaned(py)?.header().reward)
+    }
+
+    #[setter]
+    fn set_reward(&mut self, py: Python<'_>, reward: f64) -> PyResult<()> {
+        if !reward.is_finite() {
+            return Err(PyValueError::new_err(format!(
+                "reward must be a finite number, got {reward}"
+            )));
+        }
+        self.loaned(py)?.header_mut().reward = reward as f32;
+        Ok(())
+    }
+
+    /// The address range `(start, end)` of this frame's images in memory: for checking
+    /// that image arrays are views of it (their data pointer lies inside), not copies.
+    #[getter]
+    fn memory_range(&mut self, py: Python<'_>) -> PyResult<(usize, usize)> {
+        let frame = self.loaned(py)?;
+        let mut start = usize::MAX;
+        let mut end = 0;
+        for img in frame.images_mut() {
+            start = start.min(img.data.as_ptr() as usize);
+            end = end.max(img.data.as_ptr() as usize + img.data.len());
+        }
+        Ok(if start > end { (0, 0) } else { (start, end) })
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "<vrsync.HostFrame agent={} cycle={} images={:?}{}>",
+            self.agent_id,
+            self.cycle,
+            self.cameras,
+            if self.frame.is_none() {
+                " published"
+            } else {
+                ""
+            }
+        )
+    }
+}
+
+/// One image of a `HostFrame`, exported through the buffer protocol as a writable
+/// N-dimensional view (what numpy wraps without copying). Each export counts on the frame
+/// until it is released; exporting fails once the frame is published.
+#[pyclass(module = "vrsync._vrsync", unsendable)]
+pub(crate) struct HostBuffer {
+    frame: Py<PyHostFrame>,
+    image: usize,
+    layout: Layout,
+    exports: Rc<Cell<usize>>,
+}
+
+#[pymethods]
+impl HostBuffer {
+    /// Exports the image, writable.
+    ///
+    /// # Safety
+    /// `view` must be a valid `Py_buffer` to fill (Python's buffer protocol guarantees it).
+    unsafe fn __getbuffer__(
+        slf: Bound<'_, Self>,
+        view: *mut ffi::Py_buffer,
+        flags: c_int,
+    ) -> PyResult<()> {
+        let py = slf.py();
+        let me = slf.try_borrow()?;
+        let (ptr, len, _) = me.frame.bind(py).try_borrow_mut()?.image_memory(me.image)?;
+        // SAFETY: the memory is the frame's loan, which lives as long as the frame (kept
+        // alive by `frame`, inside `slf`) and is not handed on while an export is counted
+        // (`PyHostFrame::take` refuses); the layout lives in `slf`.
+        unsafe {
+            fill(
+                view,
+                flags,
+                ptr,
+                len,
+                &me.layout,
+                None,
+                slf.clone().into_any(),
+            )?;
+        }
+        me.exports.set(me.exports.get() + 1);
+        Ok(())
+    }
+
+    unsafe fn __releasebuffer__(&self, _view: *mut ffi::Py_buffer) {
+        self.exports.set(self.exports.get().saturating_sub(1));
+    }
+}
