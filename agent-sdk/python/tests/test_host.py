@@ -1,0 +1,284 @@
+"""`vrsync.Host`: a simulator written in Python serving real agent processes.
+
+The agents are real processes: `vr-agent` (Rust) and small Python agents (`vrsync.Agent`)
+that check, pixel by pixel, what the Python host wrote into their frames and answer
+with commands that say what they saw. Every wait has a deadline; every process a test
+starts is killed at its end.
+"""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import vrsync
+
+from conftest import binary, run_python, write_config
+
+DEADLINE = 60.0
+"""Seconds any one wait of these tests may take (they take well under a second)."""
+
+# A Python agent that checks the pattern the host writes (see `pattern`) in every image
+# of every frame, and answers each frame with MoveTo(cycle, mismatching pixels, reward)
+# and Turn(the value of pixel (1, 2) of its first image), then stops. It ends when the
+# host closes the session.
+CHECKING_AGENT = """
+import sys
+import numpy as np
+import vrsync
+
+config, agent_id = sys.argv[1], int(sys.argv[2])
+
+def pattern(shape, cycle, agent, camera):
+    h, w = shape[:2]
+    y, x = np.mgrid[0:h, 0:w]
+    base = x + 2 * y
+    if len(shape) == 3:
+        base = base[:, :, None] + 3 * np.arange(shape[2])
+    return ((base + 7 * cycle + 11 * agent + 13 * camera) % 256).astype(np.uint8)
+
+frames = 0
+with vrsync.Agent.connect(config, agent_id, connect_timeout=30) as agent:
+    for frame in agent.frames(timeout=30):
+        bad = 0
+        for i, name in enumerate(frame.camera_names):
+            img = frame.image(name)
+            bad += int(np.count_nonzero(img != pattern(img.shape, frame.cycle, agent_id, i)))
+        first = frame.image(frame.camera_names[0])
+        agent.send(vrsync.MoveTo(x=frame.cycle, y=bad, z=frame.reward))
+        agent.send(vrsync.Turn(angle_deg=float(first[1, 2, 0])))
+        del first
+        agent.stop()
+        frames += 1
+print("frames", frames, flush=True)
+"""
+
+
+def pattern(shape: tuple[int, ...], cycle: int, agent: int, camera: int) -> np.ndarray:
+    """What the host writes into image `camera` of `agent`'s frame of `cycle`."""
+    h, w = shape[:2]
+    y, x = np.mgrid[0:h, 0:w]
+    base = x + 2 * y
+    if len(shape) == 3:
+        base = base[:, :, None] + 3 * np.arange(shape[2])
+    return ((base + 7 * cycle + 11 * agent + 13 * camera) % 256).astype(np.uint8)
+
+
+class Agents:
+    """Agent processes of one test: killed at its end if still running."""
+
+    def __init__(self, tmp_path: Path) -> None:
+        self.tmp_path = tmp_path
+        self.procs: list[subprocess.Popen[str]] = []
+
+    def vr_agent(self, config: Path, agent_id: int, policy: str = "wander") -> subprocess.Popen[str]:
+        proc = subprocess.Popen(
+            [str(binary("vr-agent")), "--config", str(config), "--id", str(agent_id),
+             "--policy", policy],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        self.procs.append(proc)
+        return proc
+
+    def python(self, code: str, *args: str) -> subprocess.Popen[str]:
+        script = self.tmp_path / f"agent{len(self.procs)}.py"
+        script.write_text(code)
+        proc = subprocess.Popen(
+            [sys.executable, str(script), *args],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        self.procs.append(proc)
+        return proc
+
+    def kill(self) -> None:
+        for p in self.procs:
+            if p.poll() is None:
+                p.kill()
+            p.communicate(timeout=30)
+
+
+@pytest.fixture
+def agents(tmp_path: Path) -> Iterator[Agents]:
+    a = Agents(tmp_path)
+    yield a
+    a.kill()
+
+
+def finish(proc: subprocess.Popen[str]) -> str:
+    """Waits for an agent process to end (it does when the host closes) and returns
+    its output; fails on a non-zero exit."""
+    out, err = proc.communicate(timeout=DEADLINE)
+    assert proc.returncode == 0, f"agent exited {proc.returncode}:\n{out}\n{err}"
+    return out
+
+
+def with_tcp_port(config: Path, address: str | None) -> None:
+    """Writes the port a `tcp_listen = ...:0` host bound into its config, for its agents."""
+    assert address is not None
+    port = address.rsplit(":", 1)[1]
+    text = config.read_text()
+    config.write_text(text.replace('tcp_listen = "127.0.0.1:0"', f'tcp_listen = "127.0.0.1:{port}"'))
+
+
+def test_sync_cycles_over_shm_and_tcp_carry_the_pixels_written_in_python(
+    tmp_path: Path, agents: Agents
+) -> None:
+    config, session = write_config(tmp_path, "host", agents=3, agent_transports={2: "tcp"})
+    cycles = 20
+    with vrsync.Host(config) as host:
+        assert host.session == session
+        assert host.agent_ids == [0, 1, 2]
+        assert host.sync_mode
+        with_tcp_port(config, host.tcp_address)
+        checkers = {0: agents.python(CHECKING_AGENT, str(config), "0"),
+                    2: agents.python(CHECKING_AGENT, str(config), "2")}  # fmt: skip
+        agents.vr_agent(config, 1)
+        host.wait_for_agents(timeout=DEADLINE)
+        wander_commands = 0
+        for cycle in range(cycles):
+            assert host.cycle == cycle
+            for agent_id in host.agent_ids:
+                frame = host.loan(agent_id)
+                assert (frame.agent_id, frame.cycle) == (agent_id, cycle)
+                for i, name in enumerate(frame.camera_names):
+                    view = frame.image(name)
+                    view[...] = pattern(view.shape, cycle, agent_id, i)
+                    del view
+                frame.set_pose((cycle * 0.1, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0))
+                frame.reward = cycle * 0.5
+                host.publish(frame)
+                assert frame.published
+            host.start()
+            report = host.collect()
+            assert report.cycle == cycle
+            assert not report.timed_out
+            for ar in report.agents:
+                assert ar.outcome == "stopped", ar
+            for agent_id in checkers:
+                ar = report.agent(agent_id)
+                assert ar.commands == [
+                    vrsync.MoveTo(x=cycle, y=0, z=cycle * 0.5),
+                    vrsync.Turn(angle_deg=float(pattern((3, 3, 3), cycle, agent_id, 0)[1, 2, 0])),
+                ], (agent_id, cycle)
+                assert ar.invalid_commands == 0
+                assert len(ar.action_ids) == 2
+            wander = report.agent(1).commands
+            assert all(isinstance(c, vrsync.Command) for c in wander)
+            wander_commands += len(wander)
+        assert wander_commands >= 1  # vr-agent's wander sends its first command at once
+        stats = host.stats()
+        assert stats["cycles"] == cycles
+        assert stats["frames_delivered"] == 3 * cycles
+        assert stats["stop_timeouts"] == 0
+    for proc in checkers.values():
+        assert finish(proc).split() == ["frames", str(cycles)]
+
+
+def test_image_views_are_writable_zero_copy_and_must_be_gone_before_publish(
+    tmp_path: Path,
+) -> None:
+    cameras = (("rgb", 32, "rgb8", 8), ("rgba", 16, "rgba8", 4), ("gray", 8, "gray8", 6),
+               ("depth", 12, "depth32f", 5))  # fmt: skip
+    config, _ = write_config(tmp_path, "views", cameras=cameras)
+    with vrsync.Host(config) as host, vrsync.Host(config, session=f"{host.session}-b") as other:
+        assert [c.name for c in host.cameras(0)] == ["rgb", "rgba", "gray", "depth"]
+        frame = host.loan(0)
+        start, end = frame.memory_range
+        shapes = {}
+        for name in frame.camera_names:
+            view = frame.image(name)
+            assert view.flags.writeable
+            assert start <= view.ctypes.data < end  # a view of the loaned memory
+            view[...] = 1
+            shapes[name] = (view.shape, view.dtype.name)
+        del view
+        assert shapes == {
+            "rgb": ((8, 32, 3), "uint8"),
+            "rgba": ((4, 16, 4), "uint8"),
+            "gray": ((6, 8), "uint8"),
+            "depth": ((5, 12), "float32"),
+        }
+        # Two arrays over the same memory: a write through one is seen by the other.
+        a, b = frame.image("depth"), frame.image("depth")
+        a[2, 3] = 1.5
+        assert b[2, 3] == 1.5
+        del a, b
+
+        view = frame.image("rgb")
+        row = view[1]  # arrays made from a view count too
+        del view
+        assert frame.views == 1
+        with pytest.raises(vrsync.FrameInUseError) as e:
+            host.publish(frame)
+        assert isinstance(e.value, BufferError)
+        assert (e.value.agent_id, e.value.cycle, e.value.views) == (0, 0, 1)
+        assert not frame.published
+        exporter = row
+        while isinstance(exporter, np.ndarray):
+            exporter = exporter.base
+        exporter = exporter.obj  # the exporter, which a user could dig out to export again
+        del row
+        assert frame.views == 0
+
+        with pytest.raises(vrsync.UsageError, match="another vrsync.Host"):
+            other.publish(frame)
+        host.publish(frame)  # no agent connected: dropped and counted, not an error
+        assert frame.published and host.stats()["frames_undelivered"] == 1
+        with pytest.raises(vrsync.UsageError, match="published"):
+            frame.image("rgb")
+        with pytest.raises(BufferError):
+            memoryview(exporter)  # the memory is not the frame's any more
+        with pytest.raises(vrsync.UsageError, match="published already"):
+            host.publish(frame)
+
+        with pytest.raises(KeyError, match='no camera "nope"'):
+            host.loan(0).image("nope")
+        with pytest.raises(KeyError):
+            host.loan(7)
+        stale = host.loan(0)
+        host.start()
+        host.collect()  # no frame published: nothing to wait for
+        with pytest.raises(vrsync.UsageError, match="cycle 0"):
+            host.publish(stale)
+        assert "HostFrame agent=0 cycle=0" in repr(stale)
+    assert host.closed and "closed" in repr(host)
+    with pytest.raises(vrsync.UsageError, match="closed"):
+        host.loan(0)
+
+
+def test_async_mode_ticks_and_takes_commands_as_they_come(tmp_path: Path, agents: Agents) -> None:
+    config, _ = write_config(tmp_path, "async", sync_mode=False)
+    with vrsync.Host(config) as host:
+        assert not host.sync_mode
+        agent = agents.vr_agent(config, 0)
+        host.wait_for_agents(timeout=DEADLINE)
+        commands = []
+        deadline = time.monotonic() + DEADLINE
+        while not commands and time.monotonic() < deadline:
+            frame = host.loan(0)
+            frame.image("left")[...] = 0  # the temporary view is gone after this line
+            host.publish(frame)
+            host.start()
+            report = host.collect()
+            assert report.agent(0).outcome == "async"
+            commands += report.agent(0).commands
+        assert commands, "vr-agent's first command never arrived"
+        assert host.stats()["cycles"] == report.cycle + 1
+    agent.communicate(timeout=DEADLINE)
+    assert agent.returncode == 0
+
+
+def test_wait_for_agents_names_the_missing_ones(tmp_path: Path) -> None:
+    config, session = write_config(tmp_path, "missing", agents=2)
+    with vrsync.Host(config) as host:
+        with pytest.raises(vrsync.HostWaitTimeout) as e:
+            host.wait_for_agents(timeout=0.3)
+    assert isinstance(e.value, TimeoutError)
+    assert e.value.missing == [0, 1] and e.value.session == session
+    assert e.value.waited >= 0.3
