@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 use pyo3::exceptions::{PyKeyError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use vrsync_bridge::{Host, HostCycleError, HostWaitError, SignalHandling};
+use vrsync_bridge::{Host, HostCycleError, HostTransportError, HostWaitError, SignalHandling};
 
 use crate::agent::{PyCamera, SameThread, WAIT_SLICE, cameras_of, load_config, secs};
 use crate::errors::{error, obj};
@@ -262,6 +262,22 @@ impl PyHost {
         let frame = self.host(py)?.loan_frame(id);
         match frame {
             Ok(f) => Ok(PyHostFrame::new(f, token)),
+            Err(e @ HostCycleError::Transport(HostTransportError::Loan { .. })) => {
+                Err(error(
+                    py,
+                    "TransportError",
+                    format!(
+                        "session {:?}: {e} (is a frame loaned earlier for agent {id} still \
+                         alive, neither published nor dropped? The shared-memory transport \
+                         lends one at a time)",
+                        self.session
+                    ),
+                    &[
+                        ("session", obj(py, &self.session)),
+                        ("agent_id", obj(py, id)),
+                    ],
+                ))
+            }
             Err(e) => Err(self.cycle_error(py, e)),
         }
     }

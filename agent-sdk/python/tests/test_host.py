@@ -242,6 +242,8 @@ def test_image_views_are_writable_zero_copy_and_must_be_gone_before_publish(
         with pytest.raises(KeyError):
             host.loan(7)
         stale = host.loan(0)
+        with pytest.raises(vrsync.TransportError, match="still alive"):
+            host.loan(0)  # shared memory lends one frame per agent at a time
         host.start()
         host.collect()  # no frame published: nothing to wait for
         with pytest.raises(vrsync.UsageError, match="cycle 0"):
@@ -282,3 +284,73 @@ def test_wait_for_agents_names_the_missing_ones(tmp_path: Path) -> None:
     assert isinstance(e.value, TimeoutError)
     assert e.value.missing == [0, 1] and e.value.session == session
     assert e.value.waited >= 0.3
+# A Python host blocked in `wait_for_agents` (its agent never comes) or in `collect` (its
+# agent takes its frame and never stops: the host waits for it as long as it lives). A
+# helper thread prints "blocking" once the main thread is on the blocking line; the
+# parent then sends SIGINT. The child prints when KeyboardInterrupt arrived.
+BLOCKED_HOST = """
+import sys, threading, time, vrsync
+config, where = sys.argv[1], sys.argv[2]
+MAIN = threading.main_thread().ident
+
+def report_when_blocking(line):
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        frame = sys._current_frames().get(MAIN)
+        while frame is not None and frame.f_code.co_name != "<module>":
+            frame = frame.f_back
+        if frame is not None and frame.f_lineno == line:
+            print("blocking", flush=True)
+            return
+        time.sleep(0.005)
+
+host = vrsync.Host(config)
+if where == "collect":
+    host.wait_for_agents(timeout=60)
+    host.publish(host.loan(0))
+    host.start()
+line = sys._getframe().f_lineno + 3
+threading.Thread(target=report_when_blocking, args=(line,), daemon=True).start()
+try:
+    host.collect() if where == "collect" else host.wait_for_agents(timeout=600)
+except KeyboardInterrupt:
+    print("interrupted", time.monotonic(), flush=True)
+    sys.exit(0)
+print("returned", flush=True)
+sys.exit(1)
+"""
+
+SILENT_AGENT = """
+import sys, vrsync
+with vrsync.Agent.connect(sys.argv[1], 0, connect_timeout=30) as agent:
+    agent.wait(timeout=30)
+    sys.stdin.read()  # never stops; ends when the test kills it
+"""
+
+
+@pytest.mark.parametrize("where", ["wait_for_agents", "collect"])
+def test_ctrl_c_ends_a_blocked_host_with_keyboard_interrupt(
+    tmp_path: Path, agents: Agents, where: str
+) -> None:
+    config, _ = write_config(tmp_path, "ctrlc", stop_timeout=0.2)
+    host = agents.python(BLOCKED_HOST, str(config), where)
+    if where == "collect":
+        agent = subprocess.Popen(
+            [sys.executable, "-c", SILENT_AGENT, str(config)],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        agents.procs.append(agent)
+    assert host.stdout is not None
+    assert host.stdout.readline().strip() == "blocking", host.communicate(timeout=DEADLINE)
+    # Past the stop timeout (0.2 s) the host keeps waiting for the live agent.
+    time.sleep(0.5)  # not synchronisation: lets the call get well into its wait
+    assert host.poll() is None, host.communicate(timeout=DEADLINE)
+    sent = time.monotonic()
+    host.send_signal(signal.SIGINT)
+    out, err = host.communicate(timeout=DEADLINE)
+    assert host.returncode == 0, (out, err)
+    word, when = out.split()[-2:]
+    assert word == "interrupted", (out, err)
+    latency = float(when) - sent
+    print(f"{where} ended {latency * 1000:.1f} ms after SIGINT")
+    assert latency < DEADLINE  # measured, not a speed limit: the wait ends, it does not hang
