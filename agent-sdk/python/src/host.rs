@@ -6,22 +6,30 @@
 //! [`frame`]), waits that release the GIL and end on Ctrl-C, reports as Python objects
 //! (see [`report`]) and typed exceptions.
 //!
+//! # Ctrl-C
+//! The host calls an interrupt hook at least every 50 ms while it waits (for agents, for
+//! stops, for the tick); the hook takes the GIL for a moment and runs Python's pending
+//! signal handlers. When one raises (Ctrl-C's `KeyboardInterrupt`), the hook keeps the
+//! exception and ends the wait, and the waiting method raises it.
+//!
 //! # Threads
 //! The host's transports are not thread-safe (iceoryx2 `ipc::Service` ports), so the host
 //! and its frames are `unsendable` classes: usable only on the thread that created them.
 //! Releasing the GIL does not move anything: [`SameThread`] carries the host through
 //! `Python::detach`, whose closure runs on the calling thread.
 
+use std::cell::RefCell;
 use std::path::PathBuf;
+use std::rc::Rc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use pyo3::exceptions::{PyKeyError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use vrsync_bridge::{Host, HostCycleError, HostTransportError, HostWaitError, SignalHandling};
 
-use crate::agent::{PyCamera, SameThread, WAIT_SLICE, cameras_of, load_config, secs};
+use crate::agent::{PyCamera, SameThread, cameras_of, load_config, secs};
 use crate::errors::{error, obj};
 
 mod frame;
@@ -32,6 +40,24 @@ pub(crate) use report::{PyAgentReport, PyCycleReport};
 
 /// Tells the frames of one `Host` from those of another (`publish` checks).
 static NEXT_HOST: AtomicU64 = AtomicU64::new(1);
+
+/// The exception a signal handler raised while the host waited, kept by the interrupt
+/// hook for the waiting method to raise.
+type Raised = Rc<RefCell<Option<PyErr>>>;
+
+/// The host's interrupt hook: runs Python's pending signal handlers (the GIL is taken
+/// for that moment only); `true`, with the exception kept in `raised`, when one raised.
+fn interrupt_hook(raised: Raised) -> impl FnMut() -> bool + 'static {
+    move || {
+        Python::attach(|py| match py.check_signals() {
+            Ok(()) => false,
+            Err(e) => {
+                *raised.borrow_mut() = Some(e);
+                true
+            }
+        })
+    }
+}
 
 /// The simulator side of a vrsync session: serves the agents of a config file over the
 /// transports the config names for them (shared memory, TCP, zenoh; one lock-step world).
@@ -69,6 +95,7 @@ pub(crate) struct PyHost {
     simulation_time_per_frame: Duration,
     connect_timeout: Duration,
     cameras: Vec<(u32, Vec<PyCamera>)>,
+    raised: Raised,
 }
 
 impl PyHost {
@@ -84,7 +111,22 @@ impl PyHost {
         }
     }
 
+    /// The exception the interrupt hook kept (Ctrl-C's `KeyboardInterrupt`).
+    fn raised(&self, py: Python<'_>) -> PyErr {
+        self.raised.borrow_mut().take().unwrap_or_else(|| {
+            error(
+                py,
+                "TransportError",
+                format!("session {:?}: the wait was interrupted", self.session),
+                &[("session", obj(py, &self.session))],
+            )
+        })
+    }
+
     fn cycle_error(&self, py: Python<'_>, e: HostCycleError) -> PyErr {
+        if let HostCycleError::Terminated = e {
+            return self.raised(py);
+        }
         let msg = format!("session {:?}: {e}", self.session);
         let session = ("session", obj(py, &self.session));
         match e {
@@ -183,7 +225,7 @@ impl PyHost {
         // /dev/shm is filled lazily: too little of it would be a SIGBUS at the first write
         // into a frame, not an error here.
         vrsync_bridge::check_shm_budget(&cfg).map_err(|e| transport_error(e.to_string()))?;
-        let host = py
+        let mut host = py
             .detach(|| {
                 SameThread(
                     Host::builder(&cfg)
@@ -195,6 +237,8 @@ impl PyHost {
             })
             .0
             .map_err(|e| transport_error(format!("session {session:?}: {e}")))?;
+        let raised = Raised::default();
+        host.set_interrupt(interrupt_hook(raised.clone()));
         Ok(Self {
             host: Some(host),
             token: NEXT_HOST.fetch_add(1, Ordering::Relaxed),
@@ -204,6 +248,7 @@ impl PyHost {
             connect_timeout: cfg.sync.connect_timeout,
             cameras: cfg.agents.iter().map(|a| (a.id, cameras_of(a))).collect(),
             session,
+            raised,
         })
     }
 
@@ -215,38 +260,15 @@ impl PyHost {
     #[pyo3(signature = (timeout = None))]
     fn wait_for_agents(&mut self, py: Python<'_>, timeout: Option<f64>) -> PyResult<()> {
         let timeout = secs("timeout", timeout)?.unwrap_or(self.connect_timeout);
-        let started = Instant::now();
-        loop {
-            // In slices, so that Ctrl-C is seen between two (the host counts its log's
-            // waiting time across them).
-            let slice = timeout.saturating_sub(started.elapsed()).min(WAIT_SLICE);
-            let host = SameThread(self.host(py)?);
-            let result = py.detach(move || {
-                let host = host;
-                SameThread(host.0.wait_for_agents(slice))
-            });
-            match result.0 {
-                Ok(()) => return Ok(()),
-                Err(HostWaitError::AgentsMissing { .. }) if started.elapsed() < timeout => {
-                    py.check_signals()?;
-                }
-                Err(HostWaitError::AgentsMissing {
-                    session,
-                    missing,
-                    left,
-                    ..
-                }) => {
-                    // The last slice waited briefly; the caller waited since the first.
-                    let e = HostWaitError::AgentsMissing {
-                        session,
-                        missing,
-                        left,
-                        waited: started.elapsed(),
-                    };
-                    return Err(wait_error(py, e, &self.session));
-                }
-                Err(e) => return Err(wait_error(py, e, &self.session)),
-            }
+        let host = SameThread(self.host(py)?);
+        let result = py.detach(move || {
+            let host = host;
+            SameThread(host.0.wait_for_agents(timeout))
+        });
+        match result.0 {
+            Ok(()) => Ok(()),
+            Err(HostWaitError::Terminated) => Err(self.raised(py)),
+            Err(e) => Err(wait_error(py, e, &self.session)),
         }
     }
 
@@ -262,22 +284,20 @@ impl PyHost {
         let frame = self.host(py)?.loan_frame(id);
         match frame {
             Ok(f) => Ok(PyHostFrame::new(f, token)),
-            Err(e @ HostCycleError::Transport(HostTransportError::Loan { .. })) => {
-                Err(error(
-                    py,
-                    "TransportError",
-                    format!(
-                        "session {:?}: {e} (is a frame loaned earlier for agent {id} still \
+            Err(e @ HostCycleError::Transport(HostTransportError::Loan { .. })) => Err(error(
+                py,
+                "TransportError",
+                format!(
+                    "session {:?}: {e} (is a frame loaned earlier for agent {id} still \
                          alive, neither published nor dropped? The shared-memory transport \
                          lends one at a time)",
-                        self.session
-                    ),
-                    &[
-                        ("session", obj(py, &self.session)),
-                        ("agent_id", obj(py, id)),
-                    ],
-                ))
-            }
+                    self.session
+                ),
+                &[
+                    ("session", obj(py, &self.session)),
+                    ("agent_id", obj(py, id)),
+                ],
+            )),
             Err(e) => Err(self.cycle_error(py, e)),
         }
     }
@@ -308,7 +328,8 @@ impl PyHost {
     /// whose frame was published this cycle sent its stop (as long as it lives, or up to
     /// `stop_timeout` for agents with `wait_for_stop = "timeout"`); async mode: waits
     /// until the next tick. Then the cycle number and simulated time advance. The GIL is
-    /// released while waiting.
+    /// released while waiting; Ctrl-C raises `KeyboardInterrupt` (the cycle does not
+    /// end: call `collect` again to go on waiting for it).
     ///
     /// Raises `AgentLostError` (an agent was lost and `on_agent_lost` is `"abort"`, or
     /// `"wait"` and it did not come back), `TransportError`.
