@@ -42,7 +42,6 @@ impl Layout {
     }
 
     /// A vector of `len` `float32`.
-    #[allow(dead_code)] // used by the vector channels
     pub(crate) fn vector(len: usize) -> Self {
         Self {
             format: c"f",

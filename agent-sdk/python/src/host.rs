@@ -382,6 +382,7 @@ impl PyHost {
             ("leaves", s.leaves),
             ("evictions", s.evictions),
             ("peers_refused", s.peers_refused),
+            ("actions_rejected", s.actions_rejected),
         ] {
             d.set_item(k, v)?;
         }

@@ -354,3 +354,101 @@ def test_ctrl_c_ends_a_blocked_host_with_keyboard_interrupt(
     latency = float(when) - sent
     print(f"{where} ended {latency * 1000:.1f} ms after SIGINT")
     assert latency < DEADLINE  # measured, not a speed limit: the wait ends, it does not hang
+
+
+# An agent with channels: it checks the vector the host wrote (joints = arange + cycle)
+# and answers with both actions: torque = (joints[0] / 100, 1 if the vector was right
+# else -1), gear = cycle % 3.
+CHANNEL_AGENT = """
+import sys
+import numpy as np
+import vrsync
+
+with vrsync.Agent.connect(sys.argv[1], 0, connect_timeout=30) as agent:
+    for frame in agent.frames(timeout=30):
+        joints = frame.vector("joints")
+        right = np.array_equal(joints, np.arange(joints.size, dtype=np.float32) + frame.cycle)
+        agent.act("torque", [joints[0] / 100.0, 1.0 if right else -1.0])
+        agent.act("gear", frame.cycle % 3)
+        del joints
+        agent.stop()
+"""
+
+CHANNELS = """
+[[agent.vector]]
+name = "joints"
+len = 5
+[[agent.action]]
+name = "torque"
+len = 2
+low = -1.0
+high = 1.0
+[[agent.action]]
+name = "gear"
+n = 3
+"""
+
+
+def with_channels(config: Path) -> Path:
+    """Gives the (last) agent of `config` the vector and actions of `CHANNELS`."""
+    text = config.read_text()
+    at = text.index("\n[world]")
+    config.write_text(text[:at] + CHANNELS + text[at:])
+    return config
+
+
+def test_vector_views_are_writable_and_refused_at_publish_while_alive(tmp_path: Path) -> None:
+    config = with_channels(write_config(tmp_path, "vectors")[0])
+    with vrsync.Host(config) as host:
+        frame = host.loan(0)
+        assert frame.vector_names == ["joints"]
+        joints = frame.vector("joints")
+        assert joints.shape == (5,) and joints.dtype == np.float32 and joints.flags.writeable
+        joints[:] = np.arange(5)
+        again = frame.vectors["joints"]
+        assert again.ctypes.data == joints.ctypes.data and again.tolist() == [0, 1, 2, 3, 4]
+        with pytest.raises(vrsync.FrameInUseError) as e:
+            host.publish(frame)
+        assert e.value.views == 2
+        del joints, again
+        with pytest.raises(KeyError, match="no vector"):
+            frame.vector("nope")
+        host.publish(frame)
+        with pytest.raises(vrsync.UsageError, match="published"):
+            frame.vector("joints")
+
+
+@pytest.mark.skipif(
+    not hasattr(vrsync.Agent, "act"),
+    reason="this build's Python agent has no channels (Agent.act, Frame.vector)",
+)
+def test_vectors_written_in_python_arrive_and_actions_come_back(
+    tmp_path: Path, agents: Agents
+) -> None:
+    config = with_channels(write_config(tmp_path, "channels")[0])
+    with vrsync.Host(config) as host:
+        agents.python(CHANNEL_AGENT, str(config))
+        host.wait_for_agents(timeout=DEADLINE)
+        for cycle in range(5):
+            frame = host.loan(0)
+            assert frame.vector_names == ["joints"]
+            joints = frame.vector("joints")
+            assert joints.shape == (5,) and joints.dtype == np.float32 and joints.flags.writeable
+            joints[:] = np.arange(5) + cycle
+            with pytest.raises(vrsync.FrameInUseError):
+                host.publish(frame)
+            del joints
+            with pytest.raises(KeyError, match="no vector"):
+                frame.vector("nope")
+            host.publish(frame)
+            host.start()
+            ar = host.collect().agent(0)
+            assert ar.outcome == "stopped"
+            actions = ar.actions
+            assert list(actions) == ["torque", "gear"]
+            assert actions["torque"].dtype == np.float32
+            assert actions["torque"].tolist() == pytest.approx([cycle / 100.0, 1.0])
+            assert actions["gear"] == cycle % 3
+            assert ar.actions_rejected == 0
+            assert ar.commands == []  # actions are not commands
+        assert host.stats()["actions_rejected"] == 0

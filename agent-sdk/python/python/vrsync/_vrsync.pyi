@@ -587,6 +587,13 @@ class HostFrame:
     @property
     def images(self) -> dict[str, npt.NDArray[Any]]:
         """Every image by camera name (writable views), in camera order."""
+    @property
+    def vector_names(self) -> list[str]: ...
+    def vector(self, name: str) -> npt.NDArray[Any]:
+        """Vector ``name`` as a WRITABLE float32 view of the frame (``KeyError`` if unknown)."""
+    @property
+    def vectors(self) -> dict[str, npt.NDArray[Any]]:
+        """Every vector by name (writable views)."""
     def set_pose(self, position: Sequence[float], rotation: Sequence[float]) -> None:
         """Body pose the agent reads: position (x, y, z) metres, rotation quaternion (x, y, z, w)."""
     @property
@@ -625,6 +632,12 @@ class AgentReport:
     @property
     def invalid_commands(self) -> int:
         """Commands sent this cycle that do not decode (unknown kind, NaN/∞ argument)."""
+    @property
+    def actions(self) -> dict[str, npt.NDArray[Any] | int | None]:
+        """Each configured action's value this cycle: float32 array (copy), int, or None."""
+    @property
+    def actions_rejected(self) -> int:
+        """Action chunks refused this cycle (unknown, wrong length, out of bounds)."""
 
 @final
 class CycleReport:

@@ -51,6 +51,15 @@ pub(crate) struct PyHostFrame {
     sim_time_ns: u64,
     /// Camera names, in image order.
     cameras: Vec<String>,
+    /// Vector names (`[[agent.vector]]`), in payload order.
+    vectors: Vec<String>,
+}
+
+/// A part of a frame that can be exported: an image (by index) or a vector (by name).
+#[derive(Debug, Clone)]
+enum Part {
+    Image(usize),
+    Vector(String),
 }
 
 impl PyHostFrame {
@@ -62,6 +71,11 @@ impl PyHostFrame {
             .take(h.image_count as usize)
             .map(|d| d.name().to_owned())
             .collect();
+        let vectors = frame
+            .vector_descs()
+            .iter()
+            .map(|d| d.name().to_owned())
+            .collect();
         Self {
             agent_id: frame.agent_id(),
             cycle: h.cycle,
@@ -70,6 +84,7 @@ impl PyHostFrame {
             exports: Rc::default(),
             host,
             cameras,
+            vectors,
         }
     }
 
@@ -142,42 +157,57 @@ impl PyHostFrame {
         })
     }
 
-    /// Where image `index` is and how it is shaped.
-    fn image_memory(&mut self, index: usize) -> PyResult<(*mut u8, usize, Layout)> {
+    /// Where `part` is and how it is shaped.
+    fn memory(&mut self, part: &Part) -> PyResult<(*mut u8, usize, Layout)> {
         let frame = self
             .frame
             .as_mut()
             .ok_or_else(|| PyBufferError::new_err("the frame was published"))?;
-        let img = frame
-            .images_mut()
-            .nth(index)
-            .ok_or_else(|| PyBufferError::new_err(format!("no image {index} in this frame")))?;
-        let format = img.desc.pixel_format().ok_or_else(|| {
-            PyBufferError::new_err(format!("image {index} has an unknown pixel format"))
-        })?;
-        let layout = Layout::image(
-            format,
-            img.desc.width_px,
-            img.desc.height_px,
-            img.desc.stride_bytes as usize,
-        );
-        Ok((img.data.as_mut_ptr(), img.data.len(), layout))
+        match part {
+            Part::Image(index) => {
+                let img = frame.images_mut().nth(*index).ok_or_else(|| {
+                    PyBufferError::new_err(format!("no image {index} in this frame"))
+                })?;
+                let format = img.desc.pixel_format().ok_or_else(|| {
+                    PyBufferError::new_err(format!("image {index} has an unknown pixel format"))
+                })?;
+                let layout = Layout::image(
+                    format,
+                    img.desc.width_px,
+                    img.desc.height_px,
+                    img.desc.stride_bytes as usize,
+                );
+                Ok((img.data.as_mut_ptr(), img.data.len(), layout))
+            }
+            Part::Vector(name) => {
+                let values = frame.vector_mut(name).ok_or_else(|| {
+                    PyBufferError::new_err(format!("no vector {name:?} in this frame"))
+                })?;
+                let layout = Layout::vector(values.len());
+                Ok((
+                    values.as_mut_ptr().cast::<u8>(),
+                    std::mem::size_of_val(values),
+                    layout,
+                ))
+            }
+        }
     }
 }
 
-fn image_at<'py>(frame: &Bound<'py, PyHostFrame>, index: usize) -> PyResult<Bound<'py, PyAny>> {
+/// A writable numpy view of `part` of `frame`.
+fn view<'py>(frame: &Bound<'py, PyHostFrame>, part: Part) -> PyResult<Bound<'py, PyAny>> {
     let py = frame.py();
     let (layout, exports) = {
         let mut me = frame.try_borrow_mut()?;
         me.loaned(py)?;
-        let (_, _, layout) = me.image_memory(index)?;
+        let (_, _, layout) = me.memory(&part)?;
         (layout, me.exports.clone())
     };
     let buffer = Bound::new(
         py,
         HostBuffer {
             frame: frame.clone().unbind(),
-            image: index,
+            part,
             layout,
             exports,
         },
@@ -243,7 +273,7 @@ impl PyHostFrame {
     /// Raises `KeyError` for an unknown camera, `UsageError` after publish.
     fn image<'py>(slf: &Bound<'py, Self>, name: &str) -> PyResult<Bound<'py, PyAny>> {
         let index = slf.try_borrow()?.camera_index(name)?;
-        image_at(slf, index)
+        view(slf, Part::Image(index))
     }
 
     /// Every image by camera name (see `image`), in camera order.
@@ -253,7 +283,42 @@ impl PyHostFrame {
         let d = PyDict::new(py);
         let names = slf.try_borrow()?.cameras.clone();
         for (i, name) in names.into_iter().enumerate() {
-            d.set_item(name, image_at(slf, i)?)?;
+            d.set_item(name, view(slf, Part::Image(i))?)?;
+        }
+        Ok(d)
+    }
+
+    /// Vector names (`[[agent.vector]]`), in payload order.
+    #[getter]
+    fn vector_names(&self) -> Vec<String> {
+        self.vectors.clone()
+    }
+
+    /// The vector `name` (`[[agent.vector]]`) as a WRITABLE 1-d `float32` numpy array
+    /// over the frame's memory (no copy), as long as configured. Like an image view, it
+    /// must be gone before `Host.publish(frame)`; write every value.
+    ///
+    /// Raises `KeyError` for an unknown vector, `UsageError` after publish.
+    fn vector<'py>(slf: &Bound<'py, Self>, name: &str) -> PyResult<Bound<'py, PyAny>> {
+        {
+            let me = slf.try_borrow()?;
+            if !me.vectors.iter().any(|v| v == name) {
+                return Err(PyKeyError::new_err(format!(
+                    "agent {} has no vector {name:?} (its vectors: {:?})",
+                    me.agent_id, me.vectors
+                )));
+            }
+        }
+        view(slf, Part::Vector(name.to_owned()))
+    }
+
+    /// Every vector by name (see `vector`), in payload order.
+    #[getter]
+    fn vectors<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(slf.py());
+        let names = slf.try_borrow()?.vectors.clone();
+        for name in names {
+            d.set_item(&name, view(slf, Part::Vector(name.clone()))?)?;
         }
         Ok(d)
     }
@@ -318,20 +383,20 @@ impl PyHostFrame {
     }
 }
 
-/// One image of a `HostFrame`, exported through the buffer protocol as a writable
-/// N-dimensional view (what numpy wraps without copying). Each export counts on the frame
+/// One image or vector of a `HostFrame`, exported through the buffer protocol as a
+/// writable view (what numpy wraps without copying). Each export counts on the frame
 /// until it is released; exporting fails once the frame is published.
 #[pyclass(module = "vrsync._vrsync", unsendable)]
 pub(crate) struct HostBuffer {
     frame: Py<PyHostFrame>,
-    image: usize,
+    part: Part,
     layout: Layout,
     exports: Rc<Cell<usize>>,
 }
 
 #[pymethods]
 impl HostBuffer {
-    /// Exports the image, writable.
+    /// Exports the image or vector, writable.
     ///
     /// # Safety
     /// `view` must be a valid `Py_buffer` to fill (Python's buffer protocol guarantees it).
@@ -342,7 +407,7 @@ impl HostBuffer {
     ) -> PyResult<()> {
         let py = slf.py();
         let me = slf.try_borrow()?;
-        let (ptr, len, _) = me.frame.bind(py).try_borrow_mut()?.image_memory(me.image)?;
+        let (ptr, len, _) = me.frame.bind(py).try_borrow_mut()?.memory(&me.part)?;
         // SAFETY: the memory is the frame's loan, which lives as long as the frame (kept
         // alive by `frame`, inside `slf`) and is not handed on while an export is counted
         // (`PyHostFrame::take` refuses); the layout lives in `slf`.

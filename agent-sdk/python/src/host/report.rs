@@ -5,8 +5,8 @@
 
 use pyo3::exceptions::PyKeyError;
 use pyo3::prelude::*;
-use pyo3::types::PyList;
-use vrsync_bridge::{AgentOutcome, CycleReport, MotorCommand};
+use pyo3::types::{PyDict, PyList};
+use vrsync_bridge::{ActionValue, AgentOutcome, CycleReport, MotorCommand};
 
 use crate::commands::to_object;
 
@@ -21,6 +21,12 @@ fn outcome_name(o: AgentOutcome) -> &'static str {
     }
 }
 
+/// One action's value in one cycle, owned.
+enum Action {
+    Box(Vec<f32>),
+    Discrete(u32),
+}
+
 /// One agent's part of a cycle: how its cycle ended and the commands it sent.
 #[pyclass(module = "vrsync._vrsync", name = "AgentReport", frozen)]
 pub(crate) struct PyAgentReport {
@@ -32,6 +38,10 @@ pub(crate) struct PyAgentReport {
     left: bool,
     slow: bool,
     wire: Vec<MotorCommand>,
+    /// Every configured action (`[[agent.action]]`) in config order, with its value of
+    /// this cycle (`None`: none arrived).
+    actions: Vec<(String, Option<Action>)>,
+    actions_rejected: u32,
 }
 
 #[pymethods]
@@ -115,6 +125,30 @@ impl PyAgentReport {
         self.wire.iter().filter(|c| c.decode().is_err()).count()
     }
 
+    /// The actions it sent this cycle (`[[agent.action]]`), by name in config order: a
+    /// `float32` numpy array (a copy) for a continuous action, an `int` for a discrete
+    /// one, `None` when none arrived this cycle. Values are within the configured bounds
+    /// (the host refused the others: `actions_rejected`).
+    #[getter]
+    fn actions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        for (name, value) in &self.actions {
+            match value {
+                None => d.set_item(name, py.None())?,
+                Some(Action::Discrete(choice)) => d.set_item(name, choice)?,
+                Some(Action::Box(values)) => d.set_item(name, float32_array(py, values)?)?,
+            }
+        }
+        Ok(d)
+    }
+
+    /// Action chunks the host refused this cycle (unknown action, wrong length, out of
+    /// bounds, not finite): nothing of those values is in `actions`.
+    #[getter]
+    fn actions_rejected(&self) -> u32 {
+        self.actions_rejected
+    }
+
     fn __repr__(&self) -> String {
         let mut flags = String::new();
         for (set, name) in [
@@ -164,6 +198,17 @@ impl PyCycleReport {
                         left: a.left,
                         slow: a.slow,
                         wire: a.commands().to_vec(),
+                        actions: a
+                            .actions()
+                            .map(|(name, v)| {
+                                let v = v.map(|v| match v {
+                                    ActionValue::Box(values) => Action::Box(values.to_vec()),
+                                    ActionValue::Discrete(choice) => Action::Discrete(choice),
+                                });
+                                (name.to_owned(), v)
+                            })
+                            .collect(),
+                        actions_rejected: a.actions_rejected(),
                     },
                 )
             })
@@ -230,4 +275,18 @@ impl PyCycleReport {
             if self.timed_out { " timed_out" } else { "" }
         )
     }
+}
+
+/// A new `float32` numpy array holding `values`.
+fn float32_array<'py>(py: Python<'py>, values: &[f32]) -> PyResult<Bound<'py, PyAny>> {
+    use pyo3::sync::PyOnceLock;
+    static ARRAY: PyOnceLock<(Py<PyAny>, Py<PyAny>)> = PyOnceLock::new();
+    let (array, float32) = ARRAY.get_or_try_init(py, || {
+        let np = py.import("numpy")?;
+        Ok::<_, PyErr>((
+            np.getattr("array")?.unbind(),
+            np.getattr("float32")?.unbind(),
+        ))
+    })?;
+    array.bind(py).call1((values.to_vec(), float32.bind(py)))
 }
