@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 import vrsync
 
-from conftest import binary, run_python, write_config
+from conftest import TRANSPORTS, binary, write_config
 
 DEADLINE = 60.0
 """Seconds any one wait of these tests may take (they take well under a second)."""
@@ -178,6 +178,31 @@ def test_sync_cycles_over_shm_and_tcp_carry_the_pixels_written_in_python(
         assert stats["stop_timeouts"] == 0
     for proc in checkers.values():
         assert finish(proc).split() == ["frames", str(cycles)]
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_every_transport_carries_the_pixels(tmp_path: Path, agents: Agents, transport: str) -> None:
+    config, _ = write_config(tmp_path, f"host-{transport}", transport=transport)
+    cycles = 5
+    with vrsync.Host(config) as host:
+        if transport == "tcp":
+            with_tcp_port(config, host.tcp_address)
+        else:
+            assert host.tcp_address is None
+        checker = agents.python(CHECKING_AGENT, str(config), "0")
+        host.wait_for_agents(timeout=DEADLINE)
+        for cycle in range(cycles):
+            frame = host.loan(0)
+            for i, view in enumerate(frame.images.values()):
+                view[...] = pattern(view.shape, cycle, 0, i)
+            del view
+            frame.reward = 1.0
+            host.publish(frame)
+            host.start()
+            ar = host.collect().agent(0)
+            assert ar.outcome == "stopped"
+            assert ar.commands[0] == vrsync.MoveTo(x=cycle, y=0, z=1.0), (transport, cycle)
+    assert finish(checker).split() == ["frames", str(cycles)]
 
 
 def test_image_views_are_writable_zero_copy_and_must_be_gone_before_publish(
