@@ -443,10 +443,6 @@ def test_vector_views_are_writable_and_refused_at_publish_while_alive(tmp_path: 
             frame.vector("joints")
 
 
-@pytest.mark.skipif(
-    not hasattr(vrsync.Agent, "act"),
-    reason="this build's Python agent has no channels (Agent.act, Frame.vector)",
-)
 def test_vectors_written_in_python_arrive_and_actions_come_back(
     tmp_path: Path, agents: Agents
 ) -> None:
