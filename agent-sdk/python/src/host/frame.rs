@@ -1,19 +1,20 @@
 //! `vrsync.HostFrame`: a sensor frame loaned for one agent, written from Python in place.
 //!
 //! # Views and publish
-//! `image(name)` returns a writable numpy array over the loaned memory itself (the
-//! agent's shared-memory sample, or the transport's pooled send buffer). `publish` hands
+//! `image(name)` and `vector(name)` return writable numpy arrays over the loaned memory
+//! itself (the agent's shared-memory sample, or the transport's pooled send buffer). `publish` hands
 //! that memory to the transport, after which it may be read by the agent, reused for
 //! another cycle, or unmapped: a write through an old array would corrupt a frame or
 //! crash. So the frame counts the buffers it exported (each array, and each array made
 //! from it, holds one export until it is freed), and `Host.publish` refuses, with
 //! `FrameInUseError`, a frame of which any view is alive. After publish the frame exports
-//! nothing any more (`image` raises `UsageError`).
+//! nothing any more (`image` and `vector` raise `UsageError`, and a buffer object dug out
+//! of an old array refuses to export again).
 //!
 //! # Threads
 //! The loan belongs to the host's transports, which are not thread-safe (iceoryx2
 //! `ipc::Service` ports): frames and their buffers are `unsendable` classes, usable only on
-//! the thread that loaned them (PyO3 raises on any other).
+//! the thread that loaned them (PyO3 raises `PanicException` on any other).
 
 use std::cell::Cell;
 use std::ffi::c_int;
@@ -30,7 +31,8 @@ use crate::errors::{error, obj};
 
 /// One agent's sensor frame of the current cycle, loaned by `Host.loan(agent_id)`:
 /// write the images (`image(name)` is a writable numpy view of the frame's memory, no
-/// copy), the pose and the reward, then `Host.publish(frame)`.
+/// copy), the vectors (`vector(name)`, the same), the pose and the reward, then
+/// `Host.publish(frame)`.
 ///
 /// A view must not outlive the publish: `publish` raises `FrameInUseError` while any
 /// array viewing this frame is alive (`del` them first; arrays made from a view, such as
