@@ -473,3 +473,50 @@ def test_vectors_written_in_python_arrive_and_actions_come_back(
             assert ar.actions_rejected == 0
             assert ar.commands == []  # actions are not commands
         assert host.stats()["actions_rejected"] == 0
+
+
+# One command of every class, as Python source both the agent and the host evaluate.
+EVERY_COMMAND = """[
+    vrsync.Move(heading_deg=90.5, distance_m=1.25),
+    vrsync.Turn(angle_deg=-30.0),
+    vrsync.MoveTo(x=1.0, y=0.0, z=-2.5),
+    vrsync.CancelMove(),
+    vrsync.EyeMovement(pan_left_deg=5.0, pan_right_deg=-5.0, tilt_deg=2.0),
+    vrsync.EyeFixation(x=0.5, y=1.5, z=2.5),
+    vrsync.GraspId(object_id=7),
+    vrsync.GraspPos(x_px=10.0, y_px=20.0),
+    vrsync.PointId(object_id=8),
+    vrsync.PointPos(x_px=11.0, y_px=21.0),
+    vrsync.InteractId(object_id=9),
+    vrsync.InteractPos(x_px=12.0, y_px=22.0),
+    vrsync.GraspRelease(),
+    vrsync.EnvironmentReset(reset_type=1),
+    vrsync.TrialReset(reset_type=2),
+]"""
+
+SENDING_AGENT = """
+import sys, vrsync
+with vrsync.Agent.connect(sys.argv[1], 0, connect_timeout=30) as agent:
+    for frame in agent.frames(timeout=30):
+        for i, command in enumerate(COMMANDS):
+            agent.send_with_id(1000 + i, command)
+        agent.stop()
+""".replace("COMMANDS", EVERY_COMMAND)
+
+
+def test_every_command_class_comes_back_as_itself(tmp_path: Path, agents: Agents) -> None:
+    sent = eval(EVERY_COMMAND, {"vrsync": vrsync})
+    assert {type(c) for c in sent} == set(vrsync.Command.__subclasses__())
+    config, _ = write_config(tmp_path, "commands")
+    with vrsync.Host(config) as host:
+        agents.python(SENDING_AGENT, str(config))
+        host.wait_for_agents(timeout=DEADLINE)
+        host.publish(host.loan(0))
+        host.start()
+        ar = host.collect().agent(0)
+    got = ar.commands
+    assert [type(c) for c in got] == [type(c) for c in sent]
+    assert got == sent
+    assert [repr(c) for c in got] == [repr(c) for c in sent]
+    assert ar.action_ids == [1000 + i for i in range(len(sent))]
+    assert ar.invalid_commands == 0
