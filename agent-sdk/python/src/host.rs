@@ -312,6 +312,8 @@ impl PyHost {
     /// published already, loaned by another host or in an earlier cycle.
     fn publish(&mut self, py: Python<'_>, frame: &Bound<'_, PyHostFrame>) -> PyResult<()> {
         let token = self.token;
+        // A closed host keeps the frame as it is (not taken, not dropped).
+        self.host(py)?;
         let loan = frame.try_borrow_mut()?.take(py, token)?;
         let result = self.host(py)?.publish(loan);
         result.map_err(|e| self.cycle_error(py, e))
@@ -328,8 +330,9 @@ impl PyHost {
     /// whose frame was published this cycle sent its stop (as long as it lives, or up to
     /// `stop_timeout` for agents with `wait_for_stop = "timeout"`); async mode: waits
     /// until the next tick. Then the cycle number and simulated time advance. The GIL is
-    /// released while waiting; Ctrl-C raises `KeyboardInterrupt` (the cycle does not
-    /// end: call `collect` again to go on waiting for it).
+    /// released while waiting; Ctrl-C raises `KeyboardInterrupt` within 50 ms. The cycle
+    /// does not end then: calling `collect` again finishes it (the stops that came are
+    /// kept), but the commands taken before the interrupt are not reported.
     ///
     /// Raises `AgentLostError` (an agent was lost and `on_agent_lost` is `"abort"`, or
     /// `"wait"` and it did not come back), `TransportError`.
