@@ -303,11 +303,14 @@ def test_async_mode_ticks_and_takes_commands_as_they_come(tmp_path: Path, agents
 
 def test_wait_for_agents_names_the_missing_ones(tmp_path: Path) -> None:
     config, session = write_config(tmp_path, "missing", agents=2)
-    with vrsync.Host(config) as host:
+    with vrsync.Host(config, session=f"{session}-x", agents=3) as host:
+        assert (host.session, host.agent_ids) == (f"{session}-x", [0, 1, 2])
         with pytest.raises(vrsync.HostWaitTimeout) as e:
             host.wait_for_agents(timeout=0.3)
     assert isinstance(e.value, TimeoutError)
-    assert e.value.missing == [0, 1] and e.value.session == session
+    assert e.value.missing == [0, 1, 2] and e.value.session == f"{session}-x"
+    with pytest.raises(vrsync.ConfigError):
+        vrsync.Host(config, session="not a session name")
     assert e.value.waited >= 0.3
 # A Python host blocked in `wait_for_agents` (its agent never comes) or in `collect` (its
 # agent takes its frame and never stops: the host waits for it as long as it lives). A
@@ -498,8 +501,11 @@ SENDING_AGENT = """
 import sys, vrsync
 with vrsync.Agent.connect(sys.argv[1], 0, connect_timeout=30) as agent:
     for frame in agent.frames(timeout=30):
-        for i, command in enumerate(COMMANDS):
-            agent.send_with_id(1000 + i, command)
+        if frame.cycle == 0:
+            for i, command in enumerate(COMMANDS):
+                agent.send_with_id(1000 + i, command)
+        else:  # what the host said it rejected of the previous cycle's commands
+            agent.send(vrsync.Turn(angle_deg=frame.previous_rejected))
         agent.stop()
 """.replace("COMMANDS", EVERY_COMMAND)
 
@@ -514,6 +520,10 @@ def test_every_command_class_comes_back_as_itself(tmp_path: Path, agents: Agents
         host.publish(host.loan(0))
         host.start()
         ar = host.collect().agent(0)
+        host.set_rejected(0, 4)
+        host.publish(host.loan(0))
+        host.start()
+        assert host.collect().agent(0).commands == [vrsync.Turn(angle_deg=4)]
     got = ar.commands
     assert [type(c) for c in got] == [type(c) for c in sent]
     assert got == sent
