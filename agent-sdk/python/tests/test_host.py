@@ -504,13 +504,16 @@ with vrsync.Agent.connect(sys.argv[1], 0, connect_timeout=30) as agent:
         if frame.cycle == 0:
             for i, command in enumerate(COMMANDS):
                 agent.send_with_id(1000 + i, command)
-        else:  # what the host said it rejected of the previous cycle's commands
+        else:  # what the host said of the previous cycle's commands
             agent.send(vrsync.Turn(angle_deg=frame.previous_rejected))
+            state = frame.action_states.get(1000)
+            hits = [c.collider_id for c in frame.collisions if c.action_id == 1000]
+            agent.send(vrsync.MoveTo(x=-1 if state is None else int(state), y=len(hits), z=sum(hits)))
         agent.stop()
 """.replace("COMMANDS", EVERY_COMMAND)
 
 
-def test_every_command_class_comes_back_as_itself(tmp_path: Path, agents: Agents) -> None:
+def test_every_command_class_comes_back_and_statuses_reach_the_agent(tmp_path: Path, agents: Agents) -> None:
     sent = eval(EVERY_COMMAND, {"vrsync": vrsync})
     assert {type(c) for c in sent} == set(vrsync.Command.__subclasses__())
     config, _ = write_config(tmp_path, "commands")
@@ -521,9 +524,15 @@ def test_every_command_class_comes_back_as_itself(tmp_path: Path, agents: Agents
         host.start()
         ar = host.collect().agent(0)
         host.set_rejected(0, 4)
-        host.publish(host.loan(0))
+        frame = host.loan(0)
+        assert frame.add_status(1000, vrsync.ActionState.Finished)
+        assert frame.add_collision(1000, 42)
+        host.publish(frame)
         host.start()
-        assert host.collect().agent(0).commands == [vrsync.Turn(angle_deg=4)]
+        assert host.collect().agent(0).commands == [
+            vrsync.Turn(angle_deg=4),
+            vrsync.MoveTo(x=int(vrsync.ActionState.Finished), y=1, z=42),
+        ]
     got = ar.commands
     assert [type(c) for c in got] == [type(c) for c in sent]
     assert got == sent

@@ -596,6 +596,10 @@ class HostFrame:
         """Every vector by name (writable views)."""
     def set_pose(self, position: Sequence[float], rotation: Sequence[float]) -> None:
         """Body pose the agent reads: position (x, y, z) metres, rotation quaternion (x, y, z, w)."""
+    def add_status(self, action_id: int, state: ActionState) -> bool:
+        """Reports a new state of the agent's action ``action_id`` (once; repeated until read)."""
+    def add_collision(self, action_id: int, collider_id: int) -> bool:
+        """Reports a collision during action ``action_id`` (once; repeated until read)."""
     @property
     def reward(self) -> float: ...
     @reward.setter

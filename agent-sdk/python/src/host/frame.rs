@@ -24,10 +24,11 @@ use pyo3::exceptions::{PyBufferError, PyKeyError, PyValueError};
 use pyo3::ffi;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use vrsync_bridge::{Pose, SensorFrameMut};
+use vrsync_bridge::{ActionState, Pose, SensorFrameMut};
 
 use crate::buffer::{Layout, as_array, fill};
 use crate::errors::{error, obj};
+use crate::sensors::PyActionState;
 
 /// One agent's sensor frame of the current cycle, loaned by `Host.loan(agent_id)`:
 /// write the images (`image(name)` is a writable numpy view of the frame's memory, no
@@ -337,6 +338,37 @@ impl PyHostFrame {
             rotation: [r[0], r[1], r[2], r[3]],
         };
         Ok(())
+    }
+
+    /// Reports a new state of the agent's action `action_id` (the id it sent the command
+    /// with) in this frame. Report each change once: the host repeats it in later frames
+    /// until the agent has read one. Returns `False` (and drops it) when this frame's
+    /// table is full.
+    fn add_status(
+        &mut self,
+        py: Python<'_>,
+        action_id: u32,
+        state: PyRef<'_, PyActionState>,
+    ) -> PyResult<bool> {
+        let state = *state;
+        let state = ActionState::from_u32(state as u32)
+            .ok_or_else(|| PyValueError::new_err(format!("unknown action state {state:?}")))?;
+        Ok(self.loaned(py)?.header_mut().push_status(action_id, state))
+    }
+
+    /// Reports that the agent's body hit `collider_id` while action `action_id` ran, in
+    /// this frame (once: the host repeats it until read). Returns `False` (and drops it)
+    /// when this frame's table is full.
+    fn add_collision(
+        &mut self,
+        py: Python<'_>,
+        action_id: u32,
+        collider_id: u32,
+    ) -> PyResult<bool> {
+        Ok(self
+            .loaned(py)?
+            .header_mut()
+            .push_collision(action_id, collider_id))
     }
 
     /// The reward the agent reads in this frame.
