@@ -25,9 +25,10 @@ DEADLINE = 60.0
 """Seconds any one wait of these tests may take (they take well under a second)."""
 
 # A Python agent that checks the pattern the host writes (see `pattern`) in every image
-# of every frame, and answers each frame with MoveTo(cycle, mismatching pixels, reward)
-# and Turn(the value of pixel (1, 2) of its first image), then stops. It ends when the
-# host closes the session.
+# of every frame, and answers each frame with MoveTo(cycle, mismatching pixels, reward),
+# Turn(the value of pixel (1, 2) of its first image), EyeFixation(pose x, grid rotation
+# y, eye tilt) and Turn(head velocity x), then stops. It ends when the host closes the
+# session.
 CHECKING_AGENT = """
 import sys
 import numpy as np
@@ -53,6 +54,10 @@ with vrsync.Agent.connect(config, agent_id, connect_timeout=30) as agent:
         first = frame.image(frame.camera_names[0])
         agent.send(vrsync.MoveTo(x=frame.cycle, y=bad, z=frame.reward))
         agent.send(vrsync.Turn(angle_deg=float(first[1, 2, 0])))
+        agent.send(vrsync.EyeFixation(
+            x=frame.pose.position[0], y=frame.grid.rotation_deg[1], z=frame.eye.rotation_deg[2]
+        ))
+        agent.send(vrsync.Turn(angle_deg=frame.head_motion.velocity[0]))
         del first
         agent.stop()
         frames += 1
@@ -151,6 +156,9 @@ def test_sync_cycles_over_shm_and_tcp_carry_the_pixels_written_in_python(
                     view[...] = pattern(view.shape, cycle, agent_id, i)
                     del view
                 frame.set_pose((cycle * 0.1, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0))
+                frame.set_grid((0, 0, 0), (0, cycle, 0))
+                frame.set_eye((0, 0, cycle))
+                frame.set_head_motion((2 * cycle, 0, 0), (0, 0, 0), (0, 0, 0), (0, 0, 0))
                 frame.reward = cycle * 0.5
                 host.publish(frame)
                 assert frame.published
@@ -165,9 +173,11 @@ def test_sync_cycles_over_shm_and_tcp_carry_the_pixels_written_in_python(
                 assert ar.commands == [
                     vrsync.MoveTo(x=cycle, y=0, z=cycle * 0.5),
                     vrsync.Turn(angle_deg=float(pattern((3, 3, 3), cycle, agent_id, 0)[1, 2, 0])),
+                    vrsync.EyeFixation(x=cycle * 0.1, y=cycle, z=cycle),
+                    vrsync.Turn(angle_deg=2 * cycle),
                 ], (agent_id, cycle)
                 assert ar.invalid_commands == 0
-                assert len(ar.action_ids) == 2
+                assert len(ar.action_ids) == 4
             wander = report.agent(1).commands
             assert all(isinstance(c, vrsync.Command) for c in wander)
             wander_commands += len(wander)
@@ -255,6 +265,18 @@ def test_image_views_are_writable_zero_copy_and_must_be_gone_before_publish(
             other.publish(frame)
         host.publish(frame)  # no agent connected: dropped and counted, not an error
         assert frame.published and host.stats()["frames_undelivered"] == 1
+        fresh = host.loan(0)  # the sensors start neutral, whatever the memory held
+        assert fresh.reward == 0.0
+        fresh.reward = 5.0
+        fresh.set_pose((1, 2, 3), (0, 0, 0, 1))
+        fresh.set_grid((1, 2, 3), (0, 90, 0))
+        fresh.set_head_motion((1, 0, 0), (0, 0, 0), (0, 0, 0), (0, 0, 0))
+        fresh.set_eye((1, 2, 3))
+        with pytest.raises(ValueError, match="rotation must be 4 finite numbers"):
+            fresh.set_pose((1, 2, 3), (0, 0, 1))
+        with pytest.raises(ValueError, match="finite"):
+            fresh.reward = float("nan")
+        del fresh
         with pytest.raises(vrsync.UsageError, match="published"):
             frame.image("rgb")
         with pytest.raises(BufferError):

@@ -596,6 +596,20 @@ class HostFrame:
         """Every vector by name (writable views)."""
     def set_pose(self, position: Sequence[float], rotation: Sequence[float]) -> None:
         """Body pose the agent reads: position (x, y, z) metres, rotation quaternion (x, y, z, w)."""
+    def set_grid(self, position: Sequence[float], rotation_deg: Sequence[float]) -> None:
+        """Grid position sensor: position (metres) and Euler rotation (degrees)."""
+    def set_head_motion(
+        self,
+        velocity: Sequence[float],
+        acceleration: Sequence[float],
+        angular_velocity_deg: Sequence[float],
+        angular_acceleration_deg: Sequence[float],
+    ) -> None:
+        """Head motion sensor (each x, y, z)."""
+    def set_eye(
+        self, rotation_deg: Sequence[float], rotation_velocity_deg: Sequence[float] = (0, 0, 0)
+    ) -> None:
+        """Eye position sensor: rotation (pan left, pan right, tilt) and its change per cycle."""
     def add_status(self, action_id: int, state: ActionState) -> bool:
         """Reports a new state of the agent's action ``action_id`` (once; repeated until read)."""
     def add_collision(self, action_id: int, collider_id: int) -> bool:

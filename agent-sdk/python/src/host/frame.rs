@@ -24,7 +24,7 @@ use pyo3::exceptions::{PyBufferError, PyKeyError, PyValueError};
 use pyo3::ffi;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use vrsync_bridge::{ActionState, Pose, SensorFrameMut};
+use vrsync_bridge::{ActionState, EyePosition, GridPosition, HeadMotion, Pose, SensorFrameMut};
 
 use crate::buffer::{Layout, as_array, fill};
 use crate::errors::{error, obj};
@@ -66,7 +66,18 @@ enum Part {
 }
 
 impl PyHostFrame {
-    pub(crate) fn new(frame: SensorFrameMut, host: u64) -> Self {
+    pub(crate) fn new(mut frame: SensorFrameMut, host: u64) -> Self {
+        // The memory holds what it held when last used: every frame starts from neutral
+        // sensors, so that what a Python world does not set reads the same every cycle.
+        let h = frame.header_mut();
+        h.pose = Pose {
+            position: [0.0; 3],
+            rotation: [0.0, 0.0, 0.0, 1.0],
+        };
+        h.reward = 0.0;
+        h.grid = GridPosition::default();
+        h.head_motion = HeadMotion::default();
+        h.eye = EyePosition::default();
         let h = frame.header();
         let cameras = h
             .images
@@ -218,13 +229,16 @@ fn view<'py>(frame: &Bound<'py, PyHostFrame>, part: Part) -> PyResult<Bound<'py,
     as_array(buffer.into_any())
 }
 
-fn triple(name: &str, v: &[f64], n: usize) -> PyResult<Vec<f32>> {
-    if v.len() != n || v.iter().any(|x| !x.is_finite()) {
-        return Err(PyValueError::new_err(format!(
-            "{name} must be {n} finite numbers, got {v:?}"
-        )));
+/// `v` as `N` finite `f32`s; `ValueError` naming `name` otherwise.
+fn floats<const N: usize>(name: &str, v: &[f64]) -> PyResult<[f32; N]> {
+    let bad = || PyValueError::new_err(format!("{name} must be {N} finite numbers, got {v:?}"));
+    if v.iter()
+        .any(|x| !x.is_finite() || x.abs() > f64::from(f32::MAX))
+    {
+        return Err(bad());
     }
-    Ok(v.iter().map(|&x| x as f32).collect())
+    let v: [f64; N] = v.try_into().map_err(|_| bad())?;
+    Ok(v.map(|x| x as f32))
 }
 
 #[pymethods]
@@ -327,16 +341,69 @@ impl PyHostFrame {
     }
 
     /// Sets the body pose the agent reads: `position` (x, y, z) in metres, `rotation` a
-    /// unit quaternion (x, y, z, w). Default: what the sample held before, so set it
-    /// every cycle.
+    /// unit quaternion (x, y, z, w). Default: the origin, identity rotation (a frame's
+    /// sensors start neutral every cycle: zero, reward 0).
     fn set_pose(&mut self, py: Python<'_>, position: Vec<f64>, rotation: Vec<f64>) -> PyResult<()> {
-        let p = triple("position", &position, 3)?;
-        let r = triple("rotation", &rotation, 4)?;
-        let frame = self.loaned(py)?;
-        frame.header_mut().pose = Pose {
-            position: [p[0], p[1], p[2]],
-            rotation: [r[0], r[1], r[2], r[3]],
+        let pose = Pose {
+            position: floats("position", &position)?,
+            rotation: floats("rotation", &rotation)?,
         };
+        self.loaned(py)?.header_mut().pose = pose;
+        Ok(())
+    }
+
+    /// Sets the grid position sensor: `position` (x, y, z) in metres, `rotation_deg`
+    /// Euler angles in degrees.
+    fn set_grid(
+        &mut self,
+        py: Python<'_>,
+        position: Vec<f64>,
+        rotation_deg: Vec<f64>,
+    ) -> PyResult<()> {
+        let grid = GridPosition {
+            position: floats("position", &position)?,
+            rotation_deg: floats("rotation_deg", &rotation_deg)?,
+        };
+        self.loaned(py)?.header_mut().grid = grid;
+        Ok(())
+    }
+
+    /// Sets the head motion sensor (each an x, y, z triple).
+    fn set_head_motion(
+        &mut self,
+        py: Python<'_>,
+        velocity: Vec<f64>,
+        acceleration: Vec<f64>,
+        angular_velocity_deg: Vec<f64>,
+        angular_acceleration_deg: Vec<f64>,
+    ) -> PyResult<()> {
+        let motion = HeadMotion {
+            velocity: floats("velocity", &velocity)?,
+            acceleration: floats("acceleration", &acceleration)?,
+            angular_velocity_deg: floats("angular_velocity_deg", &angular_velocity_deg)?,
+            angular_acceleration_deg: floats(
+                "angular_acceleration_deg",
+                &angular_acceleration_deg,
+            )?,
+        };
+        self.loaned(py)?.header_mut().head_motion = motion;
+        Ok(())
+    }
+
+    /// Sets the eye position sensor: `rotation_deg` (pan left, pan right, tilt) and its
+    /// change per cycle, in degrees.
+    #[pyo3(signature = (rotation_deg, rotation_velocity_deg = vec![0.0; 3]))]
+    fn set_eye(
+        &mut self,
+        py: Python<'_>,
+        rotation_deg: Vec<f64>,
+        rotation_velocity_deg: Vec<f64>,
+    ) -> PyResult<()> {
+        let eye = EyePosition {
+            rotation_deg: floats("rotation_deg", &rotation_deg)?,
+            rotation_velocity_deg: floats("rotation_velocity_deg", &rotation_velocity_deg)?,
+        };
+        self.loaned(py)?.header_mut().eye = eye;
         Ok(())
     }
 
