@@ -561,3 +561,40 @@ def test_every_command_class_comes_back_and_statuses_reach_the_agent(tmp_path: P
     assert [repr(c) for c in got] == [repr(c) for c in sent]
     assert ar.action_ids == [1000 + i for i in range(len(sent))]
     assert ar.invalid_commands == 0
+
+
+def one_cycle(host: vrsync.Host) -> vrsync.CycleReport:
+    for agent_id in host.agent_ids:
+        host.publish(host.loan(agent_id))
+    host.start()
+    return host.collect()
+
+
+@pytest.mark.parametrize("on_agent_lost", ["evict", "abort"])
+def test_an_agent_killed_between_cycles_is_evicted_or_aborts_the_run(
+    tmp_path: Path, agents: Agents, on_agent_lost: str
+) -> None:
+    config, _ = write_config(tmp_path, f"lost-{on_agent_lost}", agents=2)
+    config.write_text(
+        config.read_text().replace("[sync]\n", f'[sync]\non_agent_lost = "{on_agent_lost}"\n', 1)
+    )
+    with vrsync.Host(config) as host:
+        agents.vr_agent(config, 0, policy="idle")
+        doomed = agents.vr_agent(config, 1, policy="idle")
+        host.wait_for_agents(timeout=DEADLINE)
+        for _ in range(2):
+            assert [a.outcome for a in one_cycle(host).agents] == ["stopped", "stopped"]
+        doomed.kill()
+        doomed.wait(timeout=DEADLINE)
+        if on_agent_lost == "abort":
+            with pytest.raises(vrsync.AgentLostError) as e:
+                one_cycle(host)
+            assert isinstance(e.value, ConnectionError) and e.value.agent_id == 1
+            return
+        report = one_cycle(host)  # the loss is noticed in this cycle (or at its publish)
+        lost = report.agent(1)
+        assert lost.evicted or lost.outcome == "not_awaited", lost
+        assert report.agent(0).outcome == "stopped"
+        report = one_cycle(host)
+        assert [a.outcome for a in report.agents] == ["stopped", "not_awaited"]
+        assert host.stats()["evictions"] == 1
