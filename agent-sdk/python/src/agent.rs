@@ -18,7 +18,7 @@ use crate::errors::{error, obj};
 use crate::frame::{Graveyard, PyFrame};
 
 /// The longest the GIL is released in one go while waiting: Ctrl-C is seen within this.
-pub(crate) const WAIT_SLICE: Duration = Duration::from_millis(50);
+const WAIT_SLICE: Duration = Duration::from_millis(50);
 
 /// Moves a value that is not `Send` through [`Python::detach`], which runs its closure on
 /// the *calling* thread: nothing crosses a thread.
