@@ -186,7 +186,8 @@ impl PyHost {
     /// Creates the host of the session in `config` (a vrsync TOML file): the services and
     /// listeners of every transport its agents use. `session` overrides the config's
     /// session name; `agents` resizes the agent list to ids `0..agents` (new agents copy
-    /// the last configured agent's cameras), as `vr-sim run --spawn-agents` does.
+    /// the last configured agent's cameras and channels), as `vr-sim run --spawn-agents`
+    /// does.
     ///
     /// Raises `ConfigError` (bad file or arguments), `TransportError` (a transport cannot
     /// be set up: a TCP address in use, too little shared memory, ...).
