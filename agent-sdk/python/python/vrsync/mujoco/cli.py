@@ -1,0 +1,280 @@
+"""``python -m vrsync.mujoco`` / ``vrsync-mujoco``: run a MuJoCo world, or bench it alone.
+
+``run`` mirrors ``vr-sim run`` (README "Run a world"): the same config file, the same
+``--frames``, ``--session``, ``--spawn-agents`` and ``--summary-json``, the same summary
+keys and exit codes (0 success, 1 runtime failure, 2 bad usage or bad config).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from types import FrameType
+from typing import Any
+
+from ..errors import ConfigError
+from .bench import bench_alone, physics_rate, render_rate
+from .config import MujocoConfigError, load_config
+from .world import MujocoWorld
+
+__all__ = ["main"]
+
+EXIT_OK = 0
+EXIT_FAILURE = 1
+EXIT_USAGE = 2
+
+DEFAULT_AGENT_CMD = (
+    "{python} -m vrsync.mujoco.agent --config {config} --id {id} --session {session}"
+)
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m vrsync.mujoco",
+        description="Serve a MuJoCo scene to vrsync agents in lock-step, or bench it alone. "
+        "The config's [world.mujoco] table binds the scene (config/mujoco-rovers.toml "
+        "documents every key).",
+        epilog="Exit codes: 0 success, 1 runtime failure, 2 bad usage or bad config.",
+    )
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    run = sub.add_parser(
+        "run",
+        help="serve the world to its agents (like `vr-sim run`)",
+        description="Serve the config's MuJoCo scene through a vrsync host. Without "
+        "--spawn-agents it waits for the configured agents and says which. Ctrl-C ends "
+        "the run and still prints the summary.",
+        epilog="Exit codes: 0 success, 1 runtime failure, 2 bad usage or bad config.",
+    )
+    run.add_argument("--config", required=True, type=Path, help="vrsync config file (TOML)")
+    run.add_argument(
+        "--frames", type=_positive, default=None, help="cycles to run (default: until Ctrl-C)"
+    )
+    run.add_argument("--session", default=None, help="session name (default: the config's)")
+    run.add_argument(
+        "--spawn-agents",
+        type=_positive,
+        default=None,
+        metavar="N",
+        help="start N agent processes, ids 0..N, resizing the config's agent list (new "
+        "agents copy the last [[agent]] and [[world.mujoco.agent]])",
+    )
+    run.add_argument(
+        "--agent-cmd",
+        default=DEFAULT_AGENT_CMD,
+        metavar="CMD",
+        help="command line of each spawned agent, split like a shell; {config}, {id}, "
+        "{session}, {agents} and {python} are replaced (default: %(default)r, a "
+        "wandering agent)",
+    )
+    run.add_argument("--summary-json", type=Path, default=None, metavar="FILE",
+                     help="write the run summary as JSON (vr-sim's keys)")
+    run.add_argument("--quiet", action="store_true", help="print only errors")
+
+    bench = sub.add_parser(
+        "bench",
+        help="MuJoCo alone: seconds per cycle, renders/s, physics steps/s",
+        description="The world's cycle with no bridge (renders into numpy arrays): the "
+        "reference the bridge's MuJoCo cycle is compared with.",
+        epilog="Exit codes: 0 success, 1 runtime failure, 2 bad usage or bad config.",
+    )
+    bench.add_argument("--config", required=True, type=Path, help="vrsync config file (TOML)")
+    bench.add_argument("--frames", type=_positive, default=100, help="measured cycles (100)")
+    bench.add_argument("--agents", type=_positive, action="append", default=None,
+                       metavar="N", help="agent count (repeatable; default: the config's)")
+    bench.add_argument("--json", type=Path, default=None, metavar="FILE",
+                       help="write the rows as a JSON array")
+    return p
+
+
+def _positive(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, found {n}")
+    return n
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """The command line; returns the exit code."""
+    args = _parser().parse_args(argv)
+    try:
+        if args.command == "bench":
+            return _bench(args)
+        return _run(args)
+    except (MujocoConfigError, ConfigError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    except Exception as e:  # noqa: BLE001 - the binary's one handler: say it, exit 1
+        print(f"error: {type(e).__name__}: {e}", file=sys.stderr)
+        return EXIT_FAILURE
+
+
+def _bench(args: argparse.Namespace) -> int:
+    counts = args.agents or [None]
+    rows = []
+    for n in counts:
+        per_cycle = bench_alone(args.config, args.frames, agents=n)
+        cfg = load_config(args.config, agents=n)
+        cam = cfg.agents[0].cameras[0] if cfg.agents[0].cameras else None
+        row = {
+            "world": "mujoco-alone",
+            "agents": len(cfg.agents),
+            "frames": args.frames,
+            "width": cam.width if cam else 0,
+            "height": cam.height if cam else 0,
+            "s_per_cycle": per_cycle,
+            "mean_us": per_cycle * 1e6,
+            "frames_per_s": 1.0 / per_cycle,
+            "renders_per_s": render_rate(args.config, agents=n) if cam else 0.0,
+            "physics_steps_per_s": physics_rate(args.config, agents=n),
+        }
+        rows.append(row)
+        print(
+            f"{row['agents']:>3} agents: {per_cycle * 1e3:8.2f} ms per cycle, "
+            f"{row['renders_per_s']:7.1f} renders/s at {row['width']}x{row['height']}, "
+            f"{row['physics_steps_per_s']:8.0f} physics steps/s"
+        )
+    if args.json is not None:
+        args.json.write_text(json.dumps(rows, indent=2) + "\n")
+    return EXIT_OK
+
+
+class _Agents:
+    """Spawned agent processes: started in id order, reaped (killed at the deadline)."""
+
+    def __init__(self) -> None:
+        self.procs: dict[int, subprocess.Popen[bytes]] = {}
+
+    def spawn(self, template: str, ids: Sequence[int], fields: dict[str, Any]) -> None:
+        for i in ids:
+            try:
+                argv = [part.format(id=i, **fields) for part in shlex.split(template)]
+            except (KeyError, IndexError, ValueError) as e:
+                raise MujocoConfigError(f"--agent-cmd {template!r}: {e}") from e
+            self.procs[i] = subprocess.Popen(argv)
+
+    def failed(self) -> dict[int, int]:
+        """Ids of agents that have exited with a non-zero code, and the code."""
+        return {i: p.returncode for i, p in self.procs.items() if p.poll() not in (None, 0)}
+
+    def finish(self, timeout_s: float) -> dict[int, str]:
+        """Waits for every agent up to ``timeout_s`` (kills the rest); what went wrong."""
+        deadline = time.monotonic() + timeout_s
+        problems = {}
+        for i, p in self.procs.items():
+            try:
+                code = p.wait(timeout=max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+                problems[i] = f"still running after {timeout_s:.0f} s: killed"
+                continue
+            if code != 0:
+                problems[i] = f"exit code {code}"
+        return problems
+
+
+def _run(args: argparse.Namespace) -> int:
+    # SIGTERM ends the run like Ctrl-C: the summary is still written, agents reaped.
+    def on_term(_sig: int, _frame: FrameType | None) -> None:
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, on_term)
+    config_path = args.config.resolve()
+    world = MujocoWorld(config_path, agents=args.spawn_agents)
+    import vrsync
+
+    host_cls = getattr(vrsync, "Host", None)
+    if host_cls is None:
+        world.close()
+        print("error: this vrsync build has no vrsync.Host (the Python host API)",
+              file=sys.stderr)
+        return EXIT_FAILURE
+    session = args.session or world.config.session
+    agents = _Agents()
+    summary: dict[str, Any] | None = None
+    try:
+        with host_cls(config_path, session=session, agents=args.spawn_agents) as host:
+            ids = list(host.agent_ids)
+            if args.spawn_agents is not None:
+                agents.spawn(
+                    args.agent_cmd,
+                    ids,
+                    {
+                        "config": str(config_path),
+                        "session": session,
+                        "agents": len(ids),
+                        "python": sys.executable,
+                    },
+                )
+            elif not args.quiet:
+                print(f"waiting for agents {ids} of session {session!r}", file=sys.stderr)
+            try:
+                summary = world.run(host, args.frames, on_cycle=_progress(args))
+            except KeyboardInterrupt:
+                # Ctrl-C while waiting for the agents: no cycle ran.
+                world.interrupted = True
+                summary = world.summary(host)
+    except KeyboardInterrupt:
+        world.interrupted = True
+    finally:
+        world.close()
+        problems = agents.finish(timeout_s=10.0)
+    if summary is None:
+        summary = world.summary()
+    if args.summary_json is not None:
+        args.summary_json.write_text(json.dumps(summary, indent=2) + "\n")
+    if not args.quiet:
+        _print_summary(summary)
+    evicted = set(summary["evicted_agents"])
+    unhandled = {i: why for i, why in problems.items() if i not in evicted}
+    if unhandled and not summary["interrupted"]:
+        print(f"error: spawned agents failed: {unhandled}", file=sys.stderr)
+        return EXIT_FAILURE
+    return EXIT_OK
+
+
+def _progress(args: argparse.Namespace) -> Any:
+    if args.quiet:
+        return None
+    every = 100
+
+    def on_cycle(cycle: int, report: Any) -> None:
+        if cycle % every == every - 1:
+            print(f"cycle {cycle + 1}", file=sys.stderr)
+
+    return on_cycle
+
+
+def _print_summary(s: dict[str, Any]) -> None:
+    rows = [
+        ("mode", s["mode"]),
+        ("transport", s["transport"]),
+        ("agents", s["agents"]),
+        ("cycles", s["frames"]),
+        ("simulated time", f"{s['sim_time_s']:.2f} s"),
+        ("wall time", f"{s['wall_s']:.2f} s"),
+        ("cycles per second", f"{s['frames_per_s']:.1f}"),
+        ("physics per cycle", f"{s['physics_us']:.0f} us ({s['physics_steps']} steps in all)"),
+        ("frames per cycle", f"{s['render_us']:.0f} us (render + vectors + pose + reward)"),
+        ("stop timeouts", s["stop_timeouts"]),
+        ("late stops", s["late_stops"]),
+        ("evicted agents", s["evicted_agents"]),
+        ("actions applied", s["commands_applied"]),
+        ("rejected", s["commands_rejected"]),
+        ("trajectory hash", s["trajectory_hash"][:16]),
+    ]
+    if s["interrupted"]:
+        rows.append(("interrupted", "yes"))
+    for k, v in rows:
+        print(f"{k:>18}: {v}")
