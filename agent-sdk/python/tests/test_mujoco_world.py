@@ -73,6 +73,7 @@ class FakeAgentReport:
     outcome: str = "stopped"
     evicted: bool = False
     actions_rejected: int = 0
+    invalid_commands: int = 0
     commands: list[Any] = field(default_factory=list)
 
 
@@ -118,6 +119,7 @@ class FakeHost:
         self.history: list[dict[int, dict[str, Any]]] = []
         self.started = False
         self.calls: list[str] = []
+        self.rejected: dict[int, int] = {}
 
     def wait_for_agents(self, timeout: float | None = None) -> None:
         self.calls.append("wait_for_agents")
@@ -155,6 +157,9 @@ class FakeHost:
         self.published, self.loaned, self.started = {}, set(), False
         self.cycle += 1
         return report
+
+    def set_rejected(self, agent_id: int, rejected: int) -> None:
+        self.rejected[agent_id] = rejected
 
     def stats(self) -> dict[str, int]:
         return {}
@@ -254,28 +259,44 @@ def test_the_test_config_binds(tmp_path: Path) -> None:
     ("changes", "needles"),
     [
         ({"vlen": "5"}, ["agent 0", "vector 'wheels'", "len = 5", "give 3"]),
-        ({"alen": "3", "actuators": '["rover0_left", "rover0_right"]'},
-         ["agent 0", "action 'wheels'", "len = 3", "2 actuators"]),
+        (
+            {"alen": "3", "actuators": '["rover0_left", "rover0_right"]'},
+            ["agent 0", "action 'wheels'", "len = 3", "2 actuators"],
+        ),
         ({"n": "3"}, ["agent 0", "action 'drive'", "n = 3", "2 choices"]),
         ({"body": "nobody"}, ["agent 0", "`body`", "no body named 'nobody'", "'rover0'"]),
         ({"camera": "rover0_nose"}, ["agent 0", "`cameras.eye`", "no camera named 'rover0_nose'"]),
-        ({"actuators": '["rover0_left", "rover0_wing"]'},
-         ["agent 0", "`actions.wheels`", "no actuator named 'rover0_wing'"]),
-        ({"sources": '["sensor:rover0_left_pos", "sensor:sonar", "qvel:rover0_left"]'},
-         ["`vectors.wheels`", "no sensor named 'sonar'"]),
-        ({"sources": '["qpos:axle", "qvel:rover0_left", "qvel:rover0_right"]'},
-         ["`vectors.wheels`", "no joint named 'axle'"]),
+        (
+            {"actuators": '["rover0_left", "rover0_wing"]'},
+            ["agent 0", "`actions.wheels`", "no actuator named 'rover0_wing'"],
+        ),
+        (
+            {"sources": '["sensor:rover0_left_pos", "sensor:sonar", "qvel:rover0_left"]'},
+            ["`vectors.wheels`", "no sensor named 'sonar'"],
+        ),
+        (
+            {"sources": '["qpos:axle", "qvel:rover0_left", "qvel:rover0_right"]'},
+            ["`vectors.wheels`", "no joint named 'axle'"],
+        ),
         ({"sources": '["joint:rover0_left"]'}, ["vectors.wheels", "source 'joint:rover0_left'"]),
-        ({"choices": "[[0.0, 0.0], [5.0]]"}, ["actions.drive.choices", "choice 1", "2 ctrl values"]),
+        (
+            {"choices": "[[0.0, 0.0], [5.0]]"},
+            ["actions.drive.choices", "choice 1", "2 ctrl values"],
+        ),
         ({"dt": "0.0512"}, ["simulation_time_per_frame = 0.0512", "whole number", "0.005"]),
         ({"fmt": "rgba8"}, ["agent 0", "'eye'", "'rgba8'", "rgb8 only"]),
         ({"world_extra": "shadow = true"}, ["world.mujoco.shadow", "unknown key"]),
         ({"agent_extra": "pose_body = 'x'"}, ["pose_body", "unknown key"]),
         ({"world_extra": 'generator = "vrsync.mujoco.scenes:rovers"'}, ["exactly one of"]),
         ({"scene": "missing.xml"}, ["world.mujoco.scene", "no such file", "missing.xml"]),
-        ({"agent_extra": 'reward = "vrsync.mujoco.rewards:nothing"'},
-         ["vrsync.mujoco.rewards:nothing", "no function 'nothing'"]),
-        ({"agent_extra": 'reward = "no_such_module_xyz:f"'}, ["cannot import 'no_such_module_xyz'"]),
+        (
+            {"agent_extra": 'reward = "vrsync.mujoco.rewards:nothing"'},
+            ["vrsync.mujoco.rewards:nothing", "no function 'nothing'"],
+        ),
+        (
+            {"agent_extra": 'reward = "no_such_module_xyz:f"'},
+            ["cannot import 'no_such_module_xyz'"],
+        ),
         ({"agent_extra": 'reward = "just_a_name"'}, ["reward", '"module:function"']),
     ],
 )
@@ -302,14 +323,19 @@ def test_a_config_error_is_a_value_error_and_a_vrsync_config_error(tmp_path: Pat
 
 def test_unbound_and_undeclared_channels_are_named(tmp_path: Path) -> None:
     text = write(tmp_path).read_text()
-    (tmp_path / "a.toml").write_text(text.replace('[world.mujoco.agent.cameras]\neye = "rover{id}_eye"\n', ""))
+    (tmp_path / "a.toml").write_text(
+        text.replace('[world.mujoco.agent.cameras]\neye = "rover{id}_eye"\n', "")
+    )
     with pytest.raises(MujocoConfigError, match="camera 'eye' has no MJCF camera bound"):
         load_config(tmp_path / "a.toml")
-    (tmp_path / "b.toml").write_text(text + '[world.mujoco.agent.cameras.extra]\n')
+    (tmp_path / "b.toml").write_text(text + "[world.mujoco.agent.cameras.extra]\n")
     with pytest.raises(MujocoConfigError, match="cameras"):
         load_config(tmp_path / "b.toml")
     (tmp_path / "c.toml").write_text(
-        text.replace("[world.mujoco.agent.actions]\n", '[world.mujoco.agent.actions]\ngear = ["rover0_left"]\n')
+        text.replace(
+            "[world.mujoco.agent.actions]\n",
+            '[world.mujoco.agent.actions]\ngear = ["rover0_left"]\n',
+        )
     )
     with pytest.raises(MujocoConfigError, match="agent 0 declares no action 'gear'"):
         load_config(tmp_path / "c.toml")
@@ -546,7 +572,9 @@ def test_summary_has_vr_sims_keys_and_counts_reports() -> None:
                 report.late_batches = 2
                 report.agents[2].evicted = True
                 report.agents[1].actions_rejected = 1
+                report.agents[1].invalid_commands = 1
                 report.agents[1].commands = ["Move"]
+                report.agents[0].actions = {"wheels": None, "gear": 2}
             return report
 
         host.collect = collect  # type: ignore[method-assign]
@@ -556,9 +584,14 @@ def test_summary_has_vr_sims_keys_and_counts_reports() -> None:
     assert summary["agents"] == 4 and summary["frames"] == 4
     assert summary["stop_timeouts"] == 1 and summary["late_stops"] == 2
     assert summary["evicted_agents"] == [2]
-    assert summary["commands_rejected"] == 2
-    # wander: 4 agents act in cycles 0, 1, 2 and none in cycle 3.
-    assert summary["commands_applied"] == 12
+    # A refused action, an undecodable command, a catalogue command (Move means nothing
+    # here) and an action the world does not bind (gear).
+    assert summary["commands_rejected"] == 4
+    # The agents whose own commands the world rejected are told (the bridge's counts
+    # reach them from the bridge).
+    assert host.rejected == {0: 1, 1: 1}
+    # wander: 4 agents act in cycles 0, 1, 2 and none in cycle 3; agent 0 not in cycle 1.
+    assert summary["commands_applied"] == 11
     assert len(summary["trajectory_hash"]) == 64
     json.dumps(summary)
 
@@ -632,3 +665,75 @@ def test_cli_bench_writes_rows(tmp_path: Path) -> None:
     (row,) = json.loads(out.read_text())
     assert row["agents"] == 4 and row["width"] == 84 and row["s_per_cycle"] > 0
     assert row["renders_per_s"] > 0 and row["physics_steps_per_s"] > 0
+
+
+# ---- against the real host (vrsync.Host) ----------------------------------------------
+
+EXAMPLES = ROOT / "agent-sdk" / "python" / "examples"
+
+
+def _needs_host() -> None:
+    import vrsync
+
+    if not hasattr(vrsync, "Host"):
+        pytest.skip("this vrsync build has no vrsync.Host (the Python host API)")
+
+
+def test_cli_run_serves_spawned_agents_with_the_same_hash_twice(tmp_path: Path) -> None:
+    _needs_host()
+    from conftest import session
+
+    hashes = []
+    for k in range(2):
+        out = tmp_path / f"summary{k}.json"
+        r = _cli(
+            "run", "--config", str(ROVERS_TOML), "--frames", "30", "--spawn-agents", "4",
+            "--session", session(f"mjrun{k}"), "--summary-json", str(out), "--quiet",
+        )  # fmt: skip
+        assert r.returncode == 0, r.stdout + r.stderr
+        s = json.loads(out.read_text())
+        assert (s["frames"], s["agents"], s["stop_timeouts"], s["evicted_agents"]) == (30, 4, 0, [])
+        # The wandering agents act every cycle.
+        assert s["commands_applied"] == 30 * 4
+        hashes.append(s["trajectory_hash"])
+    assert hashes[0] == hashes[1]
+
+
+def test_example_mujoco_host(tmp_path: Path) -> None:
+    _needs_host()
+    from conftest import session
+
+    name = session("mjex")
+    host = subprocess.Popen(
+        [sys.executable, str(EXAMPLES / "mujoco_host.py"), "--config", str(ROVERS_TOML),
+         "--frames", "20", "--session", name],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    agents = [
+        subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "vrsync.mujoco.agent",
+                "--config",
+                str(ROVERS_TOML),
+                "--id",
+                str(i),
+                "--session",
+                name,
+            ],
+        )  # fmt: skip
+        for i in range(4)
+    ]
+    try:
+        out, err = host.communicate(timeout=120)
+        assert host.returncode == 0, out + err
+        words = out.split()
+        assert words[:4] == ["frames", "20", "stop-timeouts", "0"], out
+        for a in agents:
+            assert a.wait(timeout=30) == 0
+    finally:
+        for p in [host, *agents]:
+            if p.poll() is None:
+                p.kill()
+                p.wait()

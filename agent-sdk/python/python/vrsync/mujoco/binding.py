@@ -14,6 +14,7 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, cast
 
 import mujoco
 import numpy as np
@@ -79,11 +80,11 @@ class ActionBinding:
     ctrl_index: npt.NDArray[np.intp]
     choices: npt.NDArray[np.float64] | None
 
-    def apply(self, ctrl: npt.NDArray[np.float64], value: object) -> None:
+    def apply(self, ctrl: npt.NDArray[np.float64], value: Any) -> None:
         """Writes ``value`` (floats for a continuous action, an int for a discrete one)
         into ``ctrl``. The bridge has checked lengths and bounds already."""
         if self.choices is not None:
-            ctrl[self.ctrl_index] = self.choices[int(value)]  # type: ignore[call-overload]
+            ctrl[self.ctrl_index] = self.choices[int(value)]
         else:
             ctrl[self.ctrl_index] = value
 
@@ -161,7 +162,7 @@ def bind_agent(
     for act in agent.actions:
         actions[act.name] = _action(model, act, b.actions[act.name], lookup, where)
 
-    reward = load_hook(b.reward, config.path) if b.reward else None
+    reward = cast(RewardFn, load_hook(b.reward, config.path)) if b.reward else None
     return AgentBinding(agent.id, body_id, tuple(cameras), tuple(vectors), actions, reward)
 
 
@@ -200,7 +201,9 @@ def _action(
         [lookup(mujoco.mjtObj.mjOBJ_ACTUATOR, a, "actuator", key) for a in names], dtype=np.intp
     )
     if len(set(index.tolist())) != len(index):
-        raise MujocoConfigError(f"{where}: action {spec.name!r} names an actuator twice: {list(names)}")
+        raise MujocoConfigError(
+            f"{where}: action {spec.name!r} names an actuator twice: {list(names)}"
+        )
     if isinstance(bound, DiscreteBinding):
         if len(bound.choices) != spec.n:
             raise MujocoConfigError(
@@ -234,7 +237,7 @@ def _known(model: mujoco.MjModel, kind: mujoco.mjtObj, what: str) -> str:
     return f"{what}s: {shown}{more}"
 
 
-def load_hook(spec: str, config_path: Path) -> Callable[..., object]:
+def load_hook(spec: str, config_path: Path) -> Callable[..., Any]:
     """Imports ``"module:function"``. A module that cannot be imported is looked for as
     a file beside the config (``module`` → ``<config dir>/module.py``).
 
@@ -262,5 +265,4 @@ def load_hook(spec: str, config_path: Path) -> Callable[..., object]:
         raise MujocoConfigError(
             f"{config_path}: hook {spec!r}: module {module_name!r} has no function {func_name!r}"
         )
-    return func
-
+    return cast(Callable[..., Any], func)

@@ -74,8 +74,13 @@ def _parser() -> argparse.ArgumentParser:
         "{session}, {agents} and {python} are replaced (default: %(default)r, a "
         "wandering agent)",
     )
-    run.add_argument("--summary-json", type=Path, default=None, metavar="FILE",
-                     help="write the run summary as JSON (vr-sim's keys)")
+    run.add_argument(
+        "--summary-json",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="write the run summary as JSON (vr-sim's keys)",
+    )
     run.add_argument("--quiet", action="store_true", help="print only errors")
 
     bench = sub.add_parser(
@@ -87,10 +92,17 @@ def _parser() -> argparse.ArgumentParser:
     )
     bench.add_argument("--config", required=True, type=Path, help="vrsync config file (TOML)")
     bench.add_argument("--frames", type=_positive, default=100, help="measured cycles (100)")
-    bench.add_argument("--agents", type=_positive, action="append", default=None,
-                       metavar="N", help="agent count (repeatable; default: the config's)")
-    bench.add_argument("--json", type=Path, default=None, metavar="FILE",
-                       help="write the rows as a JSON array")
+    bench.add_argument(
+        "--agents",
+        type=_positive,
+        action="append",
+        default=None,
+        metavar="N",
+        help="agent count (repeatable; default: the config's)",
+    )
+    bench.add_argument(
+        "--json", type=Path, default=None, metavar="FILE", help="write the rows as a JSON array"
+    )
     return p
 
 
@@ -197,8 +209,7 @@ def _run(args: argparse.Namespace) -> int:
     host_cls = getattr(vrsync, "Host", None)
     if host_cls is None:
         world.close()
-        print("error: this vrsync build has no vrsync.Host (the Python host API)",
-              file=sys.stderr)
+        print("error: this vrsync build has no vrsync.Host (the Python host API)", file=sys.stderr)
         return EXIT_FAILURE
     session = args.session or world.config.session
     agents = _Agents()

@@ -187,7 +187,7 @@ class _Reader:
             raise self.fail(
                 "world.mujoco",
                 "needs exactly one of `scene` (an MJCF file) and `generator` "
-                "(\"module:function\" returning MJCF text)",
+                '("module:function" returning MJCF text)',
             )
         scene = None
         if scene_text is not None:
@@ -206,7 +206,9 @@ class _Reader:
             or not math.isfinite(frame_s)
             or frame_s <= 0
         ):
-            raise self.fail("sync.simulation_time_per_frame", "must be a positive number of seconds")
+            raise self.fail(
+                "sync.simulation_time_per_frame", "must be a positive number of seconds"
+            )
         sync_mode = sync.get("sync_mode", sync.get("SyncMode", True))
 
         agents = self.agents(doc.get("agent", []))
@@ -290,7 +292,9 @@ class _Reader:
             for x in a.get("action", []):
                 name = self.string(x.get("name"), f"agent {aid} action.name")
                 if "n" in x:
-                    acts.append(ActionSpec(name, None, self.int_(x["n"], f"agent {aid} action {name}.n", 1)))
+                    acts.append(
+                        ActionSpec(name, None, self.int_(x["n"], f"agent {aid} action {name}.n", 1))
+                    )
                 else:
                     acts.append(ActionSpec(name, _box_len(self, x, aid, name), None))
             out.append(AgentSpec(aid, tuple(cams), vecs, tuple(acts)))
@@ -299,13 +303,9 @@ class _Reader:
             raise self.fail("agent.id", f"ids must be unique, found {ids}")
         return tuple(sorted(out, key=lambda a: a.id))
 
-    def bindings(
-        self, raw: object, agents: Sequence[AgentSpec]
-    ) -> dict[int, AgentBindingConfig]:
+    def bindings(self, raw: object, agents: Sequence[AgentSpec]) -> dict[int, AgentBindingConfig]:
         if not isinstance(raw, list) or not raw:
-            raise self.fail(
-                "world.mujoco.agent", "needs at least one [[world.mujoco.agent]] entry"
-            )
+            raise self.fail("world.mujoco.agent", "needs at least one [[world.mujoco.agent]] entry")
         entries: dict[int, Mapping[str, Any]] = {}
         for e in raw:
             if not isinstance(e, dict):

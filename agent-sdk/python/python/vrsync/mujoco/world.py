@@ -15,10 +15,14 @@ So cycle 0 shows the agents the scene's initial state, and the actions answering
 ``f``'s frames act during the step from ``f`` to ``f + 1``, as in vr-sim.
 
 The host is anything with the interface of ``vrsync.Host`` (agent-sdk/python,
-``loan``/``publish``/``start``/``collect``, see notes/channels-spec.md); the world only
-calls those methods and reads ``agent_ids``, ``report.agents`` and per agent
-``agent_id``, ``actions``, ``actions_rejected``, ``commands``, ``evicted``, and
-``report.timed_out`` / ``report.late_batches``.
+``loan``/``publish``/``start``/``collect``); the world only calls those methods (and
+``wait_for_agents``, ``stats`` and, when present, ``set_rejected``), reads
+``agent_ids`` and ``simulation_time_per_frame``, ``report.timed_out``,
+``report.late_batches``, ``report.agents`` and per agent ``agent_id``, ``actions``
+(name -> floats, int or ``None``), ``actions_rejected``, ``commands``,
+``invalid_commands`` and ``evicted``. Every view of a frame (``frame.image``,
+``frame.vector``) is dropped before the frame is published: the host refuses to publish
+a frame whose memory is still viewed.
 """
 
 from __future__ import annotations
@@ -148,7 +152,7 @@ class MujocoWorld:
         self.render_s += time.perf_counter() - t0
         host.start()
         report = host.collect()
-        self.apply_report(report)
+        self.apply_report(report, host)
         self.advance()
         return report
 
@@ -176,30 +180,41 @@ class MujocoWorld:
         if agent.reward is not None:
             frame.reward = float(agent.reward(self.model, data, agent.id))
 
-    def apply_report(self, report: Any) -> None:
-        """Counts what ``report`` says and applies every agent's actions to ``ctrl``."""
+    def apply_report(self, report: Any, host: Any | None = None) -> None:
+        """Counts what ``report`` says and applies every agent's actions to ``ctrl``.
+
+        The command catalogue (``Move``, ``Turn``, ...) means nothing to a MuJoCo scene:
+        an agent's commands are rejected, counted, and reported back to it through
+        ``host.set_rejected`` (when the host has it), as are actions the world does not
+        bind. Actions the bridge refused (``actions_rejected``) and undecodable commands
+        (``invalid_commands``) are counted too."""
         if report.timed_out:
             self.stop_timeouts += 1
         self.late_stops += int(getattr(report, "late_batches", 0))
+        set_rejected = getattr(host, "set_rejected", None)
         ctrl = self._ctrl
         for ar in report.agents:
+            aid = int(ar.agent_id)
             if getattr(ar, "evicted", False):
-                self.evicted_agents.add(int(ar.agent_id))
+                self.evicted_agents.add(aid)
             self.commands_rejected += int(getattr(ar, "actions_rejected", 0))
-            # The command catalogue (Move, Turn, ...) means nothing to a MuJoCo scene.
-            self.commands_rejected += len(getattr(ar, "commands", ()))
-            binding = self._by_id.get(ar.agent_id)
-            if binding is None:
-                continue
-            for name, value in ar.actions.items():
-                if value is None:
-                    continue
-                action = binding.actions.get(name)
-                if action is None:
-                    self.commands_rejected += 1
-                    continue
-                action.apply(ctrl, value)
-                self.commands_applied += 1
+            self.commands_rejected += int(getattr(ar, "invalid_commands", 0))
+            rejected = len(getattr(ar, "commands", ()))
+            binding = self._by_id.get(aid)
+            if binding is not None:
+                for name, value in getattr(ar, "actions", {}).items():
+                    if value is None:
+                        continue
+                    action = binding.actions.get(name)
+                    if action is None:
+                        rejected += 1
+                        continue
+                    action.apply(ctrl, value)
+                    self.commands_applied += 1
+            if rejected:
+                self.commands_rejected += rejected
+                if set_rejected is not None:
+                    set_rejected(aid, rejected)
 
     def advance(self) -> None:
         """Steps the physics by one cycle and folds the new state into the hash."""
@@ -396,7 +411,6 @@ def _steps_per_cycle(config: WorldConfig, model: mujoco.MjModel) -> int:
     if n < 1 or abs(n * ts - dt) > _STEP_TOLERANCE:
         raise MujocoConfigError(
             f"{config.path}: sync.simulation_time_per_frame = {dt} s is not a whole number of "
-            f"the scene's physics steps (<option timestep=\"{ts}\"/>: {dt / ts:.6f} steps)"
+            f'the scene\'s physics steps (<option timestep="{ts}"/>: {dt / ts:.6f} steps)'
         )
     return n
-

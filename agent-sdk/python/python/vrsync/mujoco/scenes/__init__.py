@@ -73,7 +73,8 @@ _HEAD = """\
 _ROVER = """\
     <body name="rover{i}" pos="{x:.4f} {y:.4f} 0.05" quat="{qw:.6f} 0 0 {qz:.6f}">
       <freejoint name="rover{i}_root"/>
-      <geom name="rover{i}_chassis" type="box" size="0.15 0.09 0.035" mass="1.5" material="chassis"/>
+      <geom name="rover{i}_chassis" type="box" size="0.15 0.09 0.035" mass="1.5"
+            material="chassis"/>
       <geom name="rover{i}_mark" type="box" pos="0.1 0 0.04" size="0.03 0.06 0.008"
             rgba="{r:.2f} {g:.2f} {b:.2f} 1" contype="0" conaffinity="0" mass="0"/>
       <geom name="rover{i}_caster" type="sphere" pos="-0.12 0 -0.02" size="0.03" mass="0.05"
