@@ -10,7 +10,7 @@ Each rover ``rover{i}`` (a free body: its pose is the agent's pose) has
 - two hinge wheels ``rover{i}_left`` / ``rover{i}_right`` (radius 5 cm, 24 cm apart),
   driven by velocity actuators of the same names (``ctrl`` = wheel speed in rad/s,
   ``ctrlrange`` -20..20: 1 m/s at full speed), and a frictionless caster ball at the back;
-- a forward-looking camera ``rover{i}_eye`` (``fovy`` 60°) on its front;
+- a forward-looking camera ``rover{i}_eye`` (``fovy`` 60°, 10° down) on its front;
 - sensors ``rover{i}_left_pos``, ``rover{i}_right_pos`` (wheel angles, rad),
   ``rover{i}_left_vel``, ``rover{i}_right_vel`` (rad/s) and ``rover{i}_gyro``
   (3 values, rad/s, body frame).
@@ -31,6 +31,10 @@ __all__ = ["ROVERS_XML", "rovers", "scene_path"]
 #: The file name of the shipped four-rover scene (``rovers(4)``), in this package.
 ROVERS_XML = "rovers.xml"
 
+# Where target i is from rover i: ahead and to the left (15 degrees: in its camera's view).
+_TARGET_AHEAD_M = 1.5
+_TARGET_LEFT_M = 0.4
+
 # Distinct, saturated target colours (cycled beyond eight rovers).
 _PALETTE = (
     (0.90, 0.15, 0.15),
@@ -49,7 +53,10 @@ _HEAD = """\
   <compiler angle="radian"/>
   <option timestep="0.005" integrator="implicitfast"/>
   <visual>
-    <quality shadowsize="0"/>
+    <!-- Cheap on a CPU renderer (llvmpipe), measured at 84x84 with 16 rovers: no shadow
+         map, no multisampling (offsamples 4 -> 0: 2.9x faster), coarser spheres and
+         cylinders (28x16 -> 12x8 facets: 2.3x faster). -->
+    <quality shadowsize="0" offsamples="0" numslices="12" numstacks="8"/>
     <map znear="0.01"/>
   </visual>
   <asset>
@@ -79,7 +86,7 @@ _ROVER = """\
             rgba="{r:.2f} {g:.2f} {b:.2f} 1" contype="0" conaffinity="0" mass="0"/>
       <geom name="rover{i}_caster" type="sphere" pos="-0.12 0 -0.02" size="0.03" mass="0.05"
             condim="1"/>
-      <camera name="rover{i}_eye" pos="0.16 0 0.04" xyaxes="0 -1 0 0 0 1" fovy="60"/>
+      <camera name="rover{i}_eye" pos="0.16 0 0.04" xyaxes="0 -1 0 0.17 0 0.985" fovy="60"/>
       <site name="rover{i}_imu" pos="0 0 0"/>
       <body name="rover{i}_lwheel" pos="0 0.12 0">
         <joint name="rover{i}_left" type="hinge" axis="0 1 0"/>
@@ -111,9 +118,9 @@ _SENSORS = """\
 
 
 def rovers(n: int) -> str:
-    """MJCF text of ``n`` rovers on a ring around the origin, each facing the centre,
-    and their targets on a ring 1.5 m further out, ``target{i}`` between rover ``i`` and
-    rover ``i + 1`` (see the module doc for names and units).
+    """MJCF text of ``n`` rovers on a ring around the origin, each facing outwards, with
+    ``target{i}`` 1.5 m ahead of rover ``i`` and 0.4 m to its left, in its camera's view
+    (see the module doc for names and units).
 
     Raises:
         ValueError: ``n`` < 1.
@@ -121,12 +128,14 @@ def rovers(n: int) -> str:
     if n < 1:
         raise ValueError(f"a rover scene needs at least one rover, asked for {n}")
     ring = max(1.0, 0.25 * n)
-    floor = ring + 3.0
+    floor = ring + 8.0
     parts = [_HEAD.format(n=n, floor=floor)]
     for i in range(n):
         angle = 2 * math.pi * i / n
-        heading = angle + math.pi  # facing the centre
-        target_angle = angle + math.pi / max(n, 2)
+        heading = angle  # facing outwards
+        ahead = (math.cos(angle), math.sin(angle))
+        left = (-ahead[1], ahead[0])
+        target = [(ring + _TARGET_AHEAD_M) * ahead[k] + _TARGET_LEFT_M * left[k] for k in (0, 1)]
         r, g, b = _PALETTE[i % len(_PALETTE)]
         parts.append(
             _ROVER.format(
@@ -135,8 +144,8 @@ def rovers(n: int) -> str:
                 y=ring * math.sin(angle),
                 qw=math.cos(heading / 2),
                 qz=math.sin(heading / 2),
-                tx=(ring + 1.5) * math.cos(target_angle),
-                ty=(ring + 1.5) * math.sin(target_angle),
+                tx=target[0],
+                ty=target[1],
                 r=r,
                 g=g,
                 b=b,
