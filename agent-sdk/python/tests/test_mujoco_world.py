@@ -407,8 +407,7 @@ def test_one_renderer_per_size_and_shadows_off(world: MujocoWorld) -> None:
 
 
 _GL_PROBE = """
-import os, sys
-os.environ["MUJOCO_GL"] = sys.argv[1]
+import sys
 import mujoco, numpy as np
 m = mujoco.MjModel.from_xml_string(
     '<mujoco><worldbody><light pos="0 0 2"/><geom type="box" size=".1 .1 .1" rgba="1 0 0 1"/>'
@@ -421,11 +420,16 @@ sys.exit(0 if img[8, 8, 0] > 100 else 3)
 
 
 def _gl_backend_renders(backend: str) -> subprocess.CompletedProcess[str]:
+    # A fresh process: the platform is fixed at import, and mujoco's import of EGL set
+    # PYOPENGL_PLATFORM in this one.
+    env = {k: v for k, v in os.environ.items() if k != "PYOPENGL_PLATFORM"}
+    env["MUJOCO_GL"] = backend
     return subprocess.run(
-        [sys.executable, "-c", _GL_PROBE, backend],
+        [sys.executable, "-c", _GL_PROBE],
         capture_output=True,
         text=True,
         timeout=120,
+        env=env,
     )
 
 
