@@ -75,6 +75,13 @@ def _parser() -> argparse.ArgumentParser:
         "wandering agent)",
     )
     run.add_argument(
+        "--agent-arg",
+        action="append",
+        default=[],
+        metavar="ARG",
+        help="an argument appended to every spawned agent's command line (repeatable)",
+    )
+    run.add_argument(
         "--summary-json",
         type=Path,
         default=None,
@@ -167,17 +174,15 @@ class _Agents:
     def __init__(self) -> None:
         self.procs: dict[int, subprocess.Popen[bytes]] = {}
 
-    def spawn(self, template: str, ids: Sequence[int], fields: dict[str, Any]) -> None:
+    def spawn(
+        self, template: str, extra: Sequence[str], ids: Sequence[int], fields: dict[str, Any]
+    ) -> None:
         for i in ids:
             try:
                 argv = [part.format(id=i, **fields) for part in shlex.split(template)]
             except (KeyError, IndexError, ValueError) as e:
                 raise MujocoConfigError(f"--agent-cmd {template!r}: {e}") from e
-            self.procs[i] = subprocess.Popen(argv)
-
-    def failed(self) -> dict[int, int]:
-        """Ids of agents that have exited with a non-zero code, and the code."""
-        return {i: p.returncode for i, p in self.procs.items() if p.poll() not in (None, 0)}
+            self.procs[i] = subprocess.Popen([*argv, *extra])
 
     def finish(self, timeout_s: float) -> dict[int, str]:
         """Waits for every agent up to ``timeout_s`` (kills the rest); what went wrong."""
@@ -220,6 +225,7 @@ def _run(args: argparse.Namespace) -> int:
             if args.spawn_agents is not None:
                 agents.spawn(
                     args.agent_cmd,
+                    args.agent_arg,
                     ids,
                     {
                         "config": str(config_path),
