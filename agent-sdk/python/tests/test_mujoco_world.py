@@ -368,6 +368,17 @@ def test_added_agents_copy_the_last_entry_and_the_scene_grows_with_them() -> Non
     assert more.bindings[5].body == "rover5" and "drive" in more.bindings[5].actions
 
 
+def test_the_example_config_documents_every_key() -> None:
+    from vrsync.mujoco import config as cfg
+
+    text = ROVERS_TOML.read_text()
+    keys = cfg._WORLD_KEYS | cfg._AGENT_KEYS | {"actuators", "choices"}  # noqa: SLF001
+    for key in sorted(keys):
+        assert f"{key} =" in text or f"{key}]" in text or f"`{key}`" in text, key
+    for kind in cfg._SOURCE_KINDS:  # noqa: SLF001
+        assert f'"{kind}:' in text, kind
+
+
 def test_the_shipped_scene_is_the_generators_output() -> None:
     assert scene_path().read_text() == rovers(4), (
         "rovers.xml is out of date: write vrsync.mujoco.scenes.rovers(4) into it"
