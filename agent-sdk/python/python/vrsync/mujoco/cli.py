@@ -36,8 +36,9 @@ DEFAULT_AGENT_CMD = (
 
 
 def _parser() -> argparse.ArgumentParser:
+    script = Path(sys.argv[0]).name == "vrsync-mujoco"
     p = argparse.ArgumentParser(
-        prog="python -m vrsync.mujoco",
+        prog="vrsync-mujoco" if script else "python -m vrsync.mujoco",
         description="Serve a MuJoCo scene to vrsync agents in lock-step, or bench it alone. "
         "The config's [world.mujoco] table binds the scene (config/mujoco-rovers.toml "
         "documents every key).",

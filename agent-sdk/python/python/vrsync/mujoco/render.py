@@ -24,6 +24,9 @@ import numpy.typing as npt
 
 __all__ = ["Renderers"]
 
+# MuJoCo's default <visual><quality shadowsize>.
+_DEFAULT_SHADOW_MAP_PX = 4096
+
 
 class Renderers:
     """The renderers of one model: one per ``(height, width)``."""
@@ -31,9 +34,12 @@ class Renderers:
     def __init__(self, model: mujoco.MjModel, *, shadows: bool = False) -> None:
         self._model = model
         self._shadows = shadows
+        # Read when a renderer's context is made: with 0 no shadow map is allocated.
         if not shadows:
-            # Read when a renderer's context is made: no shadow map is allocated at all.
             model.vis.quality.shadowsize = 0
+        elif model.vis.quality.shadowsize == 0:
+            # Asked for, but the scene has no map (rovers.xml): MuJoCo's default size.
+            model.vis.quality.shadowsize = _DEFAULT_SHADOW_MAP_PX
         self._by_size: dict[tuple[int, int], mujoco.Renderer] = {}
         self._cameras: dict[int, mujoco.MjvCamera] = {}
         self._option = mujoco.MjvOption()

@@ -73,7 +73,7 @@ _HEAD = """\
     <geom friction="1 0.005 0.0001"/>
   </default>
   <worldbody>
-    <light name="sun" directional="true" castshadow="false" pos="0 0 6" dir="0.2 0.3 -1"/>
+    <light name="sun" directional="true" pos="0 0 6" dir="0.2 0.3 -1"/>
     <geom name="floor" type="plane" size="{floor:.3f} {floor:.3f} 0.1" material="floor"/>
 """
 
