@@ -339,6 +339,9 @@ def test_unbound_and_undeclared_channels_are_named(tmp_path: Path) -> None:
     )
     with pytest.raises(MujocoConfigError, match="agent 0 declares no action 'gear'"):
         load_config(tmp_path / "c.toml")
+    (tmp_path / "d.toml").write_text(text + '[[world.mujoco.agent]]\nid = 5\nbody = "rover1"\n')
+    with pytest.raises(MujocoConfigError, match=r"id 5 has no \[\[agent\]\] \(agents: \[0\]\)"):
+        load_config(tmp_path / "d.toml")
 
 
 def test_the_shipped_config_binds_four_rovers(world: MujocoWorld) -> None:
@@ -671,6 +674,52 @@ def test_cli_bad_config_exits_2_with_the_reason(tmp_path: Path) -> None:
     assert "vector 'wheels'" in r.stderr and "len = 9" in r.stderr
     r = _cli("run", "--config", str(tmp_path / "none.toml"))
     assert r.returncode == 2 and "cannot read config file" in r.stderr
+
+
+def test_cli_run_against_a_stand_in_host(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The run command's own work (resize, spawn and reap agents, summary, exit code)
+    with the fake host standing in for vrsync.Host."""
+    import vrsync
+    from vrsync.mujoco import cli
+
+    made: list[dict[str, Any]] = []
+
+    class StandIn(FakeHost):
+        def __init__(self, config: Any, *, session: str | None = None, agents: int | None = None):
+            made.append({"config": config, "session": session, "agents": agents})
+            with MujocoWorld(config, agents=agents) as shapes:
+                super().__init__(shapes, wander)
+
+        def __enter__(self) -> StandIn:
+            return self
+
+        def __exit__(self, *exc: object) -> bool:
+            return False
+
+    monkeypatch.setattr(vrsync, "Host", StandIn, raising=False)
+    summary = tmp_path / "summary.json"
+    agent = f"{sys.executable} -c \"import sys; open(sys.argv[1], 'w').write(sys.argv[2])\""
+    code = cli.main(
+        [
+            "run", "--config", str(ROVERS_TOML), "--frames", "5", "--spawn-agents", "2",
+            "--session", "s1", "--summary-json", str(summary), "--quiet",
+            "--agent-cmd", f"{agent} {tmp_path}/agent{{id}} {{session}}:{{agents}}",
+        ]
+    )  # fmt: skip
+    assert code == 0
+    assert made == [{"config": ROVERS_TOML.resolve(), "session": "s1", "agents": 2}]
+    s = json.loads(summary.read_text())
+    assert (s["frames"], s["agents"], s["commands_applied"]) == (5, 2, 8)
+    assert (tmp_path / "agent0").read_text() == "s1:2"
+    assert (tmp_path / "agent1").read_text() == "s1:2"
+    # A spawned agent that fails fails the run.
+    code = cli.main(
+        [
+            "run", "--config", str(ROVERS_TOML), "--frames", "2", "--spawn-agents", "1",
+            "--quiet", "--agent-cmd", f"{sys.executable} -c \"raise SystemExit(3)\"",
+        ]
+    )  # fmt: skip
+    assert code == 1
 
 
 def test_cli_bench_writes_rows(tmp_path: Path) -> None:

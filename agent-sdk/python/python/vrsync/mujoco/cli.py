@@ -207,7 +207,14 @@ def _run(args: argparse.Namespace) -> int:
     def on_term(_sig: int, _frame: FrameType | None) -> None:
         raise KeyboardInterrupt
 
-    signal.signal(signal.SIGTERM, on_term)
+    previous = signal.signal(signal.SIGTERM, on_term)
+    try:
+        return _run_world(args)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _run_world(args: argparse.Namespace) -> int:
     config_path = args.config.resolve()
     world = MujocoWorld(config_path, agents=args.spawn_agents)
     import vrsync

@@ -212,9 +212,10 @@ class _Reader:
         sync_mode = sync.get("sync_mode", sync.get("SyncMode", True))
 
         agents = self.agents(doc.get("agent", []))
+        declared = {a.id for a in agents}
         if count is not None:
             agents = _resize(agents, count, self.path)
-        bindings = self.bindings(mj.get("agent", []), agents)
+        bindings = self.bindings(mj.get("agent", []), agents, declared)
         return WorldConfig(
             path=self.path,
             session=str(doc.get("session", "default")),
@@ -303,7 +304,11 @@ class _Reader:
             raise self.fail("agent.id", f"ids must be unique, found {ids}")
         return tuple(sorted(out, key=lambda a: a.id))
 
-    def bindings(self, raw: object, agents: Sequence[AgentSpec]) -> dict[int, AgentBindingConfig]:
+    def bindings(
+        self, raw: object, agents: Sequence[AgentSpec], declared: set[int]
+    ) -> dict[int, AgentBindingConfig]:
+        """Each agent's entry; ``declared``: the file's own [[agent]] ids, which every
+        entry must name (a resize to fewer agents leaves the others unused)."""
         if not isinstance(raw, list) or not raw:
             raise self.fail("world.mujoco.agent", "needs at least one [[world.mujoco.agent]] entry")
         entries: dict[int, Mapping[str, Any]] = {}
@@ -320,12 +325,11 @@ class _Reader:
             if eid in entries:
                 raise self.fail("world.mujoco.agent.id", f"id {eid} appears twice")
             entries[eid] = e
-        ids = {a.id for a in agents}
-        stray = sorted(set(entries) - ids)
+        stray = sorted(set(entries) - declared)
         if stray:
             raise self.fail(
                 "world.mujoco.agent.id",
-                f"id {stray[0]} has no [[agent]] (agents: {sorted(ids)})",
+                f"id {stray[0]} has no [[agent]] (agents: {sorted(declared)})",
             )
         ordered = sorted(entries)
 
