@@ -1,0 +1,177 @@
+"""vrsync.mujoco's command line (`python -m vrsync.mujoco`), and the world served by the
+real `vrsync.Host` (those tests skip while the build has no Host). The fake host and the
+configs come from test_mujoco_world. Skipped when `mujoco` cannot be imported.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+pytest.importorskip("mujoco", reason="the `mujoco` package is not installed")
+
+from test_mujoco_world import ROOT, ROVERS_TOML, FakeHost, wander, write  # noqa: E402
+from vrsync.mujoco import MujocoWorld  # noqa: E402
+
+# ---- the command line -----------------------------------------------------------------
+
+
+def _cli(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "vrsync.mujoco", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=cwd,
+    )
+
+
+def test_cli_help_and_bad_usage() -> None:
+    r = _cli("--help")
+    assert r.returncode == 0 and "run" in r.stdout and "bench" in r.stdout
+    r = _cli("run", "--help")
+    assert r.returncode == 0 and "--spawn-agents" in r.stdout and "Exit codes" in r.stdout
+    assert _cli("run").returncode == 2
+    assert _cli("run", "--config", str(ROVERS_TOML), "--frames", "0").returncode == 2
+
+
+def test_cli_bad_config_exits_2_with_the_reason(tmp_path: Path) -> None:
+    r = _cli("run", "--config", str(write(tmp_path, vlen="9")), "--frames", "1")
+    assert r.returncode == 2, r.stderr
+    assert "vector 'wheels'" in r.stderr and "len = 9" in r.stderr
+    r = _cli("run", "--config", str(tmp_path / "none.toml"))
+    assert r.returncode == 2 and "cannot read config file" in r.stderr
+
+
+def test_cli_run_against_a_stand_in_host(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The run command's own work (resize, spawn and reap agents, summary, exit code)
+    with the fake host standing in for vrsync.Host."""
+    import vrsync
+    from vrsync.mujoco import cli
+
+    made: list[dict[str, Any]] = []
+
+    class StandIn(FakeHost):
+        def __init__(self, config: Any, *, session: str | None = None, agents: int | None = None):
+            made.append({"config": config, "session": session, "agents": agents})
+            with MujocoWorld(config, agents=agents) as shapes:
+                super().__init__(shapes, wander)
+
+        def __enter__(self) -> StandIn:
+            return self
+
+        def __exit__(self, *exc: object) -> bool:
+            return False
+
+    monkeypatch.setattr(vrsync, "Host", StandIn, raising=False)
+    summary = tmp_path / "summary.json"
+    agent = f"{sys.executable} -c \"import sys; open(sys.argv[1], 'w').write(sys.argv[2])\""
+    code = cli.main(
+        [
+            "run", "--config", str(ROVERS_TOML), "--frames", "5", "--spawn-agents", "2",
+            "--session", "s1", "--summary-json", str(summary), "--quiet",
+            "--agent-cmd", f"{agent} {tmp_path}/agent{{id}} {{session}}:{{agents}}",
+        ]
+    )  # fmt: skip
+    assert code == 0
+    assert made == [{"config": ROVERS_TOML.resolve(), "session": "s1", "agents": 2}]
+    s = json.loads(summary.read_text())
+    assert (s["frames"], s["agents"], s["commands_applied"]) == (5, 2, 8)
+    assert (tmp_path / "agent0").read_text() == "s1:2"
+    assert (tmp_path / "agent1").read_text() == "s1:2"
+    # A spawned agent that fails fails the run.
+    code = cli.main(
+        [
+            "run", "--config", str(ROVERS_TOML), "--frames", "2", "--spawn-agents", "1",
+            "--quiet", "--agent-cmd", f"{sys.executable} -c \"raise SystemExit(3)\"",
+        ]
+    )  # fmt: skip
+    assert code == 1
+
+
+def test_cli_bench_writes_rows(tmp_path: Path) -> None:
+    out = tmp_path / "bench.json"
+    r = _cli("bench", "--config", str(ROVERS_TOML), "--frames", "2", "--json", str(out))
+    assert r.returncode == 0, r.stderr
+    (row,) = json.loads(out.read_text())
+    assert row["agents"] == 4 and row["width"] == 84 and row["s_per_cycle"] > 0
+    assert row["renders_per_s"] > 0 and row["physics_steps_per_s"] > 0
+
+
+# ---- against the real host (vrsync.Host) ----------------------------------------------
+
+EXAMPLES = ROOT / "agent-sdk" / "python" / "examples"
+
+
+def _needs_host() -> None:
+    import vrsync
+
+    if not hasattr(vrsync, "Host"):
+        pytest.skip("this vrsync build has no vrsync.Host (the Python host API)")
+
+
+def test_cli_run_serves_spawned_agents_with_the_same_hash_twice(tmp_path: Path) -> None:
+    _needs_host()
+    from conftest import session
+
+    hashes = []
+    for k in range(2):
+        out = tmp_path / f"summary{k}.json"
+        r = _cli(
+            "run", "--config", str(ROVERS_TOML), "--frames", "30", "--spawn-agents", "4",
+            "--session", session(f"mjrun{k}"), "--summary-json", str(out), "--quiet",
+        )  # fmt: skip
+        assert r.returncode == 0, r.stdout + r.stderr
+        s = json.loads(out.read_text())
+        assert (s["frames"], s["agents"], s["stop_timeouts"], s["evicted_agents"]) == (30, 4, 0, [])
+        # The wandering agents act every cycle.
+        assert s["commands_applied"] == 30 * 4
+        hashes.append(s["trajectory_hash"])
+    assert hashes[0] == hashes[1]
+
+
+def test_example_mujoco_host(tmp_path: Path) -> None:
+    _needs_host()
+    from conftest import session
+
+    name = session("mjex")
+    host = subprocess.Popen(
+        [sys.executable, str(EXAMPLES / "mujoco_host.py"), "--config", str(ROVERS_TOML),
+         "--frames", "20", "--session", name],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    agents = [
+        subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "vrsync.mujoco.agent",
+                "--config",
+                str(ROVERS_TOML),
+                "--id",
+                str(i),
+                "--session",
+                name,
+            ],
+        )  # fmt: skip
+        for i in range(4)
+    ]
+    try:
+        out, err = host.communicate(timeout=120)
+        assert host.returncode == 0, out + err
+        words = out.split()
+        assert words[:4] == ["frames", "20", "stop-timeouts", "0"], out
+        for a in agents:
+            assert a.wait(timeout=30) == 0
+    finally:
+        for p in [host, *agents]:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
