@@ -508,6 +508,30 @@ def test_a_cycle_follows_the_protocol_and_fills_every_channel() -> None:
         assert not np.array_equal(first[0]["images"]["eye"], first[1]["images"]["eye"])
 
 
+def test_pose_axes_y_up_gives_vrsyncs_heading(tmp_path: Path) -> None:
+    text = ROVERS_TOML.read_text().replace('pose_axes = "mujoco"', 'pose_axes = "y_up"')
+    text = text.replace('scene = "../', f'scene = "{ROOT}/')
+    (tmp_path / "y.toml").write_text(text)
+    with MujocoWorld(tmp_path / "y.toml") as w:
+        host = FakeHost(w)
+        w.step_cycle(host)
+        for i in range(len(w.agents)):
+            got = host.history[0][i]
+            x, y, z, qw = got["rotation"]
+            # vrsync.Pose.heading_deg: the body's forward (+z) turned by the rotation.
+            fx = 2 * (x * z + qw * y)
+            fz = 1 - 2 * (x * x + y * y)
+            heading = math.degrees(math.atan2(fx, fz)) % 360
+            # rovers(4) puts rover i at 90 * i degrees round the ring, facing outwards.
+            assert heading == pytest.approx(90.0 * i, abs=1e-3)
+            px, py, pz = got["position"]
+            assert py == pytest.approx(0.05, abs=0.01)  # the height is vrsync's y
+            assert math.hypot(px, pz) == pytest.approx(1.0, abs=0.01)
+    with pytest.raises(MujocoConfigError, match="pose_axes"):
+        (tmp_path / "z.toml").write_text(text.replace('"y_up"', '"z_down"'))
+        load_config(tmp_path / "z.toml")
+
+
 def test_actions_reach_ctrl_and_none_keeps_the_previous_value() -> None:
     with MujocoWorld(ROVERS_TOML) as w:
         plan = {

@@ -40,7 +40,8 @@ _DEFAULT_FOV_V_DEG = 90.0
 _DEFAULT_FRAME_S = 0.1
 _DEFAULT_FORMAT = "rgb8"
 _SOURCE_KINDS = ("sensor", "qpos", "qvel")
-_WORLD_KEYS = {"scene", "generator", "agent", "shadows"}
+_WORLD_KEYS = {"scene", "generator", "agent", "shadows", "pose_axes"}
+_POSE_AXES = ("mujoco", "y_up")
 _AGENT_KEYS = {"id", "body", "cameras", "vectors", "actions", "reward"}
 
 
@@ -125,6 +126,7 @@ class WorldConfig:
     scene: Path | None
     generator: str | None
     shadows: bool
+    pose_axes: str
     agents: tuple[AgentSpec, ...]
     bindings: Mapping[int, AgentBindingConfig]
 
@@ -197,6 +199,12 @@ class _Reader:
         shadows = mj.get("shadows", False)
         if not isinstance(shadows, bool):
             raise self.fail("world.mujoco.shadows", "must be true or false")
+        pose_axes = mj.get("pose_axes", "mujoco")
+        if pose_axes not in _POSE_AXES:
+            raise self.fail(
+                "world.mujoco.pose_axes",
+                f"must be one of {', '.join(repr(a) for a in _POSE_AXES)}, found {pose_axes!r}",
+            )
 
         frame_s = sync.get("simulation_time_per_frame", sync.get("SimulationTimePerFrame"))
         frame_s = _DEFAULT_FRAME_S if frame_s is None else frame_s
@@ -226,6 +234,7 @@ class _Reader:
             scene=scene,
             generator=generator,
             shadows=shadows,
+            pose_axes=pose_axes,
             agents=agents,
             bindings=bindings,
         )

@@ -123,6 +123,7 @@ class MujocoWorld:
         self._pose_views = {
             b.id: (self.data.xpos[b.body_id], self.data.xquat[b.body_id]) for b in self.agents
         }
+        self._y_up = self.config.pose_axes == "y_up"
         self._ctrl = self.data.ctrl
         self._state = (self.data.qpos, self.data.qvel, self.data.ctrl)
         self.renderers = Renderers(self.model, shadows=self.config.shadows)
@@ -158,8 +159,12 @@ class MujocoWorld:
 
     def write_frame(self, agent: AgentBinding, frame: HostFrameLike) -> None:
         """Writes ``agent``'s sensor data of the current state into ``frame``: images
-        rendered in place, vectors, pose (position xyz, quaternion xyzw, MuJoCo's world
-        frame: z up) and reward."""
+        rendered in place, vectors, pose (position xyz, quaternion xyzw) and reward.
+
+        The pose is in MuJoCo's world frame (z up) by default; with ``pose_axes =
+        "y_up"`` in vrsync's (``vrsync.Pose``: y up, heading 0 facing +z): MuJoCo's x, y,
+        z become z, x, y, so a body facing MuJoCo's +x has heading 0 and its yaw about
+        MuJoCo's z is its heading."""
         data = self.data
         for cam in agent.cameras:
             view = frame.image(cam.name)
@@ -176,7 +181,13 @@ class MujocoWorld:
             vec.fill(frame.vector(vec.name))
         pos, quat = self._pose_views[agent.id]
         w, x, y, z = quat.tolist()
-        frame.set_pose(pos.tolist(), (x, y, z, w))
+        if self._y_up:
+            # MuJoCo x, y, z -> vrsync z, x, y (a proper rotation: 240 degrees about
+            # (1, 1, 1)), for positions and quaternion vector parts alike.
+            px, py, pz = pos.tolist()
+            frame.set_pose((py, pz, px), (y, z, x, w))
+        else:
+            frame.set_pose(pos.tolist(), (x, y, z, w))
         if agent.reward is not None:
             frame.reward = float(agent.reward(self.model, data, agent.id))
 
