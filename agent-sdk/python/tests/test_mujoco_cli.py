@@ -17,7 +17,7 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")
 pytest.importorskip("mujoco", reason="the `mujoco` package is not installed")
 
-from test_mujoco_world import ROOT, ROVERS_TOML, FakeHost, wander, write  # noqa: E402
+from test_mujoco_world import ROOT, ROVERS_N_TOML, ROVERS_TOML, FakeHost, wander, write  # noqa: E402
 from vrsync.mujoco import MujocoWorld  # noqa: E402
 
 # ---- the command line -----------------------------------------------------------------
@@ -72,20 +72,28 @@ def test_cli_run_against_a_stand_in_host(tmp_path: Path, monkeypatch: pytest.Mon
 
     monkeypatch.setattr(vrsync, "Host", StandIn, raising=False)
     summary = tmp_path / "summary.json"
-    agent = f"{sys.executable} -c \"import sys; open(sys.argv[1], 'w').write(sys.argv[2])\""
-    code = cli.main(
+    # Each agent writes what it would read: the session and agent ids of its config.
+    code = (
+        "import sys, tomllib; doc = tomllib.load(open(sys.argv[1], 'rb')); "
+        "ids = [a['id'] for a in doc['agent']]; "
+        "open(sys.argv[2], 'w').write('%s %s %s' % (doc['session'], ids, sys.argv[3]))"
+    )
+    agent = f'{sys.executable} -c "{code}" {{config}} {tmp_path}/agent{{id}} {{session}}:{{agents}}'
+    exit_code = cli.main(
         [
-            "run", "--config", str(ROVERS_TOML), "--frames", "5", "--spawn-agents", "2",
-            "--session", "s1", "--summary-json", str(summary), "--quiet",
-            "--agent-cmd", f"{agent} {tmp_path}/agent{{id}} {{session}}:{{agents}}",
+            "run", "--config", str(ROVERS_N_TOML), "--frames", "5", "--spawn-agents", "6",
+            "--session", "s1", "--summary-json", str(summary), "--quiet", "--agent-cmd", agent,
         ]
     )  # fmt: skip
-    assert code == 0
-    assert made == [{"config": ROVERS_TOML.resolve(), "session": "s1", "agents": 2}]
+    assert exit_code == 0
+    assert made == [{"config": ROVERS_N_TOML.resolve(), "session": "s1", "agents": 6}]
     s = json.loads(summary.read_text())
-    assert (s["frames"], s["agents"], s["commands_applied"]) == (5, 2, 8)
-    assert (tmp_path / "agent0").read_text() == "s1:2"
-    assert (tmp_path / "agent1").read_text() == "s1:2"
+    assert (s["frames"], s["agents"]) == (5, 6)
+    # wander: wheel speeds for all but agent 3 (a "drive" choice, which this config's
+    # agents do not have: rejected) in cycles 0, 1, 2 and 4 (none in cycle 3).
+    assert (s["commands_applied"], s["commands_rejected"]) == (4 * 5, 4)
+    for i in range(6):
+        assert (tmp_path / f"agent{i}").read_text() == "s1 [0, 1, 2, 3, 4, 5] s1:6"
     # A spawned agent that fails fails the run.
     code = cli.main(
         [
@@ -175,3 +183,50 @@ def test_example_mujoco_host(tmp_path: Path) -> None:
             if p.poll() is None:
                 p.kill()
                 p.wait()
+
+
+# ---- the spawned agents' config ------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", sorted(p.name for p in (ROOT / "config").glob("*.toml")))
+def test_dumps_reads_back_equal(name: str) -> None:
+    import tomllib
+
+    from vrsync.mujoco.private_config import dumps
+
+    doc = tomllib.loads((ROOT / "config" / name).read_text())
+    assert tomllib.loads(dumps(doc)) == doc
+
+
+def test_dumps_quotes_what_needs_it() -> None:
+    import math
+    import tomllib
+
+    from vrsync.mujoco.private_config import dumps
+
+    doc = {"a b": 'q"\\\n\x01', "x": [1.5, -math.inf, True], "t": {"in": {"k": 1}}}
+    back = tomllib.loads(dumps(doc))
+    assert back["a b"] == doc["a b"] and back["t"] == doc["t"]
+    assert back["x"][0] == 1.5 and back["x"][1] == -math.inf and back["x"][2] is True
+
+
+def test_agents_config_resizes_renames_and_drops_the_world() -> None:
+    import tomllib
+
+    from vrsync.mujoco.private_config import agents_config_text
+
+    doc = tomllib.loads(
+        agents_config_text(ROVERS_TOML, agents=6, session="s2", tcp_listen="127.0.0.1:4000")
+    )
+    assert doc["session"] == "s2" and doc["transport"]["tcp_listen"] == "127.0.0.1:4000"
+    assert "world" not in doc
+    assert [a["id"] for a in doc["agent"]] == list(range(6))
+    original = tomllib.loads(ROVERS_TOML.read_text())["agent"]
+    assert doc["agent"][:4] == original
+    for added in doc["agent"][4:]:
+        assert {k: v for k, v in added.items() if k != "id"} == {
+            k: v for k, v in original[3].items() if k != "id"
+        }
+    fewer = tomllib.loads(agents_config_text(ROVERS_TOML, agents=2))
+    assert [a["id"] for a in fewer["agent"]] == [0, 1]
+    assert fewer["session"] == "mujoco-rovers"

@@ -248,11 +248,12 @@ def _known(model: mujoco.MjModel, kind: mujoco.mjtObj, what: str) -> str:
     }[kind]
     names = [mujoco.mj_id2name(model, kind, i) for i in range(count)]
     names = [n for n in names if n]
+    plural = "bodies" if what == "body" else f"{what}s"
     if not names:
-        return f"it has no named {what}"
+        return f"it has no named {plural}"
     shown = ", ".join(repr(n) for n in names[:8])
     more = f", ... ({len(names)} in all)" if len(names) > 8 else ""
-    return f"{what}s: {shown}{more}"
+    return f"{plural}: {shown}{more}"
 
 
 def load_hook(spec: str, config_path: Path) -> Callable[..., Any]:

@@ -13,6 +13,7 @@ import shlex
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -22,6 +23,7 @@ from typing import Any
 from ..errors import ConfigError
 from .bench import bench_alone, physics_rate, render_rate
 from .config import MujocoConfigError, load_config
+from .private_config import agents_config_text
 from .world import MujocoWorld
 
 __all__ = ["main"]
@@ -71,8 +73,9 @@ def _parser() -> argparse.ArgumentParser:
         "--agent-cmd",
         default=DEFAULT_AGENT_CMD,
         metavar="CMD",
-        help="command line of each spawned agent, split like a shell; {config}, {id}, "
-        "{session}, {agents} and {python} are replaced (default: %(default)r, a "
+        help="command line of each spawned agent, split like a shell; {config} (a private "
+        "copy of the config, resized, with the session), {id}, {session}, {agents} and "
+        "{python} are replaced (default: %(default)r, a "
         "wandering agent)",
     )
     run.add_argument(
@@ -227,16 +230,28 @@ def _run_world(args: argparse.Namespace) -> int:
     session = args.session or world.config.session
     agents = _Agents()
     summary: dict[str, Any] | None = None
+    private = tempfile.TemporaryDirectory(prefix="vrsync-mujoco-")
     try:
         with host_cls(config_path, session=session, agents=args.spawn_agents) as host:
             ids = list(host.agent_ids)
             if args.spawn_agents is not None:
+                # The agents read their own [[agent]] (resized), the session and the bound
+                # TCP address from a private copy of the config, as vr-sim's do.
+                agent_config = Path(private.name) / "agents.toml"
+                agent_config.write_text(
+                    agents_config_text(
+                        config_path,
+                        agents=args.spawn_agents,
+                        session=session,
+                        tcp_listen=getattr(host, "tcp_address", None),
+                    )
+                )
                 agents.spawn(
                     args.agent_cmd,
                     args.agent_arg,
                     ids,
                     {
-                        "config": str(config_path),
+                        "config": str(agent_config),
                         "session": session,
                         "agents": len(ids),
                         "python": sys.executable,
@@ -255,6 +270,7 @@ def _run_world(args: argparse.Namespace) -> int:
     finally:
         world.close()
         problems = agents.finish(timeout_s=10.0)
+        private.cleanup()
     if summary is None:
         summary = world.summary()
     if args.summary_json is not None:
