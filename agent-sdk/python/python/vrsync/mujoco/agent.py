@@ -62,8 +62,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     rng = np.random.default_rng([args.seed, args.id])
     with vrsync.Agent.connect(args.config, args.id, session=args.session) as agent:
-        specs = list(agent.actions)
-        vector_names = [_field(v, "name") for v in agent.vectors]
+        specs = list(agent.action_specs)
+        vector_names = [v.name for v in agent.vector_specs]
         actions: dict[str, Any] = {}
         for cycle, frame in enumerate(agent.frames(timeout=args.timeout)):
             for name in vector_names:
