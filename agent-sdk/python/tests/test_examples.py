@@ -32,7 +32,9 @@ def run_example(name: str, *args: str, timeout: float = 120) -> subprocess.Compl
 def test_every_example_has_a_test() -> None:
     assert ALL == [
         "gym_random.py",
+        "mujoco_host.py",  # test_mujoco_cli.py
         "pettingzoo_loop.py",
+        "python_host.py",  # test_python_host.py
         "seek.py",
         "train_ppo.py",
         "vector_loop.py",
