@@ -24,8 +24,8 @@ use std::time::{Duration, Instant};
 use proptest::prelude::*;
 use serde_json::json;
 use vrsync_bridge::tcp::{
-    Hello, MAX_HELLO, MAX_PENDING, MAX_TOKEN, PREFIX, ReadProgress, RecordReader, decode_hello,
-    decode_motor, decode_reject, encode_hello, kind, reject,
+    Hello, MAX_HELLO, MAX_PENDING, MAX_TOKEN, PREFIX, ReadProgress, RecordReader, Reject,
+    decode_hello, decode_motor, encode_hello, kind, reject,
 };
 use vrsync_bridge::{LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, SensorHeader};
 
@@ -184,7 +184,7 @@ proptest! {
                     let ((), cost) = allocations_in(|| {
                         let _ = decode_hello(body);
                         let _ = decode_motor(body);
-                        let _ = decode_reject(body);
+                        let _ = Reject::decode(body);
                     });
                     // A hello's token (<= MAX_TOKEN), a reject's message (<= the body)
                     // or an error message: never more than the body plus a short text.
@@ -381,9 +381,9 @@ fn rejected(s: &mut TcpStream, hello: &Hello) -> (u32, u32, u64, String) {
         .unwrap();
     let (k, body) = read_record(s);
     assert_eq!(k, kind::REJECT, "expected a reject");
-    let r = decode_reject(&body).expect("a well-formed reject");
+    let r = Reject::decode(&body).expect("a well-formed reject");
     assert_closed_by_host(s);
-    r
+    (r.code, r.host_protocol, r.host_layout, r.message)
 }
 
 /// Reads until the host closes the connection (end of stream or reset); panics if it is
@@ -429,7 +429,7 @@ impl Scripted {
             k,
             kind::WELCOME,
             "scripted agent {id} refused: {:?}",
-            decode_reject(&body)
+            Reject::decode(&body)
         );
         Self {
             s,
@@ -541,7 +541,7 @@ fn a_length_beyond_the_maximum_is_refused_before_any_body_byte() {
     // It read the prefix and nothing else, so its reject reaches us intact.
     let (k, body) = read_record(&mut peer);
     assert_eq!(k, kind::REJECT);
-    let (code, _, _, message) = decode_reject(&body).unwrap();
+    let Reject { code, message, .. } = Reject::decode(&body).unwrap();
     assert_eq!(code, reject::MALFORMED);
     assert!(message.contains(&why), "{message}");
     assert_closed_by_host(&mut peer);

@@ -14,7 +14,7 @@ use std::io::{self, ErrorKind, Read};
 use libfuzzer_sys::fuzz_target;
 use vrsync_bridge::tcp::{
     MAX_HELLO, MAX_TOKEN, PREFIX, ReadProgress, RecordReader, decode_hello, decode_motor,
-    decode_prefix, decode_reject, kind,
+    decode_prefix, kind, Reject,
 };
 use vrsync_bridge::{MotorCommand, MotorHeader};
 
@@ -91,7 +91,7 @@ fuzz_target!(|input: &[u8]| {
                         }
                     }
                     _ => {
-                        let _ = decode_reject(body);
+                        let _ = Reject::decode(body);
                     }
                 }
             }

@@ -204,6 +204,18 @@ pub enum RefusalKind {
 }
 
 impl RefusalKind {
+    /// The kind of a refusal sent with reject code `code` (`record::reject`).
+    pub(crate) fn of_reject(code: u32) -> Self {
+        use record::reject;
+        match code {
+            reject::VERSION => Self::Version,
+            reject::TOKEN => Self::Token,
+            reject::UNKNOWN_AGENT => Self::UnknownAgent,
+            reject::ID_IN_USE => Self::IdInUse,
+            _ => Self::Malformed,
+        }
+    }
+
     /// Lowercase name for events and summaries.
     pub fn as_str(self) -> &'static str {
         match self {

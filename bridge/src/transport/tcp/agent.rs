@@ -41,19 +41,6 @@ impl Drop for TcpFrame {
     }
 }
 
-/// The ids in the `[…]` list at the end of an unknown-agent reject message.
-fn served_ids_from_reject(message: &str) -> Vec<u32> {
-    let list = message
-        .rfind('[')
-        .and_then(|start| Some(&message[start + 1..start + message[start..].find(']')?]));
-    list.map(|l| {
-        l.split(',')
-            .filter_map(|id| id.trim().parse::<u32>().ok())
-            .collect()
-    })
-    .unwrap_or_default()
-}
-
 /// The agent side of the TCP transport.
 #[derive(Debug)]
 pub struct TcpAgent {
@@ -174,25 +161,8 @@ impl TcpAgent {
                 })
             }
             kind::REJECT => {
-                let (code, host_protocol, host_layout, reason) =
-                    decode_reject(&body).ok_or_else(|| hs("malformed reject".into()))?;
-                Err(match code {
-                    reject::VERSION => mismatch(host_protocol, host_layout),
-                    reject::UNKNOWN_AGENT => AgentConnectError::IdNotServed {
-                        session: session.clone(),
-                        agent: id,
-                        served: served_ids_from_reject(&reason),
-                    },
-                    reject::ID_IN_USE => AgentConnectError::IdInUse {
-                        session: session.clone(),
-                        agent: id,
-                    },
-                    _ => AgentConnectError::Refused {
-                        session: session.clone(),
-                        agent: id,
-                        reason,
-                    },
-                })
+                let r = Reject::decode(&body).ok_or_else(|| hs("malformed reject".into()))?;
+                Err(r.into_connect_error(session, id, mismatch))
             }
             other => Err(hs(format!("unexpected reply kind {other}"))),
         }

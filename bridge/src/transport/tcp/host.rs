@@ -389,7 +389,7 @@ impl TcpHost {
                         let _ = write_record(
                             &mut p.stream,
                             kind::REJECT,
-                            &encode_reject(reject::MALFORMED, &why),
+                            &Reject::new(reject::MALFORMED, why.as_str()).encode(),
                         );
                     }
                 }
@@ -443,66 +443,21 @@ impl TcpHost {
     }
 
     /// Tells a peer why its hello is refused (best effort), then logs and records it.
-    fn refuse_hello(
-        &mut self,
-        stream: &mut TcpStream,
-        peer: SocketAddr,
-        agent: u32,
-        code: u32,
-        why: String,
-    ) {
-        let kind = match code {
-            reject::VERSION => RefusalKind::Version,
-            reject::TOKEN => RefusalKind::Token,
-            reject::UNKNOWN_AGENT => RefusalKind::UnknownAgent,
-            reject::ID_IN_USE => RefusalKind::IdInUse,
-            _ => RefusalKind::Malformed,
-        };
+    fn refuse_hello(&mut self, stream: &mut TcpStream, peer: SocketAddr, agent: u32, r: Reject) {
         let _ = stream.set_nonblocking(false);
         let _ = stream.set_write_timeout(Some(Duration::from_millis(200)));
-        let _ = write_record(stream, kind::REJECT, &encode_reject(code, &why));
-        self.refuse(kind, Some(agent), peer, why);
+        let _ = write_record(stream, kind::REJECT, &r.encode());
+        self.refuse(RefusalKind::of_reject(r.code), Some(agent), peer, r.message);
     }
 
     fn admit(&mut self, p: Pending, hello: Hello) {
         let mut stream = p.stream;
         let peer = p.peer;
         let agent = hello.agent_id;
-        if hello.protocol_version != PROTOCOL_VERSION || hello.layout_hash != LAYOUT_HASH {
-            return self.refuse_hello(
-                &mut stream,
-                peer,
-                agent,
-                reject::VERSION,
-                format!(
-                    "agent speaks protocol {} (layout {:016x}), host speaks protocol {PROTOCOL_VERSION} (layout {LAYOUT_HASH:016x})",
-                    hello.protocol_version, hello.layout_hash
-                ),
-            );
-        }
-        if let Some(token) = &self.token
-            && !constant_time_eq(token, &hello.token)
-        {
-            return self.refuse_hello(
-                &mut stream,
-                peer,
-                agent,
-                reject::TOKEN,
-                "wrong tcp_token".into(),
-            );
-        }
-        let Some(slot) = self.slots.iter().position(|s| s.id == hello.agent_id) else {
-            return self.refuse_hello(
-                &mut stream,
-                peer,
-                agent,
-                reject::UNKNOWN_AGENT,
-                format!(
-                    "agent {} is not part of this session (it serves agents {:?})",
-                    hello.agent_id,
-                    self.slots.iter().map(|s| s.id).collect::<Vec<_>>()
-                ),
-            );
+        let served: Vec<u32> = self.slots.iter().map(|s| s.id).collect();
+        let slot = match admit(&hello, self.token.as_deref(), "wrong tcp_token", &served) {
+            Ok(slot) => slot,
+            Err(r) => return self.refuse_hello(&mut stream, peer, agent, r),
         };
         if let Some(old) = &self.slots[slot].conn
             && wait::peer_closed(old.stream.as_raw_fd())
@@ -511,13 +466,7 @@ impl TcpHost {
             self.drop_conn(slot, "connection closed (a new connection takes its place)");
         }
         if self.slots[slot].conn.is_some() {
-            return self.refuse_hello(
-                &mut stream,
-                peer,
-                agent,
-                reject::ID_IN_USE,
-                format!("agent {} is already connected", hello.agent_id),
-            );
+            return self.refuse_hello(&mut stream, peer, agent, Reject::id_in_use(agent));
         }
         let mut welcome = [0u8; 16];
         welcome[..4].copy_from_slice(&PROTOCOL_VERSION.to_le_bytes());

@@ -279,7 +279,7 @@ mod tests {
         let mut twin = say_hello(&host, 0);
         let (k, body) = read_reply_pumping(&mut host, &mut twin);
         assert_eq!(k, kind::REJECT);
-        assert_eq!(decode_reject(&body).unwrap().0, reject::ID_IN_USE);
+        assert_eq!(Reject::decode(&body).unwrap().code, reject::ID_IN_USE);
         // Once it closed, a new one takes its place, even when the host does not drain
         // (it waits for agents, not for stops): after the hello timeout at the latest.
         drop(a0);

@@ -11,7 +11,7 @@ use ::zenoh::sample::{Sample, SampleKind};
 use tracing::{debug, warn};
 use zerocopy::{FromBytes, IntoBytes};
 
-use super::super::record::{Hello, decode_reject, encode_hello, reject};
+use super::super::record::{Hello, Reject, encode_hello};
 use super::super::{
     AGENT_MAX_HELD_FRAMES, AgentConnectError, AgentFrame, AgentReceiveError, AgentSendError,
     AgentTransport, Attempt, HostLiveness, retry_until,
@@ -407,39 +407,11 @@ fn parse_answer(body: &[u8], session: &str, id: u32) -> Result<Answer, String> {
             })
         }
         Some(reply::REJECT) => {
-            let (code, host_protocol, host_layout, reason) =
-                decode_reject(&body[4..]).ok_or("malformed refusal")?;
-            let session = session.to_string();
-            Ok(Answer::Refused(match code {
-                reject::VERSION => mismatch(host_protocol, host_layout),
-                reject::UNKNOWN_AGENT => AgentConnectError::IdNotServed {
-                    session,
-                    agent: id,
-                    served: served_ids(&reason),
-                },
-                reject::ID_IN_USE => AgentConnectError::IdInUse { session, agent: id },
-                _ => AgentConnectError::Refused {
-                    session,
-                    agent: id,
-                    reason,
-                },
-            }))
+            let r = Reject::decode(&body[4..]).ok_or("malformed refusal")?;
+            Ok(Answer::Refused(r.into_connect_error(session, id, mismatch)))
         }
         _ => Err("the hello's answer is neither a welcome nor a refusal".into()),
     }
-}
-
-/// The ids in the `[…]` list at the end of an unknown-agent refusal.
-fn served_ids(message: &str) -> Vec<u32> {
-    let list = message
-        .rfind('[')
-        .and_then(|start| Some(&message[start + 1..start + message[start..].find(']')?]));
-    list.map(|l| {
-        l.split(',')
-            .filter_map(|id| id.trim().parse::<u32>().ok())
-            .collect()
-    })
-    .unwrap_or_default()
 }
 
 impl Drop for ZenohAgent {

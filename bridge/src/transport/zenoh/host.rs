@@ -14,7 +14,7 @@ use ::zenoh::sample::{Sample, SampleKind};
 use tracing::{info, warn};
 use zerocopy::IntoBytes;
 
-use super::super::record::{Hello, constant_time_eq, decode_hello, encode_reject, reject};
+use super::super::record::{Hello, Reject, admit, decode_hello, reject};
 use super::super::{
     BatchSink, FrameLoanMut, HostTransport, HostTransportError, PeerRefusal, RefusalKind, Refusals,
 };
@@ -175,10 +175,12 @@ impl Shared {
             .map(|p| p.to_bytes());
         let hello = match payload.as_deref().map(decode_hello) {
             Some(Ok(h)) => h,
-            Some(Err(e)) => return self.refuse(query, None, reject::MALFORMED, e.to_string()),
+            Some(Err(e)) => {
+                return self.refuse(query, None, Reject::new(reject::MALFORMED, e.to_string()));
+            }
             None => {
-                let why = "no hello payload, or one longer than a hello".into();
-                return self.refuse(query, None, reject::MALFORMED, why);
+                let why = "no hello payload, or one longer than a hello";
+                return self.refuse(query, None, Reject::new(reject::MALFORMED, why));
             }
         };
         let mut st = lock(&self.state);
@@ -200,38 +202,14 @@ impl Shared {
                     nonce, "zenoh agent admitted (waiting for its token and subscriber)"
                 );
             }
-            Err((code, why)) => self.refuse(query, Some(hello.agent_id), code, why),
+            Err(r) => self.refuse(query, Some(hello.agent_id), r),
         }
     }
 
-    fn admit(&self, st: &mut HostState, hello: &Hello) -> Result<(u64, usize), (u32, String)> {
-        if hello.protocol_version != PROTOCOL_VERSION || hello.layout_hash != LAYOUT_HASH {
-            return Err((
-                reject::VERSION,
-                format!(
-                    "agent speaks protocol {} (layout {:016x}), host speaks protocol {PROTOCOL_VERSION} (layout {LAYOUT_HASH:016x})",
-                    hello.protocol_version, hello.layout_hash
-                ),
-            ));
-        }
-        if let Some(token) = &self.token
-            && !constant_time_eq(token, &hello.token)
-        {
-            return Err((
-                reject::TOKEN,
-                "wrong or missing transport.zenoh.token".into(),
-            ));
-        }
-        let Some(slot) = Self::slot_of(st, hello.agent_id) else {
-            return Err((
-                reject::UNKNOWN_AGENT,
-                format!(
-                    "agent {} is not part of this session (it serves agents {:?})",
-                    hello.agent_id,
-                    st.slots.iter().map(|s| s.id).collect::<Vec<_>>()
-                ),
-            ));
-        };
+    fn admit(&self, st: &mut HostState, hello: &Hello) -> Result<(u64, usize), Reject> {
+        let served: Vec<u32> = st.slots.iter().map(|s| s.id).collect();
+        let token_message = "wrong or missing transport.zenoh.token";
+        let slot = admit(hello, self.token.as_deref(), token_message, &served)?;
         // Only a connection whose token exists holds the id. Welcomed but no token yet: a
         // hello of the same id is that agent asking again (its query timed out before the
         // welcome reached it, as on a loaded machine), so it gets a new welcome and the
@@ -239,10 +217,7 @@ impl Shared {
         let s = &st.slots[slot];
         let in_use = s.admitted.is_some() && s.alive;
         if in_use {
-            return Err((
-                reject::ID_IN_USE,
-                format!("agent {} is already connected", hello.agent_id),
-            ));
+            return Err(Reject::id_in_use(hello.agent_id));
         }
         let nonce = st.next_nonce;
         st.next_nonce += 1;
@@ -255,18 +230,19 @@ impl Shared {
         Ok((nonce, body_len))
     }
 
-    fn refuse(&self, query: &Query, agent: Option<u32>, code: u32, why: String) {
+    fn refuse(&self, query: &Query, agent: Option<u32>, r: Reject) {
+        let why = r.message.clone();
         {
             let mut st = lock(&self.state);
             let s = &mut st.stats;
-            let (n, kind) = match code {
-                reject::VERSION => (&mut s.refused_version, RefusalKind::Version),
-                reject::TOKEN => (&mut s.refused_token, RefusalKind::Token),
-                reject::UNKNOWN_AGENT => (&mut s.refused_unknown_agent, RefusalKind::UnknownAgent),
-                reject::ID_IN_USE => (&mut s.refused_id_in_use, RefusalKind::IdInUse),
-                _ => (&mut s.refused_malformed, RefusalKind::Malformed),
-            };
-            *n += 1;
+            let kind = RefusalKind::of_reject(r.code);
+            *match kind {
+                RefusalKind::Version => &mut s.refused_version,
+                RefusalKind::Token => &mut s.refused_token,
+                RefusalKind::UnknownAgent => &mut s.refused_unknown_agent,
+                RefusalKind::IdInUse => &mut s.refused_id_in_use,
+                _ => &mut s.refused_malformed,
+            } += 1;
             st.refusals.push(PeerRefusal {
                 kind,
                 agent,
@@ -277,7 +253,7 @@ impl Shared {
         }
         warn!(?agent, session = %self.session, "zenoh agent refused: {why}");
         let mut b = reply::REJECT.to_le_bytes().to_vec();
-        b.extend_from_slice(&encode_reject(code, &why));
+        b.extend_from_slice(&r.encode());
         let _ = query.reply(query.key_expr().clone(), b).wait();
     }
 

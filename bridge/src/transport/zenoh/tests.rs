@@ -36,7 +36,7 @@ use std::time::Instant;
 use ::zenoh::Wait;
 use zerocopy::IntoBytes;
 
-use super::super::record::{Hello, decode_reject, encode_hello, reject};
+use super::super::record::{Hello, Reject, encode_hello, reject};
 use super::super::{AgentConnectError, AgentTransport, HostTransport};
 use crate::signal::SignalHandling;
 use crate::wire::{LAYOUT_HASH, MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION};
@@ -212,14 +212,15 @@ fn a_wrong_version_or_layout_is_refused_naming_both() {
         };
         let (code, body) = raw_hello(&peer, host.keys(), encode_hello(&hello));
         assert_eq!(code, reply::REJECT);
-        let (why, host_version, host_layout, message) = decode_reject(&body).unwrap();
+        let r = Reject::decode(&body).unwrap();
         assert_eq!(
-            (why, host_version, host_layout),
+            (r.code, r.host_protocol, r.host_layout),
             (reject::VERSION, PROTOCOL_VERSION, LAYOUT_HASH)
         );
         assert!(
-            message.contains(&format!("protocol {version}")),
-            "{message}"
+            r.message.contains(&format!("protocol {version}")),
+            "{}",
+            r.message
         );
     }
     assert_eq!(host.stats().refused_version, 2);
@@ -238,7 +239,7 @@ fn garbage_and_oversized_hellos_are_refused() {
     ] {
         let (code, body) = raw_hello(&peer, host.keys(), payload);
         assert_eq!(code, reply::REJECT);
-        assert_eq!(decode_reject(&body).unwrap().0, reject::MALFORMED);
+        assert_eq!(Reject::decode(&body).unwrap().code, reject::MALFORMED);
     }
     assert_eq!(host.stats().refused_malformed, 3);
     let mut host = host;
