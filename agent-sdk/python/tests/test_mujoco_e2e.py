@@ -33,7 +33,7 @@ import vrsync  # noqa: E402
 from vrsync.mujoco import MujocoWorld  # noqa: E402
 from vrsync.mujoco.private_config import dumps  # noqa: E402
 
-from conftest import binary, free_tcp_port, session  # noqa: E402
+from conftest import TRANSPORTS, binary, free_tcp_port, session  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[3]
 ROVERS_TOML = ROOT / "config" / "mujoco-rovers.toml"
@@ -344,9 +344,14 @@ def serve(
 # ---- 2. a killed agent is evicted and rejoins -----------------------------------------
 
 
-def test_a_killed_agent_is_evicted_and_rejoins(tmp_path: Path, procs: Procs) -> None:
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_a_killed_agent_is_evicted_and_rejoins(
+    tmp_path: Path, procs: Procs, transport: str
+) -> None:
+    """Agent 3 (channel_agent, on `transport`) is SIGKILLed and started again; the
+    others (shm) go on meanwhile."""
     _needs_host()
-    config = rovers_config(tmp_path, "mjkill")
+    config = rovers_config(tmp_path, f"mjkill-{transport}", agent_transports={3: transport})
     specs = specs_of(config)
     reports: list[Any] = []
 
@@ -356,6 +361,8 @@ def test_a_killed_agent_is_evicted_and_rejoins(tmp_path: Path, procs: Procs) -> 
         return report
 
     with MujocoWorld(config) as world, vrsync.Host(config) as host:
+        if transport == "tcp":
+            set_tcp_port(config, host.tcp_address)
         driver = procs.python(DRIVER, config, "0,1,2", -1)
         doomed = procs.channel_agent(config, 3)
         host.wait_for_agents(timeout=DEADLINE)
