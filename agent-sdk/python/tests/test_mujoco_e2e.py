@@ -45,11 +45,12 @@ FRAMES = 60
 """Cycles of each hash run: agent 3's choice changes every 10 cycles, so every choice of
 its first six is applied."""
 
-# Agents `IDS` of `CONFIG` driven by one VrsyncVectorEnv until the host closes the
-# session. The policy depends only on the step number and the observed vectors (wheel
-# angles and speeds, gyro), so the run repeats exactly whatever the timing. With a seed
-# >= 0 the process sleeps a seeded random 0-20 ms before each step (jitter). Prints
-# {"steps": ..., "low": ..., "high": ...} at the end.
+# `python -c DRIVER CONFIG IDS JITTER_SEED`: the agents IDS ("0,1,2") of CONFIG driven by
+# one VrsyncVectorEnv until the host closes the session. The policy depends only on the
+# step number and the observed vectors (wheel angles and speeds, gyro), so the run
+# repeats exactly whatever the timing. With a seed >= 0 the process sleeps a seeded
+# random 0-20 ms before each step (jitter). Prints {"steps": ..., "low": ..., "high": ...}
+# at the end (steps: those whose next frame came).
 DRIVER = """
 import json, sys, time
 import numpy as np
@@ -81,8 +82,9 @@ finally:
 print(json.dumps({"steps": steps, "low": space.low.tolist(), "high": space.high.tolist()}))
 """
 
-# One agent that tries values its action refuses every cycle (each must raise
-# ActionError, queueing nothing), then acts with a valid value on even cycles only.
+# `python -c PROBE CONFIG ID`: one agent that tries values its action refuses every
+# cycle (each must raise ActionError, queueing nothing), then acts with a valid value on
+# even cycles only.
 # Prints [[cycle, error.action, error.agent_id, str(error)], ...] at the end.
 PROBE = """
 import json, math, sys
