@@ -115,13 +115,15 @@ pub(crate) fn act(
     value: &Bound<'_, PyAny>,
 ) -> PyResult<()> {
     let id = agent.id();
-    let discrete = agent
+    let space = agent
         .actions()
         .iter()
         .find(|a| a.name == name)
-        .map(|a| matches!(a.space, ActionSpace::Discrete { .. }));
-    let result = match discrete {
-        Some(true) => {
+        .map(|a| a.space.clone());
+    let result = match space {
+        // The Rust error names the agent's actions.
+        None => agent.act(name, &[]),
+        Some(ActionSpace::Discrete { n }) => {
             let choice: i64 = value.extract().map_err(|_| {
                 act_error(
                     py,
@@ -133,11 +135,15 @@ pub(crate) fn act(
                     ),
                 )
             })?;
-            let choice = u32::try_from(choice).unwrap_or(u32::MAX);
-            agent.act_discrete(name, choice)
+            match u32::try_from(choice) {
+                Ok(choice) => agent.act_discrete(name, choice),
+                Err(_) => {
+                    let why = format!("action {name:?} is a choice in 0..{n}, got {choice}");
+                    return Err(act_error(py, id, name, why));
+                }
+            }
         }
-        // An unknown name: the Rust error names the agent's actions.
-        Some(false) | None => {
+        Some(ActionSpace::Box { .. }) => {
             let values = floats(value).map_err(|_| {
                 act_error(
                     py,

@@ -19,6 +19,14 @@ from typing import Any
 
 import pytest
 
+# Some tests render with MuJoCo through Mesa's llvmpipe and others train with torch in
+# the same process: torch's triton must load before Mesa's libLLVM (see
+# vrsync/mujoco/__init__.py), so before any test renders.
+try:
+    import triton  # noqa: F401
+except ImportError:
+    pass
+
 ROOT = Path(__file__).resolve().parents[3]
 _COUNTER = itertools.count()
 

@@ -32,6 +32,16 @@ import os
 # The OpenGL platform is fixed when mujoco is first imported.
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+# PyTorch's triton (an SB3 learner in the same process) registers its LLVM command-line
+# options when it loads; if Mesa's llvmpipe (the headless EGL renderer) loaded the
+# system's libLLVM first, torch later crashes with SIGSEGV as it builds an optimizer.
+# Loaded before the first render, triton keeps its options apart. Without torch, nothing
+# happens here.
+try:
+    import triton  # noqa: F401
+except ImportError:
+    pass
+
 try:
     import mujoco as _mujoco  # noqa: F401
 except ImportError as _e:  # pragma: no cover - depends on the environment

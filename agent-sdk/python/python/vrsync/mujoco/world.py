@@ -253,20 +253,29 @@ class MujocoWorld:
         ``wait``: first wait for every agent to connect (``host.wait_for_agents()``).
         ``on_cycle(cycle, report)`` is called after each cycle. Ctrl-C
         (``KeyboardInterrupt``) ends the run after the cycle in progress is abandoned;
-        the summary then says ``interrupted``.
+        the summary then says ``interrupted``. When no agent is connected any more (all
+        left or were evicted), the run pauses, as ``vr-sim run`` does: no cycle, the world
+        does not advance, and the host waits for every agent again (``[sync]
+        connect_timeout`` at most).
 
         Raises:
             MujocoConfigError: the host serves other agents than the world binds.
+            vrsync.HostWaitTimeout: the agents did not come back within the connect
+                timeout.
         """
         self.check_host(host)
         if wait:
             host.wait_for_agents()  # type: ignore[attr-defined]
+        connected = getattr(host, "is_connected", None)
+        ids = [b.id for b in self.agents]
         start = time.perf_counter()
         try:
             while frames is None or self.frames < frames:
                 report = self.step_cycle(host)
                 if on_cycle is not None:
                     on_cycle(self.frames - 1, report)
+                if connected is not None and not any(connected(i) for i in ids):
+                    host.wait_for_agents()  # type: ignore[attr-defined]
         except KeyboardInterrupt:
             self.interrupted = True
         finally:
