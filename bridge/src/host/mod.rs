@@ -443,7 +443,9 @@ impl<T: HostTransport> Host<T> {
     }
 
     /// Loans agent `id`'s sensor frame for the current cycle, header pre-filled (protocol
-    /// version, agent id, cycle, simulated time, mode, image table, previous outcome).
+    /// version, agent id, cycle, simulated time, mode, image, vector and action tables,
+    /// previous outcome); its vectors are zeros until written, its images hold whatever the
+    /// recycled sample held (write every pixel).
     ///
     /// # Errors
     /// [`HostCycleError`].
@@ -472,6 +474,14 @@ impl<T: HostTransport> Host<T> {
         // The simulator adds this cycle's events; publish adds the unacknowledged ones.
         h.status_count = 0;
         h.collision_count = 0;
+        // A vector the simulator does not write is zeros, never a value of an older
+        // cycle that the recycled sample still holds.
+        let payload = loan.parts_mut().1;
+        for d in &s.vectors[..s.vector_count] {
+            if let Some(values) = d.values_mut(payload) {
+                values.fill(0.0);
+            }
+        }
         Ok(SensorFrameMut {
             slot,
             agent_id: id,
