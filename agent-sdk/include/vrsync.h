@@ -7,8 +7,8 @@
  *
  * Conventions: every function returns a vrs_status_t (0 = VRS_OK, > 0 not an error,
  * < 0 an error; vrs_last_error_message() tells why). A vrs_agent_t belongs to the thread
- * that connected it. Image data points into shared memory and stays valid until the
- * next vrs_agent_wait_start(), vrs_agent_stop() or vrs_agent_disconnect().
+ * that connected it. Image and vector data point into shared memory and stay valid
+ * until the next vrs_agent_wait_start(), vrs_agent_stop() or vrs_agent_disconnect().
  * C++: see vrsync/agent.hpp (RAII wrapper) and vrsync/compat.hpp (the original API).
  */
 
@@ -30,6 +30,16 @@
 
 // Size of [`vrs_image_t::name`]: a camera name of up to 16 bytes and its terminating NUL.
 #define VRS_CAMERA_NAME_SIZE 17
+
+// Most vectors (`[[agent.vector]]`) per agent.
+#define VRS_MAX_VECTORS 8
+
+// Most actions (`[[agent.action]]`) per agent.
+#define VRS_MAX_ACTIONS 8
+
+// Size of a channel name field (`vrs_vector_t::name`, …): a vector or action name of up to
+// 16 bytes and its terminating NUL.
+#define VRS_CHANNEL_NAME_SIZE 17
 
 // Result of a call: 0 is success, positive values are outcomes that are not errors,
 // negative values are errors (details in [`vrs_last_error_message`]).
@@ -60,9 +70,10 @@ enum vrs_status_t
   VRS_ERROR_PROTOCOL = -7,
   // There is no current frame (before the first wait, or after stop).
   VRS_ERROR_NO_FRAME = -8,
-  // An index is past the end of its table (image, status, collision).
+  // An index is past the end of its table (image, status, collision, vector, action).
   VRS_ERROR_OUT_OF_RANGE = -9,
-  // More commands in this cycle than the config's `max_commands_per_cycle`.
+  // More commands in this cycle than the config's `max_commands_per_cycle` (a
+  // continuous action takes one entry per 4 values, a discrete one entry).
   VRS_ERROR_QUEUE_FULL = -10,
   // This cycle was already stopped.
   VRS_ERROR_ALREADY_STOPPED = -11,
@@ -70,6 +81,18 @@ enum vrs_status_t
   VRS_ERROR_TRANSPORT = -12,
   // SIGINT or SIGTERM arrived: the program should end.
   VRS_ERROR_TERMINATED = -13,
+  // No vector or action of that name in this agent's config (the message lists those
+  // it has).
+  VRS_ERROR_UNKNOWN_CHANNEL = -14,
+  // A continuous action's value has the wrong number of floats.
+  VRS_ERROR_WRONG_LENGTH = -15,
+  // A continuous action's value is outside its bounds, or not finite.
+  VRS_ERROR_OUT_OF_BOUNDS = -16,
+  // A discrete action's choice is not below its `n`.
+  VRS_ERROR_CHOICE_OUT_OF_RANGE = -17,
+  // A discrete action was given floats (`vrs_agent_act`), or a continuous one a choice
+  // (`vrs_agent_act_discrete`).
+  VRS_ERROR_WRONG_ACTION_KIND = -18,
   // Something not covered above (see the message).
   VRS_ERROR_OTHER = -98,
   // A bug: the library panicked (see the message).
@@ -124,6 +147,28 @@ enum vrs_pixel_format_t
 typedef enum vrs_pixel_format_t vrs_pixel_format_t;
 #else
 typedef uint32_t vrs_pixel_format_t;
+#endif // __STDC_VERSION__ >= 202311L
+#endif // __cplusplus
+
+// What an action holds ([`vrs_action_spec_t::kind`]). The same numbers as the host
+// API's `vrs_host_action_kind_t`.
+enum vrs_action_kind_t
+#if defined(__cplusplus) || __STDC_VERSION__ >= 202311L
+  : uint32_t
+#endif // defined(__cplusplus) || __STDC_VERSION__ >= 202311L
+ {
+  // Nothing (a zeroed struct).
+  VRS_ACTION_KIND_NONE = 0,
+  // A continuous action: `len` floats, each within its `low` and `high`.
+  VRS_ACTION_KIND_BOX = 1,
+  // A discrete action: a choice in `0..n`.
+  VRS_ACTION_KIND_DISCRETE = 2,
+};
+#ifndef __cplusplus
+#if __STDC_VERSION__ >= 202311L
+typedef enum vrs_action_kind_t vrs_action_kind_t;
+#else
+typedef uint32_t vrs_action_kind_t;
 #endif // __STDC_VERSION__ >= 202311L
 #endif // __cplusplus
 
@@ -322,6 +367,54 @@ typedef struct vrs_command_t {
   // Float arguments.
   float args[4];
 } vrs_command_t;
+
+// One vector of the current frame: a view into shared memory (on the shm transport), no
+// copy.
+typedef struct vrs_vector_t {
+  // First value. Valid until the next wait, stop or disconnect; do not write through
+  // it.
+  const float *data;
+  // Number of values at `data`.
+  size_t len;
+  // Index of the vector in the agent's vector list.
+  uint32_t index;
+  // Vector name, NUL-terminated.
+  char name[VRS_CHANNEL_NAME_SIZE];
+} vrs_vector_t;
+
+// One vector (`[[agent.vector]]`) of this agent as its config declares it.
+typedef struct vrs_vector_spec_t {
+  // `len` lower bounds (`-INFINITY` where the config gives none): the observation
+  // space, not enforced. Valid until the agent is disconnected.
+  const float *low;
+  // `len` upper bounds (`INFINITY` where the config gives none).
+  const float *high;
+  // Number of values.
+  size_t len;
+  // Index of the vector in the agent's vector list.
+  uint32_t index;
+  // Vector name, NUL-terminated.
+  char name[VRS_CHANNEL_NAME_SIZE];
+} vrs_vector_spec_t;
+
+// One action (`[[agent.action]]`) of this agent as its config declares it.
+typedef struct vrs_action_spec_t {
+  // Continuous: `len` lower bounds; discrete: NULL. Valid until the agent is
+  // disconnected.
+  const float *low;
+  // Continuous: `len` upper bounds; discrete: NULL.
+  const float *high;
+  // Continuous: number of floats of a value; discrete: 0.
+  size_t len;
+  // Discrete: number of choices; continuous: 0.
+  uint32_t n;
+  // Continuous or discrete.
+  vrs_action_kind_t kind;
+  // Index of the action in the agent's action list.
+  uint32_t index;
+  // Action name, NUL-terminated.
+  char name[VRS_CHANNEL_NAME_SIZE];
+} vrs_action_spec_t;
 
 #ifdef __cplusplus
 extern "C" {
@@ -769,6 +862,111 @@ vrs_status_t vrs_agent_send_trial_reset(struct vrs_agent_t *agent,
 // # Safety
 // Any handle value may be passed (it is looked up, never dereferenced).
 vrs_status_t vrs_agent_stop(struct vrs_agent_t *agent);
+
+// Vector `index` (`0..vector_count` of [`vrs_agent_channel_counts`], config order) of the
+// current frame: `out_vector->data` points into shared memory (no copy) and stays valid
+// until the next [`vrs_agent_wait_start`], [`vrs_agent_stop`] or
+// [`vrs_agent_disconnect`], like image data.
+//
+// # Errors
+// `VRS_ERROR_OUT_OF_RANGE`, `VRS_ERROR_NO_FRAME`, `VRS_ERROR_INVALID_ARGUMENT` (NULL
+// `out_vector`), handle errors.
+//
+// # Safety
+// `out_vector` is NULL or valid for writing a `vrs_vector_t`. Do not write through
+// `out_vector->data`.
+vrs_status_t vrs_agent_vector(struct vrs_agent_t *agent,
+                              size_t index,
+                              struct vrs_vector_t *out_vector);
+
+// Like [`vrs_agent_vector`], for the vector called `name` (`"joints"`, …).
+//
+// # Errors
+// `VRS_ERROR_UNKNOWN_CHANNEL` (no such vector: the message lists the agent's vectors),
+// `VRS_ERROR_NO_FRAME`, `VRS_ERROR_INVALID_ARGUMENT` (NULL pointers, not UTF-8), handle
+// errors.
+//
+// # Safety
+// `name` is NULL or a valid NUL-terminated string; `out_vector` is NULL or valid for
+// writing a `vrs_vector_t`.
+vrs_status_t vrs_agent_vector_by_name(struct vrs_agent_t *agent,
+                                      const char *name,
+                                      struct vrs_vector_t *out_vector);
+
+// How many vectors (`[[agent.vector]]`) and actions (`[[agent.action]]`) this agent's
+// config declares (every frame carries exactly these: a frame that differs is refused
+// at the wait). Either out pointer may be NULL. Needs no current frame.
+//
+// # Errors
+// Handle errors.
+//
+// # Safety
+// `out_vector_count` and `out_action_count` are each NULL or valid for writing a
+// `uint32_t`.
+vrs_status_t vrs_agent_channel_counts(struct vrs_agent_t *agent,
+                                      uint32_t *out_vector_count,
+                                      uint32_t *out_action_count);
+
+// Vector `index` (`0..vector_count`) of this agent as its config declares it: name,
+// length and the observation bounds (`low`, `high`, valid until the agent is
+// disconnected). Needs no current frame.
+//
+// # Errors
+// `VRS_ERROR_OUT_OF_RANGE`, `VRS_ERROR_INVALID_ARGUMENT` (NULL `out_spec`), handle
+// errors.
+//
+// # Safety
+// `out_spec` is NULL or valid for writing a `vrs_vector_spec_t`.
+vrs_status_t vrs_agent_vector_spec(struct vrs_agent_t *agent,
+                                   size_t index,
+                                   struct vrs_vector_spec_t *out_spec);
+
+// Action `index` (`0..action_count`) of this agent as its config declares it: name,
+// kind, length and bounds (continuous; valid until the agent is disconnected) or number
+// of choices (discrete). Needs no current frame.
+//
+// # Errors
+// `VRS_ERROR_OUT_OF_RANGE`, `VRS_ERROR_INVALID_ARGUMENT` (NULL `out_spec`), handle
+// errors.
+//
+// # Safety
+// `out_spec` is NULL or valid for writing a `vrs_action_spec_t`.
+vrs_status_t vrs_agent_action_spec(struct vrs_agent_t *agent,
+                                   size_t index,
+                                   struct vrs_action_spec_t *out_spec);
+
+// Queues the value of the continuous action `name` for this cycle: `len` floats at
+// `values`, each within the action's bounds. It goes out with the next
+// [`vrs_agent_stop`]; the host takes the last value sent in a cycle. Nothing is queued
+// when the call fails; the message names the action (and the length or bound).
+//
+// # Errors
+// `VRS_ERROR_UNKNOWN_CHANNEL` (no such action), `VRS_ERROR_WRONG_LENGTH`,
+// `VRS_ERROR_OUT_OF_BOUNDS` (a value outside its bounds, NaN or infinite),
+// `VRS_ERROR_WRONG_ACTION_KIND` (a discrete action: use [`vrs_agent_act_discrete`]),
+// `VRS_ERROR_QUEUE_FULL` (it takes one queue entry per 4 values),
+// `VRS_ERROR_INVALID_ARGUMENT` (NULL `name`, NULL `values` with `len > 0`), handle
+// errors.
+//
+// # Safety
+// `name` is NULL or a valid NUL-terminated string; `values` is valid for reading `len`
+// floats (or NULL when `len` is 0).
+vrs_status_t vrs_agent_act(struct vrs_agent_t *agent,
+                           const char *name,
+                           const float *values,
+                           size_t len);
+
+// Queues the choice of the discrete action `name` for this cycle (`0..n`), as
+// [`vrs_agent_act`].
+//
+// # Errors
+// `VRS_ERROR_UNKNOWN_CHANNEL` (no such action), `VRS_ERROR_CHOICE_OUT_OF_RANGE`,
+// `VRS_ERROR_WRONG_ACTION_KIND` (a continuous action: use [`vrs_agent_act`]),
+// `VRS_ERROR_QUEUE_FULL`, `VRS_ERROR_INVALID_ARGUMENT` (NULL `name`), handle errors.
+//
+// # Safety
+// `name` is NULL or a valid NUL-terminated string.
+vrs_status_t vrs_agent_act_discrete(struct vrs_agent_t *agent, const char *name, uint32_t choice);
 
 #ifdef __cplusplus
 }  // extern "C"

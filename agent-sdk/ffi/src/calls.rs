@@ -116,7 +116,15 @@ pub(super) fn connect_impl(
         builder = builder.connect_timeout(t);
     }
     let agent = builder.connect()?;
-    let key = AGENTS.insert(|_| AgentState { frame: None, agent })?;
+    let vectors = config
+        .agent(agent_id)
+        .map(|a| a.vectors.clone())
+        .unwrap_or_default();
+    let key = AGENTS.insert(|_| AgentState {
+        frame: None,
+        agent,
+        vectors,
+    })?;
     // SAFETY: as above. The handle is a registry key, never dereferenced.
     unsafe { out_agent.write(std::ptr::without_provenance_mut(key)) };
     Ok(())

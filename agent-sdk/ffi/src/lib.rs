@@ -30,27 +30,33 @@
 //! scalar fields are copied into a [`vrs_frame_t`]; images are read with
 //! [`vrs_agent_image`], whose `data` pointers point straight into shared memory (no copy).
 //! They stay valid until the next [`vrs_agent_wait_start`] (whatever it returns),
-//! [`vrs_agent_stop`] or [`vrs_agent_disconnect`] of that agent.
+//! [`vrs_agent_stop`] or [`vrs_agent_disconnect`] of that agent. The frame's vectors
+//! ([`vrs_agent_vector`]) are views with the same lifetime.
 //!
 //! # Files
 //! `types.rs` the constants, enums and `#[repr(C)]` structs; `state.rs` the error type of
 //! the boundary and the registry of agents; `calls.rs` the `*_impl` functions behind the
 //! exports; `exports.rs` the library, connection and frame functions; `send.rs` the
-//! commands and the stop that sends them. The plumbing (handle registry, last error, panic
+//! commands and the stop that sends them; `channels.rs` the vectors, the channel specs and
+//! the actions (`[[agent.vector]]`, `[[agent.action]]`). The plumbing (handle registry, last error, panic
 //! boundary, argument helpers) and the sensor structs are `vrsync_cabi`'s, shared with the
 //! host C ABI.
 
 #![allow(non_camel_case_types)]
 
 mod calls;
+mod channels;
 mod exports;
 mod send;
 mod state;
 mod types;
 
+pub use channels::*;
 pub use exports::*;
 pub use send::*;
 pub use types::*;
 
+#[cfg(test)]
+mod channel_tests;
 #[cfg(test)]
 mod tests;

@@ -7,12 +7,12 @@ use std::collections::HashMap;
 use std::ffi::c_char;
 use std::thread::LocalKey;
 
-use vrsync_bridge::ConfigLoadError;
+use vrsync_bridge::{ConfigLoadError, VectorConfig};
 use vrsync_cabi::handles::LocalMap;
 use vrsync_cabi::{AbiError, ArgError, HandleError, HandleKind, LastError, Registry};
 
 use super::types::{vrs_agent_t, vrs_status_t};
-use sdk::{Agent, AgentConnectError, Frame, SendError, StopError, WaitStartError};
+use sdk::{ActError, Agent, AgentConnectError, Frame, SendError, StopError, WaitStartError};
 
 // ---------------------------------------------------------------------------------------
 // Errors
@@ -50,6 +50,27 @@ pub(super) enum FfiError {
     },
     #[error("the current frame has no camera named {0:?}")]
     NoSuchCamera(String),
+    #[error("protocol error: {0}")]
+    Protocol(String),
+    #[error("agent {agent} has no vector {name:?} (its vectors: {known})")]
+    NoSuchVector {
+        agent: u32,
+        name: String,
+        known: String,
+    },
+    /// An action refused by the SDK; its message names the action.
+    #[error(transparent)]
+    Act(ActError),
+    /// An action that does not fit the queue (the SDK's message does not name it).
+    #[error(
+        "action {action:?} does not fit this cycle's queue (a continuous action takes one \
+         entry per 4 values)"
+    )]
+    ActQueue {
+        action: String,
+        #[source]
+        source: SendError,
+    },
     #[error("logging is already initialised in this process")]
     LoggingAlreadySet,
     #[error("panic in the vrsync library: {0}")]
@@ -108,6 +129,21 @@ impl AbiError for FfiError {
                 StopError::Transport(_) => VRS_ERROR_TRANSPORT,
                 _ => VRS_ERROR_OTHER,
             },
+            Self::Protocol(_) => VRS_ERROR_PROTOCOL,
+            Self::NoSuchVector { .. } => VRS_ERROR_UNKNOWN_CHANNEL,
+            Self::Act(e) => match e {
+                ActError::UnknownAction { .. } => VRS_ERROR_UNKNOWN_CHANNEL,
+                ActError::WrongLength { .. } => VRS_ERROR_WRONG_LENGTH,
+                ActError::OutOfBounds { .. } => VRS_ERROR_OUT_OF_BOUNDS,
+                ActError::ChoiceOutOfRange { .. } => VRS_ERROR_CHOICE_OUT_OF_RANGE,
+                ActError::WrongKind { .. } => VRS_ERROR_WRONG_ACTION_KIND,
+                ActError::Queue(SendError::QueueFull { .. }) => VRS_ERROR_QUEUE_FULL,
+                _ => VRS_ERROR_OTHER,
+            },
+            Self::ActQueue { source, .. } => match source {
+                SendError::QueueFull { .. } => VRS_ERROR_QUEUE_FULL,
+                _ => VRS_ERROR_OTHER,
+            },
             Self::NoFrame => VRS_ERROR_NO_FRAME,
             Self::OutOfRange { .. } => VRS_ERROR_OUT_OF_RANGE,
             Self::Panic(_) => VRS_ERROR_PANIC,
@@ -139,6 +175,9 @@ pub(super) struct AgentState {
     // Declared before `agent`: the frame's sample is released before the ports.
     pub(super) frame: Option<Frame>,
     pub(super) agent: Agent,
+    /// Its vectors as its config declares them (their bounds are handed out by pointer,
+    /// so they stay here, unchanged, until the disconnect).
+    pub(super) vectors: Vec<VectorConfig>,
 }
 
 static AGENT_HANDLES: HandleKind = HandleKind {

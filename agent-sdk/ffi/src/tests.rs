@@ -10,14 +10,14 @@ use super::state::boundary;
 use super::vrs_status_t::*;
 use super::*;
 
-fn last_error() -> String {
+pub(super) fn last_error() -> String {
     // SAFETY: the library returns a valid C string, never NULL.
     unsafe { CStr::from_ptr(vrs_last_error_message()) }
         .to_string_lossy()
         .into_owned()
 }
 
-fn session(tag: &str) -> String {
+pub(super) fn session(tag: &str) -> String {
     static N: AtomicU32 = AtomicU32::new(0);
     format!(
         "ffi{}-{}-{tag}",
@@ -41,7 +41,7 @@ fn write_config(dir: &Path, tag: &str) -> PathBuf {
     path
 }
 
-fn c_path(path: &Path) -> CString {
+pub(super) fn c_path(path: &Path) -> CString {
     CString::new(path.to_str().unwrap()).unwrap()
 }
 
@@ -78,6 +78,7 @@ fn header_is_up_to_date() {
         .with_src(dir.join("src/types.rs"))
         .with_src(dir.join("src/exports.rs"))
         .with_src(dir.join("src/send.rs"))
+        .with_src(dir.join("src/channels.rs"))
         .generate()
         .expect("cbindgen")
         .write(&mut generated);

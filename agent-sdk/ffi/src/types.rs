@@ -24,12 +24,22 @@ pub const VRS_MAX_STATUSES: usize = 16;
 pub const VRS_MAX_COLLISIONS: usize = 8;
 /// Size of [`vrs_image_t::name`]: a camera name of up to 16 bytes and its terminating NUL.
 pub const VRS_CAMERA_NAME_SIZE: usize = 17;
+/// Most vectors (`[[agent.vector]]`) per agent.
+pub const VRS_MAX_VECTORS: usize = 8;
+/// Most actions (`[[agent.action]]`) per agent.
+pub const VRS_MAX_ACTIONS: usize = 8;
+/// Size of a channel name field (`vrs_vector_t::name`, …): a vector or action name of up to
+/// 16 bytes and its terminating NUL.
+pub const VRS_CHANNEL_NAME_SIZE: usize = 17;
 
 const _: () = {
     assert!(VRS_MAX_IMAGES == vrsync_bridge::MAX_CAMERAS);
     assert!(VRS_MAX_STATUSES == vrsync_bridge::MAX_STATUSES);
     assert!(VRS_MAX_COLLISIONS == vrsync_bridge::MAX_COLLISIONS);
     assert!(VRS_CAMERA_NAME_SIZE == vrsync_cabi::CAMERA_NAME_SIZE);
+    assert!(VRS_MAX_VECTORS == vrsync_bridge::MAX_VECTORS);
+    assert!(VRS_MAX_ACTIONS == vrsync_bridge::MAX_ACTIONS);
+    assert!(VRS_CHANNEL_NAME_SIZE == vrsync_cabi::CHANNEL_NAME_SIZE);
 };
 
 /// Result of a call: 0 is success, positive values are outcomes that are not errors,
@@ -59,9 +69,10 @@ pub enum vrs_status_t {
     VRS_ERROR_PROTOCOL = -7,
     /// There is no current frame (before the first wait, or after stop).
     VRS_ERROR_NO_FRAME = -8,
-    /// An index is past the end of its table (image, status, collision).
+    /// An index is past the end of its table (image, status, collision, vector, action).
     VRS_ERROR_OUT_OF_RANGE = -9,
-    /// More commands in this cycle than the config's `max_commands_per_cycle`.
+    /// More commands in this cycle than the config's `max_commands_per_cycle` (a
+    /// continuous action takes one entry per 4 values, a discrete one entry).
     VRS_ERROR_QUEUE_FULL = -10,
     /// This cycle was already stopped.
     VRS_ERROR_ALREADY_STOPPED = -11,
@@ -69,6 +80,18 @@ pub enum vrs_status_t {
     VRS_ERROR_TRANSPORT = -12,
     /// SIGINT or SIGTERM arrived: the program should end.
     VRS_ERROR_TERMINATED = -13,
+    /// No vector or action of that name in this agent's config (the message lists those
+    /// it has).
+    VRS_ERROR_UNKNOWN_CHANNEL = -14,
+    /// A continuous action's value has the wrong number of floats.
+    VRS_ERROR_WRONG_LENGTH = -15,
+    /// A continuous action's value is outside its bounds, or not finite.
+    VRS_ERROR_OUT_OF_BOUNDS = -16,
+    /// A discrete action's choice is not below its `n`.
+    VRS_ERROR_CHOICE_OUT_OF_RANGE = -17,
+    /// A discrete action was given floats (`vrs_agent_act`), or a continuous one a choice
+    /// (`vrs_agent_act_discrete`).
+    VRS_ERROR_WRONG_ACTION_KIND = -18,
     /// Something not covered above (see the message).
     VRS_ERROR_OTHER = -98,
     /// A bug: the library panicked (see the message).

@@ -101,8 +101,9 @@ pub unsafe fn log_filter(filter: *const c_char) -> Result<EnvFilter, ArgError> {
     })
 }
 
-/// A camera name as a NUL-terminated C array (cut at the wire format's
-/// [`CAMERA_NAME_LEN`](vrsync_bridge::CAMERA_NAME_LEN) bytes).
+/// A camera or channel name as a NUL-terminated C array (cut at the wire format's
+/// [`CAMERA_NAME_LEN`](vrsync_bridge::CAMERA_NAME_LEN) bytes, which is also
+/// [`CHANNEL_NAME_LEN`](vrsync_bridge::CHANNEL_NAME_LEN)).
 pub fn c_name(name: &str) -> [c_char; CAMERA_NAME_SIZE] {
     let mut out = [0 as c_char; CAMERA_NAME_SIZE];
     for (dst, &src) in out

@@ -25,6 +25,6 @@ pub use args::{ArgError, c_name, log_filter, str_arg, write_opt, write_required}
 pub use error::{AbiError, LastError, boundary, boundary_status, chain, last_error_ptr};
 pub use handles::{HandleError, HandleKind, Registry, Removal};
 pub use sensors::{
-    CAMERA_NAME_SIZE, vrs_action_status_t, vrs_collision_t, vrs_eye_position_t,
+    CAMERA_NAME_SIZE, CHANNEL_NAME_SIZE, vrs_action_status_t, vrs_collision_t, vrs_eye_position_t,
     vrs_grid_position_t, vrs_head_motion_t, vrs_pose_t,
 };

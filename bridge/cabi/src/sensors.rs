@@ -16,6 +16,14 @@ use vrsync_bridge::{ActionStatus, Collision, EyePosition, GridPosition, HeadMoti
 /// cbindgen:ignore
 pub const CAMERA_NAME_SIZE: usize = vrsync_bridge::CAMERA_NAME_LEN + 1;
 
+/// Size of a channel (`[[agent.vector]]`, `[[agent.action]]`) name field: up to 16 bytes of
+/// UTF-8 and a terminating NUL, as a camera name ([`c_name`](crate::c_name) writes both).
+///
+/// cbindgen:ignore
+pub const CHANNEL_NAME_SIZE: usize = vrsync_bridge::CHANNEL_NAME_LEN + 1;
+
+const _: () = assert!(CHANNEL_NAME_SIZE == CAMERA_NAME_SIZE);
+
 /// Body pose: position in metres, orientation as a unit quaternion `[x, y, z, w]`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq)]
