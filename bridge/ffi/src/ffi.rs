@@ -542,26 +542,7 @@ fn end_cycle_impl(host: *mut vrs_host_t) -> Result<(), FfiError> {
 
 fn stats_impl(host: *mut vrs_host_t, out_stats: *mut vrs_host_stats_t) -> Result<(), FfiError> {
     with_host(host, |st| {
-        let s = st.host.stats();
-        let stats = vrs_host_stats_t {
-            cycles: s.cycles,
-            stop_timeouts: s.stop_timeouts,
-            agent_timeouts: s.agent_timeouts,
-            late_batches: s.late_batches,
-            future_batches: s.future_batches,
-            commands_received: s.commands_received,
-            commands_overflowed: s.commands_overflowed,
-            frames_undelivered: s.frames_undelivered,
-            evictions: s.evictions,
-            rejoins: s.rejoins,
-            frames_delivered: s.frames_delivered,
-            frames_read: s.frames_read,
-            statuses_dropped: s.statuses_dropped,
-            collisions_dropped: s.collisions_dropped,
-            slow_stops: s.slow_stops,
-            leaves: s.leaves,
-            peers_refused: s.peers_refused,
-        };
+        let stats = vrs_host_stats_t::from(st.host.stats());
         // SAFETY: null or writable by the caller's contract.
         unsafe { write_required(out_stats, "out_stats", stats) }
     })
@@ -659,6 +640,10 @@ pub extern "C" fn vrs_host_status_name(status: i32) -> *const c_char {
         (VRS_HOST_ERROR_AGENT_LOST, c"VRS_HOST_ERROR_AGENT_LOST"),
         (VRS_HOST_ERROR_TRANSPORT, c"VRS_HOST_ERROR_TRANSPORT"),
         (VRS_HOST_ERROR_TERMINATED, c"VRS_HOST_ERROR_TERMINATED"),
+        (
+            VRS_HOST_ERROR_UNKNOWN_CHANNEL,
+            c"VRS_HOST_ERROR_UNKNOWN_CHANNEL",
+        ),
         (VRS_HOST_ERROR_OTHER, c"VRS_HOST_ERROR_OTHER"),
         (VRS_HOST_ERROR_PANIC, c"VRS_HOST_ERROR_PANIC"),
     ];

@@ -42,13 +42,27 @@
 //! collect, reports, end cycle — and a call out of order is `VRS_HOST_ERROR_WRONG_STATE`
 //! naming the phase. Image pointers are valid from the loan until that frame's publish or
 //! discard; command pointers until [`vrs_host_end_cycle`].
+//!
+//! # Channels
+//! The `[[agent.vector]]` and `[[agent.action]]` of each agent (`channels.rs`): their specs
+//! ([`vrs_host_channel_counts`], [`vrs_host_vector_spec`], [`vrs_host_action_spec`]),
+//! each vector of a loaned frame as writable memory like an image
+//! ([`vrs_host_frame_vector`], valid until publish or discard), and what each agent sent
+//! for each action in the cycle just collected ([`vrs_host_action`], checked against the
+//! config, values valid until [`vrs_host_end_cycle`]).
 
+// `sizeof_fns!` serves `channels` too.
+#[macro_use]
 mod ffi;
+mod channels;
 mod state;
 mod types;
 
+pub use channels::*;
 pub use ffi::*;
 pub use types::*;
 
+#[cfg(test)]
+mod channel_tests;
 #[cfg(test)]
 mod tests;

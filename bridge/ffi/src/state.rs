@@ -14,6 +14,7 @@ use vrsync_bridge::{ImageDesc, MAX_CAMERAS, MotorCommand};
 use vrsync_cabi::handles::LocalMap;
 use vrsync_cabi::{AbiError, ArgError, HandleError, HandleKind, LastError, Registry, Removal};
 
+use crate::channels::{ActionCopy, copy_actions};
 use crate::types::{vrs_host_cycle_t, vrs_host_outcome_t, vrs_host_status_t, vrs_host_t};
 
 // ---------------------------------------------------------------------------------------
@@ -56,6 +57,13 @@ pub(crate) enum FfiError {
     },
     #[error("agent {agent}'s frame has no camera named {name:?}")]
     NoSuchCamera { agent: u32, name: String },
+    #[error("agent {agent} has no {what} {name:?} (its {what}s: {known})")]
+    NoSuchChannel {
+        agent: u32,
+        what: &'static str,
+        name: String,
+        known: String,
+    },
     #[error("logging is already initialised in this process")]
     LoggingAlreadySet,
     #[error("panic in the vrsync host library: {0}")]
@@ -111,6 +119,7 @@ impl AbiError for FfiError {
             Self::WrongState { .. } => VRS_HOST_ERROR_WRONG_STATE,
             Self::NoFrame { .. } => VRS_HOST_ERROR_NO_FRAME,
             Self::OutOfRange { .. } => VRS_HOST_ERROR_OUT_OF_RANGE,
+            Self::NoSuchChannel { .. } => VRS_HOST_ERROR_UNKNOWN_CHANNEL,
             Self::Panic(_) => VRS_HOST_ERROR_PANIC,
         }
     }
@@ -214,6 +223,10 @@ pub(crate) struct ReportCopy {
     pub(crate) left: bool,
     pub(crate) slow: bool,
     pub(crate) commands: Vec<MotorCommand>,
+    /// The agent's actions of the cycle, in config order (buffers sized from the config).
+    pub(crate) actions: Vec<ActionCopy>,
+    /// Action chunks of the agent refused in the cycle.
+    pub(crate) actions_rejected: u32,
 }
 
 /// Everything behind one handle.
@@ -233,6 +246,7 @@ impl HostState {
         // Room for what the host hands over in one cycle, so that copying the report
         // does not allocate in steady state.
         let cap = host.config().transport.max_commands_per_cycle as usize * 2;
+        let config = host.config();
         let reports = ids
             .iter()
             .map(|&agent_id| ReportCopy {
@@ -244,6 +258,10 @@ impl HostState {
                 left: false,
                 slow: false,
                 commands: Vec::with_capacity(cap),
+                actions: config.agent(agent_id).map_or_else(Vec::new, |a| {
+                    a.actions.iter().map(ActionCopy::new).collect()
+                }),
+                actions_rejected: 0,
             })
             .collect();
         Self {
@@ -304,6 +322,8 @@ pub(crate) fn copy_report(
         slow += u32::from(agent.slow);
         copy.commands.clear();
         copy.commands.extend_from_slice(agent.commands());
+        copy_actions(&mut copy.actions, agent);
+        copy.actions_rejected = agent.actions_rejected();
         commands = commands.saturating_add(copy.commands.len() as u32);
         if copy.outcome == vrs_host_outcome_t::VRS_HOST_OUTCOME_TIMED_OUT {
             timed_out += 1;

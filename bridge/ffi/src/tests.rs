@@ -11,14 +11,14 @@ use vrsync_bridge::Config;
 use crate::types::vrs_host_status_t::*;
 use crate::*;
 
-fn last_error() -> String {
+pub(crate) fn last_error() -> String {
     // SAFETY: the library returns a valid C string, never NULL.
     unsafe { CStr::from_ptr(vrs_host_last_error_message()) }
         .to_string_lossy()
         .into_owned()
 }
 
-fn session(tag: &str) -> String {
+pub(crate) fn session(tag: &str) -> String {
     static N: AtomicU32 = AtomicU32::new(0);
     format!(
         "hffi{}-{}-{tag}",
@@ -50,7 +50,7 @@ fn c_path(path: &Path) -> CString {
     CString::new(path.to_str().unwrap()).unwrap()
 }
 
-fn create(path: &Path) -> *mut vrs_host_t {
+pub(crate) fn create(path: &Path) -> *mut vrs_host_t {
     let mut host = ptr::null_mut();
     // SAFETY: valid C string and out pointer.
     let st = unsafe { vrs_host_create(c_path(path).as_ptr(), &mut host) };
@@ -60,7 +60,7 @@ fn create(path: &Path) -> *mut vrs_host_t {
 }
 
 /// Waits (up to 10 s) until the host closes the session, skipping frames.
-fn wait_for_close(agent: &mut Agent) {
+pub(crate) fn wait_for_close(agent: &mut Agent) {
     for _ in 0..100 {
         match agent.wait_start(Some(Duration::from_millis(100))) {
             Err(vrsync_agent::WaitStartError::HostClosed) => return,
@@ -72,7 +72,7 @@ fn wait_for_close(agent: &mut Agent) {
     panic!("the host did not close the session");
 }
 
-fn connect_agent(path: &Path, id: u32) -> Agent {
+pub(crate) fn connect_agent(path: &Path, id: u32) -> Agent {
     let config = Config::load(path).unwrap();
     Agent::connect(&config, id).unwrap()
 }
@@ -87,6 +87,7 @@ fn header_is_up_to_date() {
         .with_src(dir.join("../cabi/src/sensors.rs"))
         .with_src(dir.join("src/types.rs"))
         .with_src(dir.join("src/ffi.rs"))
+        .with_src(dir.join("src/channels.rs"))
         .generate()
         .expect("cbindgen")
         .write(&mut generated);
@@ -132,7 +133,7 @@ fn version_status_names_and_sizes() {
         vrs_host_sizeof_agent_report(),
         std::mem::size_of::<vrs_host_agent_report_t>()
     );
-    assert_eq!(vrs_host_sizeof_stats(), 136);
+    assert_eq!(vrs_host_sizeof_stats(), 144);
     assert_eq!(
         vrs_host_sizeof_image(),
         std::mem::size_of::<vrs_host_image_t>()

@@ -12,7 +12,7 @@
 use core::mem::{align_of, offset_of, size_of};
 use std::ffi::c_char;
 
-use vrsync_bridge::{MotorCommand, PixelFormat};
+use vrsync_bridge::{HostStats, MotorCommand, PixelFormat};
 use vrsync_cabi::{
     vrs_action_status_t, vrs_collision_t, vrs_eye_position_t, vrs_grid_position_t,
     vrs_head_motion_t, vrs_pose_t,
@@ -26,8 +26,18 @@ pub const VRS_HOST_MAX_STATUSES: u32 = 16;
 pub const VRS_HOST_MAX_COLLISIONS: u32 = 8;
 /// Size of a camera name field: up to 16 bytes of UTF-8 and a terminating NUL.
 pub const VRS_HOST_CAMERA_NAME_SIZE: usize = 17;
+/// Most vectors (`[[agent.vector]]`) per agent.
+pub const VRS_HOST_MAX_VECTORS: u32 = 8;
+/// Most actions (`[[agent.action]]`) per agent.
+pub const VRS_HOST_MAX_ACTIONS: u32 = 8;
+/// Size of a channel (vector, action) name field: up to 16 bytes of UTF-8 and a
+/// terminating NUL.
+pub const VRS_HOST_CHANNEL_NAME_SIZE: usize = 17;
 
 const _: () = {
+    assert!(VRS_HOST_MAX_VECTORS as usize == vrsync_bridge::MAX_VECTORS);
+    assert!(VRS_HOST_MAX_ACTIONS as usize == vrsync_bridge::MAX_ACTIONS);
+    assert!(VRS_HOST_CHANNEL_NAME_SIZE == vrsync_cabi::CHANNEL_NAME_SIZE);
     assert!(VRS_HOST_MAX_IMAGES as usize == vrsync_bridge::MAX_CAMERAS);
     assert!(VRS_HOST_MAX_STATUSES as usize == vrsync_bridge::MAX_STATUSES);
     assert!(VRS_HOST_MAX_COLLISIONS as usize == vrsync_bridge::MAX_COLLISIONS);
@@ -66,7 +76,8 @@ pub enum vrs_host_status_t {
     VRS_HOST_ERROR_WRONG_STATE = -7,
     /// No frame is loaned for this agent (publish, image or discard without a loan).
     VRS_HOST_ERROR_NO_FRAME = -8,
-    /// An index is past the end of its table (image, camera, agent, command).
+    /// An index is past the end of its table (image, camera, agent, command, vector,
+    /// action).
     VRS_HOST_ERROR_OUT_OF_RANGE = -9,
     /// An agent was lost (its process died or disconnected) and the config says
     /// `on_agent_lost = "abort"`, or `"wait"` and it did not come back in time.
@@ -75,6 +86,9 @@ pub enum vrs_host_status_t {
     VRS_HOST_ERROR_TRANSPORT = -12,
     /// SIGINT or SIGTERM arrived: the program should end.
     VRS_HOST_ERROR_TERMINATED = -13,
+    /// The agent has no vector or action of that name in the config (the message lists
+    /// those it has).
+    VRS_HOST_ERROR_UNKNOWN_CHANNEL = -14,
     /// Something not covered above (see the message).
     VRS_HOST_ERROR_OTHER = -98,
     /// A bug: the library panicked (see the message).
@@ -522,6 +536,35 @@ pub struct vrs_host_stats_t {
     /// Peers refused or dropped before they were admitted as agents (garbage, a wrong
     /// token or protocol version, an unknown or taken id, a silent connection).
     pub peers_refused: u64,
+    /// Action chunks refused (an unknown action, a value of the wrong length, out of its
+    /// bounds or not finite, a choice out of range): none of it was applied. Per agent and
+    /// cycle: `vrs_host_actions_rejected`.
+    pub actions_rejected: u64,
+}
+
+impl From<&HostStats> for vrs_host_stats_t {
+    fn from(s: &HostStats) -> Self {
+        Self {
+            cycles: s.cycles,
+            stop_timeouts: s.stop_timeouts,
+            agent_timeouts: s.agent_timeouts,
+            late_batches: s.late_batches,
+            future_batches: s.future_batches,
+            commands_received: s.commands_received,
+            commands_overflowed: s.commands_overflowed,
+            frames_undelivered: s.frames_undelivered,
+            evictions: s.evictions,
+            rejoins: s.rejoins,
+            frames_delivered: s.frames_delivered,
+            frames_read: s.frames_read,
+            statuses_dropped: s.statuses_dropped,
+            collisions_dropped: s.collisions_dropped,
+            slow_stops: s.slow_stops,
+            leaves: s.leaves,
+            peers_refused: s.peers_refused,
+            actions_rejected: s.actions_rejected,
+        }
+    }
 }
 
 // The command array of a report is the host's `[MotorCommand]`, handed out as is.
@@ -537,12 +580,13 @@ const _: () = {
     assert!(size_of::<vrs_host_sensors_t>() == 328);
     assert!(size_of::<vrs_host_command_t>() == 32);
     assert!(size_of::<vrs_host_cycle_t>() == 48);
-    assert!(size_of::<vrs_host_stats_t>() == 136);
+    assert!(size_of::<vrs_host_stats_t>() == 144);
     // Fields are only ever appended: the offsets of the first ABI's fields stay put.
     assert!(offset_of!(vrs_host_cycle_t, rejoined_agents) == 36);
     assert!(offset_of!(vrs_host_cycle_t, left_agents) == 40);
     assert!(offset_of!(vrs_host_stats_t, collisions_dropped) == 104);
     assert!(offset_of!(vrs_host_stats_t, slow_stops) == 112);
+    assert!(offset_of!(vrs_host_stats_t, actions_rejected) == 136);
 };
 
 // The report holds a pointer: these hold on 64-bit targets, which the C# binding mirrors.
