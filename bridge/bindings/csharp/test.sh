@@ -9,6 +9,8 @@
 #   5. stop timeout  agent 1 stops late once: a TimedOut outcome, no exception
 #   6. leave, slow   agent 0 leaves after 3 cycles (Left, Stats.Leaves), agent 1 busy past the
 #                    stop timeout under wait_for_stop = "alive" (Slow, Stats.SlowStops)
+#   7. channels      vectors written through Span<float> reach the Rust channel_agent example,
+#                    its actions come back in the reports (values checked), errors named
 # Needs: cargo, mcs, mono (apt-get install -y mono-mcs mono-runtime), a C compiler for 1.
 # Every process runs under `timeout`; children are killed on exit. Usage:
 #   bash bridge/bindings/csharp/test.sh
@@ -238,5 +240,45 @@ timeout 90 mono --debug "$work/VrsyncTests.exe" leave-slow "$work/leave.toml" 2>
 [[ ${PIPESTATUS[0]} == 0 ]] || fail "VrsyncTests.exe leave-slow"
 expect_exit "$leave_agent0" "vr-agent 0 (leave after 3 frames)"
 expect_exit "$leave_agent1" "vr-agent 1 (slow once)"
+
+step "7. channels: vectors and actions with the Rust channel_agent example"
+cat >"$work/channels.toml" <<EOF
+session = "$session_base-channels"
+[sync]
+stop_timeout = 5.0
+connect_timeout = 20.0
+[[agent]]
+id = 0
+[[agent.camera]]
+name = "left"
+width = 16
+height = 8
+[[agent.vector]]
+name = "joints"
+len = 3
+low = -1.0
+high = 1.0
+[[agent.vector]]
+name = "vel"
+len = 2
+[[agent.action]]
+name = "torque"
+len = 3
+low = -2.0
+high = 2.0
+[[agent.action]]
+name = "gear"
+n = 3
+EOF
+[[ -x "$bin/examples/channel_agent" ]] || fail "$bin/examples/channel_agent was not built"
+channel_seed=5
+timeout 90 "$bin/examples/channel_agent" "$work/channels.toml" 0 "$channel_seed" \
+    >"$work/channels-agent0.log" 2>&1 &
+channel_agent=$!
+pids+=("$channel_agent")
+timeout 90 mono --debug "$work/VrsyncTests.exe" channels "$work/channels.toml" "$channel_seed" 2>&1 |
+    tee "$work/channels.log"
+[[ ${PIPESTATUS[0]} == 0 ]] || fail "VrsyncTests.exe channels"
+expect_exit "$channel_agent" "channel_agent 0 after the host closed the session"
 
 step "C# binding: all tests passed"

@@ -1,10 +1,12 @@
 // vrsync C# binding: the host API (Vrsync.Host) over libvrsync_host.
 //
 // One cycle, as the original Unity app's AgentScript.Update() ran it in two engine frames:
-//   frame 1: for each agent  var f = host.LoanFrame(id);  write f.GetImage(i).Pixels;
-//            f.Publish(ref sensors);   then  host.Start();
+//   frame 1: for each agent  var f = host.LoanFrame(id);  write f.GetImage(i).Pixels
+//            (and f.Vector("joints"): Channels.cs);  f.Publish(ref sensors);
+//            then  host.Start();
 //   frame 2: var c = host.Collect();   (blocks until every stop, or stop_timeout)
-//            for i < c.AgentCount: var r = host.GetReport(i); apply r.Commands;
+//            for i < c.AgentCount: var r = host.GetReport(i); apply r.Commands
+//            (and r.Action("torque"));
 //            host.EndCycle();
 // A Host belongs to the thread that created it (Unity: the main thread).
 
@@ -162,7 +164,7 @@ namespace Vrsync
     /// <see cref="Host.LoanFrame"/>: write the images, then <see cref="Publish"/> it (or
     /// <see cref="Discard"/> it).
     /// </summary>
-    public readonly struct SensorFrame
+    public readonly partial struct SensorFrame
     {
         /// <summary>Most images (cameras) per agent.</summary>
         public const int MaxImages = 4;
@@ -220,8 +222,9 @@ namespace Vrsync
     /// library's memory and is valid until <see cref="Host.EndCycle"/> (a ref struct, so it
     /// cannot be kept longer by mistake).
     /// </summary>
-    public readonly ref struct AgentReport
+    public readonly ref partial struct AgentReport
     {
+        readonly Host host;
         public readonly uint AgentId;
         public readonly AgentOutcome Outcome;
         /// <summary>The commands, in the order the agent sent them.</summary>
@@ -246,8 +249,9 @@ namespace Vrsync
         /// agent, reported, not timed out.</summary>
         public readonly bool Slow;
 
-        internal unsafe AgentReport(NativeStructs.AgentReport r)
+        internal unsafe AgentReport(Host host, NativeStructs.AgentReport r)
         {
+            this.host = host;
             AgentId = r.AgentId;
             Outcome = r.Outcome;
             Commands = r.Commands == null
@@ -322,6 +326,10 @@ namespace Vrsync
     {
         public uint Id { get; internal set; }
         public CameraInfo[] Cameras { get; internal set; }
+        /// <summary>Its vectors (<c>[[agent.vector]]</c>), in config order.</summary>
+        public VectorSpec[] Vectors { get; internal set; }
+        /// <summary>Its actions (<c>[[agent.action]]</c>), in config order.</summary>
+        public ActionSpec[] Actions { get; internal set; }
     }
 
     /// <summary>
@@ -331,7 +339,7 @@ namespace Vrsync
     /// <c>OnDestroy</c> / <c>OnApplicationQuit</c>) to close the session; agents then end
     /// cleanly.
     /// </summary>
-    public sealed class Host : IDisposable
+    public sealed partial class Host : IDisposable
     {
         readonly HostHandle handle;
         readonly AgentInfo[] agents;
@@ -365,6 +373,7 @@ namespace Vrsync
                 for (uint c = 0; c < a.CameraCount; c++)
                     Check(Native.vrs_host_camera(handle, a.AgentId, c, out cameras[c]), "vrs_host_camera");
                 agents[i] = new AgentInfo { Id = a.AgentId, Cameras = cameras };
+                LoadChannels(agents[i]);
             }
         }
 
@@ -402,6 +411,9 @@ namespace Vrsync
                 Row("vrs_host_agent_report_t", typeof(NativeStructs.AgentReport), Native.vrs_host_sizeof_agent_report()),
                 Row("vrs_host_stats_t", typeof(HostStats), Native.vrs_host_sizeof_stats()),
             };
+            var channelRows = ChannelLayoutRows();
+            Array.Resize(ref rows, rows.Length + channelRows.Length);
+            channelRows.CopyTo(rows, rows.Length - channelRows.Length);
             foreach (var r in rows)
                 if (r.StartsWith("MISMATCH"))
                     throw new VrsyncException(Status.InvalidArgument, "Vrsync.Host.CheckLayout",
@@ -576,7 +588,7 @@ namespace Vrsync
         {
             NativeStructs.AgentReport r;
             Check(Native.vrs_host_agent_report(Handle, (uint)index, out r), "vrs_host_agent_report");
-            return new AgentReport(r);
+            return new AgentReport(this, r);
         }
 
         /// <summary>The report of agent <paramref name="agentId"/> in the cycle just collected
@@ -587,7 +599,7 @@ namespace Vrsync
         {
             NativeStructs.AgentReport r;
             Check(Native.vrs_host_agent_report_by_id(Handle, agentId, out r), "vrs_host_agent_report_by_id");
-            return new AgentReport(r);
+            return new AgentReport(this, r);
         }
 
         /// <summary>The summary of agent <paramref name="agentId"/>'s part of the cycle just

@@ -33,6 +33,8 @@ namespace Vrsync
         AgentLost = -10,
         Transport = -12,
         Terminated = -13,
+        /// <summary>The agent has no vector or action of that name.</summary>
+        UnknownChannel = -14,
         Other = -98,
         Panic = -99,
     }
@@ -545,10 +547,14 @@ namespace Vrsync
         /// wrong token or protocol version, an unknown or taken id, a silent
         /// connection).</summary>
         public ulong PeersRefused;
+        /// <summary>Action values refused (unknown action, wrong length, out of bounds, not
+        /// finite, a choice out of range): none was applied. Per agent and cycle:
+        /// <see cref="AgentReport.ActionsRejected"/>.</summary>
+        public ulong ActionsRejected;
     }
 
     /// <summary>The raw C structs the public types are built from.</summary>
-    public static unsafe class NativeStructs
+    public static unsafe partial class NativeStructs
     {
         [StructLayout(LayoutKind.Sequential)]
         public struct Frame
@@ -598,7 +604,7 @@ namespace Vrsync
     }
 
     /// <summary>P/Invoke declarations of libvrsync_host (vrsync_host.dll on Windows).</summary>
-    public static unsafe class Native
+    public static unsafe partial class Native
     {
         /// <summary>The library name: Unity and Mono find <c>libvrsync_host.so</c>,
         /// <c>libvrsync_host.dylib</c> or <c>vrsync_host.dll</c> from it.</summary>

@@ -4,6 +4,7 @@
 //   VrsyncTests.exe api CONFIG              API, errors, missing agent 1 (agent 0 runs)
 //   VrsyncTests.exe stop-timeout CONFIG     agent 1 stops late once: an outcome, not an exception
 //   VrsyncTests.exe leave-slow CONFIG       agent 0 leaves after 3 cycles, agent 1 is slow in cycle 1
+//   VrsyncTests.exe channels CONFIG SEED    vectors and actions with the Rust channel_agent example
 // Prints "ok <check>" lines; exits 1 with "FAIL <why>" on the first failed check.
 
 using System;
@@ -24,8 +25,9 @@ static class Tests
                 case "api": Api(args[1]); break;
                 case "stop-timeout": StopTimeout(args[1]); break;
                 case "leave-slow": LeaveSlow(args[1]); break;
+                case "channels": Channels(args[1], uint.Parse(args[2])); break;
                 default:
-                    Console.Error.WriteLine("usage: VrsyncTests.exe layout | api CONFIG | stop-timeout CONFIG | leave-slow CONFIG");
+                    Console.Error.WriteLine("usage: VrsyncTests.exe layout | api CONFIG | stop-timeout CONFIG | leave-slow CONFIG | channels CONFIG SEED");
                     return 2;
             }
             return 0;
@@ -97,7 +99,12 @@ static class Tests
         "vrs_host_agent_report_t", typeof(NativeStructs.AgentReport),
             "agent_id=AgentId outcome=Outcome command_count=CommandCount reserved=Reserved commands=Commands read_cycle=ReadCycle evicted=Evicted rejoined=Rejoined left=Left slow=Slow",
         "vrs_host_stats_t", typeof(HostStats),
-            "cycles=Cycles stop_timeouts=StopTimeouts agent_timeouts=AgentTimeouts late_batches=LateBatches future_batches=FutureBatches commands_received=CommandsReceived commands_overflowed=CommandsOverflowed frames_undelivered=FramesUndelivered evictions=Evictions rejoins=Rejoins frames_delivered=FramesDelivered frames_read=FramesRead statuses_dropped=StatusesDropped collisions_dropped=CollisionsDropped slow_stops=SlowStops leaves=Leaves peers_refused=PeersRefused",
+            "cycles=Cycles stop_timeouts=StopTimeouts agent_timeouts=AgentTimeouts late_batches=LateBatches future_batches=FutureBatches commands_received=CommandsReceived commands_overflowed=CommandsOverflowed frames_undelivered=FramesUndelivered evictions=Evictions rejoins=Rejoins frames_delivered=FramesDelivered frames_read=FramesRead statuses_dropped=StatusesDropped collisions_dropped=CollisionsDropped slow_stops=SlowStops leaves=Leaves peers_refused=PeersRefused actions_rejected=ActionsRejected",
+        "vrs_host_vector_t", typeof(NativeStructs.Vector), "data=Data len=Length index=Index name=Name",
+        "vrs_host_vector_spec_t", typeof(NativeStructs.VectorSpec), "low=Low high=High len=Length index=Index name=Name",
+        "vrs_host_action_spec_t", typeof(NativeStructs.ActionSpec), "low=Low high=High len=Length n=N kind=Kind index=Index name=Name",
+        "vrs_host_action_value_t", typeof(NativeStructs.ActionValue),
+            "values=Values len=Length choice=Choice kind=Kind index=Index name=Name",
     };
 
     static string Snake(string pascal)
@@ -143,10 +150,14 @@ static class Tests
         Enum<AgentOutcome>("VRS_HOST_OUTCOME_", n => "");
         Enum<CommandKind>("VRS_HOST_COMMAND_", n => "");
         Enum<Transport>("VRS_HOST_TRANSPORT_", n => "");
+        Enum<ActionKind>("VRS_HOST_ACTION_KIND_", n => "");
         Console.WriteLine("VRS_HOST_MAX_STATUSES " + Sensors.MaxStatuses);
         Console.WriteLine("VRS_HOST_MAX_COLLISIONS " + Sensors.MaxCollisions);
         Console.WriteLine("VRS_HOST_MAX_IMAGES " + SensorFrame.MaxImages);
         Console.WriteLine("VRS_HOST_CAMERA_NAME_SIZE " + CameraInfo.NameSize);
+        Console.WriteLine("VRS_HOST_MAX_VECTORS " + SensorFrame.MaxVectors);
+        Console.WriteLine("VRS_HOST_MAX_ACTIONS " + AgentReport.MaxActions);
+        Console.WriteLine("VRS_HOST_CHANNEL_NAME_SIZE " + SensorFrame.ChannelNameSize);
 
         // The Sensors helpers write the pairs where the C struct has them.
         Sensors s = Sensors.Create();
@@ -474,5 +485,107 @@ static class Tests
             Equal(0ul, stats.PeersRefused, "stats peers refused");
         }
         Ok("leave-slow: a graceful leave and a slow agent in the reports and the stats");
+    }
+
+    // ---------------------------------------------------------------------------------
+    // channels: agent 0 with vectors joints[3] (bounds -1..1), vel[2] and actions
+    // torque[3] (bounds -2..2), gear (n = 3), run by the Rust example channel_agent with
+    // SEED: its torque depends on the seed, the cycle and the first value of its first
+    // vector, so the values the host reads prove that the vector arrived too.
+
+    static float ExpectedTorque(ulong cycle, uint seed, float sensed, int i, float lo, float hi)
+    {
+        float phase = ((float)cycle + (float)seed) * 0.05f;
+        float swing = (float)Math.Sin(phase + i) - 0.1f * (float)Math.Tanh(sensed);
+        swing = Math.Max(-1f, Math.Min(1f, swing));
+        return lo + (hi - lo) * (0.5f + 0.45f * swing);
+    }
+
+    static void Channels(string config, uint seed)
+    {
+        using (var host = new Host(config))
+        {
+            AgentInfo agent = host.Agents[0];
+            Equal(2, agent.Vectors.Length, "vectors");
+            Equal("joints", agent.Vectors[0].Name, "vector 0");
+            Equal(3, agent.Vectors[0].Length, "joints length");
+            Equal(-1f, agent.Vectors[0].Low[2], "joints low");
+            Equal("vel", agent.Vectors[1].Name, "vector 1");
+            Expect(float.IsPositiveInfinity(agent.Vectors[1].High[1]), "vel: no bound is +inf");
+            Equal(2, agent.Actions.Length, "actions");
+            ActionSpec torqueSpec = agent.Actions[0];
+            Equal("torque", torqueSpec.Name, "action 0");
+            Equal(ActionKind.Box, torqueSpec.Kind, "torque kind");
+            Equal(3, torqueSpec.Length, "torque length");
+            Equal(2f, torqueSpec.High[0], "torque high");
+            Equal(ActionKind.Discrete, agent.Actions[1].Kind, "gear kind");
+            Equal(3u, agent.Actions[1].N, "gear choices");
+            Equal(0, agent.Actions[1].Low.Length, "a discrete action has no bounds");
+            Ok("channel specs from the config");
+
+            host.WaitForAgents(20);
+            Throws(Status.NoFrame, () => host.GetVector(0, "joints"), "a vector without a loaned frame");
+            const int cycles = 12;
+            for (int n = 0; n < cycles; n++)
+            {
+                SensorFrame frame = host.LoanFrame(0);
+                for (int i = 0; i < frame.ImageCount; i++)
+                    frame.GetImage(i).Pixels.Fill(64);
+                Span<float> joints = frame.Vector("joints");
+                Equal(3, joints.Length, "joints span");
+                float sensed = 0.25f * n - 1f;
+                joints[0] = sensed;
+                joints[1] = 0f;
+                joints[2] = -sensed;
+                Span<float> vel = frame.Vector(1);
+                Equal(2, vel.Length, "vel span");
+                vel.Fill(n);
+                var unknown = Throws(Status.UnknownChannel, () => frame.Vector("speed"), "an unknown vector");
+                Expect(unknown.Message.Contains("\"speed\"") && unknown.Message.Contains("joints, vel"),
+                    "the message names the vector and the agent's vectors: " + unknown.Message);
+                Throws(Status.OutOfRange, () => frame.Vector(2), "vector index");
+                bool threw = false;
+                try { Span<float> j = frame.Vector(0); j[3] = 1f; } catch (IndexOutOfRangeException) { threw = true; }
+                Expect(threw, "the span is bounded by the vector");
+                Sensors sensors = Sensors.Create();
+                frame.Publish(ref sensors);
+                host.Start();
+                Throws(Status.WrongState, () => host.GetAction(0, "torque"), "an action before collect");
+                CycleResult cycle = host.Collect();
+                Equal(0u, cycle.TimedOutAgents, "timeouts");
+                AgentReport r = host.GetReportById(0);
+                Equal(AgentOutcome.Stopped, r.Outcome, "outcome");
+                Equal(0, r.Commands.Length, "actions are not commands");
+                ActionValue torque = r.Action("torque");
+                Equal(ActionKind.Box, torque.Kind, "torque sent");
+                Equal(3, torque.Values.Length, "torque values");
+                for (int i = 0; i < 3; i++)
+                {
+                    float want = ExpectedTorque(cycle.Cycle, seed, sensed, i, torqueSpec.Low[i], torqueSpec.High[i]);
+                    Expect(Math.Abs(torque.Values[i] - want) < 1e-4,
+                        string.Format("cycle {0} torque[{1}] = {2}, expected {3} (from joints[0] = {4})",
+                            cycle.Cycle, i, torque.Values[i], want, sensed));
+                }
+                float[] kept = torque.ToArray();
+                Equal(torque.Values[2], kept[2], "ToArray");
+                ActionValue gear = r.Action(1);
+                Equal(ActionKind.Discrete, gear.Kind, "gear sent");
+                Equal((uint)((cycle.Cycle / 10 + seed) % 3), gear.Choice, "gear choice");
+                Equal(0, gear.Values.Length, "a choice has no values");
+                var thrust = Throws(Status.UnknownChannel, () => host.GetAction(0, "thrust"), "an unknown action");
+                Expect(thrust.Message.Contains("\"thrust\"") && thrust.Message.Contains("torque, gear"),
+                    "the message names the action and the agent's actions: " + thrust.Message);
+                Throws(Status.OutOfRange, () => host.GetAction(0, 2), "action index");
+                Throws(Status.UnknownAgent, () => host.GetAction(4, 0), "an unknown agent");
+                Equal(0u, r.ActionsRejected, "actions rejected");
+                host.EndCycle();
+            }
+            Throws(Status.WrongState, () => host.GetAction(0, 0), "an action after the cycle ended");
+            HostStats stats = host.Stats;
+            Equal((ulong)cycles, stats.Cycles, "cycles");
+            Equal(0ul, stats.ActionsRejected, "stats actions rejected");
+            Equal(0ul, stats.StopTimeouts, "stop timeouts");
+        }
+        Ok("channels: vectors written in place reach the agent, its actions reach the report");
     }
 }

@@ -130,6 +130,33 @@ int main(void) {
     F(vrs_host_stats_t, slow_stops);
     F(vrs_host_stats_t, leaves);
     F(vrs_host_stats_t, peers_refused);
+    F(vrs_host_stats_t, actions_rejected);
+    S(vrs_host_vector_t);
+    F(vrs_host_vector_t, data);
+    F(vrs_host_vector_t, len);
+    F(vrs_host_vector_t, index);
+    F(vrs_host_vector_t, name);
+    S(vrs_host_vector_spec_t);
+    F(vrs_host_vector_spec_t, low);
+    F(vrs_host_vector_spec_t, high);
+    F(vrs_host_vector_spec_t, len);
+    F(vrs_host_vector_spec_t, index);
+    F(vrs_host_vector_spec_t, name);
+    S(vrs_host_action_spec_t);
+    F(vrs_host_action_spec_t, low);
+    F(vrs_host_action_spec_t, high);
+    F(vrs_host_action_spec_t, len);
+    F(vrs_host_action_spec_t, n);
+    F(vrs_host_action_spec_t, kind);
+    F(vrs_host_action_spec_t, index);
+    F(vrs_host_action_spec_t, name);
+    S(vrs_host_action_value_t);
+    F(vrs_host_action_value_t, values);
+    F(vrs_host_action_value_t, len);
+    F(vrs_host_action_value_t, choice);
+    F(vrs_host_action_value_t, kind);
+    F(vrs_host_action_value_t, index);
+    F(vrs_host_action_value_t, name);
 
     E(VRS_HOST_OK);
     E(VRS_HOST_TIMEOUT);
@@ -146,6 +173,7 @@ int main(void) {
     E(VRS_HOST_ERROR_AGENT_LOST);
     E(VRS_HOST_ERROR_TRANSPORT);
     E(VRS_HOST_ERROR_TERMINATED);
+    E(VRS_HOST_ERROR_UNKNOWN_CHANNEL);
     E(VRS_HOST_ERROR_OTHER);
     E(VRS_HOST_ERROR_PANIC);
     E(VRS_HOST_PIXEL_FORMAT_RGB8);
@@ -184,9 +212,15 @@ int main(void) {
     E(VRS_HOST_TRANSPORT_TCP);
     E(VRS_HOST_TRANSPORT_ZENOH);
     E(VRS_HOST_TRANSPORT_LEGACY);
+    E(VRS_HOST_ACTION_KIND_NONE);
+    E(VRS_HOST_ACTION_KIND_BOX);
+    E(VRS_HOST_ACTION_KIND_DISCRETE);
     E(VRS_HOST_MAX_STATUSES);
     E(VRS_HOST_MAX_COLLISIONS);
     E(VRS_HOST_MAX_IMAGES);
     E(VRS_HOST_CAMERA_NAME_SIZE);
+    E(VRS_HOST_MAX_VECTORS);
+    E(VRS_HOST_MAX_ACTIONS);
+    E(VRS_HOST_CHANNEL_NAME_SIZE);
     return 0;
 }
