@@ -37,6 +37,8 @@ pub struct Sdk {
     lib: PathBuf,
     /// `vrsync/agent.hpp` example, CMake, shared library.
     pub cpp_agent: PathBuf,
+    /// `vrsync/agent.hpp` channels example (vectors and actions), CMake, shared library.
+    cpp_channel_agent: PathBuf,
     /// `vrsync/compat.hpp` example, CMake, shared library.
     compat_agent: PathBuf,
     /// C example, CMake, shared library.
@@ -210,6 +212,7 @@ pub fn sdk() -> &'static Sdk {
         Sdk {
             lib: prefix.join("lib"),
             cpp_agent: build.join("cpp_agent/cpp_agent"),
+            cpp_channel_agent: build.join("cpp_channel_agent/cpp_channel_agent"),
             compat_agent: build.join("compat_agent/compat_agent"),
             c_agent: build.join("c_agent/c_agent"),
             compat_static,
@@ -440,6 +443,7 @@ fn c_and_cpp_examples_load_the_installed_library() {
     let sdk = sdk();
     for program in [
         &sdk.cpp_agent,
+        &sdk.cpp_channel_agent,
         &sdk.compat_agent,
         &sdk.c_agent,
         &sdk.c_pkg_config,
@@ -466,7 +470,65 @@ fn c_and_cpp_examples_load_the_installed_library() {
     }
 }
 
+/// The C++ channels example (`vrsync/agent.hpp`: `frame.vector`, `agent.act`,
+/// `agent.act_discrete`, the specs) through a whole `vr-sim run`, whose world has no use for
+/// channels: the vectors arrive zeroed, the actions are received and left alone. What can
+/// be seen from outside: every cycle stopped in time with every action queued, the specs
+/// as configured, and a value of the wrong length refused with its status, naming the
+/// action.
+fn cpp_channel_agent_runs_against_vr_sim(t: Transport) {
+    let sdk = sdk();
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = TestConfig::with_transport("cpp-channels", 1, t);
+    cfg.agent_extra = "[[agent.vector]]\nname = \"joints\"\nlen = 7\n\
+                       [[agent.vector]]\nname = \"vel\"\nlen = 3\n\
+                       [[agent.action]]\nname = \"torque\"\nlen = 7\nlow = -2.0\nhigh = 2.0\n\
+                       [[agent.action]]\nname = \"gear\"\nn = 3\n"
+        .into();
+    let config_path = cfg.write(dir.path());
+    let config = config_path.to_str().unwrap();
+    let s = dir.path().join("summary.json");
+    let events = Events::in_dir(dir.path());
+    let host = spawn_host(
+        &config_path,
+        &events,
+        &["--frames", "40", "--summary-json", s.to_str().unwrap()],
+    );
+    cfg.follow_host(&events, &config_path);
+    let agent = agent(&sdk.cpp_channel_agent, &[config, "0", "3"]);
+
+    let out = host.wait(RUN_DEADLINE);
+    assert_eq!(out.code(), Some(0), "vr-sim stderr:\n{}", out.stderr);
+    let out = agent.wait(RUN_DEADLINE);
+    assert_eq!(
+        out.code(),
+        Some(0),
+        "cpp_channel_agent: stdout:\n{}\nstderr:\n{}",
+        out.stdout,
+        out.stderr
+    );
+    for expected in [
+        // vrsync::Error from vrs_agent_act: its status and the library's message.
+        "refused (VRS_ERROR_WRONG_LENGTH): vrs_agent_act: action \"torque\" takes 7 floats, got 1",
+        // Two actions a cycle; the specs as configured; vr-sim leaves the vectors at zero.
+        ": 40 cycles, 80 actions, vectors: joints[7] vel[3]; actions: torque[7] in [-2.000000, \
+         2.000000] gear in 0..3, largest |vector value| 0",
+    ] {
+        assert!(
+            out.stdout.contains(expected),
+            "cpp_channel_agent stdout should contain {expected:?}:\n{}",
+            out.stdout
+        );
+    }
+    let sum = summary(&s);
+    assert_eq!(sum["frames"], 40, "{sum}");
+    assert_eq!(sum["stop_timeouts"], 0, "{sum}");
+    assert_eq!(sum["late_stops"], 0, "{sum}");
+    assert_eq!(sum["frames_read"], 40, "{sum}");
+}
+
 for_each_transport!(
     c_and_cpp_agents_run_100_sync_cycles,
     agents_end_when_the_host_is_killed,
+    cpp_channel_agent_runs_against_vr_sim,
 );

@@ -7,11 +7,14 @@
 //     while (vrsync::Frame frame = agent.wait_start()) {      // empty frame: run over
 //         const vrsync::Image& left = frame.image("left");     // a view into shared memory
 //         ... left.data(), left.width(), left.height(), left.stride() ...
+//         vrsync::View<float> joints = frame.vector("joints"); // [[agent.vector]], no copy
 //         agent.send_move(90.0f, 1.0f);
+//         agent.act("torque", {0.1f, -0.2f});        // [[agent.action]] (continuous)
+//         agent.act_discrete("gear", 2);             // [[agent.action]] (discrete)
 //         agent.stop();                              // ends the cycle and the frame
 //     }
 //
-// Lifetimes: a Frame and its Images are views. They stay valid until the next
+// Lifetimes: a Frame, its Images and its vectors are views. They stay valid until the next
 // wait_start()/try_wait_start(), stop() or the end of the Agent, whichever comes first.
 // Threads: an Agent belongs to the thread that constructed it (calls from another thread
 // throw an Error with status VRS_ERROR_WRONG_THREAD).
@@ -24,6 +27,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#include <initializer_list>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -52,6 +56,8 @@ using ActionStatus = vrs_action_status_t;
 using Collision = vrs_collision_t;
 /// A command of any kind, for Agent::send().
 using Command = vrs_command_t;
+/// Continuous (VRS_ACTION_KIND_BOX) or discrete (VRS_ACTION_KIND_DISCRETE) action.
+using ActionKind = vrs_action_kind_t;
 
 /// The library version, e.g. "0.1.0".
 inline const char* version() noexcept { return vrs_version(); }
@@ -94,6 +100,7 @@ class View {
 public:
     constexpr View() noexcept = default;
     constexpr View(const T* first, std::size_t count) noexcept : first_(first), count_(count) {}
+    constexpr const T* data() const noexcept { return first_; }
     constexpr const T* begin() const noexcept { return first_; }
     constexpr const T* end() const noexcept { return first_ + count_; }
     constexpr std::size_t size() const noexcept { return count_; }
@@ -141,8 +148,51 @@ private:
     vrs_image_t raw_;
 };
 
-/// A sensor frame: scalar sensors copied, images as views into shared memory. An empty
-/// frame (false in a condition) means the host closed the session.
+/// One vector ([[agent.vector]]) of this agent as its config declares it: name, length and
+/// observation bounds (-inf/+inf where the config gives none). Valid while the Agent lives.
+class VectorSpec {
+public:
+    explicit VectorSpec(const vrs_vector_spec_t& raw) noexcept : raw_(raw) {}
+    std::string_view name() const noexcept { return std::string_view(raw_.name); }
+    /// Number of values.
+    std::size_t size() const noexcept { return raw_.len; }
+    View<float> low() const noexcept { return View<float>(raw_.low, raw_.len); }
+    View<float> high() const noexcept { return View<float>(raw_.high, raw_.len); }
+    /// Index in the agent's vector list.
+    std::uint32_t index() const noexcept { return raw_.index; }
+    const vrs_vector_spec_t& raw() const noexcept { return raw_; }
+
+private:
+    vrs_vector_spec_t raw_;
+};
+
+/// One action ([[agent.action]]) of this agent as its config declares it: continuous
+/// (size() floats within low() and high()) or discrete (a choice in 0..n()). Valid while
+/// the Agent lives.
+class ActionSpec {
+public:
+    explicit ActionSpec(const vrs_action_spec_t& raw) noexcept : raw_(raw) {}
+    std::string_view name() const noexcept { return std::string_view(raw_.name); }
+    ActionKind kind() const noexcept { return raw_.kind; }
+    bool is_discrete() const noexcept { return raw_.kind == VRS_ACTION_KIND_DISCRETE; }
+    /// Continuous: number of floats; discrete: 0.
+    std::size_t size() const noexcept { return raw_.len; }
+    /// Discrete: number of choices; continuous: 0.
+    std::uint32_t n() const noexcept { return raw_.n; }
+    /// Continuous: the lower bounds; discrete: empty.
+    View<float> low() const noexcept { return View<float>(raw_.low, raw_.len); }
+    /// Continuous: the upper bounds; discrete: empty.
+    View<float> high() const noexcept { return View<float>(raw_.high, raw_.len); }
+    /// Index in the agent's action list.
+    std::uint32_t index() const noexcept { return raw_.index; }
+    const vrs_action_spec_t& raw() const noexcept { return raw_; }
+
+private:
+    vrs_action_spec_t raw_;
+};
+
+/// A sensor frame: scalar sensors copied, images and vectors as views into shared memory.
+/// An empty frame (false in a condition) means the host closed the session.
 class Frame {
 public:
     /// An empty frame.
@@ -200,6 +250,34 @@ public:
     View<Collision> collisions() const noexcept {
         return View<Collision>(collisions_.data(), raw_.collision_count);
     }
+    /// Number of vectors ([[agent.vector]], config order).
+    std::size_t vector_count() const noexcept { return vector_count_; }
+    /// Vector i (config order), a view into shared memory; throws Error
+    /// (VRS_ERROR_OUT_OF_RANGE) past the end.
+    View<float> vector(std::size_t i) const {
+        if (i >= vector_count_) {
+            throw Error(VRS_ERROR_OUT_OF_RANGE, "vector index " + std::to_string(i) +
+                                                    " is out of range (the frame has " +
+                                                    std::to_string(vector_count_) + ")");
+        }
+        return View<float>(vectors_[i].data, vectors_[i].len);
+    }
+    /// The vector called name, or std::nullopt.
+    std::optional<View<float>> find_vector(std::string_view name) const noexcept {
+        for (std::size_t i = 0; i < vector_count_; ++i) {
+            if (std::string_view(vectors_[i].name) == name) {
+                return View<float>(vectors_[i].data, vectors_[i].len);
+            }
+        }
+        return std::nullopt;
+    }
+    /// The vector called name, a view into shared memory (no copy); throws Error
+    /// (VRS_ERROR_UNKNOWN_CHANNEL) if the agent has none of that name.
+    View<float> vector(std::string_view name) const {
+        if (std::optional<View<float>> v = find_vector(name)) return *v;
+        throw Error(VRS_ERROR_UNKNOWN_CHANNEL,
+                    "the frame has no vector named \"" + std::string(name) + "\"");
+    }
     /// The C frame description.
     const vrs_frame_t& raw() const noexcept { return raw_; }
 
@@ -210,6 +288,8 @@ private:
     std::array<Image, VRS_MAX_IMAGES> images_{};
     std::array<ActionStatus, VRS_MAX_STATUSES> statuses_{};
     std::array<Collision, VRS_MAX_COLLISIONS> collisions_{};
+    std::array<vrs_vector_t, VRS_MAX_VECTORS> vectors_{};
+    std::size_t vector_count_ = 0;
 };
 
 /// A connected agent: move-only, disconnects on destruction.
@@ -223,16 +303,23 @@ public:
         detail::check(vrs_agent_connect(config_path.c_str(), id,
                                         detail::to_ms(connect_timeout), &handle_),
                       "vrs_agent_connect");
+        detail::check(vrs_agent_channel_counts(handle_, &vector_count_, &action_count_),
+                      "vrs_agent_channel_counts");
     }
     /// Leaves the session gracefully (vrs_agent_disconnect): the host is told at once.
     ~Agent() { reset(); }
     Agent(const Agent&) = delete;
     Agent& operator=(const Agent&) = delete;
-    Agent(Agent&& other) noexcept : handle_(std::exchange(other.handle_, nullptr)) {}
+    Agent(Agent&& other) noexcept
+        : handle_(std::exchange(other.handle_, nullptr)),
+          vector_count_(other.vector_count_),
+          action_count_(other.action_count_) {}
     Agent& operator=(Agent&& other) noexcept {
         if (this != &other) {
             reset();
             handle_ = std::exchange(other.handle_, nullptr);
+            vector_count_ = other.vector_count_;
+            action_count_ = other.action_count_;
         }
         return *this;
     }
@@ -345,6 +432,48 @@ public:
         detail::check(vrs_agent_send_with_id(handle(), action_id, &command), "send_with_id");
     }
 
+    // Channels ([[agent.vector]], [[agent.action]]).
+    /// Number of vectors this agent's frames carry.
+    std::size_t vector_count() const noexcept { return vector_count_; }
+    /// Number of actions this agent may send.
+    std::size_t action_count() const noexcept { return action_count_; }
+    /// Vector i as the config declares it. Throws Error (VRS_ERROR_OUT_OF_RANGE).
+    VectorSpec vector_spec(std::size_t i) const {
+        vrs_vector_spec_t raw;
+        detail::check(vrs_agent_vector_spec(handle(), i, &raw), "vrs_agent_vector_spec");
+        return VectorSpec(raw);
+    }
+    /// Action i as the config declares it. Throws Error (VRS_ERROR_OUT_OF_RANGE).
+    ActionSpec action_spec(std::size_t i) const {
+        vrs_action_spec_t raw;
+        detail::check(vrs_agent_action_spec(handle(), i, &raw), "vrs_agent_action_spec");
+        return ActionSpec(raw);
+    }
+    /// Queues the value of the continuous action `name` for this cycle (it goes with the
+    /// next stop(); the host takes the last value of a cycle). Throws Error naming the
+    /// action: VRS_ERROR_UNKNOWN_CHANNEL, VRS_ERROR_WRONG_LENGTH, VRS_ERROR_OUT_OF_BOUNDS,
+    /// VRS_ERROR_WRONG_ACTION_KIND, VRS_ERROR_QUEUE_FULL (nothing is queued then).
+    void act(const std::string& name, const float* values, std::size_t len) {
+        detail::check(vrs_agent_act(handle(), name.c_str(), values, len), "vrs_agent_act");
+    }
+    /// act() with a View, std::vector<float>, std::array<float, N>, …
+    template <class Floats>
+    auto act(const std::string& name, const Floats& values)
+        -> decltype(static_cast<const float*>(values.data()), values.size(), void()) {
+        act(name, values.data(), values.size());
+    }
+    /// act() with a braced list: agent.act("torque", {0.1f, -0.2f}).
+    void act(const std::string& name, std::initializer_list<float> values) {
+        act(name, values.begin(), values.size());
+    }
+    /// Queues the choice (0..n) of the discrete action `name` for this cycle. Throws Error
+    /// naming the action: VRS_ERROR_UNKNOWN_CHANNEL, VRS_ERROR_CHOICE_OUT_OF_RANGE,
+    /// VRS_ERROR_WRONG_ACTION_KIND, VRS_ERROR_QUEUE_FULL.
+    void act_discrete(const std::string& name, std::uint32_t choice) {
+        detail::check(vrs_agent_act_discrete(handle(), name.c_str(), choice),
+                      "vrs_agent_act_discrete");
+    }
+
     /// Ends this agent's cycle: sends the queued commands with the stop. The current
     /// frame (and its image views) ends here. Returns false if the host had already
     /// closed the session (the next wait_start() returns an empty frame). Throws Error.
@@ -386,6 +515,11 @@ private:
             detail::check(vrs_agent_collision(handle_, i, &frame.collisions_[i]),
                           "vrs_agent_collision");
         }
+        frame.vector_count_ = 0;
+        for (std::uint32_t i = 0; i < vector_count_ && i < VRS_MAX_VECTORS; ++i) {
+            detail::check(vrs_agent_vector(handle_, i, &frame.vectors_[i]), "vrs_agent_vector");
+            frame.vector_count_ = i + 1;
+        }
         return std::move(frame);
     }
 
@@ -403,6 +537,8 @@ private:
 
     vrs_agent_t* handle_ = nullptr;
     std::uint32_t id_ = 0;
+    std::uint32_t vector_count_ = 0;
+    std::uint32_t action_count_ = 0;
 };
 
 }  // namespace vrsync
