@@ -78,10 +78,6 @@ fn channel_calls_with_null_or_made_up_handles_are_errors() {
             last_error()
         );
     }
-    // SAFETY: a static string.
-    let name =
-        unsafe { CStr::from_ptr(vrs_host_status_name(VRS_HOST_ERROR_UNKNOWN_CHANNEL as i32)) };
-    assert_eq!(name.to_str().unwrap(), "VRS_HOST_ERROR_UNKNOWN_CHANNEL");
     assert_eq!(
         vrs_host_sizeof_vector(),
         std::mem::size_of::<vrs_host_vector_t>()
@@ -385,4 +381,37 @@ fn vectors_reach_the_agent_and_actions_reach_the_report() {
             ("vel".to_owned(), vec![0.0, 10.0, 20.0, 30.0, 40.0]),
         ]
     );
+}
+
+/// Every status of the header has its name in `vrs_host_status_name` (the table there is
+/// written by hand).
+#[test]
+fn every_status_of_the_header_has_its_name() {
+    let header = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("include/vrsync_host.h"),
+    )
+    .unwrap();
+    let body = header
+        .split("enum vrs_host_status_t")
+        .nth(1)
+        .and_then(|rest| rest.split("};").next())
+        .unwrap();
+    let statuses: Vec<(&str, i32)> = body
+        .lines()
+        .map(str::trim)
+        .filter(|l| l.starts_with("VRS_HOST_"))
+        .map(|l| {
+            let (name, value) = l.trim_end_matches(',').split_once(" = ").unwrap();
+            (name, value.parse().unwrap())
+        })
+        .collect();
+    assert!(
+        statuses.contains(&("VRS_HOST_ERROR_UNKNOWN_CHANNEL", -14)),
+        "{statuses:?}"
+    );
+    for (name, value) in statuses {
+        // SAFETY: a static string.
+        let got = unsafe { CStr::from_ptr(vrs_host_status_name(value)) };
+        assert_eq!(got.to_str().unwrap(), name);
+    }
 }

@@ -36,6 +36,18 @@ pub enum vrs_host_action_kind_t {
     VRS_HOST_ACTION_KIND_DISCRETE = 2,
 }
 
+impl vrs_host_action_kind_t {
+    /// The kind of an action of `space`. The `match` covers the bridge's action spaces: a
+    /// space added there does not compile here until it has its constant (and
+    /// `tests/channel_constants.rs` then checks the headers and the C# binding for it).
+    pub fn of(space: &ActionSpace) -> Self {
+        match space {
+            ActionSpace::Box { .. } => Self::VRS_HOST_ACTION_KIND_BOX,
+            ActionSpace::Discrete { .. } => Self::VRS_HOST_ACTION_KIND_DISCRETE,
+        }
+    }
+}
+
 /// One writable vector of a loaned frame: on shared memory, the memory the agent will
 /// read. The floats hold an older frame's values until written: write all of them.
 #[repr(C)]
@@ -224,7 +236,6 @@ fn action_spec_impl(
     index: u32,
     out_spec: *mut vrs_host_action_spec_t,
 ) -> Result<(), FfiError> {
-    use vrs_host_action_kind_t::*;
     with_host(host, |st| {
         let actions = &agent_config(st, agent_id)?.actions;
         let a = actions.get(index as usize).ok_or(FfiError::OutOfRange {
@@ -232,28 +243,16 @@ fn action_spec_impl(
             index: index as usize,
             count: actions.len(),
         })?;
-        let (low, high, len, n, kind) = match &a.space {
-            ActionSpace::Box { low, high } => (
-                low.as_ptr(),
-                high.as_ptr(),
-                low.len() as u32,
-                0,
-                VRS_HOST_ACTION_KIND_BOX,
-            ),
-            ActionSpace::Discrete { n } => (
-                std::ptr::null(),
-                std::ptr::null(),
-                0,
-                *n,
-                VRS_HOST_ACTION_KIND_DISCRETE,
-            ),
+        let (low, high, len, n) = match &a.space {
+            ActionSpace::Box { low, high } => (low.as_ptr(), high.as_ptr(), low.len() as u32, 0),
+            ActionSpace::Discrete { n } => (std::ptr::null(), std::ptr::null(), 0, *n),
         };
         let spec = vrs_host_action_spec_t {
             low,
             high,
             len,
             n,
-            kind,
+            kind: vrs_host_action_kind_t::of(&a.space),
             index,
             name: c_name(&a.name),
         };

@@ -5,54 +5,15 @@
 //! added), and none of them lists a transport the bridge does not have.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
 
 use vrsync_bridge::TransportKind;
 use vrsync_host::vrs_host_transport_t;
 
-fn repo_file(relative: &str) -> (PathBuf, String) {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(relative);
-    let text = std::fs::read_to_string(&path)
-        .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
-    (path, text)
-}
-
-/// The lines of `text` from the first one containing `start` to the next one that
-/// starts (trimmed) with `end`.
-fn block<'t>(text: &'t str, start: &str, end: &str, path: &Path) -> Vec<&'t str> {
-    let mut lines = text.lines().skip_while(|l| !l.contains(start));
-    assert!(
-        lines.next().is_some(),
-        "{}: no `{start}` found",
-        path.display()
-    );
-    lines
-        .take_while(|l| !l.trim_start().starts_with(end))
-        .collect()
-}
-
-/// `NAME = value,` lines of an enum body, comments and attributes skipped.
-fn members(lines: &[&str], path: &Path) -> BTreeMap<String, u32> {
-    lines
-        .iter()
-        .map(|l| l.trim())
-        .filter(|l| l.contains('=') && !l.starts_with("//") && !l.starts_with('#'))
-        .map(|l| {
-            let (name, value) = l
-                .trim_end_matches(',')
-                .split_once('=')
-                .unwrap_or_else(|| panic!("{}: cannot read `{l}`", path.display()));
-            let value = value
-                .trim()
-                .parse()
-                .unwrap_or_else(|e| panic!("{}: `{l}`: {e}", path.display()));
-            (name.trim().to_owned(), value)
-        })
-        .collect()
-}
+mod common;
+use common::{block, members, repo_file};
 
 /// The C constant and the C# member of each transport of the registry, with its value.
-fn expected() -> (BTreeMap<String, u32>, BTreeMap<String, u32>) {
+fn expected() -> (BTreeMap<String, i64>, BTreeMap<String, i64>) {
     let mut c = BTreeMap::new();
     let mut cs = BTreeMap::new();
     for kind in TransportKind::ALL {
@@ -64,10 +25,10 @@ fn expected() -> (BTreeMap<String, u32>, BTreeMap<String, u32>) {
             "the C constant of transport {:?} is not named after it",
             kind.as_str()
         );
-        c.insert(name, constant as u32);
+        c.insert(name, i64::from(constant as u32));
         let mut pascal = kind.as_str().to_owned();
         pascal[..1].make_ascii_uppercase();
-        cs.insert(pascal, constant as u32);
+        cs.insert(pascal, i64::from(constant as u32));
     }
     (c, cs)
 }
