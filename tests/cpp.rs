@@ -471,15 +471,15 @@ fn c_and_cpp_examples_load_the_installed_library() {
 }
 
 /// The C++ channels example (`vrsync/agent.hpp`: `frame.vector`, `agent.act`,
-/// `agent.act_discrete`, the specs) through a whole `vr-sim run`, whose world has no use for
-/// channels: the vectors arrive zeroed, the actions are received and left alone. What can
-/// be seen from outside: every cycle stopped in time with every action queued, the specs
-/// as configured, and a value of the wrong length refused with its status, naming the
-/// action.
+/// `agent.act_discrete`, the specs) and the C example (the C calls) through a whole
+/// `vr-sim run`, whose world has no use for channels: the vectors arrive zeroed, the
+/// actions are received and left alone. What can be seen from outside: every cycle stopped
+/// in time with every action queued, the specs as configured, and a value of the wrong
+/// length refused with its status, naming the action.
 fn cpp_channel_agent_runs_against_vr_sim(t: Transport) {
     let sdk = sdk();
     let dir = tempfile::tempdir().unwrap();
-    let mut cfg = TestConfig::with_transport("cpp-channels", 1, t);
+    let mut cfg = TestConfig::with_transport("cpp-channels", 2, t);
     cfg.agent_extra = "[[agent.vector]]\nname = \"joints\"\nlen = 7\n\
                        [[agent.vector]]\nname = \"vel\"\nlen = 3\n\
                        [[agent.action]]\nname = \"torque\"\nlen = 7\nlow = -2.0\nhigh = 2.0\n\
@@ -495,11 +495,27 @@ fn cpp_channel_agent_runs_against_vr_sim(t: Transport) {
         &["--frames", "40", "--summary-json", s.to_str().unwrap()],
     );
     cfg.follow_host(&events, &config_path);
-    let agent = agent(&sdk.cpp_channel_agent, &[config, "0", "3"]);
+    let cpp = agent(&sdk.cpp_channel_agent, &[config, "0", "3"]);
+    let c = agent(&sdk.c_agent, &[config, "1"]);
 
     let out = host.wait(RUN_DEADLINE);
     assert_eq!(out.code(), Some(0), "vr-sim stderr:\n{}", out.stderr);
-    let out = agent.wait(RUN_DEADLINE);
+    let out = c.wait(RUN_DEADLINE);
+    assert_eq!(
+        out.code(),
+        Some(0),
+        "c_agent: stdout:\n{}\nstderr:\n{}",
+        out.stdout,
+        out.stderr
+    );
+    // Two actions a cycle, a move every 20 cycles, the vectors zero.
+    assert!(
+        out.stdout
+            .contains("c_agent 1: 40 cycles, 2 commands, 80 actions, vectors sum 0"),
+        "c_agent stdout:\n{}",
+        out.stdout
+    );
+    let out = cpp.wait(RUN_DEADLINE);
     assert_eq!(
         out.code(),
         Some(0),
@@ -524,7 +540,7 @@ fn cpp_channel_agent_runs_against_vr_sim(t: Transport) {
     assert_eq!(sum["frames"], 40, "{sum}");
     assert_eq!(sum["stop_timeouts"], 0, "{sum}");
     assert_eq!(sum["late_stops"], 0, "{sum}");
-    assert_eq!(sum["frames_read"], 40, "{sum}");
+    assert_eq!(sum["frames_read"], 80, "{sum}");
 }
 
 for_each_transport!(

@@ -1,7 +1,10 @@
 /* A minimal vrsync agent in C: wait for start, read the frame, send, stop.
  *
  * usage: c_agent CONFIG AGENT_ID
- * Walks a square: every 20 cycles it turns the walking heading by 90 degrees.
+ * Walks a square: every 20 cycles it turns the walking heading by 90 degrees. If the config
+ * gives it channels ([[agent.vector]], [[agent.action]]), it reads its vectors in place and
+ * sends each action every cycle: the middle of a continuous action's bounds, choice 0 of a
+ * discrete one.
  * Exit codes: 0 when the host closed the session, 1 on failure, 2 on bad usage. */
 #include <stdio.h>
 #include <stdlib.h>
@@ -11,6 +14,31 @@
 static int fail(const char *what, vrs_status_t st) {
     fprintf(stderr, "c_agent: %s: %s: %s\n", what, vrs_status_name(st), vrs_last_error_message());
     return 1;
+}
+
+/* Reads every vector of the current frame and queues a value for every action. */
+static vrs_status_t channels(vrs_agent_t *agent, uint32_t vectors, uint32_t actions,
+                             float *sum) {
+    vrs_status_t st = VRS_OK;
+    for (uint32_t i = 0; i < vectors && st == VRS_OK; ++i) {
+        vrs_vector_t v;
+        st = vrs_agent_vector(agent, i, &v); /* v.data points into the frame: no copy */
+        for (size_t k = 0; st == VRS_OK && k < v.len; ++k) *sum += v.data[k];
+    }
+    for (uint32_t i = 0; i < actions && st == VRS_OK; ++i) {
+        vrs_action_spec_t a;
+        st = vrs_agent_action_spec(agent, i, &a);
+        if (st != VRS_OK) break;
+        if (a.kind == VRS_ACTION_KIND_DISCRETE) {
+            st = vrs_agent_act_discrete(agent, a.name, 0);
+        } else {
+            float value[256]; /* the longest continuous action (MAX_ACTION_LEN) */
+            const size_t n = a.len < 256 ? a.len : 256;
+            for (size_t k = 0; k < n; ++k) value[k] = 0.5f * (a.low[k] + a.high[k]);
+            st = vrs_agent_act(agent, a.name, value, n);
+        }
+    }
+    return st;
 }
 
 int main(int argc, char **argv) {
@@ -24,8 +52,11 @@ int main(int argc, char **argv) {
     vrs_status_t st = vrs_agent_connect(argv[1], id, -1, &agent);
     if (st != VRS_OK) return fail("connect", st);
     fprintf(stderr, "c_agent %u: connected (vrsync %s)\n", id, vrs_version());
+    uint32_t vectors = 0, actions = 0;
+    vrs_agent_channel_counts(agent, &vectors, &actions);
 
-    uint64_t cycles = 0, commands = 0;
+    uint64_t cycles = 0, commands = 0, sent = 0;
+    float vector_sum = 0.0f;
     int code = 0;
     for (;;) {
         vrs_frame_t frame;
@@ -44,6 +75,12 @@ int main(int argc, char **argv) {
             for (size_t i = 0; i < left.stride; ++i) sum += left.data[i];
         }
         (void)sum;
+        st = channels(agent, vectors, actions, &vector_sum);
+        if (st != VRS_OK) {
+            code = fail("channels", st);
+            break;
+        }
+        sent += actions;
         if (frame.cycle % 20 == 0) {
             const float heading = (float)((frame.cycle / 20) % 4) * 90.0f;
             uint32_t action = 0;
@@ -63,7 +100,8 @@ int main(int argc, char **argv) {
         ++cycles;
     }
     vrs_agent_disconnect(agent);
-    printf("c_agent %u: %llu cycles, %llu commands\n", id, (unsigned long long)cycles,
-           (unsigned long long)commands);
+    printf("c_agent %u: %llu cycles, %llu commands, %llu actions, vectors sum %g\n", id,
+           (unsigned long long)cycles, (unsigned long long)commands, (unsigned long long)sent,
+           (double)vector_sum);
     return code;
 }
