@@ -220,9 +220,8 @@ impl AgentTransport for ShmAgent {
         let motor = format!("agent/{id}/motor");
         // `start` is created last by the host: once it exists, a missing service of this
         // agent means the host does not serve this id.
-        let open_err = |what: &str, e: &dyn core::fmt::Debug| {
-            let s = format!("{e:?}");
-            if s.contains("DoesNotExist") {
+        let open_err = |what: &str, e: &dyn IceError| {
+            if e.does_not_exist() {
                 if what == "stop" {
                     not_found(what)
                 } else {
@@ -233,7 +232,10 @@ impl AgentTransport for ShmAgent {
                     }
                 }
             } else {
-                ice(format!("cannot open {}: {s}", service_name(session, what)))
+                ice(format!(
+                    "cannot open {}: {e:?}",
+                    service_name(session, what)
+                ))
             }
         };
         let sensor_service = node
@@ -254,15 +256,14 @@ impl AgentTransport for ShmAgent {
             .open()
             .map_err(|e| open_err("stop", &e))?;
 
-        let in_use = |e: &dyn core::fmt::Debug| {
-            let s = format!("{e:?}");
-            if s.contains("ExceedsMax") {
+        let in_use = |e: &dyn IceError| {
+            if e.port_limit_reached() {
                 AgentConnectError::IdInUse {
                     session: session.clone(),
                     agent: id,
                 }
             } else {
-                ice(s)
+                ice(format!("{e:?}"))
             }
         };
         let max_commands = config.transport.max_commands_per_cycle as usize;

@@ -142,16 +142,15 @@ impl ShmHost {
         let attrs = attributes().map_err(ice)?;
         let n = config.agents.len();
         let max_ports = n + 4;
-        let exists = |name: &str, e: &dyn core::fmt::Debug| {
-            let s = format!("{e:?}");
-            if s.contains("AlreadyExists") {
+        let exists = |name: &str, e: &dyn IceError| {
+            if e.already_exists() {
                 ShmHostCreateError::SessionInUse {
                     session: session.clone(),
                     service: service_name(session, name),
                 }
             } else {
                 ShmHostCreateError::Iceoryx(format!(
-                    "cannot create service {}: {s}",
+                    "cannot create service {}: {e:?}",
                     service_name(session, name)
                 ))
             }

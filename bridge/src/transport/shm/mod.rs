@@ -372,6 +372,9 @@ fn for_each_dead_node(mut f: impl FnMut(iceoryx2::node::DeadNodeView<Svc>, &str)
 
 mod agent;
 mod host;
+mod ice_errors;
+
+use ice_errors::IceError;
 
 pub use agent::*;
 pub use host::*;
