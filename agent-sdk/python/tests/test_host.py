@@ -598,3 +598,63 @@ def test_an_agent_killed_between_cycles_is_evicted_or_aborts_the_run(
         report = one_cycle(host)
         assert [a.outcome for a in report.agents] == ["stopped", "not_awaited"]
         assert host.stats()["evictions"] == 1
+
+
+# A Python agent that takes part in `cycles` cycles, then leaves gracefully (`close()`)
+# and prints the last cycle it stopped.
+LEAVING_AGENT = """
+import sys
+import vrsync
+
+config, agent_id, cycles = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+agent = vrsync.Agent.connect(config, agent_id, connect_timeout=30)
+last = None
+for _ in range(cycles):
+    frame = agent.wait(timeout=30)
+    last = frame.cycle
+    del frame
+    agent.stop()
+agent.close()
+print("left after", last, flush=True)
+"""
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_an_agent_that_leaves_is_let_go_at_once_and_its_id_rejoins(
+    tmp_path: Path, agents: Agents, transport: str
+) -> None:
+    """As the Rust host's leave: the cycle after a graceful leave ends without a stop
+    timeout and without an eviction, the report says `left`; a new connection of the same
+    id takes part from the next cycle and is reported `rejoined`."""
+    config, _ = write_config(tmp_path, "pyleave", agents=1, transport=transport,
+                             stop_timeout=30.0)  # fmt: skip
+    with vrsync.Host(config) as host:
+        if transport == "tcp":
+            with_tcp_port(config, host.tcp_address)
+        first = agents.python(LEAVING_AGENT, str(config), "0", "3")
+        host.wait_for_agents(DEADLINE)
+        left_in = rejoined_in = None
+        started = time.monotonic()
+        while rejoined_in is None:
+            if time.monotonic() - started > DEADLINE:
+                for p in agents.procs:
+                    p.kill()
+                said = " | ".join(p.communicate(timeout=30)[1] for p in agents.procs)
+                pytest.fail(f"no leave and rejoin in time (left in {left_in}): {said}")
+            host.publish(host.loan(0))
+            host.start()
+            report = host.collect()
+            a = report.agent(0)
+            assert not report.timed_out and not a.evicted, report
+            if a.left:
+                left_in = report.cycle
+                # Its last stop came in this cycle or the one before (the leave follows it).
+                last = int(finish(first).split()[-1])
+                assert report.cycle - 1 <= last <= report.cycle, (last, report.cycle)
+                agents.python(LEAVING_AGENT, str(config), "0", "2")
+            if a.rejoined:
+                rejoined_in = report.cycle
+        stats = host.stats()
+    assert left_in is not None and rejoined_in > left_in
+    assert (stats["leaves"], stats["rejoins"], stats["evictions"]) == (1, 1, 0), stats
+    assert stats["stop_timeouts"] == 0, stats

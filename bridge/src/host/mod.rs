@@ -786,6 +786,12 @@ impl<T: HostTransport> Host<T> {
         let mut next_report = until;
         let mut reports = 0u32;
         self.lost_this_cycle.clear();
+        if sync && self.barrier.is_complete() {
+            // Nobody to wait for (no frame reached an agent): the transports still get
+            // their turn to take in new connections (a TCP hello is served in the wait),
+            // or a host that cycles on without agents would never let one (re)join.
+            self.wait_activity(Duration::ZERO)?;
+        }
         loop {
             self.drain(sync)?;
             let now = Instant::now();
