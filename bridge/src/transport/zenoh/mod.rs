@@ -70,7 +70,7 @@ pub const WELCOME_LEN: usize = 4 + 8 + 4 + 8;
 pub mod reply {
     /// Welcome: protocol version u32, layout hash u64, largest frame body u32, nonce u64.
     pub const WELCOME: u32 = 2;
-    /// Refusal: the TCP transport's reject body ([`super::super::record::encode_reject`]).
+    /// Refusal: the TCP transport's reject body ([`super::super::record::Reject`]).
     pub const REJECT: u32 = 3;
 }
 
