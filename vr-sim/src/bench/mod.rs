@@ -26,7 +26,7 @@ mod vrsync;
 
 use floor::{bench_floor_shm, bench_floor_tcp, bench_floor_zenoh};
 use report::{plot, print_header, print_ratios, print_row, write_csv};
-use vrsync::{bench_vrsync, make_certificates, python_agent};
+use vrsync::{bench_python_host, bench_vrsync, make_certificates, python_agent};
 
 /// What to run and where to write.
 #[derive(Debug)]
@@ -41,8 +41,8 @@ pub struct BenchOptions {
     /// SVG plot.
     pub plot: Option<PathBuf>,
     /// Python interpreter for the `python` rows (the agent is `python -m
-    /// vrsync.bench_agent`) and the vector-env rows (`python -m vrsync.bench_vector`);
-    /// `None`: no Python rows.
+    /// vrsync.bench_agent`), the vector-env rows (`python -m vrsync.bench_vector`) and the
+    /// Python host rows (`python -m vrsync.bench_host`); `None`: no Python rows.
     pub python: Option<PathBuf>,
 }
 
@@ -51,7 +51,8 @@ pub struct BenchOptions {
 pub struct Row {
     /// `shm`, `shm-spin`, `tcp`, `zenoh`, `zenoh-tls` (mutual TLS), `mixed` (agents over
     /// shm, shm, tcp, zenoh), `floor-shm`, `floor-shm-spin`, `floor-tcp`, `floor-zenoh`,
-    /// `legacy`, `python`, `python-vec`.
+    /// `legacy`, `python`, `python-vec`, `python-host` (the host is a Python process,
+    /// `vrsync.Host`; the agents are the `shm` rows' Rust bench agents).
     pub transport: String,
     /// Agents.
     pub agents: u32,
@@ -73,7 +74,8 @@ pub struct Row {
     pub mean_us: f64,
     /// Cycles per second at the mean.
     pub frames_per_s: f64,
-    /// Host allocations per cycle in steady state.
+    /// Host allocations per cycle in steady state (`null` for `python-host`: a Python
+    /// host's allocations are not counted).
     pub allocs_per_cycle: f64,
     /// Agent allocations per cycle in steady state (mean over agents).
     pub agent_allocs_per_cycle: f64,
@@ -85,15 +87,19 @@ pub struct Row {
     /// `legacy` rows: time to PNG-encode one of these images at the fastest level, µs
     /// (measured separately; `null` elsewhere).
     pub png_us: f64,
-    /// `python-vec` rows: the time per agent-step spent inside the Python SDK's Rust code
-    /// (`AgentGroup.step`: sends, stops, receives, copies; blocked waits for the host
-    /// excluded), µs, as the agent process reports it (median of the rounds; `null`
-    /// elsewhere).
+    /// The Python SDK's own time per agent and cycle, µs (median of the rounds; `null`
+    /// elsewhere). `python-vec` rows: the time per agent-step spent inside the Python
+    /// SDK's Rust code (`AgentGroup.step`: sends, stops, receives, copies; blocked waits
+    /// for the host excluded), as the agent process reports it. `python-host` rows: the
+    /// Python host's time per agent-cycle outside `Host.collect` (loans, one byte written
+    /// per image, publishes, `start`, the report's check: everything but the wait for
+    /// the agents), as `vrsync.bench_host` reports it (its `host_us_per_agent_cycle`).
     pub sdk_us_per_agent_step: f64,
 }
 
 const CAMERAS: u32 = 3;
-/// The vector-env rows: one camera of this size (rgb8) per agent, at these agent counts.
+/// The vector-env and Python host rows: one camera of this size (rgb8) per agent, at these
+/// agent counts.
 const VEC_SIZE: u32 = 84;
 const VEC_AGENTS: [u32; 2] = [4, 16];
 /// The many-agent rows (3 rgb8 images per agent, against the raw floor at the same
@@ -488,30 +494,21 @@ impl Bench<'_> {
 
     /// The batched Python vector env (one process for every agent) against the same
     /// fan-out of Rust bench agents and of the raw iceoryx2 floor: one 84x84 rgb8 camera
-    /// per agent (an RL observation), 4 and 16 agents.
+    /// per agent (an RL observation), 4 and 16 agents. In the same rounds the Python host
+    /// (`python-host`: `vrsync.Host` in a Python process) serves the `shm` row's Rust
+    /// bench agents: the Python host against the Rust host.
     fn vector_env(&mut self, rows: &mut Vec<Row>) -> anyhow::Result<()> {
-        if self.python.is_none() {
+        let Some(python) = self.python else {
             return Ok(());
-        }
-        let vec_cycles = if self.quick { 600 } else { 3000 };
+        };
         for agents in VEC_AGENTS {
-            let mk = |transport: &'static str| Case {
-                transport,
-                agents,
-                cameras: 1,
-                width: VEC_SIZE,
-                height: VEC_SIZE,
-                // Enough for the Python process to reach its steady state (first-touch
-                // page faults, numpy's caches) before the host measures.
-                warmup: (vec_cycles / ROUNDS / 10).max(20),
-                cycles: (vec_cycles / ROUNDS).max(10),
-            };
-            let cases = [mk("python-vec"), mk("shm"), mk("floor-shm")];
+            let cases = vector_env_cases(agents, self.quick);
             measure_interleaved(&cases, rows, |case, _round| match case.transport {
                 "floor-shm" => bench_floor_shm(case, &self.session(), false),
+                "python-host" => bench_python_host(case, &self.session(), self.dir, python),
                 _ => {
                     let session = self.session();
-                    bench_vrsync(case, &session, self.dir, false, self.python)
+                    bench_vrsync(case, &session, self.dir, false, Some(python))
                 }
             })?;
         }
@@ -550,6 +547,27 @@ impl Bench<'_> {
         }
         Ok(())
     }
+}
+
+/// The cases of [`Bench::vector_env`] at `agents` agents, one 84x84 rgb8 camera each, in
+/// the order of each round: the vector env, the Python host, the Rust host (`shm`, the
+/// reference of both) and the raw floor.
+fn vector_env_cases(agents: u32, quick: bool) -> Vec<Case> {
+    let cycles = if quick { 600 } else { 3000 };
+    ["python-vec", "python-host", "shm", "floor-shm"]
+        .into_iter()
+        .map(|transport| Case {
+            transport,
+            agents,
+            cameras: 1,
+            width: VEC_SIZE,
+            height: VEC_SIZE,
+            // Enough for the Python process to reach its steady state (first-touch
+            // page faults, numpy's caches) before the host measures.
+            warmup: (cycles / ROUNDS / 10).max(20),
+            cycles: (cycles / ROUNDS).max(10),
+        })
+        .collect()
 }
 
 /// The one measurement loop of every row (vrsync and floors): runs `cycle` for the warm-up and measured

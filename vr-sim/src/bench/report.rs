@@ -203,6 +203,14 @@ pub(super) fn ratio_lines(rows: &[Row]) -> Vec<(String, Option<f64>, &'static st
         let what = format!("python-vec SDK µs per agent-step, {a} agents");
         let sdk = find_vec(rows, "python-vec", a).map(|r| r.sdk_us_per_agent_step);
         v.push((what, sdk, target("<= 5")));
+        // The Python host (`vrsync.Host` in a Python process) against vr-sim's Rust host,
+        // the same Rust agents; its own time per agent-cycle (DESIGN §9: <= 5 µs).
+        let what = format!("python-host / shm (Rust host), {a} agents, 1x84x84");
+        let host_ratio = ratio(find_vec(rows, "python-host", a), find_vec(rows, "shm", a));
+        v.push((what, host_ratio, "report"));
+        let what = format!("python-host own µs per agent-cycle, {a} agents");
+        let own = find_vec(rows, "python-host", a).map(|r| r.sdk_us_per_agent_step);
+        v.push((what, own, "<= 5"));
         let what = format!("shm / floor-shm, {a} agents, 1x84x84");
         let floor_ratio = ratio(find_vec(rows, "shm", a), find_vec(rows, "floor-shm", a));
         v.push((what, floor_ratio, "report"));

@@ -278,3 +278,125 @@ fn a_64_agent_case_has_a_world_to_render() {
     assert_eq!(world.bodies().len(), 64);
     assert!(world.bodies().iter().all(|b| b.cameras().len() == 3));
 }
+
+#[test]
+fn the_python_host_rows_share_their_rounds_with_the_rust_host_at_the_same_case() {
+    for agents in VEC_AGENTS {
+        for quick in [false, true] {
+            let cases = vector_env_cases(agents, quick);
+            let names: Vec<&str> = cases.iter().map(|c| c.transport).collect();
+            assert_eq!(names, ["python-vec", "python-host", "shm", "floor-shm"]);
+            let (py, rust) = (&cases[1], &cases[2]);
+            assert_eq!(
+                (py.agents, py.cameras, py.width, py.height),
+                (agents, 1, VEC_SIZE, VEC_SIZE)
+            );
+            // The same case but for who hosts it: agents, images and cycles.
+            assert_eq!(
+                (py.agents, py.cameras, py.width, py.warmup, py.cycles),
+                (
+                    rust.agents,
+                    rust.cameras,
+                    rust.width,
+                    rust.warmup,
+                    rust.cycles
+                )
+            );
+        }
+    }
+    // The Python host serves the shm agents' config: blocking waits over shm.
+    let case = &vector_env_cases(16, true)[1];
+    let text = config_text(case, "bench-test-pyhost", Path::new("/nonexistent"));
+    let config = Config::from_toml_str(&text, Path::new("<test>")).unwrap();
+    assert_eq!(config.transport.kind.as_str(), "shm");
+    assert_eq!(config.agents.len(), 16);
+    assert!(config.agents.iter().all(|a| a.cameras.len() == 1));
+}
+
+#[test]
+fn the_python_hosts_report_becomes_the_rows_histogram_and_own_time() {
+    use super::vrsync::PythonHostReport;
+    let case = Case {
+        transport: "python-host",
+        agents: 4,
+        cameras: 1,
+        width: VEC_SIZE,
+        height: VEC_SIZE,
+        warmup: 2,
+        cycles: 3,
+    };
+    // As `python -m vrsync.bench_host` writes it (keys Rust does not read included).
+    let text = r#"{"agents": 4, "warmup": 2, "cycles": 3,
+        "round_trip_ns": [100000, 120000, 5000000], "own_ns": [8000, 9000, 8500],
+        "host_us_per_agent_cycle": 2.125, "host_us_per_agent_cycle_p50": 2.125}"#;
+    let m = PythonHostReport::parse(text, &case)
+        .unwrap()
+        .measured(0.0)
+        .unwrap();
+    let r = row(&case, &m);
+    assert_eq!(r.frames, 3);
+    assert!((r.p50_us - 120.0).abs() < 0.5, "{}", r.p50_us);
+    assert_eq!(r.sdk_us_per_agent_step, 2.125);
+    let json = serde_json::to_value(&r).unwrap();
+    assert_eq!(json["sdk_us_per_agent_step"], 2.125);
+    // A Python host's allocations are not counted.
+    assert!(json["allocs_per_cycle"].is_null());
+    // No own time measured: the row says so (NaN, `null` in JSON).
+    let text = r#"{"agents": 4, "cycles": 3, "round_trip_ns": [1, 2, 3],
+        "host_us_per_agent_cycle": null}"#;
+    let m = PythonHostReport::parse(text, &case)
+        .unwrap()
+        .measured(0.0)
+        .unwrap();
+    assert!(row(&case, &m).sdk_us_per_agent_step.is_nan());
+    // Another case's report, a short list, and malformed JSON are refused.
+    for bad in [
+        r#"{"agents": 16, "cycles": 3, "round_trip_ns": [1, 2, 3], "host_us_per_agent_cycle": 1}"#,
+        r#"{"agents": 4, "cycles": 3, "round_trip_ns": [1, 2], "host_us_per_agent_cycle": 1}"#,
+        r#"{"agents": 4, "cycles": 3}"#,
+        "NaN",
+    ] {
+        assert!(PythonHostReport::parse(bad, &case).is_err(), "{bad}");
+    }
+}
+
+#[test]
+fn the_ratio_table_sets_the_python_host_against_the_rust_host() {
+    let mut h = histogram().unwrap();
+    h.record(1000).unwrap();
+    let row_of = |transport: &'static str, p50_us: f64, sdk_us: f64| {
+        let case = Case {
+            transport,
+            agents: 16,
+            cameras: 1,
+            width: VEC_SIZE,
+            height: VEC_SIZE,
+            warmup: 1,
+            cycles: 1,
+        };
+        let mut r = row(&case, &Measured::new(h.clone(), 0.0, 0.0));
+        r.p50_us = p50_us;
+        r.sdk_us_per_agent_step = sdk_us;
+        r
+    };
+    let rows = [
+        row_of("python-host", 300.0, 3.5),
+        row_of("shm", 200.0, f64::NAN),
+    ];
+    let lines = report::ratio_lines(&rows);
+    let line = |what: &str| {
+        lines
+            .iter()
+            .find(|(w, _, _)| w == what)
+            .unwrap_or_else(|| panic!("no line {what:?}"))
+            .clone()
+    };
+    let (_, v, target) = line("python-host / shm (Rust host), 16 agents, 1x84x84");
+    assert_eq!((v, target), (Some(1.5), "report"));
+    let (_, v, target) = line("python-host own µs per agent-cycle, 16 agents");
+    assert_eq!((v, target), (Some(3.5), "<= 5"));
+    assert_eq!(
+        line("python-host / shm (Rust host), 4 agents, 1x84x84").1,
+        None
+    );
+}

@@ -1,5 +1,6 @@
 //! The vrsync rows: full sync cycles through the host API with bench agents (Rust,
-//! Python, the Python vector env) over every transport.
+//! Python, the Python vector env) over every transport, and through the Python host API
+//! (`python-host`) with Rust bench agents.
 
 use super::floor::loopback_endpoint;
 use super::*;
@@ -131,12 +132,15 @@ pub(super) fn config_text(case: &Case, session: &str, certs: &Path) -> String {
     s
 }
 
-/// The interpreter for the `python` rows, if it can import `vrsync` (else the rows are
-/// left out, saying why).
+/// The interpreter for the Python rows (`python`, `python-vec`, `python-host`), if it can
+/// import `vrsync`'s bench modules (else the rows are left out, saying why).
 pub(super) fn python_agent(python: Option<&Path>) -> Option<PathBuf> {
     let python = python?;
     let ok = Command::new(python)
-        .args(["-c", "import vrsync.bench_agent, vrsync.bench_vector"])
+        .args([
+            "-c",
+            "import vrsync.bench_agent, vrsync.bench_vector, vrsync.bench_host",
+        ])
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .status()
@@ -192,6 +196,119 @@ pub(super) fn bench_vrsync(
         m.round_sdk_us.push(reported.sdk_us_per_agent_step);
     }
     Ok(m)
+}
+
+/// What `python -m vrsync.bench_host` writes to its `--out` file (the fields `vr-sim
+/// bench` reads; its module doc lists them all).
+#[derive(Debug, serde::Deserialize)]
+pub(super) struct PythonHostReport {
+    /// Agents the host served.
+    pub agents: u32,
+    /// Measured cycles.
+    pub cycles: u64,
+    /// Each measured cycle's round trip (first loan to the end of `collect`), ns.
+    pub round_trip_ns: Vec<u64>,
+    /// The host's own time (outside `collect`) per agent and cycle, µs (mean over the
+    /// measured cycles; `null` if none were measured).
+    pub host_us_per_agent_cycle: Option<f64>,
+}
+
+impl PythonHostReport {
+    /// Reads the report of a `python-host` measurement of `case`.
+    ///
+    /// # Errors
+    /// Malformed JSON, or other agent or cycle counts than `case` asked for.
+    pub(super) fn parse(text: &str, case: &Case) -> anyhow::Result<Self> {
+        let r: Self = serde_json::from_str(text).context("parse the Python host's report")?;
+        if r.agents != case.agents || r.cycles != case.cycles {
+            bail!(
+                "the Python host measured {} cycles of {} agents, not {} of {}",
+                r.cycles,
+                r.agents,
+                case.cycles,
+                case.agents
+            );
+        }
+        if r.round_trip_ns.len() as u64 != r.cycles {
+            bail!(
+                "the Python host's report has {} round trips for {} cycles",
+                r.round_trip_ns.len(),
+                r.cycles
+            );
+        }
+        Ok(r)
+    }
+
+    /// The round trips as a histogram, the host's own time as the row's SDK time (host
+    /// allocations: not counted in a Python process, NaN).
+    pub(super) fn measured(&self, agent_allocs: f64) -> anyhow::Result<Measured> {
+        let mut hist = histogram()?;
+        for &ns in &self.round_trip_ns {
+            hist.record(ns.max(1)).context("record")?;
+        }
+        let mut m = Measured::new(hist, f64::NAN, agent_allocs);
+        if let Some(us) = self.host_us_per_agent_cycle.filter(|us| us.is_finite()) {
+            m.round_sdk_us.push(us);
+        }
+        Ok(m)
+    }
+}
+
+/// A child process killed (and reaped) on drop unless it was waited for.
+struct KillOnDrop(Child);
+
+impl Drop for KillOnDrop {
+    fn drop(&mut self) {
+        if matches!(self.0.try_wait(), Ok(None)) {
+            let _ = self.0.kill();
+        }
+        let _ = self.0.wait();
+    }
+}
+
+/// A `python-host` cycle: the same `vr-bench-agent` processes as the `shm` rows, served by
+/// `python -m vrsync.bench_host` (a `vrsync.Host` in a Python process doing the Rust bench
+/// host's work) instead of vr-sim's Rust host. The Python host measures the cycles and
+/// writes them to a JSON file; its own time per agent-cycle becomes the row's
+/// `sdk_us_per_agent_step`.
+pub(super) fn bench_python_host(
+    case: &Case,
+    session: &str,
+    dir: &Path,
+    python: &Path,
+) -> anyhow::Result<Measured> {
+    let path = dir.join(format!("{session}.toml"));
+    std::fs::write(&path, config_text(case, session, dir)).context("write the bench config")?;
+    let out = dir.join(format!("{session}.json"));
+    let host = Command::new(python)
+        .args(["-m", "vrsync.bench_host", "--config"])
+        .arg(&path)
+        .args(["--warmup", &case.warmup.to_string()])
+        .args(["--cycles", &case.cycles.to_string()])
+        .arg("--out")
+        .arg(&out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .with_context(|| format!("start {} -m vrsync.bench_host", python.display()))?;
+    let mut host = KillOnDrop(host);
+    // The agents retry until a host serves the session, whichever starts first.
+    let agents = spawn_agents(case, &path, None)?;
+    // The Python host has its own deadlines (60 s for the agents, the config's stop
+    // timeout per cycle) and exits 1 when one passes.
+    let status = host.0.wait().context("wait for the Python host")?;
+    if !status.success() {
+        bail!(
+            "python-host agents={}: the Python host failed ({status})",
+            case.agents
+        );
+    }
+    let reported = agents.finish()?;
+    let text = std::fs::read_to_string(&out)
+        .with_context(|| format!("read the Python host's report {}", out.display()))?;
+    let _ = std::fs::remove_file(&out);
+    let _ = std::fs::remove_file(&path);
+    PythonHostReport::parse(&text, case)?.measured(reported.allocs_per_cycle)
 }
 
 /// The bench agents of `case` on the config at `config`: `vr-bench-agent` processes, or
