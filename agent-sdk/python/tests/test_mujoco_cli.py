@@ -104,13 +104,41 @@ def test_cli_run_against_a_stand_in_host(tmp_path: Path, monkeypatch: pytest.Mon
     assert code == 1
 
 
-def test_cli_bench_writes_rows(tmp_path: Path) -> None:
+def test_cli_bench_alone_writes_a_row_without_agents(tmp_path: Path) -> None:
     out = tmp_path / "bench.json"
-    r = _cli("bench", "--config", str(ROVERS_TOML), "--frames", "2", "--json", str(out))
+    r = _cli(
+        "bench", "--config", str(ROVERS_TOML), "--frames", "2", "--alone", "--quick",
+        "--json", str(out),
+    )  # fmt: skip
     assert r.returncode == 0, r.stderr
     (row,) = json.loads(out.read_text())
-    assert row["agents"] == 4 and row["width"] == 84 and row["s_per_cycle"] > 0
+    assert (row["world"], row["agents"], row["width"], row["rounds"]) == ("mujoco-alone", 4, 84, 1)
+    assert row["s_per_cycle"] > 0 and row["p50_us"] > 0 and row["frames"] == 2
     assert row["renders_per_s"] > 0 and row["physics_steps_per_s"] > 0
+    assert row["bridge_over_alone"] is None
+
+
+def test_cli_bench_says_where_it_looked_for_the_agent(tmp_path: Path) -> None:
+    env = {k: v for k, v in os.environ.items() if k != "VRSYNC_BIN_DIR"}
+    r = subprocess.run(
+        [sys.executable, "-m", "vrsync.mujoco", "bench", "--config", str(ROVERS_TOML), "--quick"],
+        capture_output=True, text=True, timeout=300, cwd=ROOT, env=env,
+    )  # fmt: skip
+    assert r.returncode == 2 and "--bin-dir" in r.stderr and "VRSYNC_BIN_DIR" in r.stderr
+    r = _cli("bench", "--config", str(ROVERS_TOML), "--quick", "--bin-dir", str(tmp_path))
+    assert r.returncode == 2 and "no channel_agent in" in r.stderr and "--alone" in r.stderr
+
+
+def test_bench_comparison_takes_the_median_of_the_rounds_medians() -> None:
+    from vrsync.mujoco.bench import Comparison
+
+    c = Comparison(16)
+    # One disturbed round (the middle one) moves the means, not the p50s.
+    c.alone = [[1.0, 1.0, 2.0], [9.0, 9.0, 9.0], [1.0, 1.0, 1.0]]
+    c.bridge = [[1.1, 1.1, 1.0], [1.1, 1.1, 1.1], [30.0, 30.0, 30.0]]
+    assert Comparison.p50_s(c.alone) == 1.0 and Comparison.p50_s(c.bridge) == pytest.approx(1.1)
+    assert c.ratio == pytest.approx(1.1)
+    assert c.ratio_mean == pytest.approx(Comparison.mean_s(c.bridge) / Comparison.mean_s(c.alone))
 
 
 # ---- against the real host (vrsync.Host) ----------------------------------------------
@@ -230,3 +258,27 @@ def test_agents_config_resizes_renames_and_drops_the_world() -> None:
     fewer = tomllib.loads(agents_config_text(ROVERS_TOML, agents=2))
     assert [a["id"] for a in fewer["agent"]] == [0, 1]
     assert fewer["session"] == "mujoco-rovers"
+
+
+def test_cli_bench_sets_the_bridge_against_mujoco_alone(tmp_path: Path) -> None:
+    """The bench's bridge rows: the world serving real `channel_agent` processes."""
+    _needs_host()
+    from conftest import bin_dir, binary
+
+    binary("examples/channel_agent")
+    out, csv = tmp_path / "bench.json", tmp_path / "bench.csv"
+    r = _cli(
+        "bench", "--config", str(ROVERS_N_TOML), "--agents", "2", "--quick",
+        "--bin-dir", str(bin_dir()), "--json", str(out), "--csv", str(csv),
+    )  # fmt: skip
+    assert r.returncode == 0, r.stdout + r.stderr
+    alone, bridge = json.loads(out.read_text())
+    assert (alone["world"], bridge["world"]) == ("mujoco-alone", "mujoco-bridge")
+    assert alone["agents"] == bridge["agents"] == 2
+    assert bridge["frames"] == 3 and bridge["p50_us"] > 0
+    assert bridge["bridge_over_alone"] == pytest.approx(bridge["p50_us"] / alone["p50_us"])
+    assert "mujoco bridge / alone, 2 agents" in r.stdout
+    from vrsync.mujoco.cli import BENCH_COLUMNS
+
+    header, *lines = csv.read_text().splitlines()
+    assert header.split(",") == list(BENCH_COLUMNS) and len(lines) == 2

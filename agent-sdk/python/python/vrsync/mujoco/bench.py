@@ -1,24 +1,54 @@
-"""MuJoCo alone: the cost of a world's cycle without the bridge.
+"""MuJoCo alone and MuJoCo as a vrsync world: the cost the bridge adds to a cycle.
 
 :func:`bench_alone` runs the same scene, the same physics steps and the same renders as
 :meth:`MujocoWorld.step_cycle`, into plain numpy arrays (:class:`LocalFrame`) instead
-of loaned frames, with no host: the reference the benchmark's MuJoCo rows compare the
-bridge's cycle with (DESIGN §9: the bridge adds at most 10 % at 16 agents).
-:func:`render_rate` and :func:`physics_rate` measure the two parts on their own.
+of loaned frames, with no host: the reference the bridge's cycle is compared with
+(DESIGN §9: the bridge adds at most 10 % at 16 agents). :func:`bridge_cycle_times`
+measures the bridge: the world's own loop (:meth:`MujocoWorld.step_cycle`) serving real
+agent processes through ``vrsync.Host``. :func:`compare` interleaves rounds of both, so
+a change of the machine's load hits both alike. :func:`render_rate` and
+:func:`physics_rate` measure the two parts of a cycle on their own.
+
+The agents of the bridge are ``channel_agent`` (agent-sdk/examples, a Rust agent that
+reads its vectors and sends its actions every cycle): :func:`find_channel_agent` looks
+for it in the folder of ``vr-sim`` (``target/<profile>``, under ``examples/``).
 """
 
 from __future__ import annotations
 
+import itertools
+import os
+import statistics
+import subprocess
+import tempfile
 import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import mujoco
 import numpy as np
 
-from .config import WorldConfig
+from .config import WorldConfig, load_config
+from .private_config import agents_config_text
 from .world import MujocoWorld
 
-__all__ = ["bench_alone", "drive_all", "physics_rate", "render_rate"]
+__all__ = [
+    "Comparison",
+    "alone_cycle_times",
+    "bench_alone",
+    "bridge_cycle_times",
+    "compare",
+    "drive_all",
+    "find_channel_agent",
+    "physics_rate",
+    "render_rate",
+]
+
+#: What :func:`find_channel_agent` looks for, relative to the folder of ``vr-sim``.
+CHANNEL_AGENT_PATHS = ("examples/channel_agent", "channel_agent")
+
+_SESSIONS = itertools.count()
 
 
 def drive_all(world: MujocoWorld) -> None:
@@ -47,19 +77,210 @@ def bench_alone(
         MujocoConfigError: as :class:`MujocoWorld`.
         ValueError: ``frames`` < 1.
     """
+    return statistics.fmean(alone_cycle_times(config, frames, agents=agents, warmup=warmup))
+
+
+def alone_cycle_times(
+    config: str | Path | WorldConfig,
+    frames: int,
+    *,
+    agents: int | None = None,
+    warmup: int = 3,
+) -> list[float]:
+    """Each measured cycle's seconds of the world alone (see :func:`bench_alone`).
+
+    Raises:
+        MujocoConfigError: as :class:`MujocoWorld`.
+        ValueError: ``frames`` < 1.
+    """
     if frames < 1:
         raise ValueError(f"frames must be at least 1, found {frames}")
+    times: list[float] = []
     with MujocoWorld(config, agents=agents) as world:
         drive_all(world)
         local = world.local_frames()
-        start = 0.0
+        clock = time.perf_counter
         for i in range(warmup + frames):
-            if i == warmup:
-                start = time.perf_counter()
+            t0 = clock()
             for b in world.agents:
                 world.write_frame(b, local[b.id])
             world.advance()
-        return (time.perf_counter() - start) / frames
+            if i >= warmup:
+                times.append(clock() - t0)
+    return times
+
+
+def find_channel_agent(bin_dir: str | Path | None = None) -> Path:
+    """The ``channel_agent`` executable in ``bin_dir`` (the folder of ``vr-sim``, e.g.
+    ``target/release``; default ``$VRSYNC_BIN_DIR``), under ``examples/`` as cargo puts
+    it or beside ``vr-sim``.
+
+    Raises:
+        FileNotFoundError: no folder given, or no ``channel_agent`` in it (the message
+            says how to build it).
+    """
+    if bin_dir is None:
+        bin_dir = os.environ.get("VRSYNC_BIN_DIR")
+    if not bin_dir:
+        raise FileNotFoundError(
+            "where is channel_agent? give --bin-dir (the folder of vr-sim, e.g. "
+            "target/release) or set VRSYNC_BIN_DIR"
+        )
+    for rel in CHANNEL_AGENT_PATHS:
+        path = Path(bin_dir) / rel
+        if path.is_file() and os.access(path, os.X_OK):
+            return path
+    raise FileNotFoundError(
+        f"no channel_agent in {bin_dir} (looked for {', '.join(CHANNEL_AGENT_PATHS)}): "
+        "build it with `cargo build --release --examples -p vrsync-agent` "
+        "(target/release/examples/channel_agent)"
+    )
+
+
+def bridge_cycle_times(
+    config: str | Path,
+    frames: int,
+    agent: str | Path,
+    *,
+    agents: int | None = None,
+    warmup: int = 3,
+    session: str | None = None,
+    connect_timeout: float = 60.0,
+) -> list[float]:
+    """Each measured cycle's seconds of the world serving real agents: ``agents``
+    processes of ``agent`` (started as ``agent CONFIG ID``, each reading a private copy
+    of the config: resized, with the session) through a ``vrsync.Host``, one
+    :meth:`MujocoWorld.step_cycle` per cycle (frames rendered into the loaned samples,
+    published, the agents' stops collected, their actions applied, the physics
+    stepped), after ``warmup`` cycles. The agents leave when the host closes; any still
+    running 30 s later are killed.
+
+    Raises:
+        MujocoConfigError: as :class:`MujocoWorld`.
+        ValueError: ``frames`` < 1.
+        RuntimeError: a cycle timed out, or an agent failed.
+        vrsync.HostWaitTimeout: the agents did not connect within ``connect_timeout`` s.
+    """
+    import vrsync
+
+    if frames < 1:
+        raise ValueError(f"frames must be at least 1, found {frames}")
+    config = Path(config).resolve()
+    session = session or f"mjbench-{os.getpid()}-{next(_SESSIONS)}"
+    times: list[float] = []
+    procs: list[subprocess.Popen[bytes]] = []
+    failed: list[str] = []
+    with MujocoWorld(config, agents=agents) as world, tempfile.TemporaryDirectory(
+        prefix="vrsync-mujoco-bench-"
+    ) as tmp:
+        drive_all(world)
+        n = len(world.agents)
+        try:
+            with vrsync.Host(config, session=session, agents=n) as host:
+                world.check_host(host)
+                private = Path(tmp) / "agents.toml"
+                private.write_text(
+                    agents_config_text(
+                        config, agents=n, session=session, tcp_listen=host.tcp_address
+                    )
+                )
+                for i in host.agent_ids:
+                    procs.append(
+                        subprocess.Popen(
+                            [str(agent), str(private), str(i)], stdout=subprocess.DEVNULL
+                        )
+                    )
+                host.wait_for_agents(connect_timeout)
+                clock = time.perf_counter
+                for c in range(warmup + frames):
+                    t0 = clock()
+                    report = world.step_cycle(host)
+                    if c >= warmup:
+                        times.append(clock() - t0)
+                    if report.timed_out:
+                        raise RuntimeError(f"bridge at {n} agents: cycle {c} timed out")
+        finally:
+            # The host is closed: the agents leave on their own.
+            deadline = time.monotonic() + 30.0
+            for i, p in enumerate(procs):
+                try:
+                    code = p.wait(timeout=max(0.0, deadline - time.monotonic()))
+                except subprocess.TimeoutExpired:
+                    p.kill()
+                    p.wait()
+                    code = None
+                if code != 0:
+                    failed.append(f"agent {i}: {'killed' if code is None else f'exit {code}'}")
+    if failed:
+        raise RuntimeError(f"bridge at {n} agents: {'; '.join(failed)}")
+    return times
+
+
+@dataclass
+class Comparison:
+    """The rounds of :func:`compare` at one agent count: each round's cycle times, s."""
+
+    agents: int
+    alone: list[list[float]] = field(default_factory=list)
+    bridge: list[list[float]] = field(default_factory=list)
+
+    @staticmethod
+    def p50_s(rounds: list[list[float]]) -> float:
+        """The median of the rounds' medians (one disturbed round cannot move it)."""
+        return statistics.median(statistics.median(r) for r in rounds)
+
+    @staticmethod
+    def mean_s(rounds: list[list[float]]) -> float:
+        """The mean over every cycle of every round."""
+        return statistics.fmean(t for r in rounds for t in r)
+
+    @property
+    def ratio(self) -> float:
+        """Bridge over alone, of :meth:`p50_s` (DESIGN §9: at most 1.10 at 16 agents)."""
+        return self.p50_s(self.bridge) / self.p50_s(self.alone)
+
+    @property
+    def ratio_mean(self) -> float:
+        """Bridge over alone, of :meth:`mean_s`."""
+        return self.mean_s(self.bridge) / self.mean_s(self.alone)
+
+
+def compare(
+    config: str | Path,
+    agents: int | None,
+    *,
+    frames: int,
+    rounds: int,
+    agent: str | Path,
+    warmup: int = 3,
+    on_round: Callable[[str, int, list[float]], None] | None = None,
+) -> Comparison:
+    """``rounds`` rounds of :func:`alone_cycle_times` and :func:`bridge_cycle_times` at
+    ``agents`` agents (default: the config's count), ``frames`` measured cycles each,
+    interleaved (alone first in even rounds, the bridge first in odd ones), so slow
+    minutes of a shared machine hit both. ``on_round(kind, round, times)`` after each
+    measurement (``kind``: ``"alone"`` or ``"bridge"``).
+
+    Raises:
+        as :func:`alone_cycle_times` and :func:`bridge_cycle_times`; ValueError:
+        ``rounds`` < 1.
+    """
+    if rounds < 1:
+        raise ValueError(f"rounds must be at least 1, found {rounds}")
+    n = agents if agents is not None else len(load_config(config).agents)
+    result = Comparison(n)
+    for r in range(rounds):
+        kinds = ("alone", "bridge") if r % 2 == 0 else ("bridge", "alone")
+        for kind in kinds:
+            if kind == "alone":
+                times = alone_cycle_times(config, frames, agents=n, warmup=warmup)
+                result.alone.append(times)
+            else:
+                times = bridge_cycle_times(config, frames, agent, agents=n, warmup=warmup)
+                result.bridge.append(times)
+            if on_round is not None:
+                on_round(kind, r, times)
+    return result
 
 
 def render_rate(

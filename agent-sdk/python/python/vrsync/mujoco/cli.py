@@ -1,8 +1,20 @@
-"""``python -m vrsync.mujoco`` / ``vrsync-mujoco``: run a MuJoCo world, or bench it alone.
+"""``python -m vrsync.mujoco`` / ``vrsync-mujoco``: run a MuJoCo world, or bench the bridge.
 
 ``run`` mirrors ``vr-sim run`` (README "Run a world"): the same config file, the same
 ``--frames``, ``--session``, ``--spawn-agents`` and ``--summary-json``, the same summary
 keys and exit codes (0 success, 1 runtime failure, 2 bad usage or bad config).
+
+``bench`` measures what the bridge adds to the world's cycle: MuJoCo serving N
+``channel_agent`` processes through ``vrsync.Host`` against MuJoCo alone, in interleaved
+rounds (:func:`vrsync.mujoco.bench.compare`); its rows (``--json``, ``--csv``) have the
+keys of :data:`BENCH_COLUMNS`: ``world`` (``mujoco-alone``, ``mujoco-bridge``),
+``agents``, ``rounds``, ``frames`` (measured cycles, all rounds), ``width`` and
+``height`` (agent 0's first camera), ``p50_us`` (the median of the rounds' median cycle
+times), ``mean_us`` and ``s_per_cycle`` (over every measured cycle), ``frames_per_s``,
+``bridge_over_alone`` (bridge rows: the p50 ratio; DESIGN §9 target <= 1.10 at 16
+agents), ``bridge_over_alone_mean`` (the ratio of the means), ``renders_per_s`` and
+``physics_steps_per_s`` (alone rows: MuJoCo's rates on their own); ``null`` (CSV: empty)
+where a key does not apply.
 """
 
 from __future__ import annotations
@@ -21,7 +33,14 @@ from types import FrameType
 from typing import Any
 
 from ..errors import ConfigError
-from .bench import bench_alone, physics_rate, render_rate
+from .bench import (
+    Comparison,
+    alone_cycle_times,
+    compare,
+    find_channel_agent,
+    physics_rate,
+    render_rate,
+)
 from .config import MujocoConfigError, load_config
 from .private_config import agents_config_text
 from .world import MujocoWorld
@@ -41,7 +60,7 @@ def _parser() -> argparse.ArgumentParser:
     script = Path(sys.argv[0]).name == "vrsync-mujoco"
     p = argparse.ArgumentParser(
         prog="vrsync-mujoco" if script else "python -m vrsync.mujoco",
-        description="Serve a MuJoCo scene to vrsync agents in lock-step, or bench it alone. "
+        description="Serve a MuJoCo scene to vrsync agents in lock-step, or bench the bridge. "
         "The config's [world.mujoco] table binds the scene (config/mujoco-rovers.toml "
         "documents every key).",
         epilog="Exit codes: 0 success, 1 runtime failure, 2 bad usage or bad config.",
@@ -96,13 +115,32 @@ def _parser() -> argparse.ArgumentParser:
 
     bench = sub.add_parser(
         "bench",
-        help="MuJoCo alone: seconds per cycle, renders/s, physics steps/s",
-        description="The world's cycle with no bridge (renders into numpy arrays): the "
-        "reference the bridge's MuJoCo cycle is compared with.",
+        help="the bridge's cost: MuJoCo serving agents against MuJoCo alone",
+        description="Seconds per cycle of the world's loop serving N real agent processes "
+        "through vrsync.Host over the config's transport (the bridge), against the same "
+        "scene, physics and renders into plain numpy arrays with no host (MuJoCo alone), "
+        "in interleaved rounds; prints a table with the ratio bridge/alone (DESIGN §9: at "
+        "most 1.10 at 16 agents), and MuJoCo's renders/s and physics steps/s. The agents "
+        "are channel_agent (a Rust agent that reads its vectors and acts every cycle), "
+        "found under --bin-dir. Only ratios from one run count: absolute figures move "
+        "with the machine's load. E.g.: python -m vrsync.mujoco bench --config "
+        "config/mujoco-rovers-n.toml --agents 4 --agents 16 --bin-dir target/release",
         epilog="Exit codes: 0 success, 1 runtime failure, 2 bad usage or bad config.",
     )
     bench.add_argument("--config", required=True, type=Path, help="vrsync config file (TOML)")
-    bench.add_argument("--frames", type=_positive, default=100, help="measured cycles (100)")
+    bench.add_argument(
+        "--frames",
+        type=_positive,
+        default=None,
+        help=f"measured cycles per round and kind ({BENCH_FRAMES}; --quick: {QUICK_FRAMES})",
+    )
+    bench.add_argument(
+        "--rounds",
+        type=_positive,
+        default=None,
+        help=f"interleaved rounds of alone and bridge ({BENCH_ROUNDS}; --quick: 1); a "
+        "figure is the median of the rounds' median cycle times",
+    )
     bench.add_argument(
         "--agents",
         type=_positive,
@@ -112,7 +150,26 @@ def _parser() -> argparse.ArgumentParser:
         help="agent count (repeatable; default: the config's)",
     )
     bench.add_argument(
+        "--bin-dir",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="the folder of vr-sim, whose examples/channel_agent the bridge spawns "
+        "(default: $VRSYNC_BIN_DIR), e.g. target/release",
+    )
+    bench.add_argument(
+        "--alone",
+        action="store_true",
+        help="measure MuJoCo alone only (no agents, no bridge rows)",
+    )
+    bench.add_argument(
+        "--quick", action="store_true", help="a few cycles, one round (for tests)"
+    )
+    bench.add_argument(
         "--json", type=Path, default=None, metavar="FILE", help="write the rows as a JSON array"
+    )
+    bench.add_argument(
+        "--csv", type=Path, default=None, metavar="FILE", help="write the rows as CSV"
     )
     return p
 
@@ -142,34 +199,127 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_FAILURE
 
 
+#: The bench's rows (``--json``, ``--csv``), in column order.
+BENCH_COLUMNS = (
+    "world",
+    "agents",
+    "rounds",
+    "frames",
+    "width",
+    "height",
+    "p50_us",
+    "mean_us",
+    "s_per_cycle",
+    "frames_per_s",
+    "bridge_over_alone",
+    "bridge_over_alone_mean",
+    "renders_per_s",
+    "physics_steps_per_s",
+)
+BENCH_FRAMES = 40
+BENCH_ROUNDS = 5
+QUICK_FRAMES = 3
+
+
 def _bench(args: argparse.Namespace) -> int:
-    counts = args.agents or [None]
-    rows = []
-    for n in counts:
-        per_cycle = bench_alone(args.config, args.frames, agents=n)
+    frames = args.frames or (QUICK_FRAMES if args.quick else BENCH_FRAMES)
+    rounds = args.rounds or (1 if args.quick else BENCH_ROUNDS)
+    warmup = 1 if args.quick else 5
+    agent = None
+    if not args.alone:
+        try:
+            agent = find_channel_agent(args.bin_dir)
+        except FileNotFoundError as e:
+            print(f"error: {e} (or bench MuJoCo alone with --alone)", file=sys.stderr)
+            return EXIT_USAGE
+    rows: list[dict[str, Any]] = []
+    print(
+        f"vrsync.mujoco bench: {args.config}, {rounds} round(s) of {frames} cycles per kind; "
+        "p50 = median of the rounds' median cycle times"
+    )
+    print(f"{'world':<14} {'agents':>6} {'image':>8} {'p50 ms':>9} {'mean ms':>9} {'ratio':>7}")
+    for n in args.agents or [None]:
         cfg = load_config(args.config, agents=n)
+        count = len(cfg.agents)
         cam = cfg.agents[0].cameras[0] if cfg.agents[0].cameras else None
-        row = {
-            "world": "mujoco-alone",
-            "agents": len(cfg.agents),
-            "frames": args.frames,
-            "width": cam.width if cam else 0,
-            "height": cam.height if cam else 0,
-            "s_per_cycle": per_cycle,
-            "mean_us": per_cycle * 1e6,
-            "frames_per_s": 1.0 / per_cycle,
-            "renders_per_s": render_rate(args.config, agents=n) if cam else 0.0,
-            "physics_steps_per_s": physics_rate(args.config, agents=n),
-        }
-        rows.append(row)
-        print(
-            f"{row['agents']:>3} agents: {per_cycle * 1e3:8.2f} ms per cycle, "
-            f"{row['renders_per_s']:7.1f} renders/s at {row['width']}x{row['height']}, "
-            f"{row['physics_steps_per_s']:8.0f} physics steps/s"
+        if agent is None:
+            result = Comparison(count)
+            for _ in range(rounds):
+                result.alone.append(alone_cycle_times(args.config, frames, agents=n, warmup=warmup))
+        else:
+            result = compare(
+                args.config, count, frames=frames, rounds=rounds, agent=agent, warmup=warmup
+            )
+        quick_rates = {"renders": 20, "steps": 200} if args.quick else {}
+        alone = bench_row("mujoco-alone", count, result.alone, frames, cam)
+        alone["renders_per_s"] = (
+            render_rate(args.config, agents=n, renders=quick_rates.get("renders", 200))
+            if cam
+            else 0.0
         )
+        alone["physics_steps_per_s"] = physics_rate(
+            args.config, agents=n, steps=quick_rates.get("steps", 5000)
+        )
+        new = [alone]
+        if result.bridge:
+            bridge = bench_row("mujoco-bridge", count, result.bridge, frames, cam)
+            bridge["bridge_over_alone"] = result.ratio
+            bridge["bridge_over_alone_mean"] = result.ratio_mean
+            new.append(bridge)
+        for row in new:
+            ratio = row["bridge_over_alone"]
+            print(
+                f"{row['world']:<14} {row['agents']:>6} "
+                f"{row['width']:>4}x{row['height']:<3} {row['p50_us'] / 1e3:>9.2f} "
+                f"{row['mean_us'] / 1e3:>9.2f} {'-' if ratio is None else f'{ratio:.3f}':>7}"
+            )
+        print(
+            f"{'':<14} {count:>6} MuJoCo: {alone['renders_per_s']:.1f} renders/s, "
+            f"{alone['physics_steps_per_s']:.0f} physics steps/s"
+        )
+        rows.extend(new)
+    print("\nratios (targets in parentheses):")
+    for row in rows:
+        if row["bridge_over_alone"] is not None:
+            target = "<= 1.10" if row["agents"] == 16 else "report"
+            print(
+                f"  mujoco bridge / alone, {row['agents']} agents (p50)  "
+                f"{row['bridge_over_alone']:.3f}  ({target}); of means "
+                f"{row['bridge_over_alone_mean']:.3f}"
+            )
     if args.json is not None:
-        args.json.write_text(json.dumps(rows, indent=2) + "\n")
+        args.json.write_text(json.dumps(rows, indent=2, allow_nan=False) + "\n")
+    if args.csv is not None:
+        lines = [",".join(BENCH_COLUMNS)]
+        for row in rows:
+            lines.append(",".join("" if row[k] is None else str(row[k]) for k in BENCH_COLUMNS))
+        args.csv.write_text("\n".join(lines) + "\n")
     return EXIT_OK
+
+
+def bench_row(
+    world: str, agents: int, rounds: list[list[float]], frames: int, cam: Any
+) -> dict[str, Any]:
+    """One row of the bench (:data:`BENCH_COLUMNS`; the ratio and MuJoCo's rates ``None``
+    until filled in) from each round's cycle times (s)."""
+    mean = Comparison.mean_s(rounds)
+    p50 = Comparison.p50_s(rounds)
+    return {
+        "world": world,
+        "agents": agents,
+        "rounds": len(rounds),
+        "frames": frames * len(rounds),
+        "width": cam.width if cam else 0,
+        "height": cam.height if cam else 0,
+        "p50_us": p50 * 1e6,
+        "mean_us": mean * 1e6,
+        "s_per_cycle": mean,
+        "frames_per_s": 1.0 / mean,
+        "bridge_over_alone": None,
+        "bridge_over_alone_mean": None,
+        "renders_per_s": None,
+        "physics_steps_per_s": None,
+    }
 
 
 class _Agents:
