@@ -216,8 +216,8 @@ BENCH_COLUMNS = (
     "renders_per_s",
     "physics_steps_per_s",
 )
-BENCH_FRAMES = 40
-BENCH_ROUNDS = 5
+BENCH_FRAMES = 100
+BENCH_ROUNDS = 7
 QUICK_FRAMES = 3
 
 
