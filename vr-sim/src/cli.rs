@@ -121,9 +121,11 @@ pub struct BenchArgs {
     #[arg(long, value_name = "FILE.svg")]
     pub plot: Option<PathBuf>,
     /// Python interpreter for the `python` rows (`python -m vrsync.bench_agent`, the
-    /// Python SDK doing the Rust bench agent's work) and the vector-env rows (`python -m
+    /// Python SDK doing the Rust bench agent's work), the vector-env rows (`python -m
     /// vrsync.bench_vector`: one process steps every agent through one `AgentGroup`; the
-    /// row also reports the SDK's time per agent-step); rows are left out, saying why,
+    /// row also reports the SDK's time per agent-step) and the `python-host` rows
+    /// (`python -m vrsync.bench_host`: `vrsync.Host` serving the Rust bench agents; the
+    /// row reports the host's own time per agent-cycle); rows are left out, saying why,
     /// when it cannot import vrsync (`pip install ./agent-sdk/python`).
     #[arg(
         long,
