@@ -14,6 +14,7 @@
 //! host is not there yet).
 
 pub(crate) mod absent;
+mod admission;
 pub mod any_agent;
 pub mod legacy;
 pub(crate) mod mixed;

@@ -11,7 +11,7 @@ use std::io::{self, ErrorKind, Read};
 
 use zerocopy::{FromBytes, IntoBytes};
 
-use crate::wire::{LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION};
+use crate::wire::{MotorCommand, MotorHeader};
 
 /// Record kinds.
 pub mod kind {
@@ -376,159 +376,7 @@ pub mod reject {
     pub const MALFORMED: u32 = 5;
 }
 
-/// A host's refusal of a hello, as a REJECT record carries it: a code (`reject::*`), the
-/// protocol and layout the host speaks, the ids it serves (with
-/// [`reject::UNKNOWN_AGENT`]) and a message for people.
-///
-/// Body: code, host protocol, host layout (16 bytes, little endian), the message (UTF-8),
-/// then, when ids are given, a zero byte and one `u32` per id. The ids travel as fields,
-/// never inside the message.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Reject {
-    /// One of [`reject`]'s codes.
-    pub code: u32,
-    /// The host's [`PROTOCOL_VERSION`].
-    pub host_protocol: u32,
-    /// The host's [`LAYOUT_HASH`].
-    pub host_layout: u64,
-    /// The agent ids the host serves (filled with [`reject::UNKNOWN_AGENT`]).
-    pub served: Vec<u32>,
-    /// What is wrong, for people.
-    pub message: String,
-}
-
-impl Reject {
-    /// A refusal with `code` and `message`, from this host's protocol and layout.
-    pub fn new(code: u32, message: impl Into<String>) -> Self {
-        Self {
-            code,
-            host_protocol: PROTOCOL_VERSION,
-            host_layout: LAYOUT_HASH,
-            served: Vec::new(),
-            message: message.into(),
-        }
-    }
-
-    /// "agent N is already connected".
-    pub fn id_in_use(agent: u32) -> Self {
-        Self::new(
-            reject::ID_IN_USE,
-            format!("agent {agent} is already connected"),
-        )
-    }
-
-    /// The record body.
-    pub fn encode(&self) -> Vec<u8> {
-        let mut b = Vec::with_capacity(17 + self.message.len() + 4 * self.served.len());
-        b.extend_from_slice(&self.code.to_le_bytes());
-        b.extend_from_slice(&self.host_protocol.to_le_bytes());
-        b.extend_from_slice(&self.host_layout.to_le_bytes());
-        // A message never holds a zero byte (it would end the message early).
-        b.extend(self.message.bytes().filter(|&c| c != 0));
-        if !self.served.is_empty() {
-            b.push(0);
-            for id in &self.served {
-                b.extend_from_slice(&id.to_le_bytes());
-            }
-        }
-        b
-    }
-
-    /// Decodes a record body; `None` if it is shorter than its fixed part or its id list is
-    /// cut.
-    pub fn decode(body: &[u8]) -> Option<Self> {
-        let rest = body.get(16..)?;
-        let (message, ids) = match rest.iter().position(|&c| c == 0) {
-            Some(at) => (&rest[..at], &rest[at + 1..]),
-            None => (rest, &[][..]),
-        };
-        if ids.len() % 4 != 0 {
-            return None;
-        }
-        Some(Self {
-            code: le_u32(body, 0)?,
-            host_protocol: le_u32(body, 4)?,
-            host_layout: le_u64(body, 8)?,
-            served: ids
-                .chunks_exact(4)
-                .filter_map(|c| <[u8; 4]>::try_from(c).ok().map(u32::from_le_bytes))
-                .collect(),
-            message: String::from_utf8_lossy(message).into_owned(),
-        })
-    }
-}
-
-impl Reject {
-    /// What an agent that got this refusal reports; `mismatch(host protocol, host
-    /// layout)` builds the error of a version refusal.
-    pub(crate) fn into_connect_error(
-        self,
-        session: &str,
-        agent: u32,
-        mismatch: impl FnOnce(u32, u64) -> crate::transport::AgentConnectError,
-    ) -> crate::transport::AgentConnectError {
-        use crate::transport::AgentConnectError as E;
-        let session = session.to_owned();
-        match self.code {
-            reject::VERSION => mismatch(self.host_protocol, self.host_layout),
-            reject::UNKNOWN_AGENT => E::IdNotServed {
-                session,
-                agent,
-                served: self.served,
-            },
-            reject::ID_IN_USE => E::IdInUse { session, agent },
-            _ => E::Refused {
-                session,
-                agent,
-                reason: self.message,
-            },
-        }
-    }
-}
-
-/// Admission of a hello, as every network host decides it: the protocol and layout, then
-/// the access token (refused with `token_message`, which names the host's config key),
-/// then whether the id is one the host serves (`served`, in slot order). Returns the agent's slot; whether
-/// the id is in use is the host's own to decide (its connections are its own).
-///
-/// # Errors
-/// The [`Reject`] to send: [`reject::VERSION`], [`reject::TOKEN`] or
-/// [`reject::UNKNOWN_AGENT`] (with `served`).
-pub fn admit(
-    hello: &Hello,
-    token: Option<&[u8]>,
-    token_message: &str,
-    served: &[u32],
-) -> Result<usize, Reject> {
-    if hello.protocol_version != PROTOCOL_VERSION || hello.layout_hash != LAYOUT_HASH {
-        return Err(Reject::new(
-            reject::VERSION,
-            format!(
-                "agent speaks protocol {} (layout {:016x}), host speaks protocol \
-                 {PROTOCOL_VERSION} (layout {LAYOUT_HASH:016x})",
-                hello.protocol_version, hello.layout_hash
-            ),
-        ));
-    }
-    if let Some(token) = token
-        && !constant_time_eq(token, &hello.token)
-    {
-        return Err(Reject::new(reject::TOKEN, token_message));
-    }
-    served
-        .iter()
-        .position(|&id| id == hello.agent_id)
-        .ok_or_else(|| Reject {
-            served: served.to_vec(),
-            ..Reject::new(
-                reject::UNKNOWN_AGENT,
-                format!(
-                    "agent {} is not part of this session (it serves agents {served:?})",
-                    hello.agent_id
-                ),
-            )
-        })
-}
+pub use super::admission::{Reject, admit};
 
 /// Compares two byte strings in time independent of where they differ.
 pub fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
@@ -542,46 +390,8 @@ pub fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::wire::PROTOCOL_VERSION;
     use proptest::prelude::*;
-
-    #[test]
-    fn a_reject_carries_the_served_ids_as_fields() {
-        let hello = |id, version| Hello {
-            protocol_version: version,
-            layout_hash: LAYOUT_HASH,
-            agent_id: id,
-            token: b"t".to_vec(),
-        };
-        let served = [0, 1, 250];
-        assert_eq!(
-            admit(&hello(1, PROTOCOL_VERSION), Some(b"t"), "x", &served),
-            Ok(1)
-        );
-        let r = admit(&hello(7, PROTOCOL_VERSION), Some(b"t"), "x", &served).unwrap_err();
-        assert_eq!(
-            (r.code, r.served.as_slice()),
-            (reject::UNKNOWN_AGENT, &served[..])
-        );
-        let back = Reject::decode(&r.encode()).unwrap();
-        assert_eq!(back, r);
-        assert!(back.message.contains("agent 7 is not part of this session"));
-        let v = admit(&hello(1, PROTOCOL_VERSION + 1), None, "x", &served).unwrap_err();
-        assert_eq!((v.code, v.served.len()), (reject::VERSION, 0));
-        assert_eq!(Reject::decode(&v.encode()), Some(v));
-        let t = admit(
-            &hello(1, PROTOCOL_VERSION),
-            Some(b"other"),
-            "wrong key",
-            &served,
-        );
-        assert_eq!(t, Err(Reject::new(reject::TOKEN, "wrong key")));
-        // A cut id list is not a reject; a body without ids is one with none.
-        let mut cut = r.encode();
-        cut.pop();
-        assert_eq!(Reject::decode(&cut), None);
-        assert_eq!(Reject::decode(&[0; 15]), None);
-        assert_eq!(Reject::decode(&[0; 16]).map(|r| r.served), Some(Vec::new()));
-    }
 
     #[test]
     fn hello_round_trips() {
