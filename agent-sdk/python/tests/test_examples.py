@@ -36,6 +36,7 @@ def test_every_example_has_a_test() -> None:
         "pettingzoo_loop.py",
         "python_host.py",  # test_python_host.py
         "seek.py",
+        "train_mujoco_ppo.py",
         "train_ppo.py",
         "vector_loop.py",
     ]
@@ -86,6 +87,7 @@ def test_train_ppo(tmp_path: Path, start_host) -> None:
     host = start_host(config)
     model = tmp_path / "ppo.zip"
     out = run_example(
+        "train_mujoco_ppo.py",
         "train_ppo.py", "--config", str(config), "--camera", "left", "--steps", "512",
         "--n-steps", "64", "--episode", "50", "--save", str(model), timeout=300,
     )
@@ -95,3 +97,19 @@ def test_train_ppo(tmp_path: Path, start_host) -> None:
     assert words[4] == "mean-episode-reward" and words[6] == "agent-steps/s", out.stdout
     assert model.stat().st_size > 0
     host.kill()
+
+
+def test_train_mujoco_ppo(tmp_path: Path) -> None:
+    """The MuJoCo PPO example trains a few updates against its own host process (the
+    session is the example's own: ppo-<pid>) and saves the policy."""
+    pytest.importorskip("mujoco")
+    pytest.importorskip("stable_baselines3")
+    model = tmp_path / "rovers.zip"
+    out = run_example(
+        "train_mujoco_ppo.py", "--agents", "2", "--timesteps", "256", "--n-steps", "64",
+        "--save", str(model), timeout=300,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stdout + out.stderr
+    words = out.stdout.split()
+    assert words[:2] == ["rollouts", "2"], out.stdout
+    assert model.stat().st_size > 0
