@@ -494,7 +494,13 @@ impl HostTransport for ShmHost {
                 std::hint::spin_loop();
             }
         }
-        match self.stop.timed_wait(|_| {}, timeout) {
+        // A zero timeout polls: iceoryx2's timed wait does not return at once for it.
+        let waited = if timeout.is_zero() {
+            self.stop.try_wait(|_| {})
+        } else {
+            self.stop.timed_wait(|_| {}, timeout)
+        };
+        match waited {
             Ok(_) => {}
             Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => {}
             Err(e) => {
