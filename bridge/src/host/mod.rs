@@ -325,8 +325,9 @@ impl<T: HostTransport> Host<T> {
     /// [`Host::collect`] block, the host calls it at least every [`INTERRUPT_PERIOD`], and
     /// when it returns `true` the wait ends with the `Terminated` error, as after SIGINT
     /// with [`SignalHandling::Install`]. For embedders that keep their own signal
-    /// handling (a Python interpreter checks for Ctrl-C here). A cycle whose collect was
-    /// interrupted is abandoned: its commands are lost.
+    /// handling (a Python interpreter checks for Ctrl-C here). An interrupted collect does
+    /// not end its cycle: the next `collect` finishes it (the stops that came are kept),
+    /// but the commands taken before the interrupt are not reported.
     pub fn set_interrupt(&mut self, hook: impl FnMut() -> bool + 'static) {
         self.interrupt = Some(Box::new(hook));
     }
