@@ -332,8 +332,8 @@ impl PyHost {
     /// `stop_timeout` for agents with `wait_for_stop = "timeout"`); async mode: waits
     /// until the next tick. Then the cycle number and simulated time advance. The GIL is
     /// released while waiting; Ctrl-C raises `KeyboardInterrupt` within 50 ms. The cycle
-    /// does not end then: calling `collect` again finishes it (the stops that came are
-    /// kept), but the commands taken before the interrupt are not reported.
+    /// does not end then: calling `collect` again finishes it, with the stops and the
+    /// commands that came before the interrupt.
     ///
     /// Raises `AgentLostError` (an agent was lost and `on_agent_lost` is `"abort"`, or
     /// `"wait"` and it did not come back), `TransportError`.

@@ -154,6 +154,7 @@ impl<T: HostTransport> Host<T> {
             refused_hook: None,
             slow_hook: None,
             interrupt: None,
+            collecting: None,
             wait_started: None,
             config,
         }
@@ -221,6 +222,8 @@ pub struct Host<T: HostTransport = Transports> {
     refused_hook: Option<RefusedHook>,
     slow_hook: Option<SlowHook>,
     interrupt: Option<Box<dyn FnMut() -> bool>>,
+    /// The cycle whose collect began and did not finish (it is finished by the next).
+    collecting: Option<u64>,
     /// When the current wait for agents began (a caller may wait in slices).
     wait_started: Option<Instant>,
 }
@@ -326,8 +329,8 @@ impl<T: HostTransport> Host<T> {
     /// when it returns `true` the wait ends with the `Terminated` error, as after SIGINT
     /// with [`SignalHandling::Install`]. For embedders that keep their own signal
     /// handling (a Python interpreter checks for Ctrl-C here). An interrupted collect does
-    /// not end its cycle: the next `collect` finishes it (the stops that came are kept),
-    /// but the commands taken before the interrupt are not reported.
+    /// not end its cycle: the next `collect` finishes it, with the stops and commands that
+    /// came before the interrupt.
     pub fn set_interrupt(&mut self, hook: impl FnMut() -> bool + 'static) {
         self.interrupt = Some(Box::new(hook));
     }
@@ -568,20 +571,26 @@ impl<T: HostTransport> Host<T> {
     /// [`HostCycleError::Terminated`] on SIGINT/SIGTERM; transport failures.
     pub fn collect(&mut self) -> Result<&CycleReport, HostCycleError> {
         let cycle = self.cycle;
-        self.report.cycle = cycle;
-        self.report.sim_time_ns = self.sim_time_ns();
-        self.report.timed_out = false;
-        self.report.late_batches = 0;
-        for a in &mut self.report.agents {
-            a.commands.clear();
-            a.actions.begin_cycle();
-            a.outcome = AgentOutcome::NotAwaited;
+        // A collect that ended early (an interrupt, a transport error) left this cycle's
+        // report half filled: the next collect goes on with it.
+        if self.collecting != Some(cycle) {
+            self.collecting = Some(cycle);
+            self.report.cycle = cycle;
+            self.report.sim_time_ns = self.sim_time_ns();
+            self.report.timed_out = false;
+            self.report.late_batches = 0;
+            for a in &mut self.report.agents {
+                a.commands.clear();
+                a.actions.begin_cycle();
+                a.outcome = AgentOutcome::NotAwaited;
+            }
         }
         if self.config.sync.sync_mode {
             self.collect_sync()?;
         } else {
             self.collect_async()?;
         }
+        self.collecting = None;
         for (a, s) in self.report.agents.iter_mut().zip(&self.slots) {
             a.read_cycle = s.read_cycle;
             a.evicted = s.evicted_in == Some(cycle);

@@ -666,3 +666,40 @@ fn an_agent_that_connected_and_left_is_named_as_such() {
         "{message}"
     );
 }
+
+#[test]
+fn an_interrupted_collect_is_finished_by_the_next_with_what_came_before() {
+    let (mut host, agents) = host_waiting("evict", "alive", 5.0);
+    // Agent 7 is busy; agent 3 answers at the first wait, and the interrupt comes at the
+    // second, after the host took agent 3's command.
+    agents.borrow_mut().busy_until = vec![None, Some(Instant::now() + Duration::from_secs(3600))];
+    let calls = Rc::new(RefCell::new(0u32));
+    let counted = calls.clone();
+    host.set_interrupt(move || {
+        *counted.borrow_mut() += 1;
+        *counted.borrow() >= 3
+    });
+    publish_all(&mut host);
+    assert!(matches!(host.collect(), Err(HostCycleError::Terminated)));
+    assert_eq!(host.cycle(), 0, "the cycle did not end");
+    host.set_interrupt(|| false);
+    agents.borrow_mut().busy_until[1] = None;
+    let report = host.collect().unwrap();
+    assert_eq!(report.cycle, 0);
+    assert_eq!(
+        outcomes(report),
+        [(3, AgentOutcome::Stopped), (7, AgentOutcome::Stopped)]
+    );
+    assert!(
+        report.agents().iter().all(|a| a.commands().len() == 1),
+        "{report:?}"
+    );
+    assert_eq!(host.cycle(), 1);
+    // The next cycle starts afresh.
+    publish_all(&mut host);
+    let report = host.collect().unwrap();
+    assert!(
+        report.agents().iter().all(|a| a.commands().len() == 1),
+        "{report:?}"
+    );
+}
