@@ -62,22 +62,24 @@ fn interrupt_hook(raised: Raised) -> impl FnMut() -> bool + 'static {
 /// The simulator side of a vrsync session: serves the agents of a config file over the
 /// transports the config names for them (shared memory, TCP, zenoh; one lock-step world).
 ///
-/// One cycle::
+/// One cycle:
 ///
-///     with vrsync.Host("world.toml") as host:
-///         host.wait_for_agents()
-///         while running:
-///             for agent_id in host.agent_ids:
-///                 frame = host.loan(agent_id)
-///                 view = frame.image("left")      # writable numpy view, no copy
-///                 render(agent_id, out=view)
-///                 del view                        # views must be gone before publish
-///                 frame.set_pose(position, rotation)
-///                 host.publish(frame)
-///             host.start()
-///             report = host.collect()             # GIL released; Ctrl-C ends it
-///             for ar in report.agents:
-///                 apply(ar.agent_id, ar.commands)
+/// ```python
+/// with vrsync.Host("world.toml") as host:
+///     host.wait_for_agents()
+///     while running:
+///         for agent_id in host.agent_ids:
+///             frame = host.loan(agent_id)
+///             view = frame.image("left")      # writable numpy view, no copy
+///             render(agent_id, out=view)
+///             del view                        # views must be gone before publish
+///             frame.set_pose(position, rotation)
+///             host.publish(frame)
+///         host.start()
+///         report = host.collect()             # GIL released; Ctrl-C ends it
+///         for ar in report.agents:
+///             apply(ar.agent_id, ar.commands)
+/// ```
 ///
 /// In sync mode `collect` returns once every agent that got a frame sent its stop for
 /// this cycle (or its stop timeout passed); in async mode at the next tick of
