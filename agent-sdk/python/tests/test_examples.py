@@ -87,7 +87,6 @@ def test_train_ppo(tmp_path: Path, start_host) -> None:
     host = start_host(config)
     model = tmp_path / "ppo.zip"
     out = run_example(
-        "train_mujoco_ppo.py",
         "train_ppo.py", "--config", str(config), "--camera", "left", "--steps", "512",
         "--n-steps", "64", "--episode", "50", "--save", str(model), timeout=300,
     )
