@@ -48,6 +48,13 @@ def action_space(actions: Sequence[Action]) -> spaces.Space[Any] | None:
     return spaces.Dict(by_name)
 
 
+def _clipped(a: Action, value: Any) -> np.ndarray:
+    """``value`` as float32, clipped to the bounds of continuous action ``a`` (per value;
+    a batch of rows is clipped row by row)."""
+    v = np.asarray(value, dtype=np.float32)
+    return np.clip(v, np.asarray(a.low, dtype=np.float32), np.asarray(a.high, dtype=np.float32))
+
+
 def act(agent: Agent, actions: Sequence[Action], action: Any) -> None:
     """Queues ``action`` (an element of :func:`action_space`) on ``agent``: one value per
     action. A continuous value outside its bounds is clipped to them first, as RL policies
@@ -58,9 +65,7 @@ def act(agent: Agent, actions: Sequence[Action], action: Any) -> None:
         if a.kind == "discrete":
             agent.act(a.name, int(value))
         else:
-            arr = np.asarray(value, dtype=np.float32).reshape(-1)
-            low = np.asarray(a.low, dtype=np.float32)
-            agent.act(a.name, np.clip(arr, low, np.asarray(a.high, dtype=np.float32)))
+            agent.act(a.name, _clipped(a, np.asarray(value, dtype=np.float32).reshape(-1)))
 
 
 def batched_values(actions: Sequence[Action], batch: Any) -> dict[str, Any]:
@@ -75,9 +80,7 @@ def batched_values(actions: Sequence[Action], batch: Any) -> dict[str, Any]:
         if a.kind == "discrete":
             out[a.name] = np.asarray(values[a.name], dtype=np.int64)
         else:
-            v = np.asarray(values[a.name], dtype=np.float32)
-            low = np.asarray(a.low, dtype=np.float32)
-            out[a.name] = np.clip(v, low, np.asarray(a.high, dtype=np.float32))
+            out[a.name] = _clipped(a, values[a.name])
     return out
 
 
