@@ -38,8 +38,8 @@ use std::time::{Duration, Instant};
 
 use vrsync_agent::{AgentBuilder, Command, SignalHandling, WaitStartError};
 use vrsync_bridge::{
-    ActionValue, AgentFrame, AgentOutcome, AgentTransport, Config, Host, MOTOR_FLAG_STOP,
-    MotorCommand, MotorHeader, PROTOCOL_VERSION, wait_for_newer_frame,
+    ActionValue, AgentFrame, AgentOutcome, AgentTransport, Config, Host, MOTOR_FLAG_LEAVE,
+    MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION, wait_for_newer_frame,
 };
 
 const WAIT: Duration = Duration::from_secs(20);
@@ -244,6 +244,60 @@ fn a_closed_agent_leaves_and_its_id_reconnects_at_the_next_cycle(kind: &'static 
     assert_eq!(frame.cycle(), 2, "{kind}: the next cycle");
     drop(frame);
     again.stop().unwrap();
+    host.join().unwrap();
+}
+
+/// An agent process says it leaves before its ports close: until they do, they are the
+/// departed connection's, not a new one. The next frame is not delivered to them (no
+/// rejoin), and their closing is not a loss (no eviction).
+fn a_leaving_agents_open_ports_are_not_a_new_connection<T: AgentTransport + 'static>(
+    kind: &'static str,
+    connect: fn(&Config) -> T,
+) {
+    let (collected_tx, collected_rx): (Sender<()>, Receiver<()>) = channel();
+    let (closed_tx, closed_rx): (Sender<()>, Receiver<()>) = channel();
+    let (config, host) = with_host(config(kind, true), move |host| {
+        publish(host);
+        let report = host.collect().unwrap();
+        let a = &report.agents()[0];
+        assert_eq!(a.outcome, AgentOutcome::Left, "{kind}: {a:?}");
+        assert!(a.left && !a.evicted, "{kind}: {a:?}");
+        // Cycle 1: the agent's ports are still open.
+        publish(host);
+        let report = host.collect().unwrap();
+        let a = &report.agents()[0];
+        assert_eq!(a.outcome, AgentOutcome::NotAwaited, "{kind}: {a:?}");
+        assert!(!a.rejoined && !a.evicted, "{kind}: {a:?}");
+        collected_tx.send(()).unwrap();
+        // Cycle 2: they are closed.
+        closed_rx.recv_timeout(WAIT).unwrap();
+        publish(host);
+        let report = host.collect().unwrap();
+        let a = &report.agents()[0];
+        assert_eq!(a.outcome, AgentOutcome::NotAwaited, "{kind}: {a:?}");
+        assert!(!a.rejoined && !a.evicted, "{kind}: {a:?}");
+        let stats = host.stats();
+        assert_eq!(
+            (stats.leaves, stats.evictions, stats.rejoins),
+            (1, 0, 0),
+            "{kind}: {stats:?}"
+        );
+        assert_eq!(stats.frames_undelivered, 2, "{kind}: {stats:?}");
+    });
+    let mut agent = connect(&config);
+    assert_eq!(first_cycle(&mut agent), 0, "{kind}");
+    let header = MotorHeader {
+        protocol_version: PROTOCOL_VERSION,
+        agent_id: 4,
+        cycle: 0,
+        flags: MOTOR_FLAG_STOP | MOTOR_FLAG_LEAVE,
+        command_count: 0,
+        ack_cycle: 0,
+    };
+    agent.send_batch(&header, &[]).unwrap();
+    collected_rx.recv_timeout(WAIT).unwrap();
+    drop(agent);
+    closed_tx.send(()).unwrap();
     host.join().unwrap();
 }
 
@@ -755,6 +809,13 @@ macro_rules! conformance {
             fn a_closed_agent_leaves_and_its_id_reconnects_at_the_next_cycle() {
                 super::a_closed_agent_leaves_and_its_id_reconnects_at_the_next_cycle(
                     stringify!($kind),
+                );
+            }
+            #[test]
+            fn a_leaving_agents_open_ports_are_not_a_new_connection() {
+                super::a_leaving_agents_open_ports_are_not_a_new_connection(
+                    stringify!($kind),
+                    super::connect::<$agent>,
                 );
             }
             #[test]

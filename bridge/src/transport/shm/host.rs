@@ -425,6 +425,11 @@ impl HostTransport for ShmHost {
                 }
                 p.verified.set(Some(now));
             }
+            // Only the ports of a connection that left got it, in the moment before they
+            // close: not a new connection, so not delivered (as `is_connected` says).
+            if p.served.is_none() && p.departed.is_some_and(|d| !has_other_subscriber(p, d)) {
+                return Ok(false);
+            }
         }
         Ok(delivered)
     }
