@@ -46,6 +46,14 @@ unsafe impl Send for Agents {}
 // SAFETY: as above; there is no shared (`&`) use of the agents.
 unsafe impl Sync for Agents {}
 
+impl Drop for Agents {
+    /// The agents leave together: the closes that wait for the host overlap
+    /// ([`vrsync_agent::close_all`]).
+    fn drop(&mut self) {
+        vrsync_agent::close_all(self.0.drain(..));
+    }
+}
+
 /// N agents of one session, driven in lock-step from one process with one call per step.
 ///
 /// ```python
@@ -638,9 +646,13 @@ impl AgentGroup {
         (self.steps, self.sdk_ns, self.wait_ns) = (0, 0, 0);
     }
 
-    /// Disconnects every agent (each leaves the session). Idempotent.
-    fn close(&mut self) {
-        self.agents = None;
+    /// Disconnects every agent (each leaves the session). Idempotent. Returns within about
+    /// a second even when the host does not answer (a frozen process, a lost link).
+    fn close(&mut self, py: Python<'_>) {
+        if let Some(agents) = self.agents.take() {
+            // The closes may wait for the host: without the GIL.
+            py.detach(move || drop(agents));
+        }
     }
 
     fn __enter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {
@@ -648,8 +660,8 @@ impl AgentGroup {
     }
 
     #[pyo3(signature = (*_args))]
-    fn __exit__(&mut self, _args: &Bound<'_, PyTuple>) -> bool {
-        self.close();
+    fn __exit__(&mut self, py: Python<'_>, _args: &Bound<'_, PyTuple>) -> bool {
+        self.close(py);
         false
     }
 

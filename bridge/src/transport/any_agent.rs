@@ -104,6 +104,12 @@ macro_rules! any_agent {
                 }
             }
 
+            fn begin_close(&mut self) {
+                match self {
+                    $(Self::$kind(t) => t.begin_close(),)*
+                }
+            }
+
             fn send_batch(
                 &mut self,
                 header: &MotorHeader,

@@ -586,6 +586,11 @@ pub trait AgentTransport {
     ) -> Result<(), AgentSendError>;
     /// Whether SIGINT/SIGTERM arrived (never, with [`crate::SignalHandling::Leave`]).
     fn termination_requested(&self) -> bool;
+    /// Starts closing the connection without waiting for it; dropping the transport then
+    /// waits for the close (bounded). A transport whose close waits for the host (zenoh's)
+    /// starts it here, so that closing many agents waits for all their closes at once,
+    /// not one after another. Nothing is sent after it. The default does nothing.
+    fn begin_close(&mut self) {}
 }
 
 /// Why [`wait_for_newer_frame`] returned without a frame.

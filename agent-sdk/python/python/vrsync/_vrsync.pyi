@@ -392,7 +392,8 @@ class Agent:
     def stop(self) -> None:
         """Sends the queued commands with the stop for this cycle."""
     def close(self) -> None:
-        """Disconnects (idempotent)."""
+        """Disconnects (idempotent). Returns within about a second even when the host does
+        not answer (a frozen process, a lost link)."""
     def __enter__(self) -> Agent: ...
     def __exit__(self, *args: object) -> bool: ...
     @property
@@ -535,7 +536,8 @@ class AgentGroup:
         """(steps, seconds in the SDK excluding blocked waits, seconds blocked waiting)."""
     def reset_timing(self) -> None: ...
     def close(self) -> None:
-        """Disconnects every agent (idempotent)."""
+        """Disconnects every agent (idempotent). The agents close together: within about a
+        second even when the host does not answer (a frozen process, a lost link)."""
     def __enter__(self) -> AgentGroup: ...
     def __exit__(self, *args: object) -> bool: ...
     def __len__(self) -> int: ...

@@ -1,7 +1,7 @@
 //! The zenoh transport's agent side: hello, the newest frame, batches, the host's token.
 
 use std::rc::Rc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use ::zenoh::Wait;
 use ::zenoh::liveliness::LivelinessToken;
@@ -180,6 +180,9 @@ pub struct ZenohAgent {
     _host: Subscriber<()>,
     _token: LivelinessToken,
     session: ::zenoh::Session,
+    /// Once the close began: the closing thread's completion and when it began (`None`:
+    /// closed already, in place).
+    closing: Option<Option<(std::sync::mpsc::Receiver<()>, Instant)>>,
 }
 
 impl core::fmt::Debug for ZenohAgent {
@@ -359,6 +362,7 @@ impl ZenohAgent {
             _host: host,
             _token: token,
             session,
+            closing: None,
         })
     }
 
@@ -414,9 +418,50 @@ fn parse_answer(body: &[u8], session: &str, id: u32) -> Result<Answer, String> {
     }
 }
 
+/// How long dropping an agent waits for its zenoh session to close, from the moment the
+/// close began. zenoh's close waits up to its own 10 s for a host that does not answer (a
+/// frozen process, a lost link); past this bound the close goes on in a thread of its
+/// own and the drop returns.
+const CLOSE_BOUND: Duration = Duration::from_secs(1);
+
+impl ZenohAgent {
+    /// Starts closing the session in a thread of its own (once).
+    fn start_close(&mut self) {
+        if self.closing.is_some() {
+            return;
+        }
+        let session = self.session.clone();
+        let (done_tx, done_rx) = std::sync::mpsc::channel();
+        let spawned = std::thread::Builder::new()
+            .name("vrsync-zenoh-close".into())
+            .spawn(move || {
+                let _ = session.close().wait();
+                let _ = done_tx.send(());
+            });
+        self.closing = Some(match spawned {
+            Ok(_) => Some((done_rx, Instant::now())),
+            Err(_) => {
+                // No thread to spare: closed here, within zenoh's own timeout.
+                let _ = self.session.close().wait();
+                None
+            }
+        });
+    }
+}
+
 impl Drop for ZenohAgent {
     fn drop(&mut self) {
-        let _ = self.session.close().wait();
+        self.start_close();
+        if let Some(Some((done, began))) = &self.closing {
+            let left = CLOSE_BOUND.saturating_sub(began.elapsed());
+            if done.recv_timeout(left).is_err() {
+                debug!(
+                    agent = self.id,
+                    "the zenoh session did not close within {CLOSE_BOUND:?}: the host does \
+                     not answer; closing in the background"
+                );
+            }
+        }
     }
 }
 
@@ -506,5 +551,9 @@ impl AgentTransport for ZenohAgent {
 
     fn termination_requested(&self) -> bool {
         self.signals.termination_requested()
+    }
+
+    fn begin_close(&mut self) {
+        self.start_close();
     }
 }
