@@ -67,8 +67,11 @@ bin="$target_dir/debug"
 export LD_LIBRARY_PATH="$bin${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 
 step "mcs: binding, console host, tests ($(mcs --version))"
+# The binding's sources live in the Unity package (Runtime/Binding), which Unity compiles
+# from there; this is the same set of files (src/ here is a link to it).
+binding="$root/bridge/bindings/unity/com.vrsync.host/Runtime/Binding"
 mcs_flags=(-langversion:7.2 -unsafe -warnaserror -nologo)
-timeout 120 mcs "${mcs_flags[@]}" -target:library -out:"$work/Vrsync.dll" "$here"/src/*.cs
+timeout 120 mcs "${mcs_flags[@]}" -target:library -out:"$work/Vrsync.dll" "$binding"/*.cs
 timeout 120 mcs "${mcs_flags[@]}" -r:"$work/Vrsync.dll" -out:"$work/VrsyncConsoleHost.exe" \
     "$here"/examples/*.cs
 timeout 120 mcs "${mcs_flags[@]}" -r:"$work/Vrsync.dll" -out:"$work/VrsyncTests.exe" \
