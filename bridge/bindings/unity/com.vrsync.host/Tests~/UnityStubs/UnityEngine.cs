@@ -51,6 +51,25 @@ namespace UnityEngine
         }
     }
 
+    public static class Mathf
+    {
+        public const float Deg2Rad = (float)(Math.PI / 180.0);
+        public const float Rad2Deg = (float)(180.0 / Math.PI);
+        public static float Sin(float f) { return (float)Math.Sin(f); }
+        public static float Cos(float f) { return (float)Math.Cos(f); }
+        public static float Atan2(float y, float x) { return (float)Math.Atan2(y, x); }
+        public static float Sqrt(float f) { return (float)Math.Sqrt(f); }
+        public static float Min(float a, float b) { return Math.Min(a, b); }
+        public static float Max(float a, float b) { return Math.Max(a, b); }
+        public static float Clamp(float value, float min, float max) { return value < min ? min : value > max ? max : value; }
+        public static float Repeat(float t, float length) { return Clamp(t - (float)Math.Floor(t / length) * length, 0, length); }
+        public static float DeltaAngle(float current, float target)
+        {
+            float delta = Repeat(target - current, 360.0f);
+            return delta > 180.0f ? delta - 360.0f : delta;
+        }
+    }
+
     public struct Rect
     {
         public float x, y, width, height;
@@ -152,6 +171,29 @@ namespace UnityEngine
     public class Object
     {
         public string name { get; set; }
+
+        /// <summary>Destroys a GameObject's behaviours (OnDestroy) or a texture at once.</summary>
+        public static void DestroyImmediate(Object obj)
+        {
+            var go = obj as GameObject;
+            if (go == null)
+            {
+                Destroy(obj);
+                return;
+            }
+            foreach (Transform child in new List<Transform>(go.transform.StubChildren))
+                DestroyImmediate(child.gameObject);
+            foreach (var c in go.StubComponents)
+            {
+                var b = c as Behaviour;
+                if (b == null)
+                    continue;
+                var m = b.GetType().GetMethod("OnDestroy", BindingFlags.Instance | BindingFlags.Public | BindingFlags.NonPublic,
+                    null, Type.EmptyTypes, null);
+                if (m != null)
+                    m.Invoke(b, null);
+            }
+        }
 
         public static void Destroy(Object obj)
         {
@@ -455,8 +497,32 @@ namespace UnityEngine
         }
     }
 
+    public struct Color
+    {
+        public float r, g, b, a;
+        public Color(float r, float g, float b, float a) { this.r = r; this.g = g; this.b = b; this.a = a; }
+        public Color(float r, float g, float b) : this(r, g, b, 1) { }
+        public static Color black { get { return new Color(0, 0, 0, 1); } }
+        public static Color red { get { return new Color(1, 0, 0, 1); } }
+    }
+
+    public enum CameraClearFlags
+    {
+        Skybox = 1,
+        SolidColor = 2,
+        Depth = 3,
+        Nothing = 4,
+    }
+
     public class Camera : Behaviour
     {
+        public Camera() { rect = new Rect(0, 0, 1, 1); clearFlags = CameraClearFlags.Skybox; }
+
+        public CameraClearFlags clearFlags { get; set; }
+        public Color backgroundColor { get; set; }
+        /// <summary>The viewport, normalized; (0, 0) is the bottom left.</summary>
+        public Rect rect { get; set; }
+
         /// <summary>Stub only: what Camera.Render() draws (the tests' "scene").</summary>
         public static Action<Camera> StubRenderer;
 
@@ -474,7 +540,23 @@ namespace UnityEngine
             targetTexture.RequireCreated();
             StubRenders++;
             if (StubRenderer != null)
+            {
                 StubRenderer(this);
+                return;
+            }
+            // No scene in the stubs: a solid-colour clear of the viewport is all that renders.
+            if (clearFlags != CameraClearFlags.SolidColor)
+                return;
+            RenderTexture rt = targetTexture;
+            if (rt.format != RenderTextureFormat.ARGB32)
+                throw new NotImplementedException("stub Camera.Render: clears ARGB32 targets only");
+            var c = new[] { backgroundColor.r, backgroundColor.g, backgroundColor.b, backgroundColor.a };
+            int x0 = (int)Math.Round(rect.x * rt.width), x1 = (int)Math.Round((rect.x + rect.width) * rt.width);
+            int y0 = (int)Math.Round(rect.y * rt.height), y1 = (int)Math.Round((rect.y + rect.height) * rt.height);
+            for (int y = y0; y < y1; y++)  // rows counted from the bottom, as the viewport
+                for (int x = x0; x < x1; x++)
+                    for (int k = 0; k < 4; k++)
+                        rt.StubPixels[(y * rt.width + x) * 4 + k] = (byte)Math.Round(Math.Min(1, Math.Max(0, c[k])) * 255);
         }
     }
 
