@@ -11,6 +11,7 @@
 #                    stop timeout under wait_for_stop = "alive" (Slow, Stats.SlowStops)
 #   7. channels      vectors written through Span<float> reach the Rust channel_agent example,
 #                    its actions come back in the reports (values checked), errors named
+# The Unity package built on this binding has its own tests: bridge/bindings/unity/test.sh.
 # Needs: cargo, mcs, mono (apt-get install -y mono-mcs mono-runtime), a C compiler for 1.
 # Every process runs under `timeout`; children are killed on exit. Usage:
 #   bash bridge/bindings/csharp/test.sh
