@@ -10,7 +10,8 @@ namespace Vrsync
     /// Report the state of the actions you run with <see cref="VrsyncAgent.ReportStatus"/>
     /// and collisions with <see cref="VrsyncAgent.ReportCollision"/>: they go out with the
     /// next frame (the example agents wait for <c>Finished</c>/<c>Aborted</c> before their
-    /// next command).
+    /// next command). An exception thrown by one of these methods is logged and costs only
+    /// that call (a command that threw counts as rejected); the session goes on.
     /// </summary>
     public interface IVrsyncBody
     {

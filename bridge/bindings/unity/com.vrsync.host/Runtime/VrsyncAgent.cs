@@ -190,7 +190,15 @@ namespace Vrsync
                 Collision c = events.GetCollision(i);
                 sensors.AddCollision(c.ActionId, c.ColliderId);
             }
-            bodyImpl.WriteSensors(this, frame, ref sensors);
+            try
+            {
+                bodyImpl.WriteSensors(this, frame, ref sensors);
+            }
+            catch (Exception e)
+            {
+                // A bug in the body script costs its extra sensors, not the session.
+                Debug.LogException(e);
+            }
             frame.Publish(ref sensors);
             events.ClearEvents();
             eventsOverflowWarned = false;
@@ -211,15 +219,34 @@ namespace Vrsync
             uint rejected = 0;
             foreach (MotorCommand command in report.Commands)
             {
-                if (bodyImpl.Apply(this, command))
+                bool applied;
+                try
+                {
+                    applied = bodyImpl.Apply(this, command);
+                }
+                catch (Exception e)
+                {
+                    // Logged like any script exception; the command counts as rejected.
+                    Debug.LogException(e);
+                    applied = false;
+                }
+                if (applied)
                     CommandsApplied++;
                 else
                     rejected++;
             }
             CommandsRejected += rejected;
             host.SetRejected(report.AgentId, rejected);
-            if (report.Outcome != AgentOutcome.NotAwaited)
+            if (report.Outcome == AgentOutcome.NotAwaited)
+                return;
+            try
+            {
                 bodyImpl.ApplyActions(this, report);
+            }
+            catch (Exception e)
+            {
+                Debug.LogException(e);
+            }
         }
     }
 }
