@@ -79,9 +79,11 @@ step "1. layout: package.json, asmdefs, .meta files, GUIDs, PluginImporter"
 timeout 60 python3 "$package/Tests~/check_layout.py" "$package"
 
 step "cargo build --workspace --all-targets (libvrsync_host, vr-agent)"
-# The same command as bridge/bindings/csharp/test.sh and scripts/test-all: nothing is
-# compiled again after those.
-timeout 1800 cargo build --workspace --all-targets
+# As scripts/test-all builds (it passes its feature set in VRSYNC_FEATURES): after its
+# builds nothing is compiled again.
+features=()
+[[ -n "${VRSYNC_FEATURES:-}" ]] && features=(--features "$VRSYNC_FEATURES")
+timeout 1800 cargo build --workspace --all-targets "${features[@]}"
 target_dir="$(cargo metadata --format-version 1 --no-deps | grep -o '"target_directory":"[^"]*"' | cut -d'"' -f4)"
 bin="$target_dir/debug"
 [[ -e "$bin/libvrsync_host.so" ]] || fail "$bin/libvrsync_host.so was not built"
