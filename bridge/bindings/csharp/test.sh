@@ -58,10 +58,12 @@ session_base="cs$$-$RANDOM"
 
 step "cargo build --workspace --all-targets (libvrsync_host, vr-agent)"
 # The whole workspace with its tests, as `cargo test --workspace` builds it: the same feature
-# set, so after that command (scripts/test-all, CI) nothing is compiled again. (Building only
-# `-p vrsync-host-ffi` resolves dependency features without the dev-dependencies and rebuilds
-# a large part of the tree.)
-timeout 1800 cargo build --workspace --all-targets
+# set (scripts/test-all passes its own in VRSYNC_FEATURES), so after that command nothing is
+# compiled again. (Building only `-p vrsync-host-ffi` resolves dependency features without
+# the dev-dependencies and rebuilds a large part of the tree.)
+features=()
+[[ -n "${VRSYNC_FEATURES:-}" ]] && features=(--features "$VRSYNC_FEATURES")
+timeout 1800 cargo build --workspace --all-targets "${features[@]}"
 target_dir="$(cargo metadata --format-version 1 --no-deps | grep -o '"target_directory":"[^"]*"' | cut -d'"' -f4)"
 bin="$target_dir/debug"
 [[ -e "$bin/libvrsync_host.so" ]] || fail "$bin/libvrsync_host.so was not built"
