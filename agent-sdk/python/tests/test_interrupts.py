@@ -70,8 +70,10 @@ def interrupted(call: str) -> str:
     return CATCH.format(call=call)
 
 
-def run_child(body: str) -> float:
-    """Runs the prologue and `body` in a child; returns the measured latency (s)."""
+def run_interrupted_child(body: str) -> tuple[str, str]:
+    """Runs the prologue and `body` in a child, which must exit 0 and have been
+    interrupted on its `# BLOCKS` line; returns its (stdout, stderr) and prints the
+    measured latency of the KeyboardInterrupt."""
     code = PROLOGUE + body
     lines = code.splitlines()
     block_line = next(i + 1 for i, l in enumerate(lines) if l.rstrip().endswith("# BLOCKS"))
@@ -84,6 +86,13 @@ def run_child(body: str) -> float:
             child.kill()
             child.wait(timeout=30)
     assert child.returncode == 0, out + err
+    assert re.search(r"interrupted after ([0-9.]+) s", out), out + err
+    return out, err
+
+
+def run_child(body: str) -> float:
+    """Runs the prologue and `body` in a child; returns the measured latency (s)."""
+    out, err = run_interrupted_child(body)
     match = re.search(r"interrupted after ([0-9.]+) s", out)
     assert match, out + err
     latency = float(match.group(1))
@@ -206,19 +215,18 @@ def test_one_ctrl_c_in_step_then_close_ends_with_a_frozen_host(
         tmp_path, f"int-frozen-{transport}", agents=16, transport=transport, stop_timeout=600.0
     )
     host = start_host(config)
-    code = PROLOGUE + f"""
+    try:
+        out, err = run_interrupted_child(
+            f"""
 from vrsync.vector import VrsyncVectorEnv
 env = VrsyncVectorEnv({str(config)!r}, connect_timeout=60)
 env.reset(seed=0)
 actions = env.action_space.sample()
 env.step(actions)
 os.kill({host.proc.pid}, signal.SIGSTOP)
-threading.Thread(target=interrupt_when_blocking, daemon=True).start()
-try:
-    env.step(actions)  # BLOCKS
-    print("step returned", flush=True)
-except KeyboardInterrupt:
-    print("interrupted after", round(time.monotonic() - SENT[0], 4), "s", flush=True)
+"""
+            + interrupted("env.step(actions)")
+            + """
 t = time.monotonic()
 try:
     env.close()
@@ -226,18 +234,9 @@ try:
 except KeyboardInterrupt:
     print("close raised KeyboardInterrupt", flush=True)
 """
-    lines = code.splitlines()
-    block_line = next(i + 1 for i, l in enumerate(lines) if l.rstrip().endswith("# BLOCKS"))
-    child = run_python(code.replace("MAIN = ", f"BLOCK_LINE = {block_line}; MAIN = ", 1))
-    try:
-        out, err = child.communicate(timeout=120)
+        )
     finally:
-        if child.poll() is None:
-            child.kill()
-            child.wait(timeout=30)
         host.kill(signal.SIGKILL)
-    assert child.returncode == 0, out + err
-    assert re.search(r"interrupted after ([0-9.]+) s", out), out + err
     closed = re.search(r"closed in ([0-9.]+) s", out)
     assert closed, out + err
     close_s = float(closed.group(1))
