@@ -21,53 +21,19 @@ here="$(cd "$(dirname "$0")" && pwd)"
 root="$(cd "$here/../../.." && pwd)"
 cd "$root"
 
-step() { printf '\n--- %s (%ss)\n' "$*" "$SECONDS"; }
-fail() {
-    echo "test.sh: FAIL: $*" >&2
-    exit 1
-}
+test_name="csharp/test.sh"
+work_prefix="vrsync-csharp"
+# shellcheck source=../test-lib.sh
+source "$root/bridge/bindings/test-lib.sh"
 
 for tool in cargo mcs mono timeout; do
     command -v "$tool" >/dev/null || fail "$tool not found (apt-get install -y mono-mcs mono-runtime)"
 done
 
-work="$(mktemp -d "${TMPDIR:-/tmp}/vrsync-csharp.XXXXXX")"
-pids=()
-cleanup() {
-    local status=$?
-    for pid in "${pids[@]}"; do
-        kill "$pid" 2>/dev/null || true
-    done
-    for pid in "${pids[@]}"; do
-        wait "$pid" 2>/dev/null || true
-    done
-    if ((status != 0)); then
-        for log in "$work"/*.log; do
-            [[ -e "$log" ]] || continue
-            echo "==== $log (last lines)" >&2
-            tail -n 20 "$log" >&2
-        done
-    fi
-    rm -rf "$work"
-}
-trap cleanup EXIT
-trap 'exit 130' INT TERM
-
 # Unique per run, so parallel runs and leftovers of crashed runs never meet.
 session_base="cs$$-$RANDOM"
 
-step "cargo build --workspace --all-targets (libvrsync_host, vr-agent)"
-# The whole workspace with its tests, as `cargo test --workspace` builds it: the same feature
-# set (scripts/test-all passes its own in VRSYNC_FEATURES), so after that command nothing is
-# compiled again. (Building only `-p vrsync-host-ffi` resolves dependency features without
-# the dev-dependencies and rebuilds a large part of the tree.)
-features=()
-[[ -n "${VRSYNC_FEATURES:-}" ]] && features=(--features "$VRSYNC_FEATURES")
-timeout 1800 cargo build --workspace --all-targets "${features[@]}"
-target_dir="$(cargo metadata --format-version 1 --no-deps | grep -o '"target_directory":"[^"]*"' | cut -d'"' -f4)"
-bin="$target_dir/debug"
-[[ -e "$bin/libvrsync_host.so" ]] || fail "$bin/libvrsync_host.so was not built"
-export LD_LIBRARY_PATH="$bin${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+build_native
 
 step "mcs: binding, console host, tests ($(mcs --version))"
 # The binding's sources live in the Unity package (Runtime/Binding), which Unity compiles

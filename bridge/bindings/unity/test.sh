@@ -30,11 +30,10 @@ root="$(cd "$here/../../.." && pwd)"
 package="$here/com.vrsync.host"
 cd "$root"
 
-step() { printf '\n--- %s (%ss)\n' "$*" "$SECONDS"; }
-fail() {
-    echo "unity/test.sh: FAIL: $*" >&2
-    exit 1
-}
+test_name="unity/test.sh"
+work_prefix="vrsync-unity"
+# shellcheck source=../test-lib.sh
+source "$root/bridge/bindings/test-lib.sh"
 
 for tool in cargo mcs mono timeout python3; do
     command -v "$tool" >/dev/null || fail "$tool not found (apt-get install -y mono-mcs mono-runtime python3)"
@@ -51,43 +50,12 @@ fi
 [[ -n "$python" ]] && "$python" -c 'import vrsync' 2>/dev/null ||
     fail "no Python with the vrsync package (pip install ./agent-sdk/python, or set VRSYNC_PYTHON)"
 
-work="$(mktemp -d "${TMPDIR:-/tmp}/vrsync-unity.XXXXXX")"
-pids=()
-cleanup() {
-    local status=$?
-    for pid in "${pids[@]}"; do
-        kill "$pid" 2>/dev/null || true
-    done
-    for pid in "${pids[@]}"; do
-        wait "$pid" 2>/dev/null || true
-    done
-    if ((status != 0)); then
-        for log in "$work"/*.log; do
-            [[ -e "$log" ]] || continue
-            echo "==== $log (last lines)" >&2
-            tail -n 20 "$log" >&2
-        done
-    fi
-    rm -rf "$work"
-}
-trap cleanup EXIT
-trap 'exit 130' INT TERM
-
 session_base="unity$$-$RANDOM"
 
 step "1. layout: package.json, asmdefs, .meta files, GUIDs, PluginImporter"
 timeout 60 python3 "$package/Tests~/check_layout.py" "$package"
 
-step "cargo build --workspace --all-targets (libvrsync_host, vr-agent)"
-# As scripts/test-all builds (it passes its feature set in VRSYNC_FEATURES): after its
-# builds nothing is compiled again.
-features=()
-[[ -n "${VRSYNC_FEATURES:-}" ]] && features=(--features "$VRSYNC_FEATURES")
-timeout 1800 cargo build --workspace --all-targets "${features[@]}"
-target_dir="$(cargo metadata --format-version 1 --no-deps | grep -o '"target_directory":"[^"]*"' | cut -d'"' -f4)"
-bin="$target_dir/debug"
-[[ -e "$bin/libvrsync_host.so" ]] || fail "$bin/libvrsync_host.so was not built"
-export LD_LIBRARY_PATH="$bin${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+build_native
 
 step "2. mcs: Runtime against the Unity stubs ($(mcs --version))"
 mcs_flags=(-langversion:7.2 -unsafe -warnaserror -nologo)
