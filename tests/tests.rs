@@ -12,6 +12,7 @@ mod cpp;
 mod events;
 mod examples;
 mod faults;
+mod fuzz;
 mod hostile;
 mod legacy;
 mod liveness;
