@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+import vrsync
 
 # The OpenGL platform is chosen when mujoco is first imported.
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -668,3 +669,53 @@ def test_the_wandering_agent_picks_actions_within_bounds() -> None:
         assert -20 <= a["wheels"][0] <= 20 and -1 <= a["wheels"][1] <= 1
         assert np.all(np.abs(a["torque"]) <= 1)
         assert 0 <= a["drive"] < 5 and isinstance(a["drive"], int)
+
+
+def test_a_reset_puts_only_that_agents_body_back_at_rest() -> None:
+    # Every rover drives for 20 cycles; then agent 1 sends a trial reset and agent 2 an
+    # environment reset, with no action: both are back at the scene's start, at rest,
+    # their wheels' controls at 0; agents 0 and 3 are where they drove.
+    driving = 20
+
+    def policy(cycle: int, agent_id: int) -> dict[str, Any]:
+        return wander(cycle, agent_id) if cycle < driving else {"wheels": None, "drive": None}
+
+    with MujocoWorld(ROVERS_TOML) as w:
+        start = {b.id: w.data.xpos[b.body_id].copy() for b in w.agents}
+        host = FakeHost(w, policy)
+        original = host.collect
+
+        def collect() -> FakeReport:
+            report = original()
+            if report.cycle == driving:
+                report.agents[1].commands = [vrsync.TrialReset()]
+                report.agents[2].commands = [vrsync.EnvironmentReset()]
+            return report
+
+        host.collect = collect  # type: ignore[method-assign]
+        for _ in range(driving):
+            w.step_cycle(host)
+        moved = {b.id: w.data.xpos[b.body_id].copy() for b in w.agents}
+        assert all(np.linalg.norm(moved[i] - start[i]) > 0.02 for i in start), (moved, start)
+        applied, rejected = w.commands_applied, w.commands_rejected
+        host.rejected.clear()
+        # Cycle `driving`, by hand, to look between its resets and its physics.
+        for b in w.agents:
+            frame = host.loan(b.id)
+            w.write_frame(b, frame)
+            host.publish(frame)
+        host.start()
+        w.apply_report(host.collect(), host)
+        for b in w.agents[1:3]:
+            r = b.reset
+            assert len(r.qpos_index) == 7 + 2 and len(r.qvel_index) == 6 + 2, r  # free + 2 wheels
+            np.testing.assert_array_equal(w.data.qpos[r.qpos_index], w.model.qpos0[r.qpos_index])
+            assert not w.data.qvel[r.qvel_index].any() and not w.data.ctrl[r.ctrl_index].any()
+        # One cycle of physics from rest at the start: barely moved (it settles on its wheels).
+        w.advance()
+        for i in (1, 2):
+            assert np.linalg.norm(w.data.xpos[w.agents[i].body_id] - start[i]) < 0.01
+        for i in (0, 3):
+            assert np.linalg.norm(w.data.xpos[w.agents[i].body_id] - start[i]) > 0.02
+        assert (w.commands_applied, w.commands_rejected) == (applied + 2, rejected)
+        assert host.rejected == {}

@@ -32,6 +32,7 @@ __all__ = [
     "ActionBinding",
     "AgentBinding",
     "CameraBinding",
+    "ResetBinding",
     "RewardFn",
     "VectorBinding",
     "bind_agent",
@@ -90,6 +91,24 @@ class ActionBinding:
 
 
 @dataclass(frozen=True)
+class ResetBinding:
+    """What a reset of one agent puts back: the ``qpos`` and ``qvel`` entries of every
+    joint in its body's subtree (the body's own free joint, its wheels, ...) and the
+    ``ctrl`` of every actuator that drives one of those joints."""
+
+    qpos_index: npt.NDArray[np.intp]
+    qvel_index: npt.NDArray[np.intp]
+    ctrl_index: npt.NDArray[np.intp]
+
+    def apply(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
+        """Puts the agent's joints back to the scene's initial configuration
+        (``model.qpos0``), at rest, with its actuators' controls at 0."""
+        data.qpos[self.qpos_index] = model.qpos0[self.qpos_index]
+        data.qvel[self.qvel_index] = 0.0
+        data.ctrl[self.ctrl_index] = 0.0
+
+
+@dataclass(frozen=True)
 class AgentBinding:
     """Everything one agent's cycle touches."""
 
@@ -99,6 +118,7 @@ class AgentBinding:
     vectors: tuple[VectorBinding, ...]
     actions: dict[str, ActionBinding]
     reward: RewardFn | None
+    reset: ResetBinding
 
 
 def bind_agent(
@@ -164,7 +184,37 @@ def bind_agent(
         actions[act.name] = _action(model, act, b.actions[act.name], lookup, where)
 
     reward = cast(RewardFn, load_hook(b.reward, config.path)) if b.reward else None
-    return AgentBinding(agent.id, body_id, tuple(cameras), tuple(vectors), actions, reward)
+    reset = _reset_binding(model, body_id)
+    return AgentBinding(
+        agent.id, body_id, tuple(cameras), tuple(vectors), actions, reward, reset
+    )
+
+
+def _reset_binding(model: mujoco.MjModel, body_id: int) -> ResetBinding:
+    """The joints in the subtree of ``body_id`` and the actuators that drive them."""
+
+    def in_subtree(body: int) -> bool:
+        while body != body_id and body != 0:
+            body = int(model.body_parentid[body])
+        return body == body_id
+
+    joints = [j for j in range(model.njnt) if in_subtree(int(model.jnt_bodyid[j]))]
+    qpos: list[int] = []
+    qvel: list[int] = []
+    for j in joints:
+        kind = int(model.jnt_type[j])
+        qpos.extend(range(int(model.jnt_qposadr[j]), int(model.jnt_qposadr[j]) + _QPOS_WIDTH[kind]))
+        qvel.extend(range(int(model.jnt_dofadr[j]), int(model.jnt_dofadr[j]) + _QVEL_WIDTH[kind]))
+    joint_set = set(joints)
+    ctrl = [
+        a
+        for a in range(model.nu)
+        if int(model.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT)
+        and int(model.actuator_trnid[a, 0]) in joint_set
+    ]
+    return ResetBinding(
+        np.array(qpos, dtype=np.intp), np.array(qvel, dtype=np.intp), np.array(ctrl, dtype=np.intp)
+    )
 
 
 def _source(

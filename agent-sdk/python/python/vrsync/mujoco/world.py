@@ -6,8 +6,9 @@ One cycle (:meth:`MujocoWorld.step_cycle`), in the order of DESIGN §5:
    cameras straight into ``frame.image(name)``; write its vectors into
    ``frame.vector(name)``; set its pose (its body's position and orientation) and its
    reward; ``host.publish(frame)``. Then ``host.start()``.
-2. *frame 2*: ``report = host.collect()``; apply each agent's actions to ``data.ctrl``
-   (an action of ``None``, none sent this cycle, leaves its ``ctrl`` as it was); step
+2. *frame 2*: ``report = host.collect()``; reset the agents that sent a reset (their
+   body's joints back to the scene's start, at rest); apply each agent's actions to
+   ``data.ctrl`` (an action of ``None``, none sent this cycle, leaves its ``ctrl`` as it was); step
    the physics ``simulation_time_per_frame / model.opt.timestep`` times; fold the new
    state into the trajectory hash.
 
@@ -194,11 +195,17 @@ class MujocoWorld:
     def apply_report(self, report: Any, host: Any | None = None) -> None:
         """Counts what ``report`` says and applies every agent's actions to ``ctrl``.
 
-        The command catalogue (``Move``, ``Turn``, ...) means nothing to a MuJoCo scene:
-        an agent's commands are rejected, counted, and reported back to it through
-        ``host.set_rejected`` (when the host has it), as are actions the world does not
-        bind. Actions the bridge refused (``actions_rejected``) and undecodable commands
-        (``invalid_commands``) are counted too."""
+        A reset (``TrialReset`` or ``EnvironmentReset``: what the Gymnasium, vector,
+        SB3 and PettingZoo envs send at ``reset``) puts that agent's body back where the
+        scene starts it, at rest (:class:`~vrsync.mujoco.binding.ResetBinding`: the
+        joints of its subtree to ``qpos0``, their velocities and its actuators' controls
+        to 0), before the cycle's actions, so an action sent with the reset acts from the
+        start pose. The scene is shared: an environment reset, too, resets only the
+        agent that sent it. The other commands of the catalogue (``Move``, ``Turn``, ...)
+        mean nothing to a MuJoCo scene: they are rejected, counted, and reported back to
+        the agent through ``host.set_rejected`` (when the host has it), as are actions
+        the world does not bind. Actions the bridge refused (``actions_rejected``) and
+        undecodable commands (``invalid_commands``) are counted too."""
         if report.timed_out:
             self.stop_timeouts += 1
         self.late_stops += int(getattr(report, "late_batches", 0))
@@ -210,8 +217,13 @@ class MujocoWorld:
                 self.evicted_agents.add(aid)
             self.commands_rejected += int(getattr(ar, "actions_rejected", 0))
             self.commands_rejected += int(getattr(ar, "invalid_commands", 0))
-            rejected = len(getattr(ar, "commands", ()))
+            commands = getattr(ar, "commands", ())
             binding = self._by_id.get(aid)
+            resets = sum(1 for c in commands if _is_reset(c)) if binding is not None else 0
+            rejected = len(commands) - resets
+            if resets:
+                binding.reset.apply(self.model, self.data)  # type: ignore[union-attr]
+                self.commands_applied += resets
             if binding is not None:
                 for name, value in getattr(ar, "actions", {}).items():
                     if value is None:
@@ -394,6 +406,13 @@ class LocalFrame:
         """Records the pose (position xyz, quaternion xyzw)."""
         self.position = position
         self.rotation = rotation
+
+
+def _is_reset(command: Any) -> bool:
+    """Whether ``command`` is a ``TrialReset`` or an ``EnvironmentReset`` (by class
+    name, so the world's tests can report plain stand-ins)."""
+    name = command if isinstance(command, str) else type(command).__name__
+    return name in ("TrialReset", "EnvironmentReset")
 
 
 def _load_model(config: WorldConfig) -> mujoco.MjModel:
