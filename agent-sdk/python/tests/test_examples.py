@@ -98,17 +98,21 @@ def test_train_ppo(tmp_path: Path, start_host) -> None:
     host.kill()
 
 
-def test_train_mujoco_ppo(tmp_path: Path) -> None:
+@pytest.mark.parametrize("observe", [None, "position,rotation,gyro"])
+def test_train_mujoco_ppo(tmp_path: Path, observe: str | None) -> None:
     """The MuJoCo PPO example trains a few updates against its own host process (the
-    session is the example's own: ppo-<pid>) and saves the policy."""
+    session is the example's own: ppo-<pid>) and saves the policy; episodes of 40 steps
+    end (and reset) within them; with all observations (the camera too) or some."""
     pytest.importorskip("mujoco")
     pytest.importorskip("stable_baselines3")
     model = tmp_path / "rovers.zip"
+    extra = ["--observe", observe] if observe else []
     out = run_example(
         "train_mujoco_ppo.py", "--agents", "2", "--timesteps", "256", "--n-steps", "64",
-        "--save", str(model), timeout=300,
+        "--episode-steps", "40", "--save", str(model), *extra, timeout=300,
     )  # fmt: skip
     assert out.returncode == 0, out.stdout + out.stderr
-    words = out.stdout.split()
-    assert words[:2] == ["rollouts", "2"], out.stdout
+    lines = out.stdout.strip().splitlines()
+    assert [line.split()[:2] for line in lines[:2]] == [["rollout", "1"], ["rollout", "2"]], out.stdout
+    assert lines[-1].split()[:2] == ["rollouts", "2"], out.stdout
     assert model.stat().st_size > 0
