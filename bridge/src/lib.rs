@@ -18,10 +18,12 @@
 //! - The **host API** ([`Host`]) is what a simulator calls; agents use the `vrsync-agent`
 //!   crate.
 //!
-//! The modules are private; everything public is re-exported here. Inside the crate,
-//! modules import one way: `wire` (the `#[repr(C)]` types, the image
-//! layout) ← `config` ← `transport` (with `signal`) ← `barrier` ← `host`; no module
-//! imports one that imports it back.
+//! The modules are private; everything public is re-exported here. The wire types (the
+//! `#[repr(C)]` types, the image layout, the command catalogue) and the record codec come
+//! from the `vrsync-protocol` crate, below this one, and keep their paths here
+//! ([`record`], the wire items at the root). Inside the crate, modules import one way:
+//! `config` ← `transport` (with `signal`) ← `barrier` ← `host`; no module imports one that
+//! imports it back.
 //!
 //! ```no_run
 //! use std::time::Duration;
@@ -61,7 +63,8 @@ mod logging;
 mod rounded;
 mod signal;
 mod transport;
-mod wire;
+// The wire types live in the protocol crate; `crate::wire` keeps their old path.
+use vrsync_protocol::wire;
 
 pub use barrier::AgentOutcome;
 pub use colour::ansi_on_stderr;

@@ -14,11 +14,11 @@
 //! host is not there yet).
 
 pub(crate) mod absent;
-mod admission;
 pub mod any_agent;
 pub mod legacy;
 pub(crate) mod mixed;
-pub mod record;
+/// The record codec and admission, from the protocol crate (its old path).
+pub use vrsync_protocol::record;
 pub(crate) mod registry;
 pub mod shm;
 pub mod tcp;
@@ -179,6 +179,34 @@ pub enum AgentConnectError {
         /// The transport's detail.
         detail: String,
     },
+}
+
+impl AgentConnectError {
+    /// What an agent that got the refusal `reject` reports; `mismatch(host protocol, host
+    /// layout)` builds the error of a version refusal.
+    pub(crate) fn from_reject(
+        reject: record::Reject,
+        session: &str,
+        agent: u32,
+        mismatch: impl FnOnce(u32, u64) -> Self,
+    ) -> Self {
+        use record::reject as code;
+        let session = session.to_owned();
+        match reject.code {
+            code::VERSION => mismatch(reject.host_protocol, reject.host_layout),
+            code::UNKNOWN_AGENT => Self::IdNotServed {
+                session,
+                agent,
+                served: reject.served,
+            },
+            code::ID_IN_USE => Self::IdInUse { session, agent },
+            _ => Self::Refused {
+                session,
+                agent,
+                reason: reject.message,
+            },
+        }
+    }
 }
 
 /// Why a transport refused a peer that was not (yet) an admitted agent.

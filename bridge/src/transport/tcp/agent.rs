@@ -162,7 +162,7 @@ impl TcpAgent {
             }
             kind::REJECT => {
                 let r = Reject::decode(&body).ok_or_else(|| hs("malformed reject".into()))?;
-                Err(r.into_connect_error(session, id, mismatch))
+                Err(AgentConnectError::from_reject(r, session, id, mismatch))
             }
             other => Err(hs(format!("unexpected reply kind {other}"))),
         }

@@ -412,7 +412,9 @@ fn parse_answer(body: &[u8], session: &str, id: u32) -> Result<Answer, String> {
         }
         Some(reply::REJECT) => {
             let r = Reject::decode(&body[4..]).ok_or("malformed refusal")?;
-            Ok(Answer::Refused(r.into_connect_error(session, id, mismatch)))
+            Ok(Answer::Refused(AgentConnectError::from_reject(
+                r, session, id, mismatch,
+            )))
         }
         _ => Err("the hello's answer is neither a welcome nor a refusal".into()),
     }

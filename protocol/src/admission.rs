@@ -2,7 +2,7 @@
 //! host sends when it refuses one: one decision for every network host, its reasons as
 //! fields (re-exported by `record`, whose codec carries them).
 
-use super::record::{Hello, constant_time_eq, le_u32, le_u64, reject};
+use crate::record::{Hello, constant_time_eq, le_u32, le_u64, reject};
 use crate::wire::{LAYOUT_HASH, PROTOCOL_VERSION};
 
 /// A host's refusal of a hello, as a REJECT record carries it: a code (`reject::*`), the
@@ -84,34 +84,6 @@ impl Reject {
                 .collect(),
             message: String::from_utf8_lossy(message).into_owned(),
         })
-    }
-}
-
-impl Reject {
-    /// What an agent that got this refusal reports; `mismatch(host protocol, host
-    /// layout)` builds the error of a version refusal.
-    pub(crate) fn into_connect_error(
-        self,
-        session: &str,
-        agent: u32,
-        mismatch: impl FnOnce(u32, u64) -> crate::transport::AgentConnectError,
-    ) -> crate::transport::AgentConnectError {
-        use crate::transport::AgentConnectError as E;
-        let session = session.to_owned();
-        match self.code {
-            reject::VERSION => mismatch(self.host_protocol, self.host_layout),
-            reject::UNKNOWN_AGENT => E::IdNotServed {
-                session,
-                agent,
-                served: self.served,
-            },
-            reject::ID_IN_USE => E::IdInUse { session, agent },
-            _ => E::Refused {
-                session,
-                agent,
-                reason: self.message,
-            },
-        }
     }
 }
 

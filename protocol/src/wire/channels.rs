@@ -128,7 +128,9 @@ pub(super) fn padded_str(bytes: &[u8]) -> &str {
     core::str::from_utf8(&bytes[..end]).unwrap_or("")
 }
 
-pub(crate) fn padded_name<const N: usize>(name: &str) -> [u8; N] {
+/// `name` as a zero-padded `N`-byte field (cut at `N` bytes), as the name fields of the
+/// wire tables hold it.
+pub fn padded_name<const N: usize>(name: &str) -> [u8; N] {
     let mut out = [0u8; N];
     let n = name.len().min(N);
     out[..n].copy_from_slice(&name.as_bytes()[..n]);

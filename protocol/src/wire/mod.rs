@@ -12,7 +12,8 @@
 //! unit quaternions `[x, y, z, w]` (the `glam` convention).
 
 use glam::{Quat, Vec3};
-use iceoryx2::prelude::ZeroCopySend;
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 /// Version of the vrsync protocol. Bumped on every incompatible change of the wire types

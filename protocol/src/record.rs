@@ -93,11 +93,13 @@ pub fn encode_hello(hello: &Hello) -> Vec<u8> {
     b
 }
 
-pub(crate) fn le_u32(b: &[u8], at: usize) -> Option<u32> {
+/// The little-endian `u32` at byte `at` of `b` (`None` past the end).
+pub fn le_u32(b: &[u8], at: usize) -> Option<u32> {
     Some(u32::from_le_bytes(b.get(at..at + 4)?.try_into().ok()?))
 }
 
-pub(crate) fn le_u64(b: &[u8], at: usize) -> Option<u64> {
+/// The little-endian `u64` at byte `at` of `b` (`None` past the end).
+pub fn le_u64(b: &[u8], at: usize) -> Option<u64> {
     Some(u64::from_le_bytes(b.get(at..at + 8)?.try_into().ok()?))
 }
 
@@ -189,7 +191,7 @@ impl RecordBuf {
     }
 
     /// Makes room for a body of `body_len` bytes (grows only beyond the capacity).
-    pub(crate) fn reserve_body(&mut self, body_len: usize) {
+    pub fn reserve_body(&mut self, body_len: usize) {
         let words = (PREFIX + body_len).div_ceil(8);
         if self.words.len() < words {
             self.words.resize(words, 0);
@@ -207,13 +209,14 @@ impl RecordBuf {
         &self.words.as_bytes()[PREFIX..self.len]
     }
 
-    pub(crate) fn bytes_mut(&mut self) -> &mut [u8] {
+    /// The whole record, writable: prefix and body.
+    pub fn bytes_mut(&mut self) -> &mut [u8] {
         let len = self.len;
         &mut self.words.as_mut_bytes()[..len]
     }
 
     /// Writes the prefix for a body of the current length.
-    pub(crate) fn set_prefix(&mut self, kind: u32) {
+    pub fn set_prefix(&mut self, kind: u32) {
         let body = (self.len - PREFIX) as u32;
         let b = self.bytes_mut();
         b[..4].copy_from_slice(&body.to_le_bytes());
@@ -354,7 +357,7 @@ impl RecordReader {
 
     /// Describes the incomplete record for a log line: `"5 of 8+ bytes"` before the
     /// prefix is in, `"20 of 32 bytes"` after.
-    pub(crate) fn progress(&self) -> String {
+    pub fn progress(&self) -> String {
         match self.head() {
             Some((len, _)) => format!("{} of {} bytes", self.buffered(), PREFIX + len),
             None => format!("{} of {PREFIX}+ bytes", self.buffered()),
@@ -376,7 +379,7 @@ pub mod reject {
     pub const MALFORMED: u32 = 5;
 }
 
-pub use super::admission::{Reject, admit};
+pub use crate::admission::{Reject, admit};
 
 /// Compares two byte strings in time independent of where they differ.
 pub fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {

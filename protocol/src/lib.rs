@@ -1,0 +1,26 @@
+//! # vrsync-protocol
+//!
+//! What a vrsync host and its agents say to each other, with no I/O and no transport: the
+//! words every other crate of vrsync shares.
+//!
+//! - [`wire`]: the `#[repr(C)]` types that cross process boundaries (the sensor frame's
+//!   header with its image, vector and action tables, the motor batch), their layout hash
+//!   and [`wire::PROTOCOL_VERSION`], and the commands an agent sends ([`wire::Command`]).
+//! - [`record`]: the record codec both network transports speak (hello, welcome, reject,
+//!   motor batch, TCP's `[len][kind][body]` framing with its bounded reader), and
+//!   [`record::admit`], the one decision a network host makes on a hello, its refusal a
+//!   typed [`record::Reject`].
+//!
+//! The transports, the host and the agent SDK live in `vrsync-bridge` and `vrsync-agent`,
+//! which re-export these modules at their old paths.
+//!
+//! ```
+//! use vrsync_protocol::wire::Command;
+//!
+//! let wire = Command::Turn { angle_deg: 30.0 }.encode(7);
+//! assert_eq!(wire.decode(), Ok(Command::Turn { angle_deg: 30.0 }));
+//! ```
+
+mod admission;
+pub mod record;
+pub mod wire;
