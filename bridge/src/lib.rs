@@ -93,12 +93,13 @@ pub use transport::{
 };
 pub use wire::{
     ACTION_CHUNK, ACTION_KIND, ActionDesc, ActionState, ActionStatus, CAMERA_NAME_LEN,
-    CHANNEL_NAME_LEN, Collision, Command, CommandDecodeError, EyePosition, GridPosition,
-    HeadMotion, IMAGE_ALIGN, ImageDesc, LAYOUT_HASH, MAX_ACTION_LEN, MAX_ACTIONS, MAX_CAMERAS,
-    MAX_COLLISIONS, MAX_STATUSES, MAX_TOKEN, MAX_VECTOR_LEN, MAX_VECTORS, MOTOR_FLAG_ACK,
-    MOTOR_FLAG_LEAVE, MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION, PixelFormat,
-    Pose, SENSOR_FLAG_SYNC_MODE, SensorHeader, VectorDesc, WireOutcome, action_chunks, bounds_hash,
-    discrete_action_chunk, image_layout, kind as command_kind, kind_name, vector_layout,
+    CHANNEL_NAME_LEN, Collision, Command, CommandDecodeError, CommandKind, CommandParam,
+    EyePosition, GridPosition, HeadMotion, IMAGE_ALIGN, ImageDesc, LAYOUT_HASH, MAX_ACTION_LEN,
+    MAX_ACTIONS, MAX_CAMERAS, MAX_COLLISIONS, MAX_STATUSES, MAX_TOKEN, MAX_VECTOR_LEN, MAX_VECTORS,
+    MOTOR_FLAG_ACK, MOTOR_FLAG_LEAVE, MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION,
+    ParamType, PixelFormat, Pose, SENSOR_FLAG_SYNC_MODE, SensorHeader, VectorDesc, WireOutcome,
+    action_chunks, bounds_hash, discrete_action_chunk, image_layout, kind as command_kind,
+    kind_name, vector_layout,
 };
 
 /// The shared-memory transport (iceoryx2): agents on this machine, zero copy.

@@ -5,7 +5,9 @@
 //!
 //! - [`wire`]: the `#[repr(C)]` types that cross process boundaries (the sensor frame's
 //!   header with its image, vector and action tables, the motor batch), their layout hash
-//!   and [`wire::PROTOCOL_VERSION`], and the commands an agent sends ([`wire::Command`]).
+//!   and [`wire::PROTOCOL_VERSION`], and the **command catalogue**: the commands an agent
+//!   sends ([`wire::Command`]), defined once with their tags, names and fields
+//!   ([`wire::CommandKind::ALL`]), the list every binding's copy is checked against.
 //! - [`record`]: the record codec both network transports speak (hello, welcome, reject,
 //!   motor batch, TCP's `[len][kind][body]` framing with its bounded reader), and
 //!   [`record::admit`], the one decision a network host makes on a hello, its refusal a
@@ -15,10 +17,12 @@
 //! which re-export these modules at their old paths.
 //!
 //! ```
-//! use vrsync_protocol::wire::Command;
+//! use vrsync_protocol::wire::{Command, CommandKind};
 //!
 //! let wire = Command::Turn { angle_deg: 30.0 }.encode(7);
 //! assert_eq!(wire.decode(), Ok(Command::Turn { angle_deg: 30.0 }));
+//! let turn = CommandKind::of(wire.kind).map(|k| (k.name, k.params.len()));
+//! assert_eq!(turn, Some(("turn", 1)));
 //! ```
 
 mod admission;

@@ -508,11 +508,15 @@ impl SensorHeader {
     }
 }
 
+#[macro_use]
+mod catalogue;
 mod channels;
+mod commands;
 mod layout;
 mod motor;
 
 pub use channels::*;
+pub use commands::*;
 pub use layout::LAYOUT_HASH;
 pub use motor::*;
 

@@ -74,6 +74,71 @@ fn every_command_round_trips_through_the_wire_form() {
     }
 }
 
+/// The wire form of `all_commands()` as the hand-written encoder made it before the
+/// catalogue: `(kind, object_id, args)`.
+#[test]
+fn every_command_keeps_its_wire_form() {
+    let want: [(u32, u32, [f32; 4]); 15] = [
+        (1, 0, [90.0, 2.5, 0.0, 0.0]),
+        (2, 0, [-45.0, 0.0, 0.0, 0.0]),
+        (3, 0, [1.0, 0.0, -2.0, 0.0]),
+        (4, 0, [0.0; 4]),
+        (5, 0, [5.0, -5.0, 10.0, 0.0]),
+        (6, 0, [0.5, 1.5, 3.0, 0.0]),
+        (7, 7, [0.0; 4]),
+        (8, 0, [10.0, 20.0, 0.0, 0.0]),
+        (9, 3, [0.0; 4]),
+        (10, 0, [1.0, 2.0, 0.0, 0.0]),
+        (11, 9, [0.0; 4]),
+        (12, 0, [3.0, 4.0, 0.0, 0.0]),
+        (13, 0, [0.0; 4]),
+        (14, 1, [0.0; 4]),
+        (15, 0, [0.0; 4]),
+    ];
+    for (cmd, (kind, object_id, args)) in all_commands().into_iter().zip(want) {
+        let m = cmd.encode(3);
+        assert_eq!(
+            (m.kind, m.action_id, m.object_id, m.reserved, m.args),
+            (kind, 3, object_id, 0, args),
+            "{}",
+            cmd.name()
+        );
+    }
+}
+
+#[test]
+fn the_catalogue_lists_every_command_once_in_tag_order() {
+    let commands = all_commands();
+    assert_eq!(CommandKind::ALL.len(), commands.len());
+    for ((k, cmd), tag) in CommandKind::ALL.iter().zip(&commands).zip(1..) {
+        assert_eq!((k.tag, cmd.kind(), cmd.name()), (tag, tag, k.name));
+        assert_eq!(kind_name(tag), k.name);
+        assert_eq!(CommandKind::of(tag), Some(k));
+        let debug = format!("{cmd:?}");
+        assert_eq!(debug.split([' ', '{']).next(), Some(k.variant), "{debug}");
+        // The arguments it uses are checked, the others never read.
+        let mut m = cmd.encode(1);
+        if k.arg_count > 0 {
+            m.args[k.arg_count - 1] = f32::NAN;
+            assert!(m.decode().is_err(), "{}", k.name);
+        }
+        let mut m = cmd.encode(1);
+        if let Some(unused) = m.args.get_mut(k.arg_count) {
+            *unused = f32::NAN;
+        }
+        assert_eq!(m.decode(), Ok(*cmd), "{}", k.name);
+        let floats = k.params.iter().filter(|p| p.ty == ParamType::F32).count();
+        assert_eq!(floats, k.arg_count, "{}", k.name);
+    }
+    let mut names: Vec<_> = CommandKind::ALL.iter().map(|k| k.name).collect();
+    names.sort_unstable();
+    names.dedup();
+    assert_eq!(names.len(), CommandKind::ALL.len());
+    assert_eq!(CommandKind::of(0), None);
+    assert_eq!(CommandKind::of(ACTION_KIND), None);
+    assert_eq!(kind_name(ACTION_KIND), "unknown");
+}
+
 #[test]
 fn unknown_kind_and_non_finite_arguments_are_rejected() {
     let bad = MotorCommand {
