@@ -167,6 +167,17 @@ pub enum ActionState {
 }
 
 impl ActionState {
+    /// Every state, in value order: the list the bindings' copies are checked against
+    /// (`bridge/ffi/tests/command_catalogue.rs`).
+    pub const ALL: [ActionState; 6] = [
+        Self::InExecution,
+        Self::Finished,
+        Self::Aborted,
+        Self::Walking,
+        Self::Rotating,
+        Self::WalkingRotating,
+    ];
+
     /// Decodes the wire value; `None` for unknown values.
     pub fn from_u32(value: u32) -> Option<Self> {
         Some(match value {
