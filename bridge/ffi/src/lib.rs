@@ -51,6 +51,7 @@
 //! for each action in the cycle just collected ([`vrs_host_action`], checked against the
 //! config, values valid until [`vrs_host_end_cycle`]).
 
+mod calls;
 // `sizeof_fns!` serves `channels` too.
 #[macro_use]
 mod ffi;
