@@ -52,6 +52,7 @@ use crate::config::Config;
 
 mod agent;
 mod host;
+mod host_state;
 mod tls_refusals;
 
 pub use agent::*;
