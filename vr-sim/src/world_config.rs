@@ -508,133 +508,166 @@ impl WorldConfig {
                 ),
             ));
         }
-        let (hw, hd) = (w.room_width / 2.0, w.room_depth / 2.0);
         for (i, v) in raw.object.into_iter().enumerate() {
-            let key = format!("world.object[{i}]");
-            let o: RawObject = ctx.parse(v, &key)?;
-            if !(1..=MAX_OBJECT_ID).contains(&o.id) {
-                return Err(ctx.err(
-                    format!("{key}.id"),
-                    format!("must be 1..={MAX_OBJECT_ID}, found {}", o.id),
-                ));
-            }
-            if w.objects.iter().any(|p| p.id == o.id) {
-                return Err(ctx.err(format!("{key}.id"), format!("duplicate object id {}", o.id)));
-            }
-            let shape = match (o.shape, o.size, o.radius) {
-                (RawShape::Box, Some(size), None) => {
-                    if !finite(&size) || size.iter().any(|&s| s <= 0.0) {
-                        return Err(ctx.err(
-                            format!("{key}.size"),
-                            format!("sides must be positive, found {size:?}"),
-                        ));
-                    }
-                    Shape::Box {
-                        size: Vec3::from_array(size),
-                    }
-                }
-                (RawShape::Sphere, None, Some(radius)) => {
-                    if !(radius.is_finite() && radius > 0.0) {
-                        return Err(ctx.err(
-                            format!("{key}.radius"),
-                            format!("must be positive, found {radius}"),
-                        ));
-                    }
-                    Shape::Sphere { radius }
-                }
-                (RawShape::Box, _, _) => {
-                    return Err(ctx.err(
-                        key,
-                        "a box needs `size = [x, y, z]` and no `radius`".to_string(),
-                    ));
-                }
-                (RawShape::Sphere, _, _) => {
-                    return Err(ctx.err(key, "a sphere needs `radius` and no `size`".to_string()));
-                }
-            };
-            let p = Vec3::from_array(o.position);
-            let he = shape.half_extents();
-            if !finite(&o.position)
-                || p.x - he.x < -hw
-                || p.x + he.x > hw
-                || p.z - he.z < -hd
-                || p.z + he.z > hd
-                || p.y - he.y < 0.0
-                || p.y + he.y > w.wall_height
-            {
-                return Err(ctx.err(
-                    format!("{key}.position"),
-                    format!(
-                        "object {} at {:?} does not fit in the room",
-                        o.id, o.position
-                    ),
-                ));
-            }
-            w.objects.push(ObjectConfig {
-                id: o.id,
-                shape,
-                position: p,
-                color: o.color,
-                graspable: o.graspable,
-            });
+            let object = w.object_from(ctx, i, v)?;
+            w.objects.push(object);
         }
         for (i, v) in raw.agent.into_iter().enumerate() {
-            let key = format!("world.agent[{i}]");
-            let a: RawAgent = ctx.parse(v, &key)?;
-            if w.agents.iter().any(|p| p.id == a.id) {
-                return Err(ctx.err(format!("{key}.id"), format!("duplicate agent id {}", a.id)));
-            }
-            if !finite(&a.position) || !a.heading_deg.is_finite() {
-                return Err(ctx.err(key, "position and heading must be finite"));
-            }
-            w.agents.push(AgentStart {
-                id: a.id,
-                position: Vec2::from_array(a.position),
-                heading_deg: a.heading_deg.rem_euclid(360.0),
-            });
+            let agent = w.agent_from(ctx, i, v)?;
+            w.agents.push(agent);
         }
         for (i, v) in raw.goal.into_iter().enumerate() {
-            let key = format!("world.goal[{i}]");
-            let g: RawGoal = ctx.parse(v, &key)?;
-            if !g.reward.is_finite() {
-                return Err(ctx.err(format!("{key}.reward"), "must be finite"));
-            }
-            let kind = match (g.center, g.radius, g.object, g.action) {
-                (Some(center), Some(radius), None, None) => {
-                    if !(finite(&center) && radius.is_finite() && radius > 0.0) {
-                        return Err(ctx.err(
-                            format!("{key}.radius"),
-                            format!("must be positive, found {radius}"),
-                        ));
-                    }
-                    GoalKind::Region {
-                        center: Vec2::from_array(center),
-                        radius,
-                    }
-                }
-                (None, None, Some(object), Some(action)) => {
-                    if !w.objects.iter().any(|o| o.id == object) {
-                        return Err(ctx.err(
-                            format!("{key}.object"),
-                            format!("no object with id {object}"),
-                        ));
-                    }
-                    GoalKind::Object { object, action }
-                }
-                _ => {
-                    return Err(ctx.err(
-                        key,
-                        "give either `center` and `radius` (a region) or `object` and `action` \
-                         (grasp, point or interact)",
-                    ));
-                }
-            };
-            w.goals.push(GoalConfig {
-                kind,
-                reward: g.reward,
-            });
+            let goal = w.goal_from(ctx, i, v)?;
+            w.goals.push(goal);
         }
         Ok(w)
+    }
+
+    /// Object `i` of `[[world.object]]`, checked against the room and the objects before it.
+    fn object_from(
+        &self,
+        ctx: &Ctx,
+        i: usize,
+        v: toml::Value,
+    ) -> Result<ObjectConfig, WorldConfigError> {
+        let (hw, hd) = (self.room_width / 2.0, self.room_depth / 2.0);
+        let key = format!("world.object[{i}]");
+        let o: RawObject = ctx.parse(v, &key)?;
+        if !(1..=MAX_OBJECT_ID).contains(&o.id) {
+            return Err(ctx.err(
+                format!("{key}.id"),
+                format!("must be 1..={MAX_OBJECT_ID}, found {}", o.id),
+            ));
+        }
+        if self.objects.iter().any(|p| p.id == o.id) {
+            return Err(ctx.err(format!("{key}.id"), format!("duplicate object id {}", o.id)));
+        }
+        let shape = match (o.shape, o.size, o.radius) {
+            (RawShape::Box, Some(size), None) => {
+                if !finite(&size) || size.iter().any(|&s| s <= 0.0) {
+                    return Err(ctx.err(
+                        format!("{key}.size"),
+                        format!("sides must be positive, found {size:?}"),
+                    ));
+                }
+                Shape::Box {
+                    size: Vec3::from_array(size),
+                }
+            }
+            (RawShape::Sphere, None, Some(radius)) => {
+                if !(radius.is_finite() && radius > 0.0) {
+                    return Err(ctx.err(
+                        format!("{key}.radius"),
+                        format!("must be positive, found {radius}"),
+                    ));
+                }
+                Shape::Sphere { radius }
+            }
+            (RawShape::Box, _, _) => {
+                return Err(ctx.err(
+                    key,
+                    "a box needs `size = [x, y, z]` and no `radius`".to_string(),
+                ));
+            }
+            (RawShape::Sphere, _, _) => {
+                return Err(ctx.err(key, "a sphere needs `radius` and no `size`".to_string()));
+            }
+        };
+        let p = Vec3::from_array(o.position);
+        let he = shape.half_extents();
+        if !finite(&o.position)
+            || p.x - he.x < -hw
+            || p.x + he.x > hw
+            || p.z - he.z < -hd
+            || p.z + he.z > hd
+            || p.y - he.y < 0.0
+            || p.y + he.y > self.wall_height
+        {
+            return Err(ctx.err(
+                format!("{key}.position"),
+                format!(
+                    "object {} at {:?} does not fit in the room",
+                    o.id, o.position
+                ),
+            ));
+        }
+        Ok(ObjectConfig {
+            id: o.id,
+            shape,
+            position: p,
+            color: o.color,
+            graspable: o.graspable,
+        })
+    }
+
+    /// Agent start `i` of `[[world.agent]]`, checked against the starts before it.
+    fn agent_from(
+        &self,
+        ctx: &Ctx,
+        i: usize,
+        v: toml::Value,
+    ) -> Result<AgentStart, WorldConfigError> {
+        let key = format!("world.agent[{i}]");
+        let a: RawAgent = ctx.parse(v, &key)?;
+        if self.agents.iter().any(|p| p.id == a.id) {
+            return Err(ctx.err(format!("{key}.id"), format!("duplicate agent id {}", a.id)));
+        }
+        if !finite(&a.position) || !a.heading_deg.is_finite() {
+            return Err(ctx.err(key, "position and heading must be finite"));
+        }
+        Ok(AgentStart {
+            id: a.id,
+            position: Vec2::from_array(a.position),
+            heading_deg: a.heading_deg.rem_euclid(360.0),
+        })
+    }
+
+    /// Goal `i` of `[[world.goal]]`, checked against the objects.
+    fn goal_from(
+        &self,
+        ctx: &Ctx,
+        i: usize,
+        v: toml::Value,
+    ) -> Result<GoalConfig, WorldConfigError> {
+        let key = format!("world.goal[{i}]");
+        let g: RawGoal = ctx.parse(v, &key)?;
+        if !g.reward.is_finite() {
+            return Err(ctx.err(format!("{key}.reward"), "must be finite"));
+        }
+        let kind = match (g.center, g.radius, g.object, g.action) {
+            (Some(center), Some(radius), None, None) => {
+                if !(finite(&center) && radius.is_finite() && radius > 0.0) {
+                    return Err(ctx.err(
+                        format!("{key}.radius"),
+                        format!("must be positive, found {radius}"),
+                    ));
+                }
+                GoalKind::Region {
+                    center: Vec2::from_array(center),
+                    radius,
+                }
+            }
+            (None, None, Some(object), Some(action)) => {
+                if !self.objects.iter().any(|o| o.id == object) {
+                    return Err(ctx.err(
+                        format!("{key}.object"),
+                        format!("no object with id {object}"),
+                    ));
+                }
+                GoalKind::Object { object, action }
+            }
+            _ => {
+                return Err(ctx.err(
+                    key,
+                    "give either `center` and `radius` (a region) or `object` and `action` \
+                     (grasp, point or interact)",
+                ));
+            }
+        };
+        Ok(GoalConfig {
+            kind,
+            reward: g.reward,
+        })
     }
 
     /// The explicit start of agent `id`, if configured.
