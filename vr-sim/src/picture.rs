@@ -458,6 +458,67 @@ fn render_map(world: &World, trails: &Trails) -> Map {
         map_bottom: MARGIN + size.y * scale,
     };
 
+    draw_room(&mut c, world, trails, min, max);
+
+    // The legend: a swatch or marker in the first 32 pixels of each row, then its text.
+    let x0 = legend_x + 10;
+    let tx = x0 + 32;
+    let mut y = MARGIN as i64;
+    for (id, text) in &agent_rows {
+        let color = AGENT_COLORS[*id as usize % AGENT_COLORS.len()];
+        let dark = color.map(|v| (f32::from(v) * 0.6) as u8);
+        c.rect(x0, y, 24, TEXT_H, dark, 1.0);
+        c.rect(x0 + 3, y + 3, 18, TEXT_H - 6, color, 1.0);
+        c.text(tx, y, text, INK);
+        y += ROW_H;
+    }
+    y += 6;
+    let mid = |y: i64| Vec2::new(x0 as f32 + 12.0, y as f32 + TEXT_H as f32 / 2.0);
+    c.annulus_px(mid(y), 4.5, 7.0, INK);
+    c.text(tx, y, marker_rows[0], INK);
+    y += ROW_H;
+    c.annulus_px(mid(y), 0.0, 7.0, [150, 150, 150]);
+    c.annulus_px(mid(y), 5.5, 7.0, INK);
+    c.line_px(mid(y), mid(y) - Vec2::new(0.0, 12.0), 2.0, INK);
+    c.text(tx, y, marker_rows[1], INK);
+    y += ROW_H + 6;
+    for (g, text) in cfg.goals.iter().zip(&goal_rows) {
+        if matches!(g.kind, GoalKind::Region { .. }) {
+            c.annulus_px(mid(y), 0.0, 7.0, [180, 230, 190]);
+        }
+        c.annulus_px(mid(y), 5.5, 7.0, GOAL_EDGE);
+        c.text(tx, y, text, INK);
+        y += ROW_H;
+    }
+    c.rect(x0 + 5, y, 14, TEXT_H, OBJECT_EDGE, 1.0);
+    c.rect(x0 + 7, y + 2, 10, TEXT_H - 4, [200, 200, 200], 1.0);
+    c.text(tx, y, objects_row, INK);
+    y += ROW_H;
+    c.rect(x0, y + TEXT_H / 2, 24, 1, [170, 170, 165], 1.0);
+    c.text(tx, y, grid_row, INK);
+    y += ROW_H + 6;
+    c.text(x0, y, &bar_label, INK);
+    let bar = ScaleBar {
+        x0,
+        x1: x0 + (metres * scale).round() as i64,
+        y: y + TEXT_H + 6,
+        metres,
+    };
+    c.rect(bar.x0, bar.y, bar.x1 - bar.x0, 4, INK, 1.0);
+    c.rect(bar.x0, bar.y - 4, 2, 12, INK, 1.0);
+    c.rect(bar.x1 - 2, bar.y - 4, 2, 12, INK, 1.0);
+    Map {
+        canvas: c,
+        legend_x,
+        scale_bar: bar,
+    }
+}
+
+/// Draws the room onto the map: floor and grid, goal regions, objects, the agents' trails
+/// and final poses, the walls, then the labels.
+fn draw_room(c: &mut Canvas, world: &World, trails: &Trails, min: Vec2, max: Vec2) {
+    let cfg = world.config();
+    let scale = c.scale;
     // Floor and grid.
     c.fill(min, max, [238, 238, 232], 1.0, |_| true);
     let mut x = min.x.ceil();
@@ -532,59 +593,6 @@ fn render_map(world: &World, trails: &Trails) -> Map {
     }
     for (at, text) in &labels {
         c.label(at.x as i64 + 3, at.y as i64 - TEXT_H - 3, text);
-    }
-
-    // The legend: a swatch or marker in the first 32 pixels of each row, then its text.
-    let x0 = legend_x + 10;
-    let tx = x0 + 32;
-    let mut y = MARGIN as i64;
-    for (id, text) in &agent_rows {
-        let color = AGENT_COLORS[*id as usize % AGENT_COLORS.len()];
-        let dark = color.map(|v| (f32::from(v) * 0.6) as u8);
-        c.rect(x0, y, 24, TEXT_H, dark, 1.0);
-        c.rect(x0 + 3, y + 3, 18, TEXT_H - 6, color, 1.0);
-        c.text(tx, y, text, INK);
-        y += ROW_H;
-    }
-    y += 6;
-    let mid = |y: i64| Vec2::new(x0 as f32 + 12.0, y as f32 + TEXT_H as f32 / 2.0);
-    c.annulus_px(mid(y), 4.5, 7.0, INK);
-    c.text(tx, y, marker_rows[0], INK);
-    y += ROW_H;
-    c.annulus_px(mid(y), 0.0, 7.0, [150, 150, 150]);
-    c.annulus_px(mid(y), 5.5, 7.0, INK);
-    c.line_px(mid(y), mid(y) - Vec2::new(0.0, 12.0), 2.0, INK);
-    c.text(tx, y, marker_rows[1], INK);
-    y += ROW_H + 6;
-    for (g, text) in cfg.goals.iter().zip(&goal_rows) {
-        if matches!(g.kind, GoalKind::Region { .. }) {
-            c.annulus_px(mid(y), 0.0, 7.0, [180, 230, 190]);
-        }
-        c.annulus_px(mid(y), 5.5, 7.0, GOAL_EDGE);
-        c.text(tx, y, text, INK);
-        y += ROW_H;
-    }
-    c.rect(x0 + 5, y, 14, TEXT_H, OBJECT_EDGE, 1.0);
-    c.rect(x0 + 7, y + 2, 10, TEXT_H - 4, [200, 200, 200], 1.0);
-    c.text(tx, y, objects_row, INK);
-    y += ROW_H;
-    c.rect(x0, y + TEXT_H / 2, 24, 1, [170, 170, 165], 1.0);
-    c.text(tx, y, grid_row, INK);
-    y += ROW_H + 6;
-    c.text(x0, y, &bar_label, INK);
-    let bar = ScaleBar {
-        x0,
-        x1: x0 + (metres * scale).round() as i64,
-        y: y + TEXT_H + 6,
-        metres,
-    };
-    c.rect(bar.x0, bar.y, bar.x1 - bar.x0, 4, INK, 1.0);
-    c.rect(bar.x0, bar.y - 4, 2, 12, INK, 1.0);
-    c.rect(bar.x1 - 2, bar.y - 4, 2, 12, INK, 1.0);
-    Map {
-        canvas: c,
-        legend_x,
-        scale_bar: bar,
     }
 }
 
