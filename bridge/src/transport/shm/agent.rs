@@ -82,6 +82,24 @@ fn attr(attrs: &AttributeSet, key: &str) -> String {
         .unwrap_or_else(|| "unknown".into())
 }
 
+/// The host's protocol version and layout hash, as the start service's attributes carry
+/// them, against this agent's.
+fn check_host_version(attrs: &AttributeSet, session: &str) -> Result<(), AgentConnectError> {
+    let host_protocol = attr(attrs, ATTR_PROTOCOL);
+    let host_layout = attr(attrs, ATTR_LAYOUT);
+    let agent_layout = format!("{LAYOUT_HASH:016x}");
+    if host_protocol != PROTOCOL_VERSION.to_string() || host_layout != agent_layout {
+        return Err(AgentConnectError::VersionMismatch {
+            session: session.to_owned(),
+            host_protocol,
+            host_layout,
+            agent_protocol: PROTOCOL_VERSION,
+            agent_layout,
+        });
+    }
+    Ok(())
+}
+
 /// The agent ids whose sensor service exists in `session` (the ids its host serves),
 /// ascending.
 fn served_agent_ids(session: &str) -> Vec<u32> {
@@ -203,18 +221,7 @@ impl AgentTransport for ShmAgent {
             Ok(_) => not_found("start"),
             Err(e) => e,
         })?;
-        let host_protocol = attr(start_service.attributes(), ATTR_PROTOCOL);
-        let host_layout = attr(start_service.attributes(), ATTR_LAYOUT);
-        let agent_layout = format!("{LAYOUT_HASH:016x}");
-        if host_protocol != PROTOCOL_VERSION.to_string() || host_layout != agent_layout {
-            return Err(AgentConnectError::VersionMismatch {
-                session: session.clone(),
-                host_protocol,
-                host_layout,
-                agent_protocol: PROTOCOL_VERSION,
-                agent_layout,
-            });
-        }
+        check_host_version(start_service.attributes(), session)?;
 
         let sensors = format!("agent/{id}/sensors");
         let motor = format!("agent/{id}/motor");
