@@ -117,6 +117,55 @@ fn main() -> ExitCode {
     }
 }
 
+/// `--log-events`: the statuses and collisions `frame` brings, one line each.
+fn log_events(
+    out: &mut impl std::io::Write,
+    cycle: u64,
+    frame: &vrsync_agent::Frame,
+) -> anyhow::Result<()> {
+    for s in frame.statuses() {
+        writeln!(out, "{cycle} status {} {} {}", s.action_id, s.state, s.seq)
+            .context("write --log-events")?;
+    }
+    for c in frame.collisions() {
+        writeln!(
+            out,
+            "{cycle} collision {} {} {}",
+            c.action_id, c.collider_id, c.seq
+        )
+        .context("write --log-events")?;
+    }
+    out.flush().context("write --log-events")
+}
+
+/// `--bad-commands`: one command the host must reject of each sort (a NaN argument, a
+/// distance out of range, an object that does not exist, an unknown kind).
+fn send_bad_commands(agent: &mut Agent) -> anyhow::Result<()> {
+    use vrsync_bridge::{Command, MotorCommand};
+    let bad_id = u32::MAX;
+    let mut nan = Command::Move {
+        heading_deg: 0.0,
+        distance: 1.0,
+    }
+    .encode(bad_id);
+    nan.args[1] = f32::NAN;
+    let far = Command::Move {
+        heading_deg: 0.0,
+        distance: 1.0e9,
+    }
+    .encode(bad_id);
+    let ghost = Command::GraspId { object_id: 999_999 }.encode(bad_id);
+    let unknown = MotorCommand {
+        kind: 99,
+        action_id: bad_id,
+        ..MotorCommand::default()
+    };
+    for c in [nan, far, ghost, unknown] {
+        agent.send_wire(c).context("queue command")?;
+    }
+    Ok(())
+}
+
 fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let config = match Config::load(&args.config) {
         Ok(c) => c,
@@ -183,46 +232,12 @@ fn run(args: &Args) -> anyhow::Result<ExitCode> {
         }
         let decision = policy.decide(&frame);
         if let Some(out) = &mut event_log {
-            use std::io::Write;
-            for s in frame.statuses() {
-                writeln!(out, "{cycle} status {} {} {}", s.action_id, s.state, s.seq)
-                    .context("write --log-events")?;
-            }
-            for c in frame.collisions() {
-                writeln!(
-                    out,
-                    "{cycle} collision {} {} {}",
-                    c.action_id, c.collider_id, c.seq
-                )
-                .context("write --log-events")?;
-            }
-            out.flush().context("write --log-events")?;
+            log_events(out, cycle, &frame)?;
         }
         drop(frame);
         sent.clear();
         if args.bad_commands {
-            use vrsync_bridge::{Command, MotorCommand};
-            let bad_id = u32::MAX;
-            let mut nan = Command::Move {
-                heading_deg: 0.0,
-                distance: 1.0,
-            }
-            .encode(bad_id);
-            nan.args[1] = f32::NAN;
-            let far = Command::Move {
-                heading_deg: 0.0,
-                distance: 1.0e9,
-            }
-            .encode(bad_id);
-            let ghost = Command::GraspId { object_id: 999_999 }.encode(bad_id);
-            let unknown = MotorCommand {
-                kind: 99,
-                action_id: bad_id,
-                ..MotorCommand::default()
-            };
-            for c in [nan, far, ghost, unknown] {
-                agent.send_wire(c).context("queue command")?;
-            }
+            send_bad_commands(&mut agent)?;
         }
         for command in decision.iter() {
             let action = agent.send(command).context("queue command")?;
