@@ -168,6 +168,38 @@ struct RenderSet {
     buffer: Vec<u8>,
 }
 
+/// The cycle of one cycle's lines (`group`, not empty), checked: it follows `last`, and it
+/// has one line per agent of the header (`agents`), in that order.
+fn check_group(
+    path: &Path,
+    group: &[Line],
+    last: Option<u64>,
+    agents: &[u32],
+) -> Result<u64, RecordReadError> {
+    let cycle = group[0].agent.cycle;
+    if let Some(last) = last
+        && cycle <= last
+    {
+        return Err(RecordReadError::Malformed {
+            path: path.to_owned(),
+            line: group[0].number,
+            reason: format!("cycle {cycle} follows cycle {last}"),
+        });
+    }
+    let ids: Vec<u32> = group.iter().map(|l| l.agent.agent).collect();
+    if ids != agents {
+        return Err(RecordReadError::Malformed {
+            path: path.to_owned(),
+            line: group[0].number,
+            reason: format!(
+                "cycle {cycle} has lines for agents {ids:?}; every cycle has one per \
+                 agent of the header, {agents:?}, in that order"
+            ),
+        });
+    }
+    Ok(cycle)
+}
+
 /// Replays `opts.record`.
 ///
 /// # Errors
@@ -224,30 +256,7 @@ pub fn replay(opts: &ReplayOptions) -> anyhow::Result<Replayed> {
             Some(Next::End(_)) | None => !group.is_empty(),
         };
         if ends_group {
-            let cycle = group[0].agent.cycle;
-            if let Some(last) = state.last_cycle
-                && cycle <= last
-            {
-                return Err(RecordReadError::Malformed {
-                    path: path.clone(),
-                    line: group[0].number,
-                    reason: format!("cycle {cycle} follows cycle {last}"),
-                }
-                .into());
-            }
-            let ids: Vec<u32> = group.iter().map(|l| l.agent.agent).collect();
-            if ids != header.agents {
-                return Err(RecordReadError::Malformed {
-                    path: path.clone(),
-                    line: group[0].number,
-                    reason: format!(
-                        "cycle {cycle} has lines for agents {ids:?}; every cycle has one per \
-                         agent of the header, {:?}, in that order",
-                        header.agents
-                    ),
-                }
-                .into());
-            }
+            let cycle = check_group(path, &group, state.last_cycle, &header.agents)?;
             if let (Some(r), Some((dir, every))) = (&mut renderer, &opts.dump_frames)
                 && cycle.is_multiple_of(*every)
             {
