@@ -8,13 +8,14 @@
 //! - the C++ headers: `Agent::send_<name>` (parameters, and the C function it calls with
 //!   them) and the original API's `send*` methods of `vrsync/compat.hpp`;
 //! - the C# binding: `CommandKind` (member = variant, value = tag) and
-//!   `MotorCommand.ArgCount` (the float arguments each kind uses);
+//!   `MotorCommand.ArgCount` (the float arguments each kind uses), and the C side of its
+//!   layout check (`tests/layout.c`, whose output `test.sh` diffs against the C# side);
 //! - Python: the stub's `Command` subclasses (`_vrsync.pyi`: constructor parameters by
 //!   name and type, a property per parameter), their export from `vrsync`, and the original
 //!   client's methods in `vrsync.compat`.
 //!
 //! The action states (`ActionState::ALL`) are checked the same way in both C headers, C#
-//! and the stub: the two C ABIs' `vrs_action_state_t` / `vrs_host_action_state_t` are two
+//! (and `layout.c`) and the stub: the two C ABIs' `vrs_action_state_t` / `vrs_host_action_state_t` are two
 //! names for one vocabulary (both headers can be included together), proven identical to
 //! the wire's here. Each C header is the output of its crate's Rust enums (the crates'
 //! `header_is_up_to_date` tests), so those enums are covered too; the stub is checked
@@ -300,6 +301,42 @@ fn the_csharp_binding_has_every_kind_and_its_argument_count() {
         .map(|k| (k.variant.to_owned(), k.arg_count))
         .collect();
     assert_eq!(found, want, "{}: MotorCommand.ArgCount", path.display());
+}
+
+/// The `E(<prefix>...);` constants of the C side of the C# layout check.
+fn layout_c_constants(prefix: &str) -> (PathBuf, BTreeSet<String>) {
+    let (path, text) = repo_file("../bindings/csharp/tests/layout.c");
+    let found = text
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("E(")?.strip_suffix(");"))
+        .filter(|c| c.starts_with(prefix))
+        .map(str::to_owned)
+        .collect();
+    (path, found)
+}
+
+#[test]
+fn the_csharp_layout_check_compares_every_kind_and_state() {
+    let (path, found) = layout_c_constants("VRS_HOST_COMMAND_");
+    let want: BTreeSet<String> = c_constants("VRS_HOST_COMMAND_").into_keys().collect();
+    assert_eq!(
+        found,
+        want,
+        "{}: one `E(<constant>);` line per command kind (the C side of test.sh's layout diff)",
+        path.display()
+    );
+    let (path, mut found) = layout_c_constants("VRS_HOST_ACTION_");
+    found.retain(|c| !c.starts_with("VRS_HOST_ACTION_KIND_"));
+    let want: BTreeSet<String> = ActionState::ALL
+        .iter()
+        .map(|s| format!("VRS_HOST_ACTION_{}", screaming(&format!("{s:?}"))))
+        .collect();
+    assert_eq!(
+        found,
+        want,
+        "{}: one `E(<constant>);` line per action state",
+        path.display()
+    );
 }
 
 #[test]
