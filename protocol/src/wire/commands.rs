@@ -172,6 +172,31 @@ pub struct CommandKind {
     pub params: &'static [CommandParam],
 }
 
+/// The command as the bindings spell it: its variant and its parameters by name,
+/// `Move(heading_deg=90, distance_m=0.5)`, `MoveTo(x=1, y=0, z=-2)`, `CancelMove()` (what
+/// the Python classes' `repr` shows).
+impl core::fmt::Display for Command {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let m = self.encode(0);
+        let Some(k) = CommandKind::of(m.kind) else {
+            return write!(f, "{self:?}");
+        };
+        write!(f, "{}(", k.variant)?;
+        let mut args = m.args.iter();
+        for (i, p) in k.params.iter().enumerate() {
+            let sep = if i == 0 { "" } else { ", " };
+            match p.ty {
+                ParamType::F32 => {
+                    let v = args.next().copied().unwrap_or_default();
+                    write!(f, "{sep}{}={v}", p.name)?;
+                }
+                ParamType::U32 => write!(f, "{sep}{}={}", p.name, m.object_id)?,
+            }
+        }
+        f.write_str(")")
+    }
+}
+
 impl CommandKind {
     /// The kind with wire tag `tag`, if the catalogue has one.
     pub fn of(tag: u32) -> Option<&'static CommandKind> {

@@ -139,6 +139,31 @@ fn the_catalogue_lists_every_command_once_in_tag_order() {
     assert_eq!(kind_name(ACTION_KIND), "unknown");
 }
 
+/// `Display` spells each command as the bindings do (the Python classes' `repr`, as they
+/// wrote it by hand before).
+#[test]
+fn every_command_displays_with_the_bindings_names() {
+    let want = [
+        "Move(heading_deg=90, distance_m=2.5)",
+        "Turn(angle_deg=-45)",
+        "MoveTo(x=1, y=0, z=-2)",
+        "CancelMove()",
+        "EyeMovement(pan_left_deg=5, pan_right_deg=-5, tilt_deg=10)",
+        "EyeFixation(x=0.5, y=1.5, z=3)",
+        "GraspId(object_id=7)",
+        "GraspPos(x_px=10, y_px=20)",
+        "PointId(object_id=3)",
+        "PointPos(x_px=1, y_px=2)",
+        "InteractId(object_id=9)",
+        "InteractPos(x_px=3, y_px=4)",
+        "GraspRelease()",
+        "EnvironmentReset(reset_type=1)",
+        "TrialReset(reset_type=0)",
+    ];
+    let got: Vec<String> = all_commands().iter().map(ToString::to_string).collect();
+    assert_eq!(got, want);
+}
+
 #[test]
 fn unknown_kind_and_non_finite_arguments_are_rejected() {
     let bad = MotorCommand {
