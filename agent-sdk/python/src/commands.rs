@@ -75,43 +75,10 @@ impl PyCommand {
             .is_ok_and(|o| o.get().command == self.command)
     }
 
+    // The command with its parameters by name (`Move(heading_deg=90, distance_m=0.5)`):
+    // the catalogue's spelling (`Command`'s `Display`).
     fn __repr__(&self) -> String {
-        use Command as C;
-        match self.command {
-            C::Move {
-                heading_deg,
-                distance,
-            } => format!("Move(heading_deg={heading_deg}, distance_m={distance})"),
-            C::Turn { angle_deg } => format!("Turn(angle_deg={angle_deg})"),
-            C::MoveTo { target } => {
-                format!("MoveTo(x={}, y={}, z={})", target.x, target.y, target.z)
-            }
-            C::CancelMove => "CancelMove()".into(),
-            C::EyeMovement {
-                pan_left_deg,
-                pan_right_deg,
-                tilt_deg,
-            } => format!(
-                "EyeMovement(pan_left_deg={pan_left_deg}, pan_right_deg={pan_right_deg}, tilt_deg={tilt_deg})"
-            ),
-            C::EyeFixation { target } => {
-                format!(
-                    "EyeFixation(x={}, y={}, z={})",
-                    target.x, target.y, target.z
-                )
-            }
-            C::GraspId { object_id } => format!("GraspId(object_id={object_id})"),
-            C::GraspPos { x_px, y_px } => format!("GraspPos(x_px={x_px}, y_px={y_px})"),
-            C::PointId { object_id } => format!("PointId(object_id={object_id})"),
-            C::PointPos { x_px, y_px } => format!("PointPos(x_px={x_px}, y_px={y_px})"),
-            C::InteractId { object_id } => format!("InteractId(object_id={object_id})"),
-            C::InteractPos { x_px, y_px } => format!("InteractPos(x_px={x_px}, y_px={y_px})"),
-            C::GraspRelease => "GraspRelease()".into(),
-            C::EnvironmentReset { reset_type } => {
-                format!("EnvironmentReset(reset_type={reset_type})")
-            }
-            C::TrialReset { reset_type } => format!("TrialReset(reset_type={reset_type})"),
-        }
+        self.command.to_string()
     }
 }
 
