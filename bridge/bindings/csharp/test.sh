@@ -37,7 +37,7 @@ build_native
 
 step "mcs: binding, console host, tests ($(mcs --version))"
 # The binding's sources live in the Unity package (Runtime/Binding), which Unity compiles
-# from there; this is the same set of files (src/ here is a link to it).
+# from there; this is the same set of files.
 binding="$root/bridge/bindings/unity/com.vrsync.host/Runtime/Binding"
 mcs_flags=(-langversion:7.2 -unsafe -warnaserror -nologo)
 timeout 120 mcs "${mcs_flags[@]}" -target:library -out:"$work/Vrsync.dll" "$binding"/*.cs

@@ -91,7 +91,7 @@ fn every_action_space_has_its_kind_in_both_headers_and_the_csharp_binding() {
         })
         .collect();
     let cs = enum_in(
-        "../bindings/csharp/src/Channels.cs",
+        "../bindings/unity/com.vrsync.host/Runtime/Binding/Channels.cs",
         "public enum ActionKind : uint",
         "}",
         "",

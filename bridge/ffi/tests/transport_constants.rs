@@ -47,7 +47,7 @@ fn every_transport_has_its_constant_in_the_c_header() {
 #[test]
 fn every_transport_has_its_constant_in_the_csharp_binding() {
     let (_, cs) = expected();
-    let (path, text) = repo_file("../bindings/csharp/src/Native.cs");
+    let (path, text) = repo_file("../bindings/unity/com.vrsync.host/Runtime/Binding/Native.cs");
     let found = members(
         &block(&text, "public enum Transport : uint", "}", &path),
         &path,
