@@ -261,7 +261,9 @@ def test_agents_config_resizes_renames_and_drops_the_world() -> None:
 
 
 def test_cli_bench_sets_the_bridge_against_mujoco_alone(tmp_path: Path) -> None:
-    """The bench's bridge rows: the world serving real `channel_agent` processes."""
+    """The bench's bridge rows: the world serving real `channel_agent` processes, against
+    MuJoCo alone stepping the same states (the alone rounds apply the controls a first
+    bridge run recorded; the bench fails when the runs' trajectory hashes differ)."""
     _needs_host()
     from conftest import bin_dir, binary
 

@@ -6,7 +6,12 @@ of loaned frames, with no host: the reference the bridge's cycle is compared wit
 (DESIGN §9: the bridge adds at most 10 % at 16 agents). :func:`bridge_cycle_times`
 measures the bridge: the world's own loop (:meth:`MujocoWorld.step_cycle`) serving real
 agent processes through ``vrsync.Host``. :func:`compare` interleaves rounds of both, so
-a change of the machine's load hits both alike. :func:`render_rate` and
+a change of the machine's load hits both alike, and makes both step the same scene: a
+first, unmeasured bridge run records the controls the agents' actions set in every
+cycle, and the alone rounds apply those (``controls``), so both render and step the same
+states (their trajectory hashes are equal, and checked). Rendering costs what the
+cameras see: with other controls (say, :func:`drive_all`'s) the rovers go elsewhere and
+the renders cost more or less, which measured here 25 % of a 16-agent cycle. :func:`render_rate` and
 :func:`physics_rate` measure the two parts of a cycle on their own.
 
 The agents of the bridge are ``channel_agent`` (agent-sdk/examples, a Rust agent that
@@ -22,7 +27,7 @@ import statistics
 import subprocess
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -86,27 +91,41 @@ def alone_cycle_times(
     *,
     agents: int | None = None,
     warmup: int = 3,
+    controls: Sequence[np.ndarray] | None = None,
+    hash_out: list[str] | None = None,
 ) -> list[float]:
     """Each measured cycle's seconds of the world alone (see :func:`bench_alone`).
 
+    ``controls``: the ``ctrl`` of every cycle (``warmup + frames`` of them, as
+    :func:`bridge_cycle_times` records them), applied before each cycle's physics;
+    without them every actuator is driven as :func:`drive_all` does. ``hash_out`` gets
+    the run's trajectory hash appended.
+
     Raises:
         MujocoConfigError: as :class:`MujocoWorld`.
-        ValueError: ``frames`` < 1.
+        ValueError: ``frames`` < 1, or fewer ``controls`` than cycles.
     """
     if frames < 1:
         raise ValueError(f"frames must be at least 1, found {frames}")
+    if controls is not None and len(controls) < warmup + frames:
+        raise ValueError(f"{len(controls)} recorded controls for {warmup + frames} cycles")
     times: list[float] = []
     with MujocoWorld(config, agents=agents) as world:
         drive_all(world)
         local = world.local_frames()
+        ctrl = world.data.ctrl
         clock = time.perf_counter
         for i in range(warmup + frames):
             t0 = clock()
             for b in world.agents:
                 world.write_frame(b, local[b.id])
+            if controls is not None:
+                ctrl[:] = controls[i]
             world.advance()
             if i >= warmup:
                 times.append(clock() - t0)
+        if hash_out is not None:
+            hash_out.append(world.trajectory_hash)
     return times
 
 
@@ -146,6 +165,8 @@ def bridge_cycle_times(
     warmup: int = 3,
     session: str | None = None,
     connect_timeout: float = 60.0,
+    record: list[np.ndarray] | None = None,
+    hash_out: list[str] | None = None,
 ) -> list[float]:
     """Each measured cycle's seconds of the world serving real agents: ``agents``
     processes of ``agent`` (started as ``agent CONFIG ID``, each reading a private copy
@@ -153,7 +174,8 @@ def bridge_cycle_times(
     :meth:`MujocoWorld.step_cycle` per cycle (frames rendered into the loaned samples,
     published, the agents' stops collected, their actions applied, the physics
     stepped), after ``warmup`` cycles. The agents leave when the host closes; any still
-    running 30 s later are killed.
+    running 30 s later are killed. ``record`` gets every cycle's ``ctrl`` (after the
+    agents' actions) appended, ``hash_out`` the run's trajectory hash.
 
     Raises:
         MujocoConfigError: as :class:`MujocoWorld`.
@@ -197,8 +219,12 @@ def bridge_cycle_times(
                     report = world.step_cycle(host)
                     if c >= warmup:
                         times.append(clock() - t0)
+                    if record is not None:
+                        record.append(world.data.ctrl.copy())
                     if report.timed_out:
                         raise RuntimeError(f"bridge at {n} agents: cycle {c} timed out")
+                if hash_out is not None:
+                    hash_out.append(world.trajectory_hash)
         finally:
             # The host is closed: the agents leave on their own.
             deadline = time.monotonic() + 30.0
@@ -223,6 +249,9 @@ class Comparison:
     agents: int
     alone: list[list[float]] = field(default_factory=list)
     bridge: list[list[float]] = field(default_factory=list)
+    #: Every run's trajectory hash: all equal when alone and bridge stepped the same
+    #: states (:func:`compare` checks it).
+    hashes: list[str] = field(default_factory=list)
 
     @staticmethod
     def p50_s(rounds: list[list[float]]) -> float:
@@ -258,28 +287,45 @@ def compare(
     """``rounds`` rounds of :func:`alone_cycle_times` and :func:`bridge_cycle_times` at
     ``agents`` agents (default: the config's count), ``frames`` measured cycles each,
     interleaved (alone first in even rounds, the bridge first in odd ones), so slow
-    minutes of a shared machine hit both. ``on_round(kind, round, times)`` after each
-    measurement (``kind``: ``"alone"`` or ``"bridge"``).
+    minutes of a shared machine hit both. First an unmeasured bridge run records the
+    controls of every cycle; the alone rounds apply them, so every run steps and
+    renders the same states. ``on_round(kind, round, times)`` after each measurement
+    (``kind``: ``"alone"`` or ``"bridge"``).
 
     Raises:
         as :func:`alone_cycle_times` and :func:`bridge_cycle_times`; ValueError:
-        ``rounds`` < 1.
+        ``rounds`` < 1; RuntimeError: the runs did not step the same states (their
+        trajectory hashes differ).
     """
     if rounds < 1:
         raise ValueError(f"rounds must be at least 1, found {rounds}")
     n = agents if agents is not None else len(load_config(config).agents)
     result = Comparison(n)
+    controls: list[np.ndarray] = []
+    bridge_cycle_times(
+        config, frames, agent, agents=n, warmup=warmup, record=controls, hash_out=result.hashes
+    )
     for r in range(rounds):
         kinds = ("alone", "bridge") if r % 2 == 0 else ("bridge", "alone")
         for kind in kinds:
             if kind == "alone":
-                times = alone_cycle_times(config, frames, agents=n, warmup=warmup)
+                times = alone_cycle_times(
+                    config, frames, agents=n, warmup=warmup, controls=controls,
+                    hash_out=result.hashes,
+                )  # fmt: skip
                 result.alone.append(times)
             else:
-                times = bridge_cycle_times(config, frames, agent, agents=n, warmup=warmup)
+                times = bridge_cycle_times(
+                    config, frames, agent, agents=n, warmup=warmup, hash_out=result.hashes
+                )
                 result.bridge.append(times)
             if on_round is not None:
                 on_round(kind, r, times)
+    if len(set(result.hashes)) != 1:
+        raise RuntimeError(
+            f"at {n} agents the runs stepped different states (trajectory hashes "
+            f"{sorted(set(result.hashes))}): the comparison would not be of the same work"
+        )
     return result
 
 
