@@ -180,9 +180,18 @@ pub struct ZenohAgent {
     _host: Subscriber<()>,
     _token: LivelinessToken,
     session: ::zenoh::Session,
-    /// Once the close began: the closing thread's completion and when it began (`None`:
-    /// closed already, in place).
-    closing: Option<Option<(std::sync::mpsc::Receiver<()>, Instant)>>,
+    closing: Closing,
+}
+
+/// Where closing the agent's zenoh session is.
+#[derive(Debug)]
+enum Closing {
+    /// Not begun.
+    Open,
+    /// In a thread of its own, which says when it is done; begun at the instant.
+    InThread(std::sync::mpsc::Receiver<()>, Instant),
+    /// Done (in place: no thread could be started).
+    Closed,
 }
 
 impl core::fmt::Debug for ZenohAgent {
@@ -362,7 +371,7 @@ impl ZenohAgent {
             _host: host,
             _token: token,
             session,
-            closing: None,
+            closing: Closing::Open,
         })
     }
 
@@ -429,7 +438,7 @@ const CLOSE_BOUND: Duration = Duration::from_secs(1);
 impl ZenohAgent {
     /// Starts closing the session in a thread of its own (once).
     fn start_close(&mut self) {
-        if self.closing.is_some() {
+        if !matches!(self.closing, Closing::Open) {
             return;
         }
         let session = self.session.clone();
@@ -440,21 +449,21 @@ impl ZenohAgent {
                 let _ = session.close().wait();
                 let _ = done_tx.send(());
             });
-        self.closing = Some(match spawned {
-            Ok(_) => Some((done_rx, Instant::now())),
+        self.closing = match spawned {
+            Ok(_) => Closing::InThread(done_rx, Instant::now()),
             Err(_) => {
                 // No thread to spare: closed here, within zenoh's own timeout.
                 let _ = self.session.close().wait();
-                None
+                Closing::Closed
             }
-        });
+        };
     }
 }
 
 impl Drop for ZenohAgent {
     fn drop(&mut self) {
         self.start_close();
-        if let Some(Some((done, began))) = &self.closing {
+        if let Closing::InThread(done, began) = &self.closing {
             let left = CLOSE_BOUND.saturating_sub(began.elapsed());
             if done.recv_timeout(left).is_err() {
                 debug!(
