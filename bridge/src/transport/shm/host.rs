@@ -299,7 +299,7 @@ fn is_dyn_connected(p: &HostAgentPorts) -> bool {
     let Some(served) = p.served else {
         // Not known by identity: connected when a subscriber other than a departed
         // connection's is attached (listing allocates; only until that one is gone).
-        return attached && p.departed.is_none_or(|d| has_other_subscriber(p, d));
+        return attached && not_only_departed(p);
     };
     if !attached {
         return false;
@@ -316,6 +316,13 @@ fn is_dyn_connected(p: &HostAgentPorts) -> bool {
         p.verified.set(Some(now));
     }
     same
+}
+
+/// Whether a subscriber other than the departed connection's is (or may be) attached: the
+/// rule by which a connection not known by identity counts, for `is_connected` and for a
+/// frame's delivery alike.
+fn not_only_departed(p: &HostAgentPorts) -> bool {
+    p.departed.is_none_or(|d| has_other_subscriber(p, d))
 }
 
 /// Whether subscriber `id` is attached to the agent's sensor service.
@@ -427,7 +434,7 @@ impl HostTransport for ShmHost {
             }
             // Only the ports of a connection that left got it, in the moment before they
             // close: not a new connection, so not delivered (as `is_connected` says).
-            if p.served.is_none() && p.departed.is_some_and(|d| !has_other_subscriber(p, d)) {
+            if p.served.is_none() && !not_only_departed(p) {
                 return Ok(false);
             }
         }
