@@ -14,8 +14,10 @@ use crate::util::{
 };
 
 const RUN_DEADLINE: Duration = Duration::from_secs(300);
-const HOST_IP: &str = "10.77.0.1";
-const AGENT_IP: &str = "10.77.0.2";
+/// The host namespace's end of the veth pair (also used by `netfaults.rs`).
+pub(crate) const HOST_IP: &str = "10.77.0.1";
+/// The agents' namespace's end of the veth pair.
+pub(crate) const AGENT_IP: &str = "10.77.0.2";
 /// The zenoh lease of these runs: a pulled link is noticed after about this long.
 const LEASE_S: f64 = 1.0;
 /// Far beyond the lease: an agent lost with its link is evicted by the lease, never by a
@@ -23,13 +25,14 @@ const LEASE_S: f64 = 1.0;
 const STOP_TIMEOUT_S: f64 = 30.0;
 
 /// Two namespaces and the veth pair between them; deleted on drop (which deletes the
-/// veth pair too).
-struct Netns {
-    host: String,
-    agents: String,
+/// veth pair too, and every nftables rule inside them). Each end of the pair is named
+/// after its namespace. Shared with `netfaults.rs`.
+pub(crate) struct Netns {
+    pub(crate) host: String,
+    pub(crate) agents: String,
 }
 
-fn ip(args: &[&str]) -> Result<(), String> {
+pub(crate) fn ip(args: &[&str]) -> Result<(), String> {
     let out = Command::new("ip")
         .args(args)
         .output()
@@ -47,7 +50,7 @@ fn ip(args: &[&str]) -> Result<(), String> {
 
 impl Netns {
     /// `None` (and a message why) when namespaces cannot be created here.
-    fn create() -> Option<Self> {
+    pub(crate) fn create() -> Option<Self> {
         // Unique per test process and per call: tests in one process run in parallel.
         static NEXT: AtomicU32 = AtomicU32::new(0);
         let tag = format!(
@@ -86,22 +89,71 @@ impl Netns {
     }
 
     /// Starts `program args` inside namespace `ns`.
-    fn spawn(&self, ns: &str, program: &Path, args: &[&str]) -> Proc {
+    pub(crate) fn spawn(&self, ns: &str, program: &Path, args: &[&str]) -> Proc {
         Proc::spawn_command(Self::command(Command::new("ip"), ns, program, args))
     }
 
     /// `base` (a `Command` for `ip`, with its environment set) running `program args`
     /// inside namespace `ns`. `ip netns exec` execs the program with the environment it
     /// was given: the child's pid is the program's.
-    fn command(mut base: Command, ns: &str, program: &Path, args: &[&str]) -> Command {
+    pub(crate) fn command(mut base: Command, ns: &str, program: &Path, args: &[&str]) -> Command {
         base.args(["netns", "exec", ns]).arg(program).args(args);
         base
+    }
+
+    /// Runs `program args` inside namespace `ns` to completion, with `stdin` as its
+    /// input; its stdout, or an error naming the command and its stderr.
+    pub(crate) fn exec(
+        ns: &str,
+        program: &str,
+        args: &[&str],
+        stdin: &str,
+    ) -> Result<String, String> {
+        use std::io::Write;
+        use std::process::Stdio;
+        let what = || format!("ip netns exec {ns} {program} {}", args.join(" "));
+        let mut child = Command::new("ip")
+            .args(["netns", "exec", ns, program])
+            .args(args)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .map_err(|e| format!("{}: {e}", what()))?;
+        if let Some(mut input) = child.stdin.take() {
+            input
+                .write_all(stdin.as_bytes())
+                .map_err(|e| format!("{}: {e}", what()))?;
+        }
+        // Both tools these tests run this way (ip, nft) end at once: no deadline needed.
+        let out = child
+            .wait_with_output()
+            .map_err(|e| format!("{}: {e}", what()))?;
+        if out.status.success() {
+            Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+        } else {
+            Err(format!(
+                "{}: {}{}",
+                what(),
+                String::from_utf8_lossy(&out.stderr).trim(),
+                input_note(stdin)
+            ))
+        }
     }
 
     /// Sets the agents' end of the link down or up.
     fn link(&self, up: bool) {
         let state = if up { "up" } else { "down" };
         ip(&["-n", &self.agents, "link", "set", &self.agents, state]).unwrap();
+    }
+}
+
+/// `stdin`, for an error message, when there was one.
+fn input_note(stdin: &str) -> String {
+    if stdin.is_empty() {
+        String::new()
+    } else {
+        format!("\ninput:\n{stdin}")
     }
 }
 

@@ -17,6 +17,7 @@ mod hostile;
 mod legacy;
 mod liveness;
 mod logs;
+mod netfaults;
 mod netns;
 mod packages;
 mod replay;

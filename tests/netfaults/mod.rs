@@ -1,0 +1,796 @@
+//! Network faults on a real link: the host (`vr-sim run`) and one shared-memory agent in
+//! one network namespace, two remote agents (TCP, zenoh or zenoh over mutual TLS) in
+//! another, joined by a veth pair (`netns.rs`'s [`Netns`]), and faults on the agents'
+//! side of the link:
+//! - **loss**: nftables rules in the agents' namespace drop P % of the TCP packets in
+//!   each direction (`numgen random mod 100 < P drop`, on input and on output);
+//! - **partition**: a drop-everything table in the agents' namespace, added when the
+//!   remote agents reached a cycle and deleted D seconds later;
+//! - **duplication**: nftables `dup` in the output hook of both namespaces sends a second
+//!   copy of P % of the packets;
+//! - **delay with jitter**: this kernel has no netem qdisc and nothing else that delays
+//!   packets (its qdiscs are HTB, TBF, FIFO, ingress; no NFQUEUE in nftables), so the
+//!   remote agents connect through [`Relay`], a TCP relay in the host's namespace that
+//!   holds every chunk it reads for `delay ± jitter` (uniform) before forwarding it, in
+//!   order, in both directions. It delays the byte stream, not packets: TCP's own
+//!   behaviour under packet delay (its RTT estimate, its window) is not what a netem
+//!   link would give.
+//! - Packet reordering is not covered: nothing here can reorder packets (a relay above
+//!   TCP cannot, and the kernel has no qdisc for it).
+//!
+//! Each case runs the same lock-step world (`circle` agents: a command every cycle) as a
+//! clean run on the same link and compares: the trajectory hash, every agent's commands
+//! in the host's `--record` against what the agent logged it sent (every command applied
+//! once, in its cycle), evictions, stop timeouts, cycles/s. Every case prints one
+//! `netfaults:` line with what it measured (the README's "Failure behaviour" table
+//! comes from these lines).
+//!
+//! CI runs, per remote transport: the clean link, 1 % and 5 % loss, a 3 s partition
+//! (shorter than the zenoh lease of these runs, 10 s). The heavier cases (20 % loss, a
+//! 30 s partition, a 3 s partition with the default 2 s lease, delay, duplication) are
+//! `#[ignore]`d: `cargo test --workspace --features vrsync-sim/rerun --test tests --
+//! --ignored --nocapture netfaults`.
+//!
+//! Both veth ends carry one TCP segment per packet (`gso_max_segs 1`), as a wire does:
+//! otherwise a veth passes 64 KiB offload packets and one dropped "packet" is a whole
+//! camera frame.
+//!
+//! Needs root, `ip` and `nft` (CI runs as root; `scripts/test-all` and `.ci/run` install
+//! iproute2 and nftables): skipped with a message otherwise. Namespaces (and with them
+//! every rule), nftables tables, relays and processes are removed by drop guards, also
+//! when a test fails.
+
+mod nft;
+mod relay;
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::Command;
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+use crate::netns::{AGENT_IP, HOST_IP, Netns};
+use crate::util::{self, EVENT_DEADLINE, Events, Proc, bin, cycle_log, record, summary};
+use nft::{duplicate_table, loss_table, partition_table};
+use relay::Relay;
+
+/// The host's TCP transport port (inside the host namespace: no other test sees it).
+const TCP_PORT: u16 = 7400;
+/// The host's zenoh port.
+const ZENOH_PORT: u16 = 7447;
+/// Where [`Relay`] listens for the remote agents, in the host namespace.
+const RELAY_PORT: u16 = 7500;
+/// Cycles of the CI cases.
+const FRAMES: u64 = 200;
+/// The zenoh lease of the CI cases: longer than their 3 s partition (the issue's runs
+/// used zenoh's default, 10 s).
+const LEASE_S: f64 = 10.0;
+/// Far beyond any stall here: the host waits for a live agent anyway (`wait_for_stop =
+/// "alive"`, the default); this only bounds `vr-agent`'s own start timeout.
+const STOP_TIMEOUT_S: f64 = 30.0;
+/// Deadline of one run's host (a 30 s partition, 20 % loss in a debug build on a loaded
+/// 2-core machine).
+const HOST_DEADLINE: Duration = Duration::from_secs(600);
+
+/// The remote agents' transport.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Remote {
+    Tcp,
+    Zenoh,
+    /// zenoh over `tls/` endpoints with mutual TLS (`mtls = true`).
+    ZenohTls,
+}
+
+impl Remote {
+    fn name(self) -> &'static str {
+        match self {
+            Self::Tcp => "tcp",
+            Self::Zenoh => "zenoh",
+            Self::ZenohTls => "zenoh-tls",
+        }
+    }
+
+    /// The `[[agent]] transport` spelling.
+    fn transport(self) -> &'static str {
+        match self {
+            Self::Tcp => "tcp",
+            Self::Zenoh | Self::ZenohTls => "zenoh",
+        }
+    }
+}
+
+/// A fault on the agents' side of the link.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Fault {
+    Clean,
+    /// `percent` % of the TCP packets dropped, each direction.
+    Loss {
+        percent: u32,
+    },
+    /// Everything dropped from when the remote agents logged `at_cycle`, for `secs`.
+    Partition {
+        at_cycle: u64,
+        secs: u64,
+    },
+    /// `percent` % of the packets sent twice, each direction.
+    Duplicate {
+        percent: u32,
+    },
+    /// Each direction of the byte stream held `ms ± jitter_ms` ([`Relay`]).
+    Delay {
+        ms: u64,
+        jitter_ms: u64,
+    },
+}
+
+impl Fault {
+    fn label(self) -> String {
+        match self {
+            Self::Clean => "clean".into(),
+            Self::Loss { percent } => format!("loss {percent}%"),
+            Self::Partition { at_cycle, secs } => format!("partition {secs}s at cycle {at_cycle}"),
+            Self::Duplicate { percent } => format!("duplicate {percent}%"),
+            Self::Delay { ms, jitter_ms } => format!("delay {ms}±{jitter_ms}ms"),
+        }
+    }
+}
+
+/// What one run measured.
+#[derive(Debug)]
+struct Outcome {
+    remote: Remote,
+    fault: Fault,
+    lease_s: f64,
+    host_code: Option<i32>,
+    frames: u64,
+    /// Cycles per second from all agents connected to the end of the run.
+    cycles_per_s: f64,
+    hash: String,
+    evicted: Value,
+    stop_timeouts: u64,
+    late_stops: u64,
+    commands_applied: u64,
+    /// Per remote agent: its exit code and the last line of its stderr.
+    agents: Vec<(u32, Option<i32>, String)>,
+    /// Per agent: `Ok` when the record holds exactly the commands it logged it sent, in
+    /// the cycle it sent them, and it took part in every cycle.
+    commands: Vec<(u32, Result<(), String>)>,
+    /// `agent_evicted` events: (agent, cycle, seconds into the run, reason).
+    evictions: Vec<Value>,
+    /// nftables counters and relay chunks, for the record.
+    counters: BTreeMap<String, u64>,
+    /// Partition: seconds from the link's return until the remote agents answered a
+    /// cycle again (`None`: they never did).
+    resumed_after_s: Option<f64>,
+}
+
+impl Outcome {
+    /// Everything a fault the link recovers from must leave intact: the clean run's
+    /// trajectory, every command applied once in its cycle, nobody evicted or timed out.
+    fn assert_intact(&self, clean: &Outcome) {
+        assert_eq!(self.host_code, Some(0), "{self:#?}");
+        assert_eq!(self.frames, FRAMES, "{self:#?}");
+        assert_eq!(self.hash, clean.hash, "{self:#?}");
+        assert_eq!(self.evicted, serde_json::json!([]), "{self:#?}");
+        assert!(self.evictions.is_empty(), "{self:#?}");
+        assert_eq!(self.stop_timeouts, 0, "{self:#?}");
+        assert_eq!(self.late_stops, 0, "{self:#?}");
+        assert_eq!(self.commands_applied, clean.commands_applied, "{self:#?}");
+        for (id, ok) in &self.commands {
+            assert!(ok.is_ok(), "agent {id}: {ok:?}\n{self:#?}");
+        }
+        for (id, code, last) in &self.agents {
+            assert_eq!(*code, Some(0), "agent {id}: {last}");
+        }
+    }
+
+    /// The `netfaults:` line.
+    fn report(&self, clean: Option<&Outcome>) {
+        let ratio = clean.map_or(String::new(), |c| {
+            format!(
+                " ({:.2}x the clean link's {:.1})",
+                c.cycles_per_s / self.cycles_per_s.max(1e-9),
+                c.cycles_per_s
+            )
+        });
+        let hash = match clean {
+            Some(c) if c.hash == self.hash => "clean run's hash",
+            Some(_) => "hash DIFFERS from the clean run's",
+            None => "reference hash",
+        };
+        let commands = if self.commands.iter().all(|(_, r)| r.is_ok()) {
+            "every command applied once".to_string()
+        } else {
+            self.commands
+                .iter()
+                .filter_map(|(id, r)| r.as_ref().err().map(|e| format!("agent {id}: {e}")))
+                .collect::<Vec<_>>()
+                .join("; ")
+        };
+        let agents = self
+            .agents
+            .iter()
+            .map(|(id, code, last)| {
+                format!(
+                    "agent {id} exit {code:?}{}",
+                    if last.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" ({last})")
+                    }
+                )
+            })
+            .collect::<Vec<_>>()
+            .join(", ");
+        let evictions = self
+            .evictions
+            .iter()
+            .map(|e| {
+                format!(
+                    "agent {} evicted at cycle {} ({:.1} s, {})",
+                    e["agent"],
+                    e["cycle"],
+                    e["wall_s"].as_f64().unwrap_or(0.0),
+                    e["reason"].as_str().unwrap_or("")
+                )
+            })
+            .collect::<Vec<_>>()
+            .join(", ");
+        let resumed = match (self.fault, self.resumed_after_s) {
+            (Fault::Partition { .. }, Some(s)) => {
+                format!("; remote agents answered again {s:.1} s after the link returned")
+            }
+            (Fault::Partition { .. }, None) => "; remote agents never answered again".into(),
+            _ => String::new(),
+        };
+        eprintln!(
+            "netfaults: {} {} (lease {} s): host exit {:?}, {} cycles, {:.1} cycles/s{ratio}, {hash}, {commands}, \
+             stop timeouts {}, late stops {}, evicted {}{}{}; {agents}; counters {:?}{resumed}",
+            self.remote.name(),
+            self.fault.label(),
+            self.lease_s,
+            self.host_code,
+            self.frames,
+            self.cycles_per_s,
+            self.stop_timeouts,
+            self.late_stops,
+            self.evicted,
+            if evictions.is_empty() { "" } else { ": " },
+            evictions,
+            self.counters,
+        );
+    }
+}
+
+/// The world of every case: agent 0 over shared memory (in the host's namespace), agents
+/// 1 and 2 over `remote`, one 160×120 camera each. `side` is `host` or `agent` (with
+/// TLS, each side its own certificate); `via_relay` points the agents at [`Relay`].
+fn config_text(session: &str, remote: Remote, lease_s: f64, side: &str, via_relay: bool) -> String {
+    let (tcp_port, zenoh_port) = if via_relay && side == "agent" {
+        (RELAY_PORT, RELAY_PORT)
+    } else {
+        (TCP_PORT, ZENOH_PORT)
+    };
+    let scheme = if remote == Remote::ZenohTls {
+        "tls"
+    } else {
+        "tcp"
+    };
+    let mut s = format!(
+        "session = {session:?}\nseed = 11\n[sync]\nsync_mode = true\n\
+         simulation_time_per_frame = 0.1\nstop_timeout = {STOP_TIMEOUT_S}\n\
+         connect_timeout = 60.0\n[transport]\nkind = \"shm\"\n\
+         tcp_listen = \"{HOST_IP}:{tcp_port}\"\n\
+         [transport.zenoh]\nlisten = [\"{scheme}/{HOST_IP}:{ZENOH_PORT}\"]\n\
+         connect = [\"{scheme}/{HOST_IP}:{zenoh_port}\"]\nlease = {lease_s:?}\n"
+    );
+    if remote == Remote::ZenohTls {
+        s += &format!(
+            "tls_ca = \"ca.pem\"\ntls_cert = \"{side}.pem\"\ntls_key = \"{side}.key\"\nmtls = true\n"
+        );
+    }
+    for id in 0..3 {
+        let transport = if id == 0 { "shm" } else { remote.transport() };
+        s += &format!(
+            "\n[[agent]]\nid = {id}\ntransport = {transport:?}\n[[agent.camera]]\n\
+             name = \"left\"\nwidth = 160\nheight = 120\n"
+        );
+    }
+    s
+}
+
+/// `None` (and a message why) when this machine cannot run these tests.
+fn link() -> Option<Netns> {
+    let nft = Command::new("nft").arg("--version").output();
+    if !nft.is_ok_and(|o| o.status.success()) {
+        eprintln!(
+            "SKIPPED: `nft` (nftables) is not installed; `apt-get install nftables` (scripts/test-all does, as root)"
+        );
+        return None;
+    }
+    Netns::create()
+}
+
+/// The remote agents' ids.
+const REMOTE_IDS: [u32; 2] = [1, 2];
+
+/// Runs the world for `frames` cycles with `fault` on the link of `ns`, in `dir`
+/// (which holds the certificates for TLS).
+fn run_case(
+    ns: &Netns,
+    dir: &Path,
+    remote: Remote,
+    fault: Fault,
+    frames: u64,
+    lease_s: f64,
+) -> Outcome {
+    let session = util::session(&format!("nf{}", remote.name()));
+    let case_dir = dir.join(&session);
+    std::fs::create_dir_all(&case_dir).unwrap();
+    if remote == Remote::ZenohTls {
+        for f in ["ca.pem", "host.pem", "host.key", "agent.pem", "agent.key"] {
+            std::fs::copy(dir.join(f), case_dir.join(f)).unwrap();
+        }
+    }
+    wire_sized_packets(ns);
+    let via_relay = matches!(fault, Fault::Delay { .. });
+    let host_cfg = case_dir.join("host.toml");
+    let agent_cfg = case_dir.join("agent.toml");
+    std::fs::write(
+        &host_cfg,
+        config_text(&session, remote, lease_s, "host", false),
+    )
+    .unwrap();
+    std::fs::write(
+        &agent_cfg,
+        config_text(&session, remote, lease_s, "agent", via_relay),
+    )
+    .unwrap();
+
+    // The fault's guards live until the end of this function (after every process ended).
+    let mut tables = Vec::new();
+    let mut relay = None;
+    match fault {
+        Fault::Loss { percent } => tables.push(loss_table(ns, percent)),
+        Fault::Duplicate { percent } => {
+            tables.push(duplicate_table(&ns.agents, &ns.agents, HOST_IP, percent));
+            tables.push(duplicate_table(&ns.host, &ns.host, AGENT_IP, percent));
+        }
+        Fault::Delay { ms, jitter_ms } => {
+            let upstream_port = if remote == Remote::Tcp {
+                TCP_PORT
+            } else {
+                ZENOH_PORT
+            };
+            relay = Some(Relay::start(
+                &ns.host,
+                format!("{HOST_IP}:{RELAY_PORT}").parse().unwrap(),
+                format!("{HOST_IP}:{upstream_port}").parse().unwrap(),
+                Duration::from_millis(ms),
+                Duration::from_millis(jitter_ms),
+            ));
+        }
+        Fault::Clean | Fault::Partition { .. } => {}
+    }
+
+    let events = Events::in_dir(&case_dir);
+    let sum_path = case_dir.join("summary.json");
+    let rec_path = case_dir.join("record.jsonl");
+    let frames_arg = frames.to_string();
+    let host = ns.spawn(
+        &ns.host,
+        &bin("vr-sim"),
+        &[
+            "run",
+            "--config",
+            host_cfg.to_str().unwrap(),
+            "--frames",
+            &frames_arg,
+            "--events",
+            events.arg(),
+            "--summary-json",
+            sum_path.to_str().unwrap(),
+            "--record",
+            rec_path.to_str().unwrap(),
+            "--quiet",
+        ],
+    );
+    let log = |id: u32| case_dir.join(format!("a{id}.log"));
+    let agent = |id: u32, namespace: &str, cfg: &Path| {
+        let id_arg = id.to_string();
+        let log = log(id);
+        ns.spawn(
+            namespace,
+            &bin("vr-agent"),
+            &[
+                "--config",
+                cfg.to_str().unwrap(),
+                "--id",
+                &id_arg,
+                "--policy",
+                "circle",
+                "--log-cycles",
+                log.to_str().unwrap(),
+            ],
+        )
+    };
+    let shm_agent = agent(0, &ns.host, &host_cfg);
+    let mut remotes: Vec<(u32, Proc)> = REMOTE_IDS
+        .iter()
+        .map(|&id| (id, agent(id, &ns.agents, &agent_cfg)))
+        .collect();
+
+    let mut resumed_after_s = None;
+    let mut partition_counters = BTreeMap::new();
+    if let Fault::Partition { at_cycle, secs } = fault {
+        for &id in &REMOTE_IDS {
+            util::wait_for_cycle_line(&log(id), at_cycle, EVENT_DEADLINE);
+        }
+        let table = partition_table(ns);
+        // The fault itself: the link stays cut this long.
+        std::thread::sleep(Duration::from_secs(secs));
+        let cut_at = last_cycle(&log(REMOTE_IDS[0]));
+        partition_counters = table.counters();
+        drop(table);
+        let healed = Instant::now();
+        resumed_after_s = answered_again(&log(REMOTE_IDS[0]), cut_at, &mut remotes)
+            .then(|| healed.elapsed().as_secs_f64());
+    }
+
+    let host_out = host.wait(HOST_DEADLINE);
+    let shm_out = shm_agent.wait(Duration::from_secs(60));
+    let agents: Vec<(u32, Option<i32>, String)> = remotes
+        .into_iter()
+        .map(|(id, p)| {
+            let out = p.wait(Duration::from_secs(60) + Duration::from_secs_f64(lease_s * 2.0));
+            let last = out
+                .stderr
+                .lines()
+                .rev()
+                .find(|l| l.contains("error") || l.contains("gone"))
+                .unwrap_or("")
+                .trim()
+                .chars()
+                .take(200)
+                .collect();
+            (id, out.code(), last)
+        })
+        .collect();
+
+    let mut counters = BTreeMap::new();
+    for t in &tables {
+        for (k, v) in t.counters() {
+            let side = if t.ns == ns.host { "host" } else { "agents" };
+            counters.insert(format!("{side}.{}.{k}", t.name), v);
+        }
+    }
+    for (k, v) in partition_counters {
+        counters.insert(format!("partition.{k}"), v);
+    }
+    if let Some(r) = &relay {
+        counters.insert("relay.chunks".into(), r.chunks.load(Ordering::Relaxed));
+    }
+    drop(relay);
+    drop(tables);
+
+    assert!(
+        sum_path.exists(),
+        "host exit {:?} without a summary: {}",
+        host_out.code(),
+        host_out.stderr
+    );
+    assert_eq!(shm_out.code(), Some(0), "shm agent: {}", shm_out.stderr);
+    let sum = summary(&sum_path);
+    let all = events.read();
+    let connected = all
+        .iter()
+        .find(|e| e["event"] == "all_agents_connected")
+        .and_then(|e| e["wall_s"].as_f64())
+        .unwrap_or(0.0);
+    let finished = all
+        .iter()
+        .find(|e| e["event"] == "finished")
+        .and_then(|e| e["wall_s"].as_f64())
+        .unwrap_or(f64::NAN);
+    let frames_done = sum["frames"].as_u64().unwrap();
+    let rec = record(&rec_path);
+    let commands = (0..3)
+        .map(|id| (id, commands_applied_once(&rec, &log(id), id, frames_done)))
+        .collect();
+    Outcome {
+        remote,
+        fault,
+        lease_s,
+        host_code: host_out.code(),
+        frames: frames_done,
+        cycles_per_s: frames_done as f64 / (finished - connected),
+        hash: sum["trajectory_hash"].as_str().unwrap_or("").to_string(),
+        evicted: sum["evicted_agents"].clone(),
+        stop_timeouts: sum["stop_timeouts"].as_u64().unwrap(),
+        late_stops: sum["late_stops"].as_u64().unwrap(),
+        commands_applied: sum["commands_applied"].as_u64().unwrap(),
+        agents,
+        commands,
+        evictions: all
+            .into_iter()
+            .filter(|e| e["event"] == "agent_evicted")
+            .collect(),
+        counters,
+        resumed_after_s,
+    }
+}
+
+/// One segment per packet on both veth ends, as on a wire: by default a veth passes TCP's
+/// segmentation-offload packets of up to 64 KiB, so a dropped "packet" would be a whole
+/// camera frame and the loss rules would see ~40 times fewer packets than a link would.
+fn wire_sized_packets(ns: &Netns) {
+    for side in [&ns.host, &ns.agents] {
+        crate::netns::ip(&["-n", side, "link", "set", "dev", side, "gso_max_segs", "1"])
+            .unwrap_or_else(|e| panic!("{e}"));
+    }
+}
+
+/// The last cycle in a `--log-cycles` file (0 when it has none yet).
+fn last_cycle(path: &Path) -> u64 {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let complete = text.rfind('\n').map_or("", |end| &text[..end]);
+    complete
+        .lines()
+        .filter_map(|l| l.split(' ').next()?.parse::<u64>().ok())
+        .max()
+        .unwrap_or(0)
+}
+
+/// Waits until the agent logging to `path` logged a cycle after `cycle` (`true`), or every
+/// remote agent exited (`false`); panics after [`HOST_DEADLINE`].
+fn answered_again(path: &Path, cycle: u64, remotes: &mut [(u32, Proc)]) -> bool {
+    let deadline = Instant::now() + HOST_DEADLINE;
+    loop {
+        if last_cycle(path) > cycle {
+            return true;
+        }
+        if remotes.iter_mut().all(|(_, p)| p.try_exited()) {
+            return last_cycle(path) > cycle;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "{}: no cycle after {cycle} within {HOST_DEADLINE:?}",
+            path.display()
+        );
+        // The file is appended to by another process: re-read it shortly.
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// `Ok` when agent `id` logged every cycle `0..frames` and the host's record holds, for
+/// each, exactly the action ids the agent logged it sent then, with the outcome
+/// `stopped`: every command applied once, in the cycle it was sent for.
+fn commands_applied_once(rec: &[Value], log: &Path, id: u32, frames: u64) -> Result<(), String> {
+    let sent: BTreeMap<u64, Vec<u32>> = if log.exists() {
+        cycle_log(log)
+            .into_iter()
+            .map(|l| (l.cycle, l.action_ids))
+            .collect()
+    } else {
+        BTreeMap::new()
+    };
+    let applied: BTreeMap<u64, (Vec<u32>, String)> = rec
+        .iter()
+        .filter(|e| e["agent"] == id)
+        .map(|e| {
+            let ids = e["commands"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .map(|c| c[1].as_u64().expect("action id") as u32)
+                .collect();
+            (
+                e["cycle"].as_u64().expect("cycle"),
+                (ids, e["outcome"].as_str().unwrap_or("").to_string()),
+            )
+        })
+        .collect();
+    let mut missing = Vec::new();
+    for cycle in 0..frames {
+        let ok = match (sent.get(&cycle), applied.get(&cycle)) {
+            (Some(s), Some((a, outcome))) => s == a && outcome == "stopped",
+            _ => false,
+        };
+        if !ok {
+            missing.push(cycle);
+        }
+    }
+    if missing.is_empty() {
+        return Ok(());
+    }
+    let first = missing[0];
+    Err(format!(
+        "{} of {frames} cycles without exactly the commands sent (first: cycle {first}, sent {:?}, recorded {:?}; cycles logged {}, recorded {})",
+        missing.len(),
+        sent.get(&first),
+        applied.get(&first),
+        sent.len(),
+        applied.len()
+    ))
+}
+
+/// A namespace pair and a temp dir (with certificates for TLS) for one transport's cases.
+struct Bench {
+    ns: Netns,
+    dir: tempfile::TempDir,
+    remote: Remote,
+}
+
+impl Bench {
+    fn new(remote: Remote) -> Option<Self> {
+        let ns = link()?;
+        let dir = tempfile::tempdir().unwrap();
+        util::make_certificates(dir.path(), HOST_IP);
+        Some(Self { ns, dir, remote })
+    }
+
+    fn run(&self, fault: Fault, frames: u64, lease_s: f64) -> Outcome {
+        run_case(
+            &self.ns,
+            self.dir.path(),
+            self.remote,
+            fault,
+            frames,
+            lease_s,
+        )
+    }
+}
+
+/// CI: the clean link, 1 % and 5 % loss each way, a 3 s partition: the clean run's
+/// trajectory, every command once, no eviction, no stop timeout.
+fn loss_and_a_short_partition_leave_the_run_intact(remote: Remote) {
+    let Some(bench) = Bench::new(remote) else {
+        return;
+    };
+    let clean = bench.run(Fault::Clean, FRAMES, LEASE_S);
+    clean.report(None);
+    clean.assert_intact(&clean);
+    for fault in [
+        Fault::Loss { percent: 1 },
+        Fault::Loss { percent: 5 },
+        Fault::Partition {
+            at_cycle: 40,
+            secs: 3,
+        },
+    ] {
+        let out = bench.run(fault, FRAMES, LEASE_S);
+        out.report(Some(&clean));
+        out.assert_intact(&clean);
+        if let Fault::Loss { .. } = fault {
+            assert!(
+                out.counters.values().any(|&v| v > 0),
+                "the loss rules dropped nothing: {:?}",
+                out.counters
+            );
+        }
+        if let Fault::Partition { .. } = fault {
+            assert!(out.resumed_after_s.is_some(), "{out:#?}");
+        }
+    }
+}
+
+/// On demand: delay with jitter and duplication must leave the run intact too.
+fn delay_and_duplication_leave_the_run_intact(remote: Remote) {
+    let Some(bench) = Bench::new(remote) else {
+        return;
+    };
+    let clean = bench.run(Fault::Clean, FRAMES, LEASE_S);
+    clean.report(None);
+    for fault in [
+        Fault::Delay {
+            ms: 20,
+            jitter_ms: 10,
+        },
+        Fault::Delay {
+            ms: 80,
+            jitter_ms: 40,
+        },
+        Fault::Duplicate { percent: 5 },
+    ] {
+        let out = bench.run(fault, FRAMES, LEASE_S);
+        out.report(Some(&clean));
+        out.assert_intact(&clean);
+    }
+}
+
+/// On demand, recorded (not asserted to work: a resume window for links that come back
+/// is not built yet): 20 % loss, a 30 s partition, a 3 s partition with the default lease.
+/// What must hold whatever happens to the remote agents: the host ends its run, the
+/// shared-memory agent takes part in every cycle, nobody is waited for until a stop
+/// timeout.
+fn heavy_faults_are_recorded(remote: Remote) {
+    let Some(bench) = Bench::new(remote) else {
+        return;
+    };
+    let clean = bench.run(Fault::Clean, FRAMES, LEASE_S);
+    clean.report(None);
+    let mut cases = vec![
+        (Fault::Loss { percent: 20 }, LEASE_S),
+        (
+            Fault::Partition {
+                at_cycle: 40,
+                secs: 30,
+            },
+            LEASE_S,
+        ),
+    ];
+    if remote != Remote::Tcp {
+        // The lease is zenoh's: over TCP this would be the CI's 3 s partition again.
+        cases.push((
+            Fault::Partition {
+                at_cycle: 40,
+                secs: 3,
+            },
+            2.0,
+        ));
+    }
+    for (fault, lease) in cases {
+        let out = bench.run(fault, FRAMES, lease);
+        out.report(Some(&clean));
+        assert_eq!(out.host_code, Some(0), "{out:#?}");
+        assert_eq!(out.frames, FRAMES, "{out:#?}");
+        assert_eq!(out.stop_timeouts, 0, "{out:#?}");
+        assert!(out.commands[0].1.is_ok(), "shm agent: {out:#?}");
+    }
+}
+
+mod tcp {
+    use super::Remote;
+    #[test]
+    fn loss_and_a_short_partition_leave_the_run_intact() {
+        super::loss_and_a_short_partition_leave_the_run_intact(Remote::Tcp);
+    }
+    #[test]
+    #[ignore = "on demand (minutes): cargo test --workspace --test tests -- --ignored netfaults"]
+    fn delay_and_duplication_leave_the_run_intact() {
+        super::delay_and_duplication_leave_the_run_intact(Remote::Tcp);
+    }
+    #[test]
+    #[ignore = "on demand (minutes): cargo test --workspace --test tests -- --ignored netfaults"]
+    fn heavy_faults_are_recorded() {
+        super::heavy_faults_are_recorded(Remote::Tcp);
+    }
+}
+
+mod zenoh {
+    use super::Remote;
+    #[test]
+    fn loss_and_a_short_partition_leave_the_run_intact() {
+        super::loss_and_a_short_partition_leave_the_run_intact(Remote::Zenoh);
+    }
+    #[test]
+    #[ignore = "on demand (minutes): cargo test --workspace --test tests -- --ignored netfaults"]
+    fn delay_and_duplication_leave_the_run_intact() {
+        super::delay_and_duplication_leave_the_run_intact(Remote::Zenoh);
+    }
+    #[test]
+    #[ignore = "on demand (minutes): cargo test --workspace --test tests -- --ignored netfaults"]
+    fn heavy_faults_are_recorded() {
+        super::heavy_faults_are_recorded(Remote::Zenoh);
+    }
+}
+
+mod zenoh_tls {
+    use super::Remote;
+    #[test]
+    fn loss_and_a_short_partition_leave_the_run_intact() {
+        super::loss_and_a_short_partition_leave_the_run_intact(Remote::ZenohTls);
+    }
+    #[test]
+    #[ignore = "on demand (minutes): cargo test --workspace --test tests -- --ignored netfaults"]
+    fn delay_and_duplication_leave_the_run_intact() {
+        super::delay_and_duplication_leave_the_run_intact(Remote::ZenohTls);
+    }
+    #[test]
+    #[ignore = "on demand (minutes): cargo test --workspace --test tests -- --ignored netfaults"]
+    fn heavy_faults_are_recorded() {
+        super::heavy_faults_are_recorded(Remote::ZenohTls);
+    }
+}
