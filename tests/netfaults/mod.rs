@@ -416,6 +416,9 @@ fn run_case(
             ],
         )
     };
+    // A relayed TCP agent that connects before the host listens loses its connection in
+    // the hello (the relay cannot reach the host) and exits: start agents afterwards.
+    events.wait_for("listening", EVENT_DEADLINE);
     let shm_agent = agent(0, &ns.host, &host_cfg);
     let mut remotes: Vec<(u32, Proc)> = REMOTE_IDS
         .iter()
