@@ -364,7 +364,7 @@ impl<'c> AgentBuilder<'c> {
             frames_skipped: 0,
             next_liveness: Instant::now() + HOST_LIVENESS_PERIOD,
             last_event_seq: 0,
-            action_states: ActionStates::new(),
+            action_states: ActionStates::with_capacity(ACTION_STATES_CAPACITY),
             closed: false,
             channels: Channels::new(self.config.agent(self.id)),
         })
@@ -432,51 +432,6 @@ pub struct Agent {
 /// earliest is forgotten (a finished or aborted one first).
 pub const ACTION_STATES_CAPACITY: usize = 1024;
 
-/// The latest status per action id, bounded (no allocation after connect).
-#[derive(Debug)]
-struct ActionStates {
-    /// `(action id, state, seq of the status)`.
-    entries: Vec<(u32, ActionState, u64)>,
-}
-
-impl ActionStates {
-    fn new() -> Self {
-        Self {
-            entries: Vec::with_capacity(ACTION_STATES_CAPACITY),
-        }
-    }
-
-    fn get(&self, action_id: u32) -> Option<ActionState> {
-        self.entries.iter().find(|e| e.0 == action_id).map(|e| e.1)
-    }
-
-    fn update(&mut self, status: &ActionStatus) {
-        let Some(state) = ActionState::from_u32(status.state) else {
-            return;
-        };
-        if let Some(e) = self.entries.iter_mut().find(|e| e.0 == status.action_id) {
-            *e = (status.action_id, state, status.seq);
-            return;
-        }
-        if self.entries.len() >= ACTION_STATES_CAPACITY {
-            let oldest = |done: bool| {
-                self.entries
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, e)| {
-                        !done || matches!(e.1, ActionState::Finished | ActionState::Aborted)
-                    })
-                    .min_by_key(|(_, e)| e.2)
-                    .map(|(i, _)| i)
-            };
-            if let Some(i) = oldest(true).or_else(|| oldest(false)) {
-                self.entries.swap_remove(i);
-            }
-        }
-        self.entries.push((status.action_id, state, status.seq));
-    }
-}
-
 impl Agent {
     /// Connects agent `id` with the config's connect timeout (see [`AgentBuilder`]).
     ///
@@ -536,7 +491,7 @@ impl Agent {
 
     /// Every action's latest status, as [`Agent::action_state`], in no particular order.
     pub fn action_states(&self) -> impl Iterator<Item = (u32, ActionState)> + '_ {
-        self.action_states.entries.iter().map(|e| (e.0, e.1))
+        self.action_states.iter()
     }
 
     /// Blocks until the host signals *start* with a new frame, and returns that frame.
@@ -720,9 +675,12 @@ impl Drop for Agent {
     }
 }
 
+mod action_states;
 mod channels;
 #[cfg(test)]
 mod tests;
+
+use action_states::ActionStates;
 
 pub use channels::ActError;
 use channels::Channels;
