@@ -279,6 +279,19 @@ fn validate(header: &SensorHeader, payload_len: usize, id: u32) -> Result<(), St
     Ok(())
 }
 
+/// A receive failure as [`Agent::wait_start`] reports it (`last_cycle`: the newest cycle
+/// received before).
+fn receive_error(e: AgentReceiveError, last_cycle: Option<u64>) -> WaitStartError {
+    match e {
+        AgentReceiveError::TooManyFramesHeld { max } => WaitStartError::TooManyFramesHeld { max },
+        AgentReceiveError::Protocol(reason) => WaitStartError::BadFrame {
+            cycle: last_cycle.map_or(0, |c| c + 1),
+            reason,
+        },
+        other => WaitStartError::Receive(other.to_string()),
+    }
+}
+
 /// Builds an [`Agent`].
 #[derive(Debug)]
 pub struct AgentBuilder<'c> {
@@ -514,18 +527,40 @@ impl Agent {
                 session: self.session.clone(),
                 reason,
             },
-            AgentWaitError::Receive(AgentReceiveError::TooManyFramesHeld { max }) => {
-                WaitStartError::TooManyFramesHeld { max }
-            }
-            AgentWaitError::Receive(AgentReceiveError::Protocol(reason)) => {
-                WaitStartError::BadFrame {
-                    cycle: self.last_cycle.map_or(0, |c| c + 1),
-                    reason,
-                }
-            }
+            AgentWaitError::Receive(e) => receive_error(e, self.last_cycle),
             AgentWaitError::Terminated => WaitStartError::Terminated,
             other => WaitStartError::Receive(other.to_string()),
         })?;
+        self.accept(inner)
+    }
+
+    /// The frame of a cycle newer than the last one received if the host published one,
+    /// else `Ok(None)`, without waiting. Unlike [`Agent::wait_start`] with a zero
+    /// timeout, it neither consumes the transport's pending wake-ups nor checks the
+    /// host's liveness, so over shared memory it makes no system call. Meant for one
+    /// thread serving many agents: it takes every frame that is there and waits (with
+    /// [`Agent::wait_start`], which notices a host that closed or died) only for an agent
+    /// whose frame has not come. A frame taken here is the same as one
+    /// [`Agent::wait_start`] returns (its statuses and collisions handed out once).
+    ///
+    /// # Errors
+    /// [`WaitStartError`]: invalid frame, too many frames held, receive failure,
+    /// termination.
+    pub fn try_next_frame(&mut self) -> Result<Option<Frame>, WaitStartError> {
+        if self.backend.termination_requested() {
+            return Err(WaitStartError::Terminated);
+        }
+        match self.backend.try_receive_newest() {
+            Ok(Some(inner)) if self.last_cycle.is_none_or(|l| inner.header().cycle > l) => {
+                self.accept(inner).map(Some)
+            }
+            Ok(_) => Ok(None),
+            Err(e) => Err(receive_error(e, self.last_cycle)),
+        }
+    }
+
+    /// Checks a received frame of a newer cycle and takes its events in.
+    fn accept(&mut self, inner: AnyFrame) -> Result<Frame, WaitStartError> {
         let h = inner.header();
         let cycle = h.cycle;
         validate(h, inner.payload().len(), self.id)

@@ -312,3 +312,50 @@ fn leave_keeps_the_process_signal_handlers() {
         );
     }
 }
+
+fn try_next_frame_takes_a_waiting_frame_without_blocking(kind: &str) {
+    let (config, done, host) = spawn_host(config("try", kind, &[0]), 3);
+    let mut agent = AgentBuilder::new(&config, 0).connect().unwrap();
+    let wait = Some(Duration::from_secs(10));
+    let first = agent.wait_start(wait).unwrap();
+    assert_eq!(first.cycle(), 0);
+    // In sync mode nothing newer comes before this agent's stop: no frame, and no wait.
+    assert!(agent.try_next_frame().unwrap().is_none(), "{kind}");
+    drop(first);
+    agent.stop().unwrap();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let frame = loop {
+        if let Some(frame) = agent.try_next_frame().unwrap() {
+            break frame;
+        }
+        assert!(Instant::now() < deadline, "{kind}: no frame of cycle 1");
+        std::thread::yield_now();
+    };
+    assert_eq!(frame.cycle(), 1);
+    assert_eq!(agent.last_cycle(), Some(1));
+    assert!(
+        agent.try_next_frame().unwrap().is_none(),
+        "{kind}: a frame is taken once"
+    );
+    drop(frame);
+    agent.stop().unwrap();
+    // A blocking wait after tries that left the start signals pending still waits for
+    // the next frame.
+    let frame = agent.wait_start(wait).unwrap();
+    assert_eq!(frame.cycle(), 2);
+    assert_eq!(agent.frames_skipped(), 0);
+    drop(frame);
+    agent.stop().unwrap();
+    done.send(()).unwrap();
+    host.join().unwrap();
+}
+
+#[test]
+fn try_next_frame_takes_a_waiting_frame_without_blocking_shm() {
+    try_next_frame_takes_a_waiting_frame_without_blocking("shm");
+}
+
+#[test]
+fn try_next_frame_takes_a_waiting_frame_without_blocking_tcp() {
+    try_next_frame_takes_a_waiting_frame_without_blocking("tcp");
+}
