@@ -1,9 +1,10 @@
 //! `vrsync.AgentGroup`: N agents of one session, stepped together with one call.
 //!
-//! One `step` sends every agent's commands and stop, then releases the GIL once and waits
-//! for every agent's next frame, copying each frame into preallocated, stacked numpy
+//! One `step` sends every agent's commands and stop, then releases the GIL once and takes
+//! every agent's next frame (those already there without a system call; it waits only
+//! for one that has not come), copying each frame into preallocated, stacked numpy
 //! arrays (one `memcpy` per image row block) and dropping it at once: no Python object
-//! per agent or frame, and no frame is held between steps.
+//! per agent or frame, no frame held between steps, and no allocation of ours per step.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -19,7 +20,6 @@ use crate::agent::{
     send_error, stop_error, wait_error,
 };
 use crate::channels::{PyAction, PyVector};
-use crate::commands::heading_deg;
 use crate::errors::{error, obj};
 
 mod args;
@@ -31,6 +31,10 @@ use args::{Planned, indices, mask, planned, reset_command};
 use channels::{GroupChannels, act_row};
 use sink::{ImageSink, Out, Sink};
 use wait::{Waited, wait_all};
+
+/// Room for this many commands per agent and step from the start (a table entry with
+/// more grows the buffer once).
+const COMMANDS_PER_AGENT: usize = 8;
 
 /// The longest the GIL is released in one go while waiting: Ctrl-C is seen within this.
 const WAIT_SLICE: Duration = Duration::from_millis(50);
@@ -95,16 +99,19 @@ pub(crate) struct AgentGroup {
     sdk_ns: u64,
     wait_ns: u64,
     steps: u64,
+    /// Buffers reused by every step: the agents still waiting for their frame, one
+    /// agent's commands, `step`'s actions and reset mask.
+    pending: Vec<usize>,
+    commands: Vec<Command>,
+    picked: Vec<i64>,
+    resets: Vec<bool>,
 }
 
 impl AgentGroup {
     fn agents(&mut self) -> PyResult<&mut Vec<Agent>> {
         match self.agents.as_mut() {
             Some(a) => Ok(&mut a.0),
-            None => Err(pyo3::exceptions::PyRuntimeError::new_err(format!(
-                "the AgentGroup of session {:?} is closed",
-                self.session
-            ))),
+            None => Err(closed(&self.session)),
         }
     }
 
@@ -120,50 +127,58 @@ impl AgentGroup {
         )
     }
 
-    /// Sends `commands(k)` and the stop for every agent `k`, then waits for and copies
-    /// every agent's next frame. `commands(k)` returns `None` for an agent that has no
-    /// frame yet (it only waits for its first).
+    /// Sends the commands `commands(k, rotation, buffer)` puts into `buffer` and the stop
+    /// for every agent `k`, then waits for and copies every agent's next frame.
+    /// `commands` returns `false` for an agent that has no frame yet (it only waits for
+    /// its first). Allocates nothing in steady state: the buffers are the group's.
     fn run(
         &mut self,
         py: Python<'_>,
-        mut commands: impl FnMut(usize, [f32; 4]) -> Option<Vec<Command>>,
+        mut commands: impl FnMut(usize, [f32; 4], &mut Vec<Command>) -> bool,
     ) -> PyResult<()> {
         let started = Instant::now();
-        let n = self.ids.len();
-        let session = self.session.clone();
-        let ids = self.ids.clone();
-        let rotations = self.rotations.clone();
-        let agents = self.agents()?;
+        let Self {
+            agents,
+            ids,
+            session,
+            rotations,
+            pending,
+            commands: buffer,
+            sink,
+            step_timeout,
+            ..
+        } = self;
+        let Some(Agents(agents)) = agents.as_mut() else {
+            return Err(closed(session));
+        };
         // 1. every agent's commands and stop
         for (k, agent) in agents.iter_mut().enumerate() {
-            let Some(cmds) = commands(k, rotations[k]) else {
+            buffer.clear();
+            if !commands(k, rotations[k], buffer) {
                 continue;
-            };
-            for c in cmds {
+            }
+            for &c in buffer.iter() {
                 agent.send(c).map_err(|e| send_error(py, e, ids[k]))?;
             }
             agent
                 .stop()
-                .map_err(|e| stop_error(py, e, &session, ids[k]))?;
+                .map_err(|e| stop_error(py, e, session, ids[k]))?;
         }
         // 2. every agent's next frame, copied into the outputs and dropped at once
-        let mut pending: Vec<usize> = (0..n).collect();
-        let deadline = self.step_timeout.map(|t| started + t);
-        let sink = SameThread(self.sink.clone());
+        pending.clear();
+        pending.extend(0..ids.len());
+        let deadline = step_timeout.map(|t| started + t);
         let mut wait_ns = 0u64;
-        let mut rotations = rotations;
         loop {
             let slice_end = deadline.map_or(Instant::now() + WAIT_SLICE, |d| {
                 (Instant::now() + WAIT_SLICE).min(d)
             });
-            let agents = self.agents()?;
-            let job = SameThread((agents, &mut pending, &mut rotations, &sink));
+            let job = SameThread((&mut *agents, &mut *pending, &mut *rotations, &*sink));
             let (outcome, waited) = py
                 .detach(move || {
                     let job = job;
                     let (agents, pending, rotations, sink) = job.0;
-                    let r = wait_all(agents, pending, rotations, &sink.0, slice_end);
-                    SameThread(r)
+                    SameThread(wait_all(agents, pending, rotations, sink, slice_end))
                 })
                 .0;
             wait_ns += waited;
@@ -173,24 +188,19 @@ impl AgentGroup {
                     py.check_signals()?;
                     if deadline.is_some_and(|d| Instant::now() >= d) {
                         let k = pending.first().copied().unwrap_or(0);
-                        let last_cycle = self
-                            .agents
-                            .as_ref()
-                            .and_then(|a| a.0.get(k))
-                            .and_then(Agent::last_cycle);
+                        let last_cycle = agents.get(k).and_then(Agent::last_cycle);
                         let e = WaitStartError::Timeout {
                             waited: started.elapsed(),
                             last_cycle,
                         };
-                        return Err(wait_error(py, e, &session, ids[k], started.elapsed()));
+                        return Err(wait_error(py, e, session, ids[k], started.elapsed()));
                     }
                 }
                 Waited::Failed(k, e) => {
-                    return Err(wait_error(py, e, &session, ids[k], started.elapsed()));
+                    return Err(wait_error(py, e, session, ids[k], started.elapsed()));
                 }
             }
         }
-        self.rotations = rotations;
         self.primed.iter_mut().for_each(|p| *p = true);
         let total = u64::try_from(started.elapsed().as_nanos()).unwrap_or(u64::MAX);
         self.sdk_ns += total.saturating_sub(wait_ns);
@@ -198,6 +208,13 @@ impl AgentGroup {
         self.steps += 1;
         Ok(())
     }
+}
+
+/// The error of a use after `close()`.
+fn closed(session: &str) -> PyErr {
+    pyo3::exceptions::PyRuntimeError::new_err(format!(
+        "the AgentGroup of session {session:?} is closed"
+    ))
 }
 
 #[pymethods]
@@ -359,6 +376,10 @@ impl AgentGroup {
             sdk_ns: 0,
             wait_ns: 0,
             steps: 0,
+            pending: Vec::with_capacity(n),
+            commands: Vec::with_capacity(COMMANDS_PER_AGENT),
+            picked: Vec::with_capacity(n),
+            resets: Vec::with_capacity(n),
         })
     }
 
@@ -388,9 +409,12 @@ impl AgentGroup {
         if self.primed.iter().any(|p| !p) {
             let primed = self.primed.clone();
             // First frames only: agents that have one stop without commands.
-            self.run(py, |k, _| primed[k].then(Vec::new))?;
+            self.run(py, |k, _, _| primed[k])?;
         }
-        self.run(py, |_, _| Some(vec![cmd]))
+        self.run(py, |_, _, buffer| {
+            buffer.push(cmd);
+            true
+        })
     }
 
     /// One lock-step cycle for every agent: agent `k` sends the commands of table entry
@@ -409,41 +433,39 @@ impl AgentGroup {
         reset_kind: &str,
     ) -> PyResult<()> {
         let n = self.ids.len();
-        let actions = indices(actions, n, "actions")?;
-        let reset = mask(reset, n, "reset")?;
-        let reset_cmd = reset_command(reset_kind)?;
-        if self.primed.iter().any(|p| !p) {
-            return Err(self.not_primed(py));
-        }
+        // The group's own buffers (taken out while `run` borrows the group): no
+        // allocation per step.
+        let mut picked = std::mem::take(&mut self.picked);
+        let mut resets = std::mem::take(&mut self.resets);
+        let parsed = indices(actions, n, "actions", &mut picked)
+            .and_then(|()| mask(reset, n, "reset", &mut resets));
         let table = std::mem::take(&mut self.table);
-        for (k, &a) in actions.iter().enumerate() {
-            if !reset[k] && usize::try_from(a).map_or(true, |a| a >= table.len()) {
-                self.table = table;
-                return Err(PyValueError::new_err(format!(
-                    "action {a} of agent {} is not in the action table (0..{})",
-                    self.ids[k],
-                    self.table.len()
-                )));
+        let result = parsed.and_then(|()| {
+            let reset_cmd = reset_command(reset_kind)?;
+            if self.primed.iter().any(|p| !p) {
+                return Err(self.not_primed(py));
             }
-        }
-        let result = self.run(py, |k, rot| {
-            if reset[k] {
-                return Some(vec![reset_cmd]);
+            for (k, &a) in picked.iter().enumerate() {
+                if !resets[k] && usize::try_from(a).map_or(true, |a| a >= table.len()) {
+                    return Err(PyValueError::new_err(format!(
+                        "action {a} of agent {} is not in the action table (0..{})",
+                        self.ids[k],
+                        table.len()
+                    )));
+                }
             }
-            let entry = usize::try_from(actions[k])
-                .ok()
-                .and_then(|a| table.get(a))?;
-            Some(
-                entry
-                    .iter()
-                    .map(|p| match p {
-                        Planned::Fixed(c) => *c,
-                        Planned::Ahead(m) => m.resolve(heading_deg(rot)),
-                    })
-                    .collect(),
-            )
+            self.run(py, |k, rot, buffer| {
+                if resets[k] {
+                    buffer.push(reset_cmd);
+                } else if let Some(entry) =
+                    usize::try_from(picked[k]).ok().and_then(|a| table.get(a))
+                {
+                    buffer.extend(entry.iter().map(|p| p.resolve(rot)));
+                }
+                true
+            })
         });
-        self.table = table;
+        (self.table, self.picked, self.resets) = (table, picked, resets);
         result
     }
 
@@ -465,16 +487,9 @@ impl AgentGroup {
         if self.primed.iter().any(|p| !p) {
             return Err(self.not_primed(py));
         }
-        self.run(py, |k, rot| {
-            Some(
-                list[k]
-                    .iter()
-                    .map(|p| match p {
-                        Planned::Fixed(c) => *c,
-                        Planned::Ahead(m) => m.resolve(heading_deg(rot)),
-                    })
-                    .collect(),
-            )
+        self.run(py, |k, rot, buffer| {
+            buffer.extend(list[k].iter().map(|p| p.resolve(rot)));
+            true
         })
     }
 
@@ -547,9 +562,14 @@ impl AgentGroup {
         active: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<()> {
         let n = self.ids.len();
-        let reset = mask(reset, n, "reset")?;
+        let (mut reset_mask, mut active_mask) = (Vec::new(), Vec::new());
+        mask(reset, n, "reset", &mut reset_mask)?;
+        let reset = reset_mask;
         let active = match active {
-            Some(a) => mask(Some(a), n, "active")?,
+            Some(a) => {
+                mask(Some(a), n, "active", &mut active_mask)?;
+                active_mask
+            }
             None => vec![true; n],
         };
         let active: Vec<bool> = (0..n).map(|k| active[k] && !reset[k]).collect();
@@ -564,12 +584,11 @@ impl AgentGroup {
                 act_row(py, agent, &specs, &rows, k)?;
             }
         }
-        self.run(py, |k, _| {
-            Some(if reset[k] {
-                vec![reset_cmd]
-            } else {
-                Vec::new()
-            })
+        self.run(py, |k, _, buffer| {
+            if reset[k] {
+                buffer.push(reset_cmd);
+            }
+            true
         })
     }
 

@@ -55,6 +55,18 @@ fn _remove_dead_nodes_for_tests(prefix: &str) -> u64 {
     vrsync_bridge::shm::dead_nodes_for_tests(prefix, true)
 }
 
+/// Rust's allocations in the extension are counted (a relaxed atomic add each), so that
+/// the benchmark can show what a step allocates ([`_allocations`]).
+#[global_allocator]
+static ALLOC: vrsync_floor::alloc_count::CountingAlloc = vrsync_floor::alloc_count::CountingAlloc;
+
+/// Benchmark aid, not API: how many allocations (and reallocations) the extension's Rust
+/// code made so far in this process.
+#[pyfunction]
+fn _allocations() -> u64 {
+    vrsync_floor::alloc_count::allocations()
+}
+
 /// The extension module `vrsync._vrsync`.
 #[pymodule]
 fn _vrsync(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -69,6 +81,7 @@ fn _vrsync(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(_leak_nodes_for_tests, m)?)?;
     m.add_function(wrap_pyfunction!(_dead_nodes_for_tests, m)?)?;
     m.add_function(wrap_pyfunction!(_remove_dead_nodes_for_tests, m)?)?;
+    m.add_function(wrap_pyfunction!(_allocations, m)?)?;
     m.add("PROTOCOL_VERSION", vrsync_bridge::PROTOCOL_VERSION)?;
     m.add("MAX_FRAMES_HELD", vrsync_bridge::AGENT_MAX_HELD_FRAMES)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

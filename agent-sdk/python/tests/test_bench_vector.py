@@ -28,6 +28,10 @@ def run_bench_vector(tmp_path: Path, start_host, tag: str, frames: int, warmup: 
     assert summary["frames"] == frames and summary["stop_timeouts"] == 0
     lines = out.stdout.split("\n")
     assert lines[1].startswith("sdk_us_per_agent_step "), out.stdout
+    assert lines[2].startswith("allocs_per_cycle "), out.stdout
+    allocs = float(lines[2].split()[1])
+    # Per agent-step: iceoryx2's one per loan (the motor batch), nothing of ours.
+    assert math.isnan(allocs) or allocs <= 1.0, out.stdout
     return float(lines[1].split()[1])
 
 

@@ -6,10 +6,11 @@ Drives the agents through :class:`vrsync.vector.VrsyncVectorEnv` (one
 :class:`vrsync.AgentGroup`: one call into Rust per cycle for all of them) and does the work
 of ``vrsync.bench_agent`` for each agent: read the first and the last byte of every row of
 every image (vectorised over the stacked ``(N, H, W, C)`` arrays), one command (turn 1°),
-stop; until the host closes the session. Then prints ``checksum <sum>`` and
+stop; until the host closes the session. Then prints ``checksum <sum>``,
 ``sdk_us_per_agent_step <t>``: the time per agent-step spent inside the SDK's Rust code,
-blocked waiting for the host excluded, over the steps after the first ``--warmup`` (the
-host's warm-up cycles; default 0).
+blocked waiting for the host excluded, and ``allocs_per_cycle <a>``: the allocations of
+the extension's Rust code per agent-step (what a Rust bench agent reports per cycle),
+both over the steps after the first ``--warmup`` (the host's warm-up cycles; default 0).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import argparse
 
 import numpy as np
 import vrsync
+from vrsync import _vrsync
 from vrsync.vector import VrsyncVectorEnv
 
 
@@ -56,22 +58,30 @@ def main() -> None:
         actions = np.zeros(envs.num_envs, dtype=np.int64)
         envs.group.reset_timing()
         steps = 0
+        allocs_at_warmup = allocs_done = _vrsync._allocations()
         try:
             while True:
                 total += sum(touch_rows(a) for k, a in obs.items() if k not in ("position", "rotation"))
                 obs, *_ = envs.step(actions)
+                # Up to the last step that returned (the one the host's close ends
+                # allocates its exception).
+                allocs_done = _vrsync._allocations()
                 steps += 1
                 if steps == args.warmup:
                     envs.group.reset_timing()
+                    allocs_at_warmup = _vrsync._allocations()
         except vrsync.HostClosedError:
             pass  # the session ended
         # Nothing measured if the session ended within the warm-up.
         calls, sdk_s, _ = envs.group.timing if steps >= args.warmup else (0, 0.0, 0.0)
+        allocs = allocs_done - allocs_at_warmup
     finally:
         envs.close()
     print(f"checksum {total}", flush=True)
     per = sdk_s / (calls * envs.num_envs) * 1e6 if calls else float("nan")
     print(f"sdk_us_per_agent_step {per:.3f}", flush=True)
+    per = allocs / (calls * envs.num_envs) if calls else float("nan")
+    print(f"allocs_per_cycle {per:.3f}", flush=True)
 
 
 if __name__ == "__main__":

@@ -4,13 +4,23 @@ use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use vrsync_bridge::Command;
 
-use crate::commands::{MoveAhead, PyCommand};
+use crate::commands::{MoveAhead, PyCommand, heading_deg};
 
 /// One command of an action-table entry.
 #[derive(Debug, Clone, Copy)]
 pub(super) enum Planned {
     Fixed(Command),
     Ahead(MoveAhead),
+}
+
+impl Planned {
+    /// The command to send for a body whose rotation is `rotation`.
+    pub(super) fn resolve(&self, rotation: [f32; 4]) -> Command {
+        match self {
+            Self::Fixed(c) => *c,
+            Self::Ahead(m) => m.resolve(heading_deg(rotation)),
+        }
+    }
 }
 
 /// Parses one action-table entry or one agent's commands: `None`, a command, a
@@ -51,41 +61,93 @@ pub(super) fn planned(entry: &Bound<'_, PyAny>) -> PyResult<Vec<Planned>> {
     Ok(v)
 }
 
-/// Integers from a numpy array (any integer dtype) or a sequence.
-pub(super) fn indices(values: &Bound<'_, PyAny>, n: usize, what: &str) -> PyResult<Vec<i64>> {
-    let v: Vec<i64> = match pyo3::buffer::PyBuffer::<i64>::get(values) {
-        Ok(b) if b.dimensions() == 1 => b.to_vec(values.py())?,
-        _ => values.extract::<Vec<i64>>().map_err(|_| {
-            PyTypeError::new_err(format!(
-                "{what} must be {n} integers (a numpy array or a sequence)"
-            ))
-        })?,
-    };
-    if v.len() != n {
+/// Integers from a numpy array or a sequence, into `out` (replacing its contents). A
+/// one-dimensional, contiguous `int64` array is read without allocating.
+pub(super) fn indices(
+    values: &Bound<'_, PyAny>,
+    n: usize,
+    what: &str,
+    out: &mut Vec<i64>,
+) -> PyResult<()> {
+    out.clear();
+    if !read_int64s(values, out) {
+        let v: Vec<i64> = match pyo3::buffer::PyBuffer::<i64>::get(values) {
+            Ok(b) if b.dimensions() == 1 => b.to_vec(values.py())?,
+            _ => values.extract::<Vec<i64>>().map_err(|_| {
+                PyTypeError::new_err(format!(
+                    "{what} must be {n} integers (a numpy array or a sequence)"
+                ))
+            })?,
+        };
+        *out = v;
+    }
+    if out.len() != n {
         return Err(PyValueError::new_err(format!(
             "{what} has {} entries for {n} agents",
-            v.len()
+            out.len()
         )));
     }
-    Ok(v)
+    Ok(())
 }
 
-/// Booleans from a numpy array or a sequence (`None`: all false).
-pub(super) fn mask(values: Option<&Bound<'_, PyAny>>, n: usize, what: &str) -> PyResult<Vec<bool>> {
+/// Appends the items of `values` to `out` if it exports a one-dimensional, C-contiguous
+/// buffer of native 8-byte integers (a numpy `int64` array); `false` (nothing read, no
+/// error set) otherwise. Unlike `PyBuffer::get`, which boxes the buffer view, it
+/// allocates nothing but `out`'s growth.
+fn read_int64s(values: &Bound<'_, PyAny>, out: &mut Vec<i64>) -> bool {
+    let mut view = core::mem::MaybeUninit::<pyo3::ffi::Py_buffer>::uninit();
+    // SAFETY: `view` is written by a successful `PyObject_GetBuffer` and released once
+    // below; the GIL is held (`values` is bound).
+    unsafe {
+        let flags = pyo3::ffi::PyBUF_FORMAT | pyo3::ffi::PyBUF_C_CONTIGUOUS;
+        if pyo3::ffi::PyObject_GetBuffer(values.as_ptr(), view.as_mut_ptr(), flags) != 0 {
+            pyo3::ffi::PyErr_Clear();
+            return false;
+        }
+        let view = view.assume_init_mut();
+        let format = if view.format.is_null() {
+            b"B".as_slice()
+        } else {
+            core::ffi::CStr::from_ptr(view.format).to_bytes()
+        };
+        let native_int64 = matches!(
+            format,
+            b"q" | b"l" | b"@q" | b"@l" | b"=q" | b"=l" | b"<q" | b"<l"
+        ) && cfg!(target_endian = "little")
+            && view.itemsize == 8
+            && view.ndim == 1;
+        if native_int64 {
+            let count = usize::try_from(view.len).unwrap_or(0) / 8;
+            out.extend_from_slice(core::slice::from_raw_parts(view.buf.cast::<i64>(), count));
+        }
+        pyo3::ffi::PyBuffer_Release(view);
+        native_int64
+    }
+}
+
+/// Booleans from a numpy array or a sequence (`None`: all false), into `out` (replacing
+/// its contents).
+pub(super) fn mask(
+    values: Option<&Bound<'_, PyAny>>,
+    n: usize,
+    what: &str,
+    out: &mut Vec<bool>,
+) -> PyResult<()> {
+    out.clear();
     let Some(values) = values.filter(|v| !v.is_none()) else {
-        return Ok(vec![false; n]);
+        out.resize(n, false);
+        return Ok(());
     };
-    let v: Vec<bool> = values
-        .try_iter()?
-        .map(|x| x?.is_truthy())
-        .collect::<PyResult<_>>()?;
-    if v.len() != n {
+    for x in values.try_iter()? {
+        out.push(x?.is_truthy()?);
+    }
+    if out.len() != n {
         return Err(PyValueError::new_err(format!(
             "{what} has {} entries for {n} agents",
-            v.len()
+            out.len()
         )));
     }
-    Ok(v)
+    Ok(())
 }
 
 pub(super) fn reset_command(kind: &str) -> PyResult<Command> {

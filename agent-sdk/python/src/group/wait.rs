@@ -1,8 +1,8 @@
 //! Waiting for every agent's next frame, copying each into the outputs.
 
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
-use vrsync_agent::{Agent, WaitStartError};
+use vrsync_agent::{Agent, Frame, WaitStartError};
 
 use super::sink::{Sink, check_frame};
 
@@ -17,11 +17,12 @@ pub(super) enum Waited {
 }
 
 /// Receives the next frame of every agent in `pending` until `slice_end`, copying each
-/// into the outputs and dropping it; removes the agents done from `pending`. Agents are
-/// taken in order (the host publishes in that order): a non-blocking try first, then a
-/// blocking wait only if the frame is not there yet, so each agent costs at most two
-/// calls. Returns the outcome and the nanoseconds spent in tries that found no frame and
-/// in blocking waits (the time waited for the host, not spent in the SDK).
+/// into the outputs and dropping it; removes the agents done from `pending`. First every
+/// frame that is already there is taken ([`Agent::try_next_frame`]: over shared memory
+/// no system call); only when some agent's frame is not there yet does it wait, for the
+/// first such agent ([`Agent::wait_start`]), then it takes what arrived meanwhile, and
+/// so on. Returns the outcome and the nanoseconds spent in those waits (the time waited
+/// for the host, not spent in the SDK).
 pub(super) fn wait_all(
     agents: &mut [Agent],
     pending: &mut Vec<usize>,
@@ -30,50 +31,75 @@ pub(super) fn wait_all(
     slice_end: Instant,
 ) -> (Waited, u64) {
     let mut blocked = 0u64;
-    let ns = |since: Instant| u64::try_from(since.elapsed().as_nanos()).unwrap_or(u64::MAX);
-    let mut done = 0;
-    let mut outcome = Waited::Done;
-    for &k in pending.iter() {
+    loop {
+        // 1. every frame that is there, keeping the others' order
+        let mut kept = 0;
+        for i in 0..pending.len() {
+            let k = pending[i];
+            let Some(agent) = agents.get_mut(k) else {
+                continue;
+            };
+            match agent.try_next_frame() {
+                Ok(Some(frame)) => {
+                    if let Err(failed) = take(k, agent, &frame, rotations, sink) {
+                        return (failed, blocked);
+                    }
+                }
+                Ok(None) => {
+                    pending[kept] = k;
+                    kept += 1;
+                }
+                Err(e) => return (Waited::Failed(k, e), blocked),
+            }
+        }
+        pending.truncate(kept);
+        // 2. a wait for the first agent whose frame has not come
+        let Some(&k) = pending.first() else {
+            return (Waited::Done, blocked);
+        };
         let Some(agent) = agents.get_mut(k) else {
-            done += 1;
+            pending.remove(0);
             continue;
         };
         let tried = Instant::now();
-        let mut r = agent.wait_start(Some(Duration::ZERO));
-        if matches!(r, Err(WaitStartError::Timeout { .. })) {
-            let now = Instant::now();
-            if now >= slice_end {
-                blocked += ns(tried);
-                outcome = Waited::Pending;
-                break;
-            }
-            r = agent.wait_start(Some(slice_end - now));
-            blocked += ns(tried);
+        if tried >= slice_end {
+            return (Waited::Pending, blocked);
         }
+        let r = agent.wait_start(Some(slice_end - tried));
+        blocked += u64::try_from(tried.elapsed().as_nanos()).unwrap_or(u64::MAX);
         match r {
             Ok(frame) => {
-                if let Err(reason) = check_frame(sink, &frame) {
-                    let cycle = frame.cycle();
-                    outcome = Waited::Failed(k, WaitStartError::BadFrame { cycle, reason });
-                    break;
+                if let Err(failed) = take(k, agent, &frame, rotations, sink) {
+                    return (failed, blocked);
                 }
-                let skipped = agent.frames_skipped();
-                // SAFETY: the sink points to the group's output arrays (alive: the group
-                // holds them and is exclusively borrowed), k < N, and the frame was checked.
-                unsafe { sink.write(k, &frame, skipped) };
-                rotations[k] = frame.header().pose.rotation;
-                done += 1;
+                pending.remove(0);
             }
-            Err(WaitStartError::Timeout { .. }) => {
-                outcome = Waited::Pending;
-                break;
-            }
-            Err(e) => {
-                outcome = Waited::Failed(k, e);
-                break;
-            }
+            Err(WaitStartError::Timeout { .. }) => return (Waited::Pending, blocked),
+            Err(e) => return (Waited::Failed(k, e), blocked),
         }
     }
-    pending.drain(..done);
-    (outcome, blocked)
+}
+
+/// Checks agent `k`'s new frame and copies it into row `k` of the outputs.
+fn take(
+    k: usize,
+    agent: &Agent,
+    frame: &Frame,
+    rotations: &mut [[f32; 4]],
+    sink: &Sink,
+) -> Result<(), Waited> {
+    if let Err(reason) = check_frame(sink, frame) {
+        let cycle = frame.cycle();
+        return Err(Waited::Failed(
+            k,
+            WaitStartError::BadFrame { cycle, reason },
+        ));
+    }
+    // SAFETY: the sink points to the group's output arrays (alive: the group holds them
+    // and is exclusively borrowed), k < N, and the frame was checked.
+    unsafe { sink.write(k, frame, agent.frames_skipped()) };
+    if let Some(r) = rotations.get_mut(k) {
+        *r = frame.header().pose.rotation;
+    }
+    Ok(())
 }
