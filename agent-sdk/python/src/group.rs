@@ -94,6 +94,9 @@ pub(crate) struct AgentGroup {
     table: Vec<Vec<Planned>>,
     sink: Sink,
     images: Vec<(String, Out)>,
+    /// Whether every step writes the images into new arrays (`fresh_images`).
+    fresh: bool,
+    numpy: Py<PyModule>,
     outs: Vec<(&'static str, Out)>,
     channels: GroupChannels,
     sdk_ns: u64,
@@ -137,6 +140,9 @@ impl AgentGroup {
         mut commands: impl FnMut(usize, [f32; 4], &mut Vec<Command>) -> bool,
     ) -> PyResult<()> {
         let started = Instant::now();
+        if self.fresh {
+            self.renew_images(py)?;
+        }
         let Self {
             agents,
             ids,
@@ -206,6 +212,26 @@ impl AgentGroup {
         self.sdk_ns += total.saturating_sub(wait_ns);
         self.wait_ns += wait_ns;
         self.steps += 1;
+        Ok(())
+    }
+}
+
+impl AgentGroup {
+    /// New (uninitialised) image arrays, which the next wait fills: the arrays handed out
+    /// before keep their contents.
+    fn renew_images(&mut self, py: Python<'_>) -> PyResult<()> {
+        let numpy = self.numpy.bind(py);
+        let n = self.ids.len();
+        for ((_, out), (camera, sink)) in self
+            .images
+            .iter_mut()
+            .zip(self.cameras.iter().zip(&mut self.sink.images))
+        {
+            let mut shape = vec![n];
+            shape.extend(camera.shape().iter().map(|&d| d as usize));
+            *out = Out::empty(py, numpy, &shape, camera.dtype())?;
+            sink.ptr = out.ptr;
+        }
         Ok(())
     }
 }
@@ -371,6 +397,8 @@ impl AgentGroup {
             table: Vec::new(),
             sink,
             images,
+            fresh: false,
+            numpy: numpy.unbind(),
             outs,
             channels,
             sdk_ns: 0,
@@ -502,6 +530,22 @@ impl AgentGroup {
             d.set_item(name, out.array.bind(py))?;
         }
         Ok(d)
+    }
+
+    /// Whether every step writes the images into new arrays (default `False`: the same
+    /// arrays every step, overwritten in place). With `True` the arrays a step leaves
+    /// (`images`, `image(name)`) keep their contents after later steps, for callers that
+    /// hand out fresh observations: one copy from shared memory per image and step, where
+    /// copying the arrays after the step would be a second. The other outputs are
+    /// overwritten in place either way.
+    #[getter]
+    fn fresh_images(&self) -> bool {
+        self.fresh
+    }
+
+    #[setter]
+    fn set_fresh_images(&mut self, fresh: bool) {
+        self.fresh = fresh;
     }
 
     /// The stacked images of camera `name` (see `images`).

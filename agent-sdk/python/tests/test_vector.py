@@ -62,6 +62,37 @@ def test_group_steps_every_agent_in_the_same_cycle_into_stacked_arrays(
     assert summary["stop_timeouts"] == 0 and summary["late_stops"] == 0
 
 
+def test_group_fresh_images_leave_the_arrays_of_earlier_steps_alone(
+    tmp_path: Path, start_host
+) -> None:
+    config, _ = write_config(tmp_path, "fresh", agents=2, cameras=CAM84)
+    host = start_host(config, 14)
+    group = vrsync.AgentGroup.connect(config, connect_timeout=20)
+    assert group.fresh_images is False
+    group.set_action_table([vrsync.Turn(30)])
+    group.reset()
+    group.fresh_images = True
+    kept = []
+    for _ in range(8):
+        group.step(np.zeros(2, dtype=np.int64))
+        left = group.images["left"]
+        assert np.shares_memory(group.image("left"), left)
+        assert left.shape == (2, *group.cameras[0].shape) and left.flags.c_contiguous
+        kept.append((left, left.copy()))
+    # Each step wrote into new arrays; the turning agents saw something new every cycle.
+    assert not np.shares_memory(kept[0][0], kept[1][0])
+    assert all(np.array_equal(a, copy) for a, copy in kept)
+    assert not np.array_equal(kept[0][1], kept[-1][1])
+    group.fresh_images = False
+    group.step(np.zeros(2, dtype=np.int64))
+    same = group.images["left"]
+    group.step(np.zeros(2, dtype=np.int64))
+    assert np.shares_memory(same, group.images["left"]), "in place again"
+    group.close()
+    summary = host.finish()
+    assert summary["stop_timeouts"] == 0
+
+
 def test_group_over_tcp_and_mixed_transports_matches_the_all_shm_world(
     tmp_path: Path, start_host
 ) -> None:

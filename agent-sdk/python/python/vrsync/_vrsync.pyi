@@ -486,6 +486,13 @@ class AgentGroup:
     def images(self) -> dict[str, npt.NDArray[Any]]:
         """Camera name → (N, H, W[, C]) array."""
     def image(self, name: str) -> npt.NDArray[Any]: ...
+    @property
+    def fresh_images(self) -> bool:
+        """Whether every step writes the images into new arrays (default False: the
+        same arrays, overwritten in place); the arrays of earlier steps keep their
+        contents."""
+    @fresh_images.setter
+    def fresh_images(self, fresh: bool) -> None: ...
     def step_actions(
         self,
         values: dict[str, npt.ArrayLike],

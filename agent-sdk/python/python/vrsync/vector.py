@@ -208,6 +208,9 @@ class VrsyncVectorEnv(VectorEnv):  # type: ignore[type-arg]
         self._terminated_fn = terminated_fn
         self._max_steps = max_episode_steps
         self._copy = copy_observations
+        # Fresh observations with one copy from shared memory: the group writes each
+        # step's images into new arrays (copying the group's arrays would be a second).
+        self.group.fresh_images = copy_observations
         self._reset_kind = reset_kind
         self._reset_command: Command = (
             TrialReset() if reset_kind == "trial" else EnvironmentReset()
@@ -228,8 +231,9 @@ class VrsyncVectorEnv(VectorEnv):  # type: ignore[type-arg]
         g = self.group
         if self._camera is not None:
             img = g.image(self._camera)
-            return img.copy() if self._copy else img
-        obs = {name: (a.copy() if self._copy else a) for name, a in g.images.items()}
+            return img.copy() if self._copy and not g.fresh_images else img
+        copy_images = self._copy and not g.fresh_images
+        obs = {name: (a.copy() if copy_images else a) for name, a in g.images.items()}
         obs["position"] = g.positions.copy() if self._copy else g.positions
         obs["rotation"] = g.rotations.copy() if self._copy else g.rotations
         for name, a in g.vectors.items():

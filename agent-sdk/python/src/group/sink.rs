@@ -18,17 +18,38 @@ pub(super) struct Out {
 }
 
 impl Out {
+    /// A new array of zeros.
     pub(super) fn new(
         py: Python<'_>,
         numpy: &Bound<'_, PyModule>,
         shape: &[usize],
         dtype: &str,
     ) -> PyResult<Self> {
-        let array = numpy.call_method1("zeros", (PyTuple::new(py, shape)?, dtype))?;
+        Self::make(py, numpy, "zeros", shape, dtype)
+    }
+
+    /// A new array whose contents are undefined until written.
+    pub(super) fn empty(
+        py: Python<'_>,
+        numpy: &Bound<'_, PyModule>,
+        shape: &[usize],
+        dtype: &str,
+    ) -> PyResult<Self> {
+        Self::make(py, numpy, "empty", shape, dtype)
+    }
+
+    fn make(
+        py: Python<'_>,
+        numpy: &Bound<'_, PyModule>,
+        function: &str,
+        shape: &[usize],
+        dtype: &str,
+    ) -> PyResult<Self> {
+        let array = numpy.call_method1(function, (PyTuple::new(py, shape)?, dtype))?;
         let export = PyUntypedBuffer::get(&array)?;
         if export.readonly() || !export.is_c_contiguous() {
             return Err(PyValueError::new_err(
-                "numpy.zeros returned a read-only or non-contiguous array",
+                "numpy returned a read-only or non-contiguous array",
             ));
         }
         let ptr = export.buf_ptr() as usize;
