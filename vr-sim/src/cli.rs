@@ -138,6 +138,11 @@ pub struct BenchArgs {
     /// its `shm` and `floor-shm` rows at 1x84x84).
     #[arg(long)]
     pub no_python: bool,
+    /// Run only these sections (repeatable; default all): `images` (every transport at 1
+    /// and 4 agents), `many` (16 and 64 agents over shm), `vector` (the vector env and
+    /// the Python host), `original` (the original protocol).
+    #[arg(long, value_name = "SECTION")]
+    pub only: Vec<crate::bench::Section>,
 }
 
 /// `vr-sim demo`.

@@ -134,6 +134,7 @@ fn bench_cmd(args: BenchArgs) -> anyhow::Result<ExitCode> {
         csv: args.csv,
         plot: args.plot,
         python: (!args.no_python).then_some(args.python),
+        only: args.only,
     })?;
     Ok(ExitCode::SUCCESS)
 }

@@ -44,6 +44,21 @@ pub struct BenchOptions {
     /// vrsync.bench_agent`), the vector-env rows (`python -m vrsync.bench_vector`) and the
     /// Python host rows (`python -m vrsync.bench_host`); `None`: no Python rows.
     pub python: Option<PathBuf>,
+    /// The sections to run (empty: all).
+    pub only: Vec<Section>,
+}
+
+/// A section of the benchmark (`--only`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Section {
+    /// Every transport and its floor at 1 and 4 agents, per image size.
+    Images,
+    /// 16 and 64 agents over shm against the floor.
+    Many,
+    /// The Python vector env and the Python host (with `--python`).
+    Vector,
+    /// The original protocol.
+    Original,
 }
 
 /// One measured configuration (DESIGN §8 bench JSON keys, plus allocations).
@@ -354,10 +369,19 @@ pub fn run(opts: &BenchOptions) -> anyhow::Result<Vec<Row>> {
         sessions: 0,
     };
     let mut rows = Vec::new();
-    bench.image_sets(&mut rows)?;
-    bench.many_agents(&mut rows)?;
-    bench.vector_env(&mut rows)?;
-    bench.original_protocol(&mut rows)?;
+    let runs = |s: Section| opts.only.is_empty() || opts.only.contains(&s);
+    if runs(Section::Images) {
+        bench.image_sets(&mut rows)?;
+    }
+    if runs(Section::Many) {
+        bench.many_agents(&mut rows)?;
+    }
+    if runs(Section::Vector) {
+        bench.vector_env(&mut rows)?;
+    }
+    if runs(Section::Original) {
+        bench.original_protocol(&mut rows)?;
+    }
     print_ratios(&rows);
     if let Some(p) = &opts.json {
         let text = serde_json::to_string_pretty(&rows).context("serialise")?;
