@@ -350,6 +350,7 @@ fn hello(agent_id: u32, token: &[u8]) -> Hello {
         protocol_version: PROTOCOL_VERSION,
         layout_hash: LAYOUT_HASH,
         agent_id,
+        channels: vrsync_bridge::ChannelLayout::default().hash(),
         token: token.to_vec(),
     }
 }

@@ -36,7 +36,7 @@ use std::sync::mpsc::{Receiver, Sender, channel};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use vrsync_agent::{AgentBuilder, Command, SignalHandling, WaitStartError};
+use vrsync_agent::{AgentBuilder, AgentConnectError, Command, SignalHandling, WaitStartError};
 use vrsync_bridge::{
     ActionValue, AgentFrame, AgentOutcome, AgentTransport, Config, Host, MOTOR_FLAG_LEAVE,
     MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION, wait_for_newer_frame,
@@ -691,16 +691,14 @@ fn channels_carry_vectors_and_actions_each_cycle(kind: &str) {
     host.join().unwrap();
 }
 
-/// A host and an agent whose configs disagree on a channel refuse each other at the first
-/// frame, and the error names the channel.
+/// A host and an agent whose configs disagree on a channel refuse each other at connect,
+/// and the error names the channel; the refused agent holds nothing: an agent with the
+/// host's channels connects after it and runs a cycle.
 fn a_channel_mismatch_is_refused_naming_the_channel(kind: &str) {
-    let (done_tx, done_rx) = channel::<()>();
     let (config, host) = with_host(config_with_channels(kind, 6), move |host| {
-        let frame = host.loan_frame(4).unwrap();
-        host.publish(frame).unwrap();
-        host.start().unwrap();
-        // The host stays until the agent has read the frame.
-        done_rx.recv_timeout(WAIT).unwrap();
+        publish(host);
+        let report = host.collect().unwrap();
+        assert_eq!(report.agents()[0].outcome, AgentOutcome::Stopped);
     });
     // The same session and endpoints, one vector longer.
     let mut theirs = config.clone();
@@ -708,15 +706,30 @@ fn a_channel_mismatch_is_refused_naming_the_channel(kind: &str) {
     joints.len = 7;
     joints.low.push(f32::NEG_INFINITY);
     joints.high.push(f32::INFINITY);
-    let mut agent = AgentBuilder::new(&theirs, 4).connect().unwrap();
-    let err = agent.wait_start(Some(WAIT)).unwrap_err();
+    let err = AgentBuilder::new(&theirs, 4).connect().unwrap_err();
     let message = err.to_string();
     assert!(
-        matches!(err, WaitStartError::BadFrame { .. }) && message.contains("\"joints\""),
+        matches!(
+            &err,
+            AgentConnectError::ChannelMismatch { difference, .. }
+                if difference.name == "joints" && difference.table == "vector"
+        ) && message.contains("\"joints\"")
+            && message.contains("6 floats")
+            && message.contains("7 floats"),
         "{kind}: {message}"
     );
-    done_tx.send(()).unwrap();
-    drop(agent);
+    // One action fewer: named too.
+    let mut fewer = config.clone();
+    fewer.agents[0].actions.pop();
+    let err = AgentBuilder::new(&fewer, 4).connect().unwrap_err();
+    assert!(
+        matches!(&err, AgentConnectError::ChannelMismatch { difference, .. }
+            if difference.table == "action"),
+        "{kind}: {err}"
+    );
+    let mut agent = AgentBuilder::new(&config, 4).connect().unwrap();
+    agent.wait_start(Some(WAIT)).unwrap();
+    agent.stop().unwrap();
     host.join().unwrap();
 }
 

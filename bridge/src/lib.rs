@@ -66,6 +66,8 @@ mod transport;
 // The wire types live in the protocol crate; `crate::wire` keeps their old path.
 use vrsync_protocol::wire;
 
+pub use vrsync_protocol::channel_layout::{Channel, ChannelDifference, ChannelLayout};
+
 pub use barrier::AgentOutcome;
 pub use colour::ansi_on_stderr;
 pub use config::{

@@ -12,6 +12,8 @@
 //!   motor batch, TCP's `[len][kind][body]` framing with its bounded reader), and
 //!   [`record::admit`], the one decision a network host makes on a hello, its refusal a
 //!   typed [`record::Reject`].
+//! - [`channel_layout`]: an agent's channels as host and agent compare them at connect
+//!   (a canonical text, its hash, the first channel that differs).
 //!
 //! The transports, the host and the agent SDK live in `vrsync-bridge` and `vrsync-agent`,
 //! which re-export these modules at their old paths.
@@ -26,5 +28,6 @@
 //! ```
 
 mod admission;
+pub mod channel_layout;
 pub mod record;
 pub mod wire;

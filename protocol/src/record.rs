@@ -35,7 +35,7 @@ pub const PREFIX: usize = 8;
 pub const HELLO_MAGIC: [u8; 4] = *b"VRSY";
 pub use crate::wire::MAX_TOKEN;
 /// Longest hello body.
-pub const MAX_HELLO: usize = 4 + 4 + 8 + 4 + 4 + MAX_TOKEN;
+pub const MAX_HELLO: usize = 4 + 4 + 8 + 4 + 8 + 4 + MAX_TOKEN;
 
 /// A decoded hello.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -46,6 +46,9 @@ pub struct Hello {
     pub layout_hash: u64,
     /// The agent id it claims.
     pub agent_id: u32,
+    /// The hash of the agent's channel layout as its config declares it
+    /// ([`crate::channel_layout::ChannelLayout::hash`]).
+    pub channels: u64,
     /// The shared secret it presents (empty if none).
     pub token: Vec<u8>,
 }
@@ -88,6 +91,7 @@ pub fn encode_hello(hello: &Hello) -> Vec<u8> {
     b.extend_from_slice(&hello.protocol_version.to_le_bytes());
     b.extend_from_slice(&hello.layout_hash.to_le_bytes());
     b.extend_from_slice(&hello.agent_id.to_le_bytes());
+    b.extend_from_slice(&hello.channels.to_le_bytes());
     b.extend_from_slice(&(token.len() as u32).to_le_bytes());
     b.extend_from_slice(token);
     b
@@ -105,6 +109,10 @@ pub fn le_u64(b: &[u8], at: usize) -> Option<u64> {
 
 /// Decodes a hello body. Never panics, never allocates beyond [`MAX_TOKEN`].
 ///
+/// A hello of another protocol version is decoded as far as the fields every version
+/// shares (magic, version, layout, agent id), so that the host can refuse it naming both
+/// versions; its other fields are zero and empty.
+///
 /// # Errors
 /// [`DecodeError::Malformed`].
 pub fn decode_hello(body: &[u8]) -> Result<Hello, DecodeError> {
@@ -121,15 +129,26 @@ pub fn decode_hello(body: &[u8]) -> Result<Hello, DecodeError> {
     let protocol_version = le_u32(body, 4).ok_or_else(|| bad("truncated"))?;
     let layout_hash = le_u64(body, 8).ok_or_else(|| bad("truncated"))?;
     let agent_id = le_u32(body, 16).ok_or_else(|| bad("truncated"))?;
-    let token_len = le_u32(body, 20).ok_or_else(|| bad("truncated"))? as usize;
-    if token_len > MAX_TOKEN || body.len() != 24 + token_len {
+    if protocol_version != crate::wire::PROTOCOL_VERSION {
+        return Ok(Hello {
+            protocol_version,
+            layout_hash,
+            agent_id,
+            channels: 0,
+            token: Vec::new(),
+        });
+    }
+    let channels = le_u64(body, 20).ok_or_else(|| bad("truncated"))?;
+    let token_len = le_u32(body, 28).ok_or_else(|| bad("truncated"))? as usize;
+    if token_len > MAX_TOKEN || body.len() != 32 + token_len {
         return Err(bad("token length does not match the record"));
     }
     Ok(Hello {
         protocol_version,
         layout_hash,
         agent_id,
-        token: body[24..].to_vec(),
+        channels,
+        token: body[32..].to_vec(),
     })
 }
 
@@ -377,6 +396,9 @@ pub mod reject {
     pub const TOKEN: u32 = 4;
     /// The hello could not be decoded.
     pub const MALFORMED: u32 = 5;
+    /// The agent's channels (`[[agent.vector]]`, `[[agent.action]]`) differ from what the
+    /// host's config declares for it; the reject carries the host's layout.
+    pub const CHANNELS: u32 = 6;
 }
 
 pub use crate::admission::{Reject, admit};
@@ -399,12 +421,29 @@ mod tests {
     #[test]
     fn hello_round_trips() {
         let h = Hello {
-            protocol_version: 1,
+            protocol_version: PROTOCOL_VERSION,
             layout_hash: 0xdead_beef,
             agent_id: 3,
+            channels: 0x0123_4567_89ab_cdef,
             token: b"secret".to_vec(),
         };
-        assert_eq!(decode_hello(&encode_hello(&h)), Ok(h));
+        assert_eq!(decode_hello(&encode_hello(&h)), Ok(h.clone()));
+        // Another version's hello: the fields every version shares, so that the host can
+        // refuse it naming both versions (an agent of protocol 3 sent no channel hash).
+        let mut v3 = encode_hello(&h);
+        v3[4..8].copy_from_slice(&3u32.to_le_bytes());
+        v3.drain(20..28);
+        let old = decode_hello(&v3).unwrap();
+        assert_eq!(
+            (
+                old.protocol_version,
+                old.layout_hash,
+                old.agent_id,
+                old.channels
+            ),
+            (3, 0xdead_beef, 3, 0)
+        );
+        assert!(old.token.is_empty());
     }
 
     #[test]
@@ -480,12 +519,18 @@ mod tests {
 
         #[test]
         fn hellos_round_trip(
-            protocol_version in any::<u32>(),
             layout_hash in any::<u64>(),
             agent_id in any::<u32>(),
+            channels in any::<u64>(),
             token in proptest::collection::vec(any::<u8>(), 0..=MAX_TOKEN),
         ) {
-            let h = Hello { protocol_version, layout_hash, agent_id, token };
+            let h = Hello {
+                protocol_version: PROTOCOL_VERSION,
+                layout_hash,
+                agent_id,
+                channels,
+                token,
+            };
             let body = encode_hello(&h);
             prop_assert!(body.len() <= MAX_HELLO);
             prop_assert_eq!(decode_hello(&body), Ok(h));

@@ -2,8 +2,8 @@
 //! frame, sending actions, and the check that host and agent agree on them.
 
 use vrsync_bridge::{
-    ActionConfig, ActionDesc, ActionSpace, AgentConfig, AgentFrame, MAX_ACTIONS, MAX_VECTORS,
-    SensorHeader, VectorDesc, action_chunks, discrete_action_chunk,
+    ActionConfig, ActionDesc, ActionSpace, AgentConfig, AgentFrame, ChannelLayout, MAX_ACTIONS,
+    MAX_VECTORS, SensorHeader, VectorDesc, action_chunks, discrete_action_chunk,
 };
 
 use super::{Agent, Frame, SendError};
@@ -109,17 +109,21 @@ impl Channels {
     }
 
     /// Checks that the host's frame carries the channels this agent's config declares;
-    /// the error names the first channel that differs.
+    /// the error names the first channel that differs. (Host and agent compare their
+    /// layouts at connect already; this catches a host that writes other tables than its
+    /// config declares.)
     pub(super) fn check(&self, h: &SensorHeader, payload_len: usize) -> Result<(), String> {
         let ours = &self.vectors[..self.vector_count];
-        if h.vector_descs() != ours {
-            return Err(mismatch(
-                "vector",
-                ours.iter().map(|d| (d.name(), format!("{} floats", d.len))),
-                h.vector_descs()
-                    .iter()
-                    .map(|d| (d.name(), format!("{} floats", d.len))),
-            ));
+        let actions = &self.actions[..self.action_count];
+        if h.vector_descs() != ours || h.action_descs() != actions {
+            let host = ChannelLayout::from_descs(h.vector_descs(), h.action_descs());
+            let agent = ChannelLayout::from_descs(ours, actions);
+            return Err(match host.difference(&agent) {
+                Some(d) => d.to_string(),
+                None => "the host's frame places the vectors elsewhere than this agent's \
+                         config (do both configs have the same cameras?)"
+                    .to_owned(),
+            });
         }
         if let Some(d) = ours
             .iter()
@@ -130,45 +134,8 @@ impl Channels {
                 d.name()
             ));
         }
-        let ours = &self.actions[..self.action_count];
-        if h.action_descs() != ours {
-            let describe = |d: &ActionDesc| match d.n {
-                0 => format!("{} floats (bounds {:016x})", d.len, d.bounds_hash),
-                n => format!("a choice in 0..{n}"),
-            };
-            return Err(mismatch(
-                "action",
-                ours.iter().map(|d| (d.name(), describe(d))),
-                h.action_descs().iter().map(|d| (d.name(), describe(d))),
-            ));
-        }
         Ok(())
     }
-}
-
-/// "host and agent disagree on vector "joints": the host's config says 7 floats, this
-/// agent's 6" — for the first channel (in order) that differs.
-fn mismatch<'a>(
-    what: &str,
-    ours: impl Iterator<Item = (&'a str, String)>,
-    theirs: impl Iterator<Item = (&'a str, String)>,
-) -> String {
-    let ours: Vec<_> = ours.collect();
-    let theirs: Vec<_> = theirs.collect();
-    let (name, host, agent) = (0..ours.len().max(theirs.len()))
-        .find_map(|i| match (theirs.get(i), ours.get(i)) {
-            (Some(t), Some(o)) if t == o => None,
-            (Some(t), Some(o)) if t.0 == o.0 => Some((t.0, t.1.clone(), o.1.clone())),
-            (Some(t), _) => Some((t.0, t.1.clone(), "none of that name there".into())),
-            (None, Some(o)) => Some((o.0, "none of that name there".into(), o.1.clone())),
-            (None, None) => None,
-        })
-        .unwrap_or(("?", String::new(), String::new()));
-    format!(
-        "host and agent configs disagree on {what} {name:?}: the host's says {host}, this \
-         agent's says {agent} (both must list the same [[agent.{what}]] entries in the same \
-         order)"
-    )
 }
 
 impl Frame {

@@ -15,6 +15,8 @@ use std::time::Duration;
 
 use serde::Deserialize;
 
+use vrsync_protocol::channel_layout::ChannelLayout;
+
 use crate::wire::{
     ActionDesc, ImageDesc, MAX_ACTIONS, MAX_CAMERAS, MAX_VECTORS, PixelFormat, VectorDesc,
 };
@@ -216,6 +218,16 @@ impl AgentConfig {
             *d = a.desc();
         }
         table
+    }
+
+    /// This agent's channels as host and agent compare them at connect.
+    pub fn channel_layout(&self) -> ChannelLayout {
+        let (vectors, _) = self.vector_layout();
+        let actions = self.action_table();
+        ChannelLayout::from_descs(
+            &vectors[..self.vectors.len().min(MAX_VECTORS)],
+            &actions[..self.actions.len().min(MAX_ACTIONS)],
+        )
     }
 
     /// The index of the action called `name`.
@@ -481,6 +493,15 @@ pub enum ConfigLoadError {
 pub const DEFAULT_CONFIG_TOML: &str = include_str!("../../../config/default.toml");
 
 impl Config {
+    /// The channels the config declares for agent `id` (none if it has no such agent).
+    pub fn channel_layout_of(&self, id: u32) -> ChannelLayout {
+        self.agents
+            .iter()
+            .find(|a| a.id == id)
+            .map(AgentConfig::channel_layout)
+            .unwrap_or_default()
+    }
+
     /// Loads and validates a config file.
     ///
     /// # Errors

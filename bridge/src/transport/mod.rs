@@ -34,6 +34,7 @@ pub mod zenoh;
 use std::time::{Duration, Instant};
 
 use tracing::debug;
+use vrsync_protocol::channel_layout::{ChannelDifference, ChannelLayout};
 
 use crate::wire::{MotorCommand, MotorHeader, SensorHeader};
 
@@ -151,6 +152,20 @@ pub enum AgentConnectError {
         /// This agent's layout hash (hex).
         agent_layout: String,
     },
+    /// The host's config declares other channels (`[[agent.vector]]`, `[[agent.action]]`)
+    /// for this agent than the agent's config does.
+    #[error(
+        "the host of session {session:?} refused agent {agent}: {difference}; use the same \
+         config file on both sides"
+    )]
+    ChannelMismatch {
+        /// The session.
+        session: String,
+        /// The agent id.
+        agent: u32,
+        /// The first channel that differs, and what each side declares of it.
+        difference: ChannelDifference,
+    },
     /// Another process already is this agent.
     #[error("agent {agent} of session {session:?} is already connected by another process")]
     IdInUse {
@@ -182,16 +197,26 @@ pub enum AgentConnectError {
 }
 
 impl AgentConnectError {
-    /// What an agent that got the refusal `reject` reports; `mismatch(host protocol, host
-    /// layout)` builds the error of a version refusal.
+    /// What an agent whose channels are `ours` reports when it got the refusal `reject`;
+    /// `mismatch(host protocol, host layout)` builds the error of a version refusal.
     pub(crate) fn from_reject(
         reject: record::Reject,
         session: &str,
         agent: u32,
+        ours: &ChannelLayout,
         mismatch: impl FnOnce(u32, u64) -> Self,
     ) -> Self {
         use record::reject as code;
         let session = session.to_owned();
+        if let (code::CHANNELS, Some(host)) = (reject.code, &reject.host_channels)
+            && let Some(difference) = host.difference(ours)
+        {
+            return Self::ChannelMismatch {
+                session,
+                agent,
+                difference,
+            };
+        }
         match reject.code {
             code::VERSION => mismatch(reject.host_protocol, reject.host_layout),
             code::UNKNOWN_AGENT => Self::IdNotServed {
@@ -223,6 +248,8 @@ pub enum RefusalKind {
     UnknownAgent,
     /// An agent id that is already connected.
     IdInUse,
+    /// The agent's channels differ from those the host's config declares for it.
+    Channels,
     /// Connected, then sent no complete hello in time (or closed without one).
     Silent,
     /// Turned away at once: too many connections are waiting for their hello.
@@ -241,6 +268,7 @@ impl RefusalKind {
             reject::TOKEN => Self::Token,
             reject::UNKNOWN_AGENT => Self::UnknownAgent,
             reject::ID_IN_USE => Self::IdInUse,
+            reject::CHANNELS => Self::Channels,
             _ => Self::Malformed,
         }
     }
@@ -253,6 +281,7 @@ impl RefusalKind {
             Self::Token => "token",
             Self::UnknownAgent => "unknown_agent",
             Self::IdInUse => "id_in_use",
+            Self::Channels => "channels",
             Self::Silent => "silent",
             Self::TooMany => "too_many",
             Self::Tls => "tls",

@@ -17,8 +17,9 @@ use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 /// Version of the vrsync protocol. Bumped on every incompatible change of the wire types
-/// or of the cycle semantics.
-pub const PROTOCOL_VERSION: u32 = 3;
+/// or of the cycle semantics (4: the network hello carries the agent's channel layout
+/// hash, refused at connect with [`crate::record::reject::CHANNELS`] when it differs).
+pub const PROTOCOL_VERSION: u32 = 4;
 
 /// Maximum number of cameras (images) per agent and sensor frame.
 pub const MAX_CAMERAS: usize = 4;

@@ -100,6 +100,32 @@ fn check_host_version(attrs: &AttributeSet, session: &str) -> Result<(), AgentCo
     Ok(())
 }
 
+/// The host's channels for this agent, as its sensor service's attributes carry them,
+/// against this agent's config.
+fn check_channels(
+    attrs: &AttributeSet,
+    config: &Config,
+    session: &str,
+    agent: u32,
+) -> Result<(), AgentConnectError> {
+    let ours = config.channel_layout_of(agent);
+    let Some(host) = channels_of(attrs) else {
+        return Err(AgentConnectError::Transport {
+            session: session.to_owned(),
+            agent,
+            detail: "the host's sensor service carries no readable channel layout".into(),
+        });
+    };
+    match host.difference(&ours) {
+        Some(difference) => Err(AgentConnectError::ChannelMismatch {
+            session: session.to_owned(),
+            agent,
+            difference,
+        }),
+        None => Ok(()),
+    }
+}
+
 /// The agent ids whose sensor service exists in `session` (the ids its host serves),
 /// ascending.
 fn served_agent_ids(session: &str) -> Vec<u32> {
@@ -251,6 +277,7 @@ impl AgentTransport for ShmAgent {
             .user_header::<SensorHeader>()
             .open()
             .map_err(|e| open_err(&sensors, &e))?;
+        check_channels(sensor_service.attributes(), config, session, id)?;
         let motor_service = node
             .service_builder(&svc_name(session, &motor).map_err(ice)?)
             .publish_subscribe::<[MotorCommand]>()

@@ -189,7 +189,7 @@ impl ShmHost {
                 builder = builder.payload_alignment(align);
             }
             let sensor_service = builder
-                .create_with_attributes(&attrs)
+                .create_with_attributes(&with_channels(&a.channel_layout()).map_err(ice)?)
                 .map_err(|e| exists(&sensors, &e))?;
             let sensor_pub = sensor_service
                 .publisher_builder()

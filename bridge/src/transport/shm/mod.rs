@@ -28,7 +28,7 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::sample::Sample;
 use iceoryx2::sample_mut::SampleMut;
-use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
+use iceoryx2::service::attribute::{AttributeKey, AttributeSet, AttributeValue};
 use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as ps_factory};
 
 use super::{
@@ -39,6 +39,7 @@ use super::{
 use crate::config::{Config, MAX_AGENT_ID};
 use crate::signal::SignalHandling;
 use crate::wire::{LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, SensorHeader};
+use vrsync_protocol::channel_layout::ChannelLayout;
 
 type Svc = ipc::Service;
 
@@ -59,6 +60,12 @@ pub const MOTOR_QUEUE: usize = 16;
 pub const ATTR_PROTOCOL: &str = "vrsync.protocol_version";
 /// Service attribute key holding [`LAYOUT_HASH`] (hex).
 pub const ATTR_LAYOUT: &str = "vrsync.layout_hash";
+/// Service attribute key of an agent's sensor service holding its channel layout's
+/// canonical text ([`ChannelLayout::to_text`]), in pieces of at most
+/// [`ATTR_VALUE_MAX`] bytes, in order (one value each; none without channels).
+pub const ATTR_CHANNELS: &str = "vrsync.channels";
+/// Longest attribute value iceoryx2 stores (`MAX_ATTRIBUTE_VALUE_LENGTH`).
+pub const ATTR_VALUE_MAX: usize = 256;
 
 /// Name of service `suffix` of a session.
 pub fn service_name(session: &str, suffix: &str) -> String {
@@ -159,14 +166,43 @@ fn svc_name(session: &str, suffix: &str) -> Result<ServiceName, String> {
 }
 
 fn attributes() -> Result<AttributeSpecifier, String> {
+    with_channels(&ChannelLayout::default())
+}
+
+/// The attributes of a service: protocol and layout, and the channel layout `channels`
+/// (an agent's sensor service carries its agent's; the others none).
+fn with_channels(channels: &ChannelLayout) -> Result<AttributeSpecifier, String> {
     let key = |k: &str| AttributeKey::try_from(k).map_err(|e| format!("{e:?}"));
     let val = |v: &str| AttributeValue::try_from(v).map_err(|e| format!("{e:?}"));
     let (pk, pv) = (key(ATTR_PROTOCOL)?, val(&PROTOCOL_VERSION.to_string())?);
     let (lk, lv) = (key(ATTR_LAYOUT)?, val(&format!("{LAYOUT_HASH:016x}"))?);
-    AttributeSpecifier::new()
+    let mut attrs = AttributeSpecifier::new()
         .define(&pk, &pv)
         .and_then(|s| s.define(&lk, &lv))
-        .map_err(|e| format!("{e:?}"))
+        .map_err(|e| format!("{e:?}"))?;
+    let ck = key(ATTR_CHANNELS)?;
+    // The text is ASCII (`;`, `:`, names of `[A-Za-z0-9_.-]`, digits): any cut is a char
+    // boundary. At most 3 pieces (`channel_layout::MAX_TEXT`), with the 2 above within
+    // iceoryx2's 8 attributes.
+    for piece in channels.to_text().as_bytes().chunks(ATTR_VALUE_MAX) {
+        let piece = core::str::from_utf8(piece).map_err(|e| e.to_string())?;
+        attrs = attrs
+            .define(&ck, &val(piece)?)
+            .map_err(|e| format!("{e:?}"))?;
+    }
+    Ok(attrs)
+}
+
+/// The channel layout an agent's sensor service carries (see [`ATTR_CHANNELS`]); `None`
+/// if the pieces do not make one.
+fn channels_of(attrs: &AttributeSet) -> Option<ChannelLayout> {
+    let key = AttributeKey::try_from(ATTR_CHANNELS).ok()?;
+    let mut text = String::new();
+    attrs.iter_key_values(&key, |v| {
+        text.push_str(&v.to_string());
+        CallbackProgression::Continue
+    });
+    ChannelLayout::parse(&text)
 }
 
 /// Quiets iceoryx2's own logging unless `IOX2_LOG_LEVEL` asks for more. iceoryx2 logs

@@ -113,10 +113,12 @@ impl TcpAgent {
             agent_layout: format!("{LAYOUT_HASH:016x}"),
         };
         set_nodelay(&stream).map_err(|e| hs(e.to_string()))?;
+        let channels = config.channel_layout_of(id);
         let hello = Hello {
             protocol_version: PROTOCOL_VERSION,
             layout_hash: LAYOUT_HASH,
             agent_id: id,
+            channels: channels.hash(),
             token: token.map(<[u8]>::to_vec).unwrap_or_default(),
         };
         write_record(&mut stream, kind::HELLO, &encode_hello(&hello))
@@ -162,7 +164,9 @@ impl TcpAgent {
             }
             kind::REJECT => {
                 let r = Reject::decode(&body).ok_or_else(|| hs("malformed reject".into()))?;
-                Err(AgentConnectError::from_reject(r, session, id, mismatch))
+                Err(AgentConnectError::from_reject(
+                    r, session, id, &channels, mismatch,
+                ))
             }
             other => Err(hs(format!("unexpected reply kind {other}"))),
         }

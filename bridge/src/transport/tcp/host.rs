@@ -6,6 +6,7 @@ use crate::rounded::Rounded;
 use crate::transport::wait::{self, EpollSet};
 use crate::transport::{PeerRefusal, RefusalKind, Refusals};
 use std::os::fd::RawFd;
+use vrsync_protocol::channel_layout::ChannelLayout;
 
 // ---------------------------------------------------------------------------------------
 // Host side
@@ -90,6 +91,8 @@ pub struct TcpHost {
     pub(super) signals: SignalHandling,
     /// Peers refused since the host last took them.
     pub(super) refusals: Refusals,
+    /// Each slot's channels, as the hellos must declare them.
+    pub(super) layouts: Vec<ChannelLayout>,
 }
 
 /// Why the TCP host could not be created.
@@ -165,6 +168,11 @@ impl TcpHost {
             ready: Vec::with_capacity(64),
             signals,
             refusals: Refusals::default(),
+            layouts: config
+                .agents
+                .iter()
+                .map(crate::config::AgentConfig::channel_layout)
+                .collect(),
         })
     }
 
@@ -455,7 +463,13 @@ impl TcpHost {
         let peer = p.peer;
         let agent = hello.agent_id;
         let served: Vec<u32> = self.slots.iter().map(|s| s.id).collect();
-        let slot = match admit(&hello, self.token.as_deref(), "wrong tcp_token", &served) {
+        let slot = match admit(
+            &hello,
+            self.token.as_deref(),
+            "wrong tcp_token",
+            &served,
+            &self.layouts,
+        ) {
             Ok(slot) => slot,
             Err(r) => return self.refuse_hello(&mut stream, peer, agent, r),
         };

@@ -152,6 +152,7 @@ mod tests {
             protocol_version: PROTOCOL_VERSION,
             layout_hash: LAYOUT_HASH,
             agent_id: id,
+            channels: crate::ChannelLayout::default().hash(),
             token: Vec::new(),
         };
         write_record(&mut s, kind::HELLO, &encode_hello(&hello)).unwrap();

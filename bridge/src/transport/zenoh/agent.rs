@@ -20,6 +20,7 @@ use super::*;
 use crate::config::Config;
 use crate::signal::SignalHandling;
 use crate::wire::{LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, SensorHeader};
+use vrsync_protocol::channel_layout::ChannelLayout;
 
 const HEADER: usize = core::mem::size_of::<SensorHeader>();
 
@@ -271,10 +272,12 @@ impl ZenohAgent {
             .callback(move |s| sh.on_host_token(&s))
             .wait()
             .map_err(declare("the host's liveliness subscriber"))?;
+        let channels = config.channel_layout_of(id);
         let hello = encode_hello(&Hello {
             protocol_version: PROTOCOL_VERSION,
             layout_hash: LAYOUT_HASH,
             agent_id: id,
+            channels: channels.hash(),
             token: token.map(<[u8]>::to_vec).unwrap_or_default(),
         });
         let answer = retry_until(
@@ -296,7 +299,7 @@ impl ZenohAgent {
                     match reply.result() {
                         Ok(sample) => {
                             let body = sample.payload().to_bytes();
-                            return match parse_answer(&body, session_name, id) {
+                            return match parse_answer(&body, session_name, id, &channels) {
                                 Ok(a) => Attempt::Done(a),
                                 Err(e) => Attempt::Failed(fail(e)),
                             };
@@ -386,7 +389,12 @@ impl ZenohAgent {
     }
 }
 
-fn parse_answer(body: &[u8], session: &str, id: u32) -> Result<Answer, String> {
+fn parse_answer(
+    body: &[u8],
+    session: &str,
+    id: u32,
+    ours: &ChannelLayout,
+) -> Result<Answer, String> {
     let u32_at = |at: usize| {
         body.get(at..at + 4)
             .and_then(|b| b.try_into().ok())
@@ -422,7 +430,7 @@ fn parse_answer(body: &[u8], session: &str, id: u32) -> Result<Answer, String> {
         Some(reply::REJECT) => {
             let r = Reject::decode(&body[4..]).ok_or("malformed refusal")?;
             Ok(Answer::Refused(AgentConnectError::from_reject(
-                r, session, id, mismatch,
+                r, session, id, ours, mismatch,
             )))
         }
         _ => Err("the hello's answer is neither a welcome nor a refusal".into()),

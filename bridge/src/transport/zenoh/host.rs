@@ -56,6 +56,8 @@ pub struct ZenohHostStats {
     pub refused_unknown_agent: u64,
     /// Hellos refused: the agent id is connected already.
     pub refused_id_in_use: u64,
+    /// Hellos refused: the agent's channels differ from the host's config.
+    pub refused_channels: u64,
     /// Hellos refused: not a hello (garbage, too long, truncated).
     pub refused_malformed: u64,
     /// Peers dropped in the TLS handshake (counted when the process's `tracing`
@@ -217,6 +219,11 @@ impl ZenohHost {
             token: z.token.clone().map(String::into_bytes),
             max_motor_body,
             frame_bodies: frame_bodies.clone(),
+            layouts: config
+                .agents
+                .iter()
+                .map(crate::config::AgentConfig::channel_layout)
+                .collect(),
         });
         let congestion = if config.sync.sync_mode {
             CongestionControl::Block

@@ -14,6 +14,7 @@ use super::super::{PeerRefusal, RefusalKind, Refusals};
 use super::host::{HEADER, MOTOR_HEADER};
 use super::*;
 use crate::wire::{LAYOUT_HASH, PROTOCOL_VERSION};
+use vrsync_protocol::channel_layout::ChannelLayout;
 
 /// How long after an agent's token vanished its leave batch is still taken (the two travel
 /// on different zenoh channels, so the deletion may overtake the batch).
@@ -89,6 +90,8 @@ pub(super) struct Shared {
     pub(super) token: Option<Vec<u8>>,
     pub(super) max_motor_body: usize,
     pub(super) frame_bodies: Vec<usize>,
+    /// Each slot's channels, as the hellos must declare them.
+    pub(super) layouts: Vec<ChannelLayout>,
 }
 
 impl super::tls_refusals::TlsRefusalSink for Shared {
@@ -150,7 +153,13 @@ impl Shared {
     pub(super) fn admit(&self, st: &mut HostState, hello: &Hello) -> Result<(u64, usize), Reject> {
         let served: Vec<u32> = st.slots.iter().map(|s| s.id).collect();
         let token_message = "wrong or missing transport.zenoh.token";
-        let slot = admit(hello, self.token.as_deref(), token_message, &served)?;
+        let slot = admit(
+            hello,
+            self.token.as_deref(),
+            token_message,
+            &served,
+            &self.layouts,
+        )?;
         // Only a connection whose token exists holds the id. Welcomed but no token yet: a
         // hello of the same id is that agent asking again (its query timed out before the
         // welcome reached it, as on a loaded machine), so it gets a new welcome and the
@@ -182,6 +191,7 @@ impl Shared {
                 RefusalKind::Token => &mut s.refused_token,
                 RefusalKind::UnknownAgent => &mut s.refused_unknown_agent,
                 RefusalKind::IdInUse => &mut s.refused_id_in_use,
+                RefusalKind::Channels => &mut s.refused_channels,
                 _ => &mut s.refused_malformed,
             } += 1;
             st.refusals.push(PeerRefusal {

@@ -208,6 +208,7 @@ fn a_wrong_version_or_layout_is_refused_naming_both() {
             protocol_version: version,
             layout_hash: layout,
             agent_id: 0,
+            channels: crate::ChannelLayout::default().hash(),
             token: Vec::new(),
         };
         let (code, body) = raw_hello(&peer, host.keys(), encode_hello(&hello));
@@ -266,6 +267,7 @@ fn a_repeated_hello_before_the_token_is_welcomed_again() {
         protocol_version: PROTOCOL_VERSION,
         layout_hash: LAYOUT_HASH,
         agent_id: 1,
+        channels: crate::ChannelLayout::default().hash(),
         token: Vec::new(),
     };
     let (first, body1) = raw_hello(&peer, host.keys(), encode_hello(&hello));
