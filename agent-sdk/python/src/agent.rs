@@ -175,6 +175,15 @@ fn connect_error(py: Python<'_>, e: AgentConnectError, session: &str, id: u32) -
             ],
         ),
         AgentConnectError::IdInUse { .. } => raise("AgentIdInUseError", vec![]),
+        AgentConnectError::ChannelMismatch { difference, .. } => raise(
+            "ChannelMismatchError",
+            vec![
+                ("channel", obj(py, difference.name)),
+                ("table", obj(py, difference.table)),
+                ("host", obj(py, difference.host)),
+                ("agent", obj(py, difference.agent)),
+            ],
+        ),
         AgentConnectError::Refused { .. } => raise("ConnectionRefusedByHostError", vec![]),
         _ => raise("TransportError", vec![]),
     }
@@ -316,7 +325,8 @@ impl PyAgent {
     /// `connect_timeout`). `session` overrides the config's session name.
     ///
     /// Raises `ConfigError` (bad file), `HostNotFoundError`, `VersionMismatchError`,
-    /// `AgentIdInUseError`, `ConnectionRefusedByHostError`, `TransportError`.
+    /// `AgentIdInUseError`, `ChannelMismatchError`, `ConnectionRefusedByHostError`,
+    /// `TransportError`.
     #[staticmethod]
     #[pyo3(signature = (config, agent_id, *, session = None, connect_timeout = None))]
     fn connect(

@@ -500,6 +500,45 @@ def test_vectors_written_in_python_arrive_and_actions_come_back(
         assert host.stats()["actions_rejected"] == 0
 
 
+# An agent whose config declares one float more of "joints" than the host's: refused at
+# connect; it prints what the error says of the channel, then connects with the host's
+# config and runs one cycle.
+MISMATCHED_AGENT = """
+import sys
+import vrsync
+
+try:
+    vrsync.Agent.connect(sys.argv[2], 0, connect_timeout=30)
+except vrsync.ChannelMismatchError as e:
+    print(e.table, e.channel, e.host.replace(" ", "_"), e.agent.replace(" ", "_"), flush=True)
+    print(str(e), file=sys.stderr, flush=True)
+with vrsync.Agent.connect(sys.argv[1], 0, connect_timeout=30) as agent:
+    for frame in agent.frames(timeout=30):
+        agent.stop()
+"""
+
+
+@pytest.mark.parametrize("transport", ["shm", "tcp"])
+def test_an_agent_with_other_channels_is_refused_at_connect_naming_the_channel(
+    tmp_path: Path, agents: Agents, transport: str
+) -> None:
+    config = with_channels(write_config(tmp_path, f"mismatch-{transport}", transport=transport)[0])
+    with vrsync.Host(config) as host:
+        if transport == "tcp":
+            with_tcp_port(config, host.tcp_address)
+        theirs = tmp_path / "theirs.toml"
+        theirs.write_text(config.read_text().replace("len = 5", "len = 6"))
+        agent = agents.python(MISMATCHED_AGENT, str(config), str(theirs))
+        host.wait_for_agents(timeout=DEADLINE)
+        host.publish(host.loan(0))
+        host.start()
+        assert host.collect().agent(0).outcome == "stopped"
+    out, err = agent.communicate(timeout=DEADLINE)
+    assert agent.returncode == 0, err
+    assert out.split() == ["vector", "joints", "5_floats", "6_floats"], (out, err)
+    assert '"joints"' in err, err
+
+
 # One command of every class, as Python source both the agent and the host evaluate.
 EVERY_COMMAND = """[
     vrsync.Move(heading_deg=90.5, distance_m=1.25),

@@ -17,6 +17,7 @@ __all__ = [
     "VersionMismatchError",
     "AgentIdNotServedError",
     "AgentIdInUseError",
+    "ChannelMismatchError",
     "ConnectionRefusedByHostError",
     "HostClosedError",
     "HostGoneError",
@@ -67,6 +68,20 @@ class AgentIdNotServedError(VrsyncError, ConnectionError):
 
 class AgentIdInUseError(VrsyncError, ConnectionError):
     """Another process is already connected as this agent id."""
+
+
+class ChannelMismatchError(VrsyncError, ConnectionError):
+    """The host's config declares other channels for this agent than the agent's config.
+
+    Raised at connect. ``channel`` is the first channel that differs, ``table`` its kind
+    (``"vector"`` or ``"action"``), ``host`` and ``agent`` what each config says of it
+    (e.g. ``"6 floats"``, ``"a choice in 0..3"``, ``"none of that name there"``).
+    """
+
+    channel: str | None = None
+    table: str | None = None
+    host: str | None = None
+    agent: str | None = None
 
 
 class ConnectionRefusedByHostError(VrsyncError, ConnectionError):
