@@ -160,8 +160,14 @@ fn steady_churn_at_full_capacity_matches_the_reference() {
     for id in 0..=3 * ACTION_STATES_CAPACITY as u32 + 1 {
         assert_eq!(states.get(id), reference.get(id), "action {id}");
     }
-    let high: Vec<(u32, u32)> = (0..40u32).map(|i| (u32::MAX - 20 + i, (i % 6))).collect();
-    same_as_reference(16, &high, (0..40u32).map(|i| u32::MAX - 20 + i));
+    let high: Vec<(u32, u32)> = (0..40u32)
+        .map(|i| ((u32::MAX - 20).wrapping_add(i), i % 6))
+        .collect();
+    same_as_reference(
+        16,
+        &high,
+        (0..40u32).map(|i| (u32::MAX - 20).wrapping_add(i)),
+    );
 }
 
 proptest! {
