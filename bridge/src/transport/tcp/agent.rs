@@ -56,7 +56,41 @@ pub struct TcpAgent {
     signals: SignalHandling,
 }
 
+/// Whether a hello's write or the wait for its answer failed because the peer closed the
+/// connection before answering (worth another connection), not because it is slow or
+/// spoke nonsense.
+fn closed_unanswered(e: &std::io::Error) -> bool {
+    matches!(
+        e.kind(),
+        ErrorKind::UnexpectedEof
+            | ErrorKind::ConnectionReset
+            | ErrorKind::ConnectionAborted
+            | ErrorKind::BrokenPipe
+    )
+}
+
 impl TcpAgent {
+    /// A connection to `addr`, tried until `deadline` (or a termination request); the last
+    /// error if none was made.
+    fn open(
+        addr: SocketAddr,
+        deadline: Instant,
+        signals: SignalHandling,
+    ) -> Result<TcpStream, String> {
+        retry_until(
+            deadline,
+            || signals.termination_requested(),
+            || {
+                let left = deadline.saturating_duration_since(Instant::now());
+                match TcpStream::connect_timeout(&addr, left.max(Duration::from_millis(1))) {
+                    Ok(s) => Attempt::<_, ()>::Done(s),
+                    Err(e) => Attempt::NotYet(e.to_string()),
+                }
+            },
+        )
+        .map_err(|e| e.unwrap_or_default())
+    }
+
     /// Connects to `transport.tcp_listen`, retrying until `timeout`, and says hello.
     /// `signals` says whether SIGINT/SIGTERM handlers are installed (see
     /// [`SignalHandling`]).
@@ -75,31 +109,6 @@ impl TcpAgent {
         let addr = config.transport.tcp_listen;
         let started = Instant::now();
         let deadline = started + timeout;
-        let stream = retry_until(
-            deadline,
-            || signals.termination_requested(),
-            || {
-                let left = deadline.saturating_duration_since(Instant::now());
-                match TcpStream::connect_timeout(&addr, left.max(Duration::from_millis(1))) {
-                    Ok(s) => Attempt::<_, ()>::Done(s),
-                    Err(e) => Attempt::NotYet(e.to_string()),
-                }
-            },
-        );
-        let mut stream = match stream {
-            Ok(s) => s,
-            Err(e) => {
-                return Err(AgentConnectError::HostNotFound {
-                    session: session.clone(),
-                    agent: id,
-                    waited: started.elapsed(),
-                    looked_for: format!(
-                        "nothing accepts TCP connections at {addr} ({})",
-                        e.unwrap_or_default()
-                    ),
-                });
-            }
-        };
         let hs = |reason: String| AgentConnectError::Transport {
             session: session.clone(),
             agent: id,
@@ -112,21 +121,47 @@ impl TcpAgent {
             agent_protocol: PROTOCOL_VERSION,
             agent_layout: format!("{LAYOUT_HASH:016x}"),
         };
-        set_nodelay(&stream).map_err(|e| hs(e.to_string()))?;
         let channels = config.channel_layout_of(id);
-        let hello = Hello {
+        let hello = encode_hello(&Hello {
             protocol_version: PROTOCOL_VERSION,
             layout_hash: LAYOUT_HASH,
             agent_id: id,
             channels: channels.hash(),
             token: token.map(<[u8]>::to_vec).unwrap_or_default(),
+        });
+        // A connection closed before any answer to the hello (a relay or tunnel that
+        // accepted it but cannot reach the host yet, a host restarting) is tried again
+        // until the deadline, as a refused connection is.
+        let mut backoff = Duration::from_millis(10);
+        let (mut stream, prefix) = loop {
+            let mut stream = Self::open(addr, deadline, signals).map_err(|e| {
+                AgentConnectError::HostNotFound {
+                    session: session.clone(),
+                    agent: id,
+                    waited: started.elapsed(),
+                    looked_for: format!("nothing accepts TCP connections at {addr} ({e})"),
+                }
+            })?;
+            set_nodelay(&stream).map_err(|e| hs(e.to_string()))?;
+            let mut prefix = [0u8; PREFIX];
+            let answered = write_record(&mut stream, kind::HELLO, &hello).and_then(|()| {
+                read_exact_deadline(&mut stream, &mut prefix, Instant::now() + HELLO_TIMEOUT * 2)
+            });
+            match answered {
+                Ok(()) => break (stream, prefix),
+                Err(e)
+                    if closed_unanswered(&e)
+                        && Instant::now() + backoff < deadline
+                        && !signals.termination_requested() =>
+                {
+                    debug!(%addr, "TCP hello closed unanswered ({e}); trying again");
+                    std::thread::sleep(backoff);
+                    backoff = (backoff * 2).min(Duration::from_millis(200));
+                }
+                Err(e) => return Err(hs(e.to_string())),
+            }
         };
-        write_record(&mut stream, kind::HELLO, &encode_hello(&hello))
-            .map_err(|e| hs(e.to_string()))?;
         let reply_deadline = Instant::now() + HELLO_TIMEOUT * 2;
-        let mut prefix = [0u8; PREFIX];
-        read_exact_deadline(&mut stream, &mut prefix, reply_deadline)
-            .map_err(|e| hs(e.to_string()))?;
         let (len, k) = decode_prefix(prefix, 4096).map_err(|e| hs(e.to_string()))?;
         let mut body = vec![0u8; len];
         read_exact_deadline(&mut stream, &mut body, reply_deadline)

@@ -270,6 +270,58 @@ mod tests {
         assert_eq!(read_reply(&mut a0).0, kind::WELCOME);
     }
 
+    /// Forwards bytes from `from` to `to` until either side ends, then shuts `to` down.
+    fn forward(mut from: TcpStream, mut to: TcpStream) -> std::thread::JoinHandle<()> {
+        std::thread::spawn(move || {
+            let _ = std::io::copy(&mut from, &mut to);
+            let _ = to.shutdown(std::net::Shutdown::Both);
+        })
+    }
+
+    /// A tunnel or relay that accepts the agent's connection before it can reach the host
+    /// closes it unanswered: the agent tries again until its connect timeout, and the
+    /// next connection, relayed, is welcomed.
+    #[test]
+    fn an_agent_whose_hello_is_closed_unanswered_tries_again() {
+        let mut host = tcp_host(5.0);
+        let host_addr = host.local_addr();
+        let relay = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let relay_addr = relay.local_addr().unwrap();
+        let relaying = std::thread::spawn(move || {
+            drop(relay.accept().unwrap());
+            let (agent, _) = relay.accept().unwrap();
+            let host = TcpStream::connect(host_addr).unwrap();
+            for s in [&agent, &host] {
+                s.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+            }
+            let up = forward(agent.try_clone().unwrap(), host.try_clone().unwrap());
+            let down = forward(host, agent);
+            (up, down)
+        });
+        let text = format!(
+            "[transport]\nkind = \"tcp\"\ntcp_listen = \"{relay_addr}\"\n\
+             [[agent]]\nid = 0\n[[agent.camera]]\nname = \"c\"\nwidth = 8\n\
+             [[agent]]\nid = 1\n[[agent.camera]]\nname = \"c\"\nwidth = 8\n"
+        );
+        let config = Config::from_toml_str(&text, std::path::Path::new("t.toml")).unwrap();
+        // The agent (not `Send`) lives in its thread until the host has seen it.
+        let (done_tx, done_rx) = std::sync::mpsc::channel::<()>();
+        let connecting = std::thread::spawn(move || {
+            let agent =
+                TcpAgent::connect(&config, 0, Duration::from_secs(20), SignalHandling::Leave)?;
+            let _ = done_rx.recv_timeout(Duration::from_secs(20));
+            Ok::<u32, AgentConnectError>(agent.id())
+        });
+        pump(&mut host, false, "agent 0 through the relay", |h| {
+            h.is_connected(0)
+        });
+        done_tx.send(()).unwrap();
+        assert_eq!(connecting.join().unwrap().unwrap(), 0);
+        let (up, down) = relaying.join().unwrap();
+        up.join().unwrap();
+        down.join().unwrap();
+    }
+
     #[test]
     fn an_agent_reconnecting_after_a_close_replaces_its_old_connection() {
         let mut host = tcp_host(5.0);
