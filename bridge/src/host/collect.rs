@@ -185,9 +185,14 @@ impl<T: HostTransport> Host<T> {
     /// Drains batches and watches for lost agents until `until` — in sync mode only until
     /// every awaited agent stopped; there `until` is the stop timeout, after which agents
     /// with `wait_for_stop = "timeout"` are given up and the others waited for as long as
-    /// they are connected (reported as slow) — then applies `on_agent_lost`.
-    pub(super) fn wait_cycle(&mut self, sync: bool, until: Instant) -> Result<(), HostCycleError> {
-        let started = Instant::now();
+    /// they are connected (reported as slow, with the time waited since `started`, when the
+    /// wait began: at least the stop timeout) — then applies `on_agent_lost`.
+    pub(super) fn wait_cycle(
+        &mut self,
+        sync: bool,
+        started: Instant,
+        until: Instant,
+    ) -> Result<(), HostCycleError> {
         let timeout = until.saturating_duration_since(started);
         let mut next_reap = started + REAP_PERIOD;
         // Past the stop timeout (sync mode): when the next slow report is due.
@@ -267,7 +272,8 @@ impl<T: HostTransport> Host<T> {
     }
 
     pub(super) fn collect_sync(&mut self) -> Result<(), HostCycleError> {
-        self.wait_cycle(true, Instant::now() + self.config.sync.stop_timeout)?;
+        let started = Instant::now();
+        self.wait_cycle(true, started, started + self.config.sync.stop_timeout)?;
         let mut timed_out = 0u64;
         for (slot, a) in self.report.agents.iter_mut().enumerate() {
             a.outcome = self.barrier.outcome(slot);
@@ -343,7 +349,7 @@ impl<T: HostTransport> Host<T> {
             Some(t) if t + period > now => t,
             _ => now + period,
         };
-        self.wait_cycle(false, tick)?;
+        self.wait_cycle(false, Instant::now(), tick)?;
         self.next_tick = Some(tick + period);
         for a in &mut self.report.agents {
             a.outcome = AgentOutcome::Async;
