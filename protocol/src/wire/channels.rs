@@ -11,8 +11,9 @@
 //!   rules of the stops apply to them unchanged. The host assembles them (they never show
 //!   up as commands).
 //! - The header's action table ([`SensorHeader::actions`]) tells the agent what the host
-//!   expects, so that a host and an agent whose configs disagree refuse each other at the
-//!   first frame, naming the channel.
+//!   expects. Host and agent compare their layouts at connect already
+//!   ([`crate::channel_layout`]); the tables let the agent check every frame against its
+//!   config too, naming the channel that differs.
 
 use super::*;
 
