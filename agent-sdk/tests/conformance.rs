@@ -733,6 +733,49 @@ fn a_channel_mismatch_is_refused_naming_the_channel(kind: &str) {
     host.join().unwrap();
 }
 
+/// The longest layout there is (8 vectors and 8 actions, every name 16 bytes, the widest
+/// numbers): host and agent agree on it at connect — over shm its text is split into
+/// several service attributes — and a difference in the last action is named.
+fn the_longest_channel_layout_is_compared_at_connect(kind: &str) {
+    let base = config(kind, true).to_toml_string();
+    let mut text = base.clone();
+    for i in 0..8 {
+        text += &format!("[[agent.vector]]\nname = \"vector_number_{i:02}\"\nlen = 4096\n");
+    }
+    for i in 0..7 {
+        text += &format!(
+            "[[agent.action]]\nname = \"action_number_{i:02}\"\nlen = 256\nlow = -1.5\n\
+             high = 1.5\n"
+        );
+    }
+    let last = |n: u32| format!("[[agent.action]]\nname = \"action_number_07\"\nn = {n}\n");
+    let ours =
+        Config::from_toml_str(&(text.clone() + &last(4_000_000_000)), Path::new("<a>")).unwrap();
+    let theirs = Config::from_toml_str(&(text + &last(3_999_999_999)), Path::new("<b>")).unwrap();
+    // Over shm: more than one attribute's worth (256 bytes).
+    assert!(ours.agents[0].channel_layout().to_text().len() > 256);
+    let (config, host) = with_host(ours, |host| {
+        publish(host);
+        assert_eq!(
+            host.collect().unwrap().agents()[0].outcome,
+            AgentOutcome::Stopped
+        );
+    });
+    let mut theirs = theirs;
+    theirs.transport = config.transport.clone();
+    let err = AgentBuilder::new(&theirs, 4).connect().unwrap_err();
+    assert!(
+        matches!(&err, AgentConnectError::ChannelMismatch { difference, .. }
+            if difference.name == "action_number_07"
+                && difference.host == "a choice in 0..4000000000"),
+        "{kind}: {err}"
+    );
+    let mut agent = AgentBuilder::new(&config, 4).connect().unwrap();
+    agent.wait_start(Some(WAIT)).unwrap();
+    agent.stop().unwrap();
+    host.join().unwrap();
+}
+
 /// One world, one agent per transport, each with channels: every agent's vectors and
 /// actions go through its own transport in the same cycles.
 #[test]
@@ -857,6 +900,10 @@ macro_rules! conformance {
             #[test]
             fn a_channel_mismatch_is_refused_naming_the_channel() {
                 super::a_channel_mismatch_is_refused_naming_the_channel(stringify!($kind));
+            }
+            #[test]
+            fn the_longest_channel_layout_is_compared_at_connect() {
+                super::the_longest_channel_layout_is_compared_at_connect(stringify!($kind));
             }
             #[test]
             fn sigterm_ends_an_agents_wait() {

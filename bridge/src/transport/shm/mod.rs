@@ -60,9 +60,11 @@ pub const MOTOR_QUEUE: usize = 16;
 pub const ATTR_PROTOCOL: &str = "vrsync.protocol_version";
 /// Service attribute key holding [`LAYOUT_HASH`] (hex).
 pub const ATTR_LAYOUT: &str = "vrsync.layout_hash";
-/// Service attribute key of an agent's sensor service holding its channel layout's
-/// canonical text ([`ChannelLayout::to_text`]), in pieces of at most
-/// [`ATTR_VALUE_MAX`] bytes, in order (one value each; none without channels).
+/// Prefix of the service attribute keys of an agent's sensor service that hold its channel
+/// layout's canonical text ([`ChannelLayout::to_text`]): `vrsync.channels.0`, `.1`, … each
+/// a piece of at most [`ATTR_VALUE_MAX`] bytes, in order (none without channels). One key
+/// per piece, not one key with several values: iceoryx2 keeps a service's attributes sorted
+/// by key and value, which would reorder the pieces.
 pub const ATTR_CHANNELS: &str = "vrsync.channels";
 /// Longest attribute value iceoryx2 stores (`MAX_ATTRIBUTE_VALUE_LENGTH`).
 pub const ATTR_VALUE_MAX: usize = 256;
@@ -180,14 +182,18 @@ fn with_channels(channels: &ChannelLayout) -> Result<AttributeSpecifier, String>
         .define(&pk, &pv)
         .and_then(|s| s.define(&lk, &lv))
         .map_err(|e| format!("{e:?}"))?;
-    let ck = key(ATTR_CHANNELS)?;
     // The text is ASCII (`;`, `:`, names of `[A-Za-z0-9_.-]`, digits): any cut is a char
     // boundary. At most 3 pieces (`channel_layout::MAX_TEXT`), with the 2 above within
     // iceoryx2's 8 attributes.
-    for piece in channels.to_text().as_bytes().chunks(ATTR_VALUE_MAX) {
+    for (i, piece) in channels
+        .to_text()
+        .as_bytes()
+        .chunks(ATTR_VALUE_MAX)
+        .enumerate()
+    {
         let piece = core::str::from_utf8(piece).map_err(|e| e.to_string())?;
         attrs = attrs
-            .define(&ck, &val(piece)?)
+            .define(&key(&format!("{ATTR_CHANNELS}.{i}"))?, &val(piece)?)
             .map_err(|e| format!("{e:?}"))?;
     }
     Ok(attrs)
@@ -196,12 +202,14 @@ fn with_channels(channels: &ChannelLayout) -> Result<AttributeSpecifier, String>
 /// The channel layout an agent's sensor service carries (see [`ATTR_CHANNELS`]); `None`
 /// if the pieces do not make one.
 fn channels_of(attrs: &AttributeSet) -> Option<ChannelLayout> {
-    let key = AttributeKey::try_from(ATTR_CHANNELS).ok()?;
     let mut text = String::new();
-    attrs.iter_key_values(&key, |v| {
-        text.push_str(&v.to_string());
-        CallbackProgression::Continue
-    });
+    for i in 0.. {
+        let key = AttributeKey::try_from(format!("{ATTR_CHANNELS}.{i}").as_str()).ok()?;
+        match attrs.key_value(&key, 0) {
+            Some(piece) => text.push_str(&piece.to_string()),
+            None => break,
+        }
+    }
     ChannelLayout::parse(&text)
 }
 
