@@ -197,6 +197,22 @@ pub enum AgentConnectError {
 }
 
 impl AgentConnectError {
+    /// [`AgentConnectError::ChannelMismatch`] if the `host`'s channel layout for this agent
+    /// differs from `ours`.
+    pub(crate) fn channel_mismatch(
+        session: &str,
+        agent: u32,
+        host: &ChannelLayout,
+        ours: &ChannelLayout,
+    ) -> Option<Self> {
+        host.difference(ours)
+            .map(|difference| Self::ChannelMismatch {
+                session: session.to_owned(),
+                agent,
+                difference,
+            })
+    }
+
     /// What an agent whose channels are `ours` reports when it got the refusal `reject`;
     /// `mismatch(host protocol, host layout)` builds the error of a version refusal.
     pub(crate) fn from_reject(
@@ -209,13 +225,9 @@ impl AgentConnectError {
         use record::reject as code;
         let session = session.to_owned();
         if let (code::CHANNELS, Some(host)) = (reject.code, &reject.host_channels)
-            && let Some(difference) = host.difference(ours)
+            && let Some(e) = Self::channel_mismatch(&session, agent, host, ours)
         {
-            return Self::ChannelMismatch {
-                session,
-                agent,
-                difference,
-            };
+            return e;
         }
         match reject.code {
             code::VERSION => mismatch(reject.host_protocol, reject.host_layout),

@@ -116,12 +116,8 @@ fn check_channels(
             detail: "the host's sensor service carries no readable channel layout".into(),
         });
     };
-    match host.difference(&ours) {
-        Some(difference) => Err(AgentConnectError::ChannelMismatch {
-            session: session.to_owned(),
-            agent,
-            difference,
-        }),
+    match AgentConnectError::channel_mismatch(session, agent, &host, &ours) {
+        Some(e) => Err(e),
         None => Ok(()),
     }
 }
