@@ -744,56 +744,36 @@ fn heavy_faults_are_recorded(remote: Remote) {
     }
 }
 
-mod tcp {
-    use super::Remote;
-    #[test]
-    fn loss_and_a_short_partition_leave_the_run_intact() {
-        super::loss_and_a_short_partition_leave_the_run_intact(Remote::Tcp);
-    }
-    #[test]
-    #[ignore = "on demand (minutes): cargo test --workspace --test tests -- --ignored netfaults"]
-    fn delay_and_duplication_leave_the_run_intact() {
-        super::delay_and_duplication_leave_the_run_intact(Remote::Tcp);
-    }
-    #[test]
-    #[ignore = "on demand (minutes): cargo test --workspace --test tests -- --ignored netfaults"]
-    fn heavy_faults_are_recorded() {
-        super::heavy_faults_are_recorded(Remote::Tcp);
-    }
+/// `remotes!(tcp => Tcp, ...)` makes the modules `tcp`, ... whose tests call each case
+/// above with that [`Remote`]: one list of cases, run over every remote transport (as
+/// `util.rs`'s `for_each_transport!` does for the SDK's transports).
+macro_rules! remotes {
+    ($($module:ident => $remote:ident),* $(,)?) => {
+        $(mod $module {
+            use super::Remote;
+            #[test]
+            fn loss_and_a_short_partition_leave_the_run_intact() {
+                super::loss_and_a_short_partition_leave_the_run_intact(Remote::$remote);
+            }
+            #[test]
+            #[ignore = "on demand (minutes): cargo test --workspace --test tests -- --ignored netfaults"]
+            fn delay_and_duplication_leave_the_run_intact() {
+                super::delay_and_duplication_leave_the_run_intact(Remote::$remote);
+            }
+            #[test]
+            #[ignore = "on demand (minutes): cargo test --workspace --test tests -- --ignored netfaults"]
+            fn heavy_faults_are_recorded() {
+                super::heavy_faults_are_recorded(Remote::$remote);
+            }
+        })*
+        /// Fails to compile when [`Remote`] gains a transport this list makes no tests for.
+        #[allow(dead_code)]
+        fn every_remote_has_its_module(remote: Remote) {
+            match remote {
+                $(Remote::$remote)|* => {}
+            }
+        }
+    };
 }
 
-mod zenoh {
-    use super::Remote;
-    #[test]
-    fn loss_and_a_short_partition_leave_the_run_intact() {
-        super::loss_and_a_short_partition_leave_the_run_intact(Remote::Zenoh);
-    }
-    #[test]
-    #[ignore = "on demand (minutes): cargo test --workspace --test tests -- --ignored netfaults"]
-    fn delay_and_duplication_leave_the_run_intact() {
-        super::delay_and_duplication_leave_the_run_intact(Remote::Zenoh);
-    }
-    #[test]
-    #[ignore = "on demand (minutes): cargo test --workspace --test tests -- --ignored netfaults"]
-    fn heavy_faults_are_recorded() {
-        super::heavy_faults_are_recorded(Remote::Zenoh);
-    }
-}
-
-mod zenoh_tls {
-    use super::Remote;
-    #[test]
-    fn loss_and_a_short_partition_leave_the_run_intact() {
-        super::loss_and_a_short_partition_leave_the_run_intact(Remote::ZenohTls);
-    }
-    #[test]
-    #[ignore = "on demand (minutes): cargo test --workspace --test tests -- --ignored netfaults"]
-    fn delay_and_duplication_leave_the_run_intact() {
-        super::delay_and_duplication_leave_the_run_intact(Remote::ZenohTls);
-    }
-    #[test]
-    #[ignore = "on demand (minutes): cargo test --workspace --test tests -- --ignored netfaults"]
-    fn heavy_faults_are_recorded() {
-        super::heavy_faults_are_recorded(Remote::ZenohTls);
-    }
-}
+remotes!(tcp => Tcp, zenoh => Zenoh, zenoh_tls => ZenohTls);
