@@ -11,12 +11,17 @@
 //! memory may spin before it blocks).
 //!
 //! Everything here that names a transport is generated from the transport registry
-//! (`registry.rs`): the loan enum, the create error, one part per transport and the
-//! `HostTransport` methods over them, each a `match` on the agent's transport or one
-//! `if let Some` per transport (no trait object on the data path: see the registry's
-//! docs). The logic they share is in the generic [`Part`].
+//! (`registry.rs`), by one small macro per concern: the loan enum and the create error
+//! (`mixed_types!`), one part per transport in [`Parts`] (`mixed_parts!`), and the
+//! `Parts` methods over them, each a `match` on the agent's transport (`mixed_routed!`)
+//! or one `if let Some` per transport (`mixed_each!`, `mixed_first!`); no trait object on
+//! the data path: see the registry's docs. [`Transports`], the `HostTransport` the host
+//! drives, is ordinary code over [`Parts`], and the logic the parts share is in the
+//! generic [`Part`].
 
-use std::time::Duration;
+use std::net::SocketAddr;
+use std::os::fd::RawFd;
+use std::time::{Duration, Instant};
 
 use super::wait::EpollSet;
 use super::{BatchSink, FrameLoanMut, HostTransport, HostTransportError, PeerRefusal};
@@ -86,7 +91,7 @@ fn missing(kind: TransportKind) -> HostTransportError {
 }
 
 /// An epoll set of `fds` (the `None`s skipped): readable whenever one of them is.
-fn epoll_of(fds: &[Option<std::os::fd::RawFd>]) -> std::io::Result<EpollSet> {
+fn epoll_of(fds: &[Option<RawFd>]) -> std::io::Result<EpollSet> {
     let set = EpollSet::new(fds.len())?;
     for &fd in fds.iter().flatten() {
         set.add(fd, fd as u64)?;
@@ -94,7 +99,9 @@ fn epoll_of(fds: &[Option<std::os::fd::RawFd>]) -> std::io::Result<EpollSet> {
     Ok(set)
 }
 
-macro_rules! mixed {
+/// The registry's types the routing names, the create error and the loan of whichever
+/// transport serves the agent.
+macro_rules! mixed_types {
     ($(
         $(#[$attr:meta])*
         $kind:ident $name:literal $module:ident:
@@ -138,81 +145,55 @@ macro_rules! mixed {
                 }
             }
         }
+    };
+}
 
-        /// Every transport a host's agents use, routed per agent.
-        pub struct Transports {
+super::registry::transports!(mixed_types);
+
+/// [`Parts`]: one optional part per transport, created for its agents.
+macro_rules! mixed_parts {
+    ($(
+        $(#[$attr:meta])*
+        $kind:ident $name:literal $module:ident:
+            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident;
+    )*) => {
+        /// One part per transport of the registry, `None` when no agent uses it.
+        struct Parts {
             $($module: Option<Part<$host>>,)*
-            /// The transports' activity descriptors, when there are several.
-            epoll: Option<EpollSet>,
-            routes: Vec<Route>,
-            scratch: Vec<usize>,
-            signals: SignalHandling,
         }
 
-        impl core::fmt::Debug for Transports {
-            fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-                f.debug_struct("Transports")
-                    $(.field(
-                        concat!(stringify!($module), "_slots"),
-                        &self.$module.as_ref().map_or(&[][..], |p| &p.slots[..]),
-                    ))*
-                    .finish()
-            }
-        }
-
-        impl Transports {
+        impl Parts {
             /// Creates the transports `config`'s agents use, each for its own agents.
-            ///
-            /// # Errors
-            /// [`TransportsCreateError`].
-            pub fn create(
-                config: &Config,
-                signals: SignalHandling,
-            ) -> Result<Self, TransportsCreateError> {
-                let mut counts = [0; TransportKind::ALL.len()];
-                let routes = config
-                    .agents
-                    .iter()
-                    .map(|a| {
-                        let count = &mut counts[a.transport as usize];
-                        *count += 1;
-                        Route { kind: a.transport, local: *count - 1 }
-                    })
-                    .collect();
+            fn create(config: &Config, signals: SignalHandling) -> Result<Self, TransportsCreateError> {
                 $(
                     let $module =
                         Part::of(config, TransportKind::$kind, |sub| $host::create(sub, signals))?;
                 )*
-                let fds = [$($module.as_ref().map(|p| HostTransport::activity_fd(&p.host)),)*];
-                let epoll = if fds.iter().flatten().count() > 1 {
-                    Some(epoll_of(&fds).map_err(TransportsCreateError::Wait)?)
-                } else {
-                    None
-                };
-                Ok(Self {
-                    $($module,)*
-                    epoll,
-                    routes,
-                    scratch: Vec::with_capacity(config.agents.len()),
-                    signals,
-                })
+                Ok(Self { $($module,)* })
             }
 
-            fn route(&self, slot: usize) -> Result<Route, HostTransportError> {
-                self.routes
-                    .get(slot)
-                    .copied()
-                    .ok_or(HostTransportError::NoSuchSlot { slot })
+            /// Each transport's host slots, as `<module>_slots` fields of `d`.
+            fn debug_slots(&self, d: &mut core::fmt::DebugStruct<'_, '_>) {
+                $(d.field(
+                    concat!(stringify!($module), "_slots"),
+                    &self.$module.as_ref().map_or(&[][..], |p| &p.slots[..]),
+                );)*
             }
         }
+    };
+}
 
-        impl HostTransport for Transports {
-            type Loan = AnyLoan;
+super::registry::transports!(mixed_parts);
 
-            fn is_connected(&self, slot: usize) -> bool {
-                let Some(r) = self.routes.get(slot) else {
-                    return false;
-                };
+/// The [`Parts`] methods for one agent: a `match` on the transport of its [`Route`].
+macro_rules! mixed_routed {
+    ($(
+        $(#[$attr:meta])*
+        $kind:ident $name:literal $module:ident:
+            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident;
+    )*) => {
+        impl Parts {
+            fn is_connected(&self, r: Route) -> bool {
                 match r.kind {
                     $(TransportKind::$kind => {
                         self.$module.as_ref().is_some_and(|p| p.host.is_connected(r.local))
@@ -220,8 +201,7 @@ macro_rules! mixed {
                 }
             }
 
-            fn loan(&mut self, slot: usize) -> Result<AnyLoan, HostTransportError> {
-                let r = self.route(slot)?;
+            fn loan(&mut self, r: Route) -> Result<AnyLoan, HostTransportError> {
                 match r.kind {
                     $(TransportKind::$kind => match &mut self.$module {
                         Some(p) => p.host.loan(r.local).map(AnyLoan::$kind),
@@ -230,8 +210,8 @@ macro_rules! mixed {
                 }
             }
 
-            fn publish(&mut self, slot: usize, frame: AnyLoan) -> Result<bool, HostTransportError> {
-                let r = self.route(slot)?;
+            /// Publishes `frame`, loaned for host slot `slot` (routed to `r`).
+            fn publish(&mut self, slot: usize, r: Route, frame: AnyLoan) -> Result<bool, HostTransportError> {
                 // A loan comes from `loan` of the same slot, so its kind is the route's.
                 match (frame, r.kind) {
                     $((AnyLoan::$kind(l), TransportKind::$kind) => match &mut self.$module {
@@ -246,6 +226,29 @@ macro_rules! mixed {
                 }
             }
 
+            fn forget_connection(&mut self, r: Route) {
+                match r.kind {
+                    $(TransportKind::$kind => {
+                        if let Some(p) = &mut self.$module {
+                            p.host.forget_connection(r.local);
+                        }
+                    })*
+                }
+            }
+        }
+    };
+}
+
+super::registry::transports!(mixed_routed);
+
+/// The [`Parts`] methods that act on every transport: one `if let Some` per transport.
+macro_rules! mixed_each {
+    ($(
+        $(#[$attr:meta])*
+        $kind:ident $name:literal $module:ident:
+            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident;
+    )*) => {
+        impl Parts {
             fn signal_start(&mut self) -> Result<(), HostTransportError> {
                 $(if let Some(p) = &mut self.$module {
                     p.host.signal_start()?;
@@ -258,38 +261,6 @@ macro_rules! mixed {
                     p.drain(sink)?;
                 })*
                 Ok(())
-            }
-
-            fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
-                if self.epoll.is_some() {
-                    return super::wait_for_activity(self, timeout);
-                }
-                // One transport: its own wait.
-                $(if let Some(p) = &mut self.$module {
-                    return p.host.wait_activity(timeout);
-                })*
-                Ok(())
-            }
-
-            fn activity_fd(&self) -> std::os::fd::RawFd {
-                if let Some(e) = &self.epoll {
-                    return e.raw();
-                }
-                $(if let Some(p) = &self.$module {
-                    return HostTransport::activity_fd(&p.host);
-                })*
-                -1
-            }
-
-            fn next_deadline(&self) -> Option<std::time::Instant> {
-                [$(self.$module.as_ref().and_then(|p| HostTransport::next_deadline(&p.host)),)*]
-                    .into_iter()
-                    .flatten()
-                    .min()
-            }
-
-            fn has_work(&self) -> bool {
-                false $(|| self.$module.as_ref().is_some_and(|p| HostTransport::has_work(&p.host)))*
             }
 
             fn after_wait(&mut self) {
@@ -305,10 +276,6 @@ macro_rules! mixed {
                 Ok(())
             }
 
-            fn termination_requested(&self) -> bool {
-                self.signals.termination_requested()
-            }
-
             fn take_refusals(&mut self, sink: &mut dyn FnMut(&PeerRefusal)) -> u64 {
                 let mut unkept = 0;
                 $(if let Some(p) = &mut self.$module {
@@ -317,27 +284,59 @@ macro_rules! mixed {
                 unkept
             }
 
-            fn forget_connection(&mut self, slot: usize) {
-                let Ok(r) = self.route(slot) else {
-                    return;
-                };
-                match r.kind {
-                    $(TransportKind::$kind => {
-                        if let Some(p) = &mut self.$module {
-                            p.host.forget_connection(r.local);
-                        }
-                    })*
-                }
-            }
-
-            fn reap_dead_agents(&mut self, dead: &mut Vec<usize>) {
+            fn reap_dead_agents(&mut self, scratch: &mut Vec<usize>, dead: &mut Vec<usize>) {
                 $(if let Some(p) = &mut self.$module {
-                    p.reap_dead_agents(&mut self.scratch, dead);
+                    p.reap_dead_agents(scratch, dead);
                 })*
             }
+        }
+    };
+}
 
-            /// The first transport's that has one (only TCP's listener does today).
-            fn local_addr(&self) -> Option<std::net::SocketAddr> {
+super::registry::transports!(mixed_each);
+
+/// The [`Parts`] methods that ask the transports in turn: the first that has an answer,
+/// or all of them.
+macro_rules! mixed_first {
+    ($(
+        $(#[$attr:meta])*
+        $kind:ident $name:literal $module:ident:
+            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident;
+    )*) => {
+        impl Parts {
+            /// Each transport's activity descriptor, `None` for a transport no agent uses.
+            fn activity_fds(&self) -> [Option<RawFd>; TransportKind::ALL.len()] {
+                [$(self.$module.as_ref().map(|p| HostTransport::activity_fd(&p.host)),)*]
+            }
+
+            /// The first transport's own wait (for a host with one transport).
+            fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
+                $(if let Some(p) = &mut self.$module {
+                    return p.host.wait_activity(timeout);
+                })*
+                Ok(())
+            }
+
+            /// The first transport's activity descriptor, -1 without any.
+            fn activity_fd(&self) -> RawFd {
+                $(if let Some(p) = &self.$module {
+                    return HostTransport::activity_fd(&p.host);
+                })*
+                -1
+            }
+
+            fn next_deadline(&self) -> Option<Instant> {
+                [$(self.$module.as_ref().and_then(|p| HostTransport::next_deadline(&p.host)),)*]
+                    .into_iter()
+                    .flatten()
+                    .min()
+            }
+
+            fn has_work(&self) -> bool {
+                false $(|| self.$module.as_ref().is_some_and(|p| HostTransport::has_work(&p.host)))*
+            }
+
+            fn local_addr(&self) -> Option<SocketAddr> {
                 None $(.or_else(|| {
                     self.$module.as_ref().and_then(|p| HostTransport::local_addr(&p.host))
                 }))*
@@ -346,4 +345,149 @@ macro_rules! mixed {
     };
 }
 
-super::registry::transports!(mixed);
+super::registry::transports!(mixed_first);
+
+/// Every transport a host's agents use, routed per agent.
+pub struct Transports {
+    parts: Parts,
+    /// The transports' activity descriptors, when there are several.
+    epoll: Option<EpollSet>,
+    routes: Vec<Route>,
+    scratch: Vec<usize>,
+    signals: SignalHandling,
+}
+
+impl core::fmt::Debug for Transports {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let mut d = f.debug_struct("Transports");
+        self.parts.debug_slots(&mut d);
+        d.finish()
+    }
+}
+
+impl Transports {
+    /// Creates the transports `config`'s agents use, each for its own agents.
+    ///
+    /// # Errors
+    /// [`TransportsCreateError`].
+    pub fn create(config: &Config, signals: SignalHandling) -> Result<Self, TransportsCreateError> {
+        let mut counts = [0; TransportKind::ALL.len()];
+        let routes = config
+            .agents
+            .iter()
+            .map(|a| {
+                let count = &mut counts[a.transport as usize];
+                *count += 1;
+                Route {
+                    kind: a.transport,
+                    local: *count - 1,
+                }
+            })
+            .collect();
+        let parts = Parts::create(config, signals)?;
+        let fds = parts.activity_fds();
+        let epoll = if fds.iter().flatten().count() > 1 {
+            Some(epoll_of(&fds).map_err(TransportsCreateError::Wait)?)
+        } else {
+            None
+        };
+        Ok(Self {
+            parts,
+            epoll,
+            routes,
+            scratch: Vec::with_capacity(config.agents.len()),
+            signals,
+        })
+    }
+
+    fn route(&self, slot: usize) -> Result<Route, HostTransportError> {
+        self.routes
+            .get(slot)
+            .copied()
+            .ok_or(HostTransportError::NoSuchSlot { slot })
+    }
+}
+
+impl HostTransport for Transports {
+    type Loan = AnyLoan;
+
+    fn is_connected(&self, slot: usize) -> bool {
+        let Some(&r) = self.routes.get(slot) else {
+            return false;
+        };
+        self.parts.is_connected(r)
+    }
+
+    fn loan(&mut self, slot: usize) -> Result<AnyLoan, HostTransportError> {
+        let r = self.route(slot)?;
+        self.parts.loan(r)
+    }
+
+    fn publish(&mut self, slot: usize, frame: AnyLoan) -> Result<bool, HostTransportError> {
+        let r = self.route(slot)?;
+        self.parts.publish(slot, r, frame)
+    }
+
+    fn signal_start(&mut self) -> Result<(), HostTransportError> {
+        self.parts.signal_start()
+    }
+
+    fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError> {
+        self.parts.drain(sink)
+    }
+
+    fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
+        if self.epoll.is_some() {
+            return super::wait_for_activity(self, timeout);
+        }
+        // One transport: its own wait.
+        self.parts.wait_activity(timeout)
+    }
+
+    fn activity_fd(&self) -> RawFd {
+        if let Some(e) = &self.epoll {
+            return e.raw();
+        }
+        self.parts.activity_fd()
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        self.parts.next_deadline()
+    }
+
+    fn has_work(&self) -> bool {
+        self.parts.has_work()
+    }
+
+    fn after_wait(&mut self) {
+        self.parts.after_wait();
+    }
+
+    fn update_connections(&mut self) -> Result<(), HostTransportError> {
+        self.parts.update_connections()
+    }
+
+    fn termination_requested(&self) -> bool {
+        self.signals.termination_requested()
+    }
+
+    fn take_refusals(&mut self, sink: &mut dyn FnMut(&PeerRefusal)) -> u64 {
+        self.parts.take_refusals(sink)
+    }
+
+    fn forget_connection(&mut self, slot: usize) {
+        let Ok(r) = self.route(slot) else {
+            return;
+        };
+        self.parts.forget_connection(r);
+    }
+
+    fn reap_dead_agents(&mut self, dead: &mut Vec<usize>) {
+        self.parts.reap_dead_agents(&mut self.scratch, dead);
+    }
+
+    /// The first transport's that has one (only TCP's listener does today).
+    fn local_addr(&self) -> Option<SocketAddr> {
+        self.parts.local_addr()
+    }
+}
