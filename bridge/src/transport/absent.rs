@@ -11,14 +11,9 @@
 //! constructors is unreachable by construction, and the generic routing over the registry
 //! (`mixed.rs`, `any_agent.rs`) compiles unchanged.
 
-/// Declares the uninhabited agent `$agent` and its frame `$frame`; `connect` fails with
-/// `AgentConnectError::Transport` and `$detail` (an expression of type `String`).
-macro_rules! absent_agent {
-    ($(#[$doc:meta])* $agent:ident, $frame:ident, $detail:expr) => {
-        $(#[$doc])*
-        #[derive(Debug)]
-        pub enum $agent {}
-
+/// Declares the uninhabited frame `$frame` of the absent agent `$agent`.
+macro_rules! absent_frame {
+    ($agent:ident, $frame:ident) => {
         #[doc = concat!("The frame of a [`", stringify!($agent), "`]. Uninhabited.")]
         #[derive(Debug)]
         pub enum $frame {}
@@ -32,6 +27,18 @@ macro_rules! absent_agent {
                 match *self {}
             }
         }
+    };
+}
+
+/// Declares the uninhabited agent `$agent` and its frame `$frame`; `connect` fails with
+/// `AgentConnectError::Transport` and `$detail` (an expression of type `String`).
+macro_rules! absent_agent {
+    ($(#[$doc:meta])* $agent:ident, $frame:ident, $detail:expr) => {
+        $(#[$doc])*
+        #[derive(Debug)]
+        pub enum $agent {}
+
+        $crate::transport::absent::absent_frame!($agent, $frame);
 
         impl $crate::transport::AgentTransport for $agent {
             type Frame = $frame;
@@ -130,6 +137,15 @@ macro_rules! absent_host {
             }
         }
 
+        $crate::transport::absent::absent_host_transport!($host, $loan);
+    };
+}
+
+/// The [`HostTransport`](super::HostTransport) impl of the uninhabited host `$host` and the
+/// [`FrameLoanMut`](super::FrameLoanMut) impl of its loan `$loan`: every method unreachable.
+#[cfg_attr(all(feature = "legacy", feature = "zenoh"), allow(unused_macros))]
+macro_rules! absent_host_transport {
+    ($host:ident, $loan:ident) => {
         impl $crate::transport::FrameLoanMut for $loan {
             fn parts_mut(&mut self) -> (&mut $crate::wire::SensorHeader, &mut [u8]) {
                 match *self {}
@@ -189,8 +205,9 @@ macro_rules! absent_host {
 }
 
 pub(crate) use absent_agent;
+pub(crate) use absent_frame;
 #[cfg_attr(all(feature = "legacy", feature = "zenoh"), allow(unused_imports))]
-pub(crate) use absent_host;
+pub(crate) use {absent_host, absent_host_transport};
 
 /// The embedded default config with every agent on `kind`, in a session of this test
 /// process: what the stand-ins' tests create hosts and connect agents with (in a build

@@ -1,8 +1,9 @@
 //! The agent side over whichever transport the config names: the SDK's `Agent` drives this
 //! one [`AgentTransport`] and knows no transport by name (the host side's counterpart is
 //! `mixed.rs`). Generated from the transport registry (`registry.rs`): one variant per
-//! transport, each method a `match` that calls the transport's own (no trait object: see
-//! the registry's docs).
+//! transport (`any_types!`), each method a `match` that calls the transport's own
+//! (`any_agent_connect!`, `any_agent_methods!`, expanded inside the `AgentTransport`
+//! impl); no trait object: see the registry's docs.
 
 use std::time::Duration;
 
@@ -13,7 +14,8 @@ use crate::config::{Config, TransportKind};
 use crate::signal::SignalHandling;
 use crate::wire::{MotorCommand, MotorHeader, SensorHeader};
 
-macro_rules! any_agent {
+/// The registry's agent types, [`AnyFrame`] and [`AnyAgent`].
+macro_rules! any_types {
     ($(
         $(#[$attr:meta])*
         $kind:ident $name:literal $module:ident:
@@ -57,76 +59,98 @@ macro_rules! any_agent {
                 $kind(Box<$agent>),
             )*
         }
+    };
+}
 
-        impl AgentTransport for AnyAgent {
-            type Frame = AnyFrame;
+super::registry::transports!(any_types);
 
-            /// Connects over agent `id`'s transport. A transport without an agent side in
-            /// this SDK (the original protocol's, which serves programs written for the
-            /// original system) gives a clear error.
-            fn connect(
-                config: &Config,
-                id: u32,
-                timeout: Duration,
-                signals: SignalHandling,
-            ) -> Result<Self, AgentConnectError> {
-                let kind = config
-                    .agent(id)
-                    .map_or(config.transport.kind, |a| a.transport);
-                Ok(match kind {
-                    $(TransportKind::$kind => {
-                        Self::$kind(Box::new($agent::connect(config, id, timeout, signals)?))
-                    })*
-                })
+/// [`AgentTransport::connect`] of [`AnyAgent`] (inside its impl).
+macro_rules! any_agent_connect {
+    ($(
+        $(#[$attr:meta])*
+        $kind:ident $name:literal $module:ident:
+            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident;
+    )*) => {
+        /// Connects over agent `id`'s transport. A transport without an agent side in
+        /// this SDK (the original protocol's, which serves programs written for the
+        /// original system) gives a clear error.
+        fn connect(
+            config: &Config,
+            id: u32,
+            timeout: Duration,
+            signals: SignalHandling,
+        ) -> Result<Self, AgentConnectError> {
+            let kind = config
+                .agent(id)
+                .map_or(config.transport.kind, |a| a.transport);
+            Ok(match kind {
+                $(TransportKind::$kind => {
+                    Self::$kind(Box::new($agent::connect(config, id, timeout, signals)?))
+                })*
+            })
+        }
+    };
+}
+
+/// The other [`AgentTransport`] methods of [`AnyAgent`] (inside its impl): the variant's
+/// own.
+macro_rules! any_agent_methods {
+    ($(
+        $(#[$attr:meta])*
+        $kind:ident $name:literal $module:ident:
+            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident;
+    )*) => {
+        fn try_receive_newest(&mut self) -> Result<Option<AnyFrame>, AgentReceiveError> {
+            Ok(match self {
+                $(Self::$kind(t) => t.try_receive_newest()?.map(AnyFrame::$kind),)*
+            })
+        }
+
+        fn wait_readable(&mut self, timeout: Duration) {
+            match self {
+                $(Self::$kind(t) => t.wait_readable(timeout),)*
             }
+        }
 
-            fn try_receive_newest(&mut self) -> Result<Option<AnyFrame>, AgentReceiveError> {
-                Ok(match self {
-                    $(Self::$kind(t) => t.try_receive_newest()?.map(AnyFrame::$kind),)*
-                })
+        fn discard_wakeups(&mut self) {
+            match self {
+                $(Self::$kind(t) => t.discard_wakeups(),)*
             }
+        }
 
-            fn wait_readable(&mut self, timeout: Duration) {
-                match self {
-                    $(Self::$kind(t) => t.wait_readable(timeout),)*
-                }
+        fn host_liveness(&mut self, check_process: bool) -> HostLiveness {
+            match self {
+                $(Self::$kind(t) => t.host_liveness(check_process),)*
             }
+        }
 
-            fn discard_wakeups(&mut self) {
-                match self {
-                    $(Self::$kind(t) => t.discard_wakeups(),)*
-                }
+        fn begin_close(&mut self) {
+            match self {
+                $(Self::$kind(t) => t.begin_close(),)*
             }
+        }
 
-            fn host_liveness(&mut self, check_process: bool) -> HostLiveness {
-                match self {
-                    $(Self::$kind(t) => t.host_liveness(check_process),)*
-                }
+        fn send_batch(
+            &mut self,
+            header: &MotorHeader,
+            commands: &[MotorCommand],
+        ) -> Result<(), AgentSendError> {
+            match self {
+                $(Self::$kind(t) => t.send_batch(header, commands),)*
             }
+        }
 
-            fn begin_close(&mut self) {
-                match self {
-                    $(Self::$kind(t) => t.begin_close(),)*
-                }
-            }
-
-            fn send_batch(
-                &mut self,
-                header: &MotorHeader,
-                commands: &[MotorCommand],
-            ) -> Result<(), AgentSendError> {
-                match self {
-                    $(Self::$kind(t) => t.send_batch(header, commands),)*
-                }
-            }
-
-            fn termination_requested(&self) -> bool {
-                match self {
-                    $(Self::$kind(t) => t.termination_requested(),)*
-                }
+        fn termination_requested(&self) -> bool {
+            match self {
+                $(Self::$kind(t) => t.termination_requested(),)*
             }
         }
     };
 }
 
-super::registry::transports!(any_agent);
+impl AgentTransport for AnyAgent {
+    type Frame = AnyFrame;
+
+    super::registry::transports!(any_agent_connect);
+    super::registry::transports!(any_agent_methods);
+}

@@ -11,8 +11,8 @@
 //! - `TransportKind` with `ALL` and `as_str` (`config/mod.rs`; serde reads it by the same
 //!   names);
 //! - the host's routing per agent (`mixed.rs`): `AnyLoan` and its `FrameLoanMut`, one part
-//!   per transport in `Transports` and every `HostTransport` method over them, and the
-//!   create error `TransportsCreateError` (also the public `HostCreateError`);
+//!   per transport in `Parts` (inside `Transports`) and every `HostTransport` method over
+//!   them, and the create error `TransportsCreateError` (also the public `HostCreateError`);
 //! - the agent side (`any_agent.rs`): `AnyAgent`, `AnyFrame` and their contract methods.
 //!
 //! The C ABI and C# constants (`vrs_host_transport_t`, `Native.cs`, the C side of the C#
@@ -49,7 +49,8 @@
 //!
 //! The cost is that the routing is written inside `macro_rules!` bodies, which rustfmt
 //! does not format; they are kept short and mechanical (one line per method and
-//! transport), with the logic in ordinary generic functions (`mixed.rs`'s `Part<T>`).
+//! transport; several small macros per file, each under 60 lines, rather than one), with
+//! the logic in ordinary generic functions (`mixed.rs`'s `Part<T>`).
 
 /// Calls `$then! { … }` with every transport, in the order of
 /// [`TransportKind::ALL`](crate::TransportKind::ALL). Each entry:
