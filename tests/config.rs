@@ -7,7 +7,7 @@ use proptest::prelude::*;
 use vrsync_bridge::Config;
 use vrsync_bridge::{ConfigLoadError, DEFAULT_CONFIG_TOML};
 
-use crate::hostile::allocations_in;
+use crate::hostile::decoding::allocations_in;
 use crate::util::{self, TestConfig, workspace};
 
 #[test]
