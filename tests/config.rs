@@ -1,13 +1,13 @@
-//! Config files and bad configs, through the library and through the binaries.
+//! Config files and bad configs, through the library and through the binaries; the
+//! loader on arbitrary and mutated text in `config/arbitrary.rs`.
+
+mod arbitrary;
 
 use std::path::Path;
 use std::time::Duration;
 
-use proptest::prelude::*;
 use vrsync_bridge::Config;
-use vrsync_bridge::{ConfigLoadError, DEFAULT_CONFIG_TOML};
 
-use crate::hostile::decoding::allocations_in;
 use crate::util::{self, TestConfig, workspace};
 
 #[test]
@@ -141,46 +141,88 @@ fn edit(base: &str, from: &str, to: &str) -> String {
     base.replacen(from, to, 1)
 }
 
-fn bad_config_table() -> Vec<Bad> {
-    let shm = TestConfig::new("badcfg", 1).toml();
-    let tcp = TestConfig::with_transport("badcfg", 1, util::Transport::Tcp).toml();
-    let row = |name, text, at, key| Bad {
+/// A row whose text is `text`.
+fn row(name: &'static str, text: String, at: At, key: &'static str) -> Bad {
+    Bad {
         name,
         text,
         at,
         key,
-    };
-    let sync = |name, from: &str, to: &str, at, key| row(name, edit(&shm, from, to), at, key);
-    let camera = |name, from: &str, to: &str, at, key| row(name, edit(&shm, from, to), at, key);
-    let transport = |name, from: &str, to: &str, at, key| row(name, edit(&tcp, from, to), at, key);
-    let mut five_cameras = shm.clone();
-    for cam in ["c", "d", "e"] {
-        five_cameras += &format!("[[agent.camera]]\nname = \"{cam}\"\nwidth = 8\n");
     }
+}
+
+/// The good configs the rows edit: one agent over shared memory, and over TCP.
+struct Base {
+    shm: String,
+    tcp: String,
+}
+
+impl Base {
+    /// A row that edits the shared-memory config: its top level or `[sync]`.
+    fn sync(&self, name: &'static str, from: &str, to: &str, at: At, key: &'static str) -> Bad {
+        row(name, edit(&self.shm, from, to), at, key)
+    }
+
+    /// A row that edits the shared-memory config: its agent or camera.
+    fn camera(&self, name: &'static str, from: &str, to: &str, at: At, key: &'static str) -> Bad {
+        row(name, edit(&self.shm, from, to), at, key)
+    }
+
+    /// A row that edits the TCP config.
+    fn transport(
+        &self,
+        name: &'static str,
+        from: &str,
+        to: &str,
+        at: At,
+        key: &'static str,
+    ) -> Bad {
+        row(name, edit(&self.tcp, from, to), at, key)
+    }
+}
+
+fn bad_config_table() -> Vec<Bad> {
+    let base = Base {
+        shm: TestConfig::new("badcfg", 1).toml(),
+        tcp: TestConfig::with_transport("badcfg", 1, util::Transport::Tcp).toml(),
+    };
+    [
+        unknown_keys_and_wrong_types,
+        times_enums_and_agents,
+        cameras,
+        transport_and_toml,
+    ]
+    .into_iter()
+    .flat_map(|rows| rows(&base))
+    .collect()
+}
+
+/// Unknown keys (at top level and in every table) and wrong types.
+fn unknown_keys_and_wrong_types(b: &Base) -> Vec<Bad> {
     vec![
         // Unknown keys, at top level and in every table.
-        sync(
+        b.sync(
             "unknown.toml",
             "seed = 7",
             "seed = 7\nbogus = 1",
             At::Text("bogus"),
             "bogus",
         ),
-        sync(
+        b.sync(
             "unknown_sync.toml",
             "sync_mode = true",
             "sync_mode = true\nsync_mod = true",
             At::Text("sync_mod ="),
             "sync.sync_mod",
         ),
-        camera(
+        b.camera(
             "unknown_camera.toml",
             "width = 64",
             "width = 64\nwidht = 64",
             At::Text("widht"),
             "agent.camera.widht",
         ),
-        transport(
+        b.transport(
             "unknown_transport.toml",
             "kind = \"tcp\"",
             "kind = \"tcp\"\ntcp_port = 7400",
@@ -189,90 +231,96 @@ fn bad_config_table() -> Vec<Bad> {
         ),
         row(
             "unknown_table.toml",
-            shm.clone() + "\n[network]\nport = 1\n",
+            b.shm.clone() + "\n[network]\nport = 1\n",
             At::Text("[network]"),
             "network",
         ),
         // Wrong types.
-        sync(
+        b.sync(
             "type.toml",
             "sync_mode = true",
             "sync_mode = \"yes\"",
             At::Text("sync_mode"),
             "sync.sync_mode",
         ),
-        sync(
+        b.sync(
             "type_timeout.toml",
             "stop_timeout = 5",
             "stop_timeout = \"5s\"",
             At::Text("stop_timeout"),
             "sync.stop_timeout",
         ),
-        sync(
+        b.sync(
             "type_seed.toml",
             "seed = 7",
             "seed = -7",
             At::Text("seed"),
             "seed",
         ),
-        camera(
+        b.camera(
             "type_width.toml",
             "width = 64",
             "width = \"64\"",
             At::Text("width"),
             "agent.camera.width",
         ),
-        camera(
+        b.camera(
             "type_id.toml",
             "id = 0",
             "id = \"zero\"",
             At::Text("id ="),
             "agent.id",
         ),
+    ]
+}
+
+/// Bad times, bad enum values in `[sync]`, bad agent ids.
+fn times_enums_and_agents(b: &Base) -> Vec<Bad> {
+    vec![
         // Negative, zero and non-finite times.
-        sync(
+        b.sync(
             "negative.toml",
             "stop_timeout = 5",
             "stop_timeout = -5",
             At::Text("stop_timeout"),
             "sync.stop_timeout",
         ),
-        sync(
+        b.sync(
             "zero_stop.toml",
             "stop_timeout = 5",
             "stop_timeout = 0",
             At::Text("stop_timeout"),
             "sync.stop_timeout",
         ),
-        sync(
+        b.sync(
             "zero.toml",
             "simulation_time_per_frame = 0.1",
             "simulation_time_per_frame = 0",
             At::Text("simulation_time_per_frame"),
             "sync.simulation_time_per_frame",
         ),
-        sync(
+        b.sync(
             "negative_frame.toml",
             "simulation_time_per_frame = 0.1",
             "simulation_time_per_frame = -0.1",
             At::Text("simulation_time_per_frame"),
             "sync.simulation_time_per_frame",
         ),
-        sync(
+        b.sync(
             "negative_connect.toml",
             "connect_timeout = 20",
             "connect_timeout = -1",
             At::Text("connect_timeout"),
             "sync.connect_timeout",
         ),
-        sync(
+        b.sync(
             "nan_timeout.toml",
             "stop_timeout = 5",
             "stop_timeout = nan",
             At::Text("stop_timeout"),
             "sync.stop_timeout",
         ),
-        sync(
+        b.sync(
             "inf_timeout.toml",
             "stop_timeout = 5",
             "stop_timeout = inf",
@@ -280,14 +328,14 @@ fn bad_config_table() -> Vec<Bad> {
             "sync.stop_timeout",
         ),
         // Bad enum values in [sync].
-        sync(
+        b.sync(
             "wait.toml",
             "connect_timeout = 20",
             "connect_timeout = 20\nwait = \"busy\"",
             At::Text("wait ="),
             "sync.wait",
         ),
-        sync(
+        b.sync(
             "on_agent_lost.toml",
             "connect_timeout = 20",
             "connect_timeout = 20\non_agent_lost = \"ignore\"",
@@ -297,101 +345,111 @@ fn bad_config_table() -> Vec<Bad> {
         // Agents: none, duplicate and out-of-range ids.
         row(
             "noagents.toml",
-            shm.split("\n[[agent]]").next().unwrap().to_string(),
+            b.shm.split("\n[[agent]]").next().unwrap().to_string(),
             At::Line(1),
             "at least one agent",
         ),
         row(
             "dup.toml",
-            shm.clone() + "\n[[agent]]\nid = 0\n",
+            b.shm.clone() + "\n[[agent]]\nid = 0\n",
             At::LastText("id = 0"),
             "duplicate agent id 0",
         ),
         row(
             "dup_key.toml",
-            shm.clone() + "\n[[agent]]\nid = 0\n",
+            b.shm.clone() + "\n[[agent]]\nid = 0\n",
             At::LastText("id = 0"),
             "agent.id",
         ),
-        camera(
+        b.camera(
             "negative_id.toml",
             "id = 0",
             "id = -1",
             At::Text("id ="),
             "agent.id",
         ),
-        camera(
+        b.camera(
             "big_id.toml",
             "id = 0",
             "id = 251",
             At::Text("id ="),
             "agent.id",
         ),
+    ]
+}
+
+/// Cameras.
+fn cameras(b: &Base) -> Vec<Bad> {
+    let mut five_cameras = b.shm.clone();
+    for cam in ["c", "d", "e"] {
+        five_cameras += &format!("[[agent.camera]]\nname = \"{cam}\"\nwidth = 8\n");
+    }
+    vec![
         // Cameras.
-        camera(
+        b.camera(
             "camera_width.toml",
             "width = 64",
             "width = 0",
             At::Text("width"),
             "agent.camera.width",
         ),
-        camera(
+        b.camera(
             "camera_huge.toml",
             "width = 64",
             "width = 100000",
             At::Text("width"),
             "agent.camera.width",
         ),
-        camera(
+        b.camera(
             "camera_height.toml",
             "width = 64",
             "width = 64\nheight = -1",
             At::Text("height"),
             "agent.camera.height",
         ),
-        camera(
+        b.camera(
             "camera_format.toml",
             "width = 64",
             "width = 64\nformat = \"bgr\"",
             At::Text("format"),
             "agent.camera.format",
         ),
-        camera(
+        b.camera(
             "camera_fov_h.toml",
             "width = 64",
             "width = 64\nfov_horizontal_deg = 180",
             At::Text("fov_horizontal_deg"),
             "agent.camera.fov_horizontal_deg",
         ),
-        camera(
+        b.camera(
             "camera_fov_v.toml",
             "width = 64",
             "width = 64\nfov_vertical_deg = 0",
             At::Text("fov_vertical_deg"),
             "agent.camera.fov_vertical_deg",
         ),
-        camera(
+        b.camera(
             "camera_name_long.toml",
             "name = \"left\"",
             "name = \"a-very-long-camera\"",
             At::Text("a-very-long-camera"),
             "agent.camera.name",
         ),
-        camera(
+        b.camera(
             "camera_name_empty.toml",
             "name = \"left\"",
             "name = \"\"",
             At::Text("name = \"\""),
             "agent.camera.name",
         ),
-        camera(
+        b.camera(
             "camera_name_twice.toml",
             "name = \"right\"",
             "name = \"left\"",
             At::LastText("name = \"left\""),
             "agent.camera.name",
         ),
-        camera(
+        b.camera(
             "camera_no_width.toml",
             "width = 64",
             "",
@@ -404,43 +462,49 @@ fn bad_config_table() -> Vec<Bad> {
             At::Text("[[agent]]"),
             "agent.camera",
         ),
+    ]
+}
+
+/// Transport, session and plain TOML errors.
+fn transport_and_toml(b: &Base) -> Vec<Bad> {
+    vec![
         // Transport.
-        transport(
+        b.transport(
             "kind.toml",
             "kind = \"tcp\"",
             "kind = \"udp\"",
             At::Text("kind"),
             "transport.kind",
         ),
-        transport(
+        b.transport(
             "tcp_listen_name.toml",
             "tcp_listen = \"127.0.0.1:",
             "tcp_listen = \"localhost:",
             At::Text("tcp_listen"),
             "transport.tcp_listen",
         ),
-        transport(
+        b.transport(
             "tcp_listen_noport.toml",
             "tcp_listen = \"127.0.0.1:",
             "tcp_listen = \"127.0.0.1\"\n#",
             At::Text("tcp_listen"),
             "transport.tcp_listen",
         ),
-        transport(
+        b.transport(
             "tcp_listen_port.toml",
             "tcp_listen = \"127.0.0.1:",
             "tcp_listen = \"127.0.0.1:99999\"\n#",
             At::Text("tcp_listen"),
             "transport.tcp_listen",
         ),
-        transport(
+        b.transport(
             "tcp_listen_type.toml",
             "tcp_listen = \"127.0.0.1:",
             "tcp_listen = 7400\n#",
             At::Text("tcp_listen"),
             "transport.tcp_listen",
         ),
-        transport(
+        b.transport(
             "tcp_token_empty.toml",
             "kind = \"tcp\"",
             "kind = \"tcp\"\ntcp_token = \"\"",
@@ -450,21 +514,21 @@ fn bad_config_table() -> Vec<Bad> {
         row(
             "tcp_token_long.toml",
             edit(
-                &tcp,
+                &b.tcp,
                 "kind = \"tcp\"",
                 &format!("kind = \"tcp\"\ntcp_token = \"{}\"", "x".repeat(257)),
             ),
             At::Text("tcp_token"),
             "transport.tcp_token",
         ),
-        transport(
+        b.transport(
             "tcp_token_type.toml",
             "kind = \"tcp\"",
             "kind = \"tcp\"\ntcp_token = 1234",
             At::Text("tcp_token"),
             "transport.tcp_token",
         ),
-        transport(
+        b.transport(
             "max_commands.toml",
             "kind = \"tcp\"",
             "kind = \"tcp\"\nmax_commands_per_cycle = 0",
@@ -472,15 +536,15 @@ fn bad_config_table() -> Vec<Bad> {
             "transport.max_commands_per_cycle",
         ),
         // Session and plain TOML errors.
-        sync(
+        b.sync(
             "session.toml",
             "session = \"",
             "session = \"a/b",
             At::Text("session"),
             "session",
         ),
-        sync("syntax.toml", "[sync]", "[sync", At::Text("[sync"), "sync"),
-        sync(
+        b.sync("syntax.toml", "[sync]", "[sync", At::Text("[sync"), "sync"),
+        b.sync(
             "dup_toml_key.toml",
             "seed = 7",
             "seed = 7\nseed = 8",
@@ -641,238 +705,4 @@ fn effective_config_writes_names_and_tokens_as_toml_strings() {
     let back = Config::from_toml_str(&c.to_toml_string(), Path::new("e.toml")).unwrap();
     assert_eq!(back.agents[0].cameras[0].name, "\u{3347a}\u{7f}");
     assert_eq!(back.transport.tcp_token.as_deref(), Some("a\tb\u{1}\""));
-}
-
-// --- the loader on arbitrary and mutated text ------------------------------------------
-
-/// Values that probe ranges, types and parsing corners.
-const VALUES: &[&str] = &[
-    "-1",
-    "0",
-    "1",
-    "0.0000001",
-    "-0.0",
-    "nan",
-    "inf",
-    "-inf",
-    "1e308",
-    "9223372036854775807",
-    "-9223372036854775808",
-    "250",
-    "251",
-    "4096",
-    "4097",
-    "8192",
-    "8193",
-    "true",
-    "\"\"",
-    "\"x\"",
-    "\"a/b\"",
-    "\"\\u0000\"",
-    "\"\\u007f\"",
-    "\"é\"",
-    "[]",
-    "{}",
-    "[1, 2]",
-    "{ a = 1 }",
-    "\"127.0.0.1:0\"",
-    "\"[::1]:7400\"",
-    "\"0.0.0.0:7400\"",
-    "\"localhost:7400\"",
-    "\"rgba8\"",
-    "\"depth32f\"",
-    "\"gray8\"",
-    "\"tcp\"",
-    "\"spin\"",
-    "\"abort\"",
-    "1979-05-27T07:32:00Z",
-];
-
-/// Lines that add, duplicate or break structure.
-const SNIPPETS: &[&str] = &[
-    "[[agent]]",
-    "id = 0",
-    "id = 1",
-    "id = 250",
-    "[[agent.camera]]",
-    "name = \"n\"",
-    "width = 8192",
-    "height = 8192",
-    "format = \"depth32f\"",
-    "[sync]",
-    "[transport]",
-    "[world]",
-    "kind = \"tcp\"",
-    "tcp_token = \"t\"",
-    "tcp_listen = \"127.0.0.1:0\"",
-    "wait = \"spin\"",
-    "on_agent_lost = \"wait\"",
-    "session = \"s\"",
-    "bogus = 1",
-    "= 1",
-    "[",
-    "]",
-    "\"",
-    "\'\'\'",
-    "#",
-    "a.b.c = 1",
-    "agent = 1",
-    "[agent]",
-    "[[sync]]",
-    "sync = 1",
-    "[agent.camera]",
-    "SyncMode = false",
-    "SimulationTimePerFrame = 0.05",
-];
-
-/// One edit of a config text, line-wise.
-#[derive(Debug, Clone)]
-enum Mutation {
-    DeleteLine(usize),
-    DuplicateLine(usize),
-    InsertSnippet(usize, usize),
-    ReplaceValue(usize, usize),
-    SwapLines(usize, usize),
-    TruncateAt(usize),
-}
-
-fn mutation() -> impl Strategy<Value = Mutation> {
-    prop_oneof![
-        any::<usize>().prop_map(Mutation::DeleteLine),
-        any::<usize>().prop_map(Mutation::DuplicateLine),
-        (any::<usize>(), 0..SNIPPETS.len()).prop_map(|(l, s)| Mutation::InsertSnippet(l, s)),
-        (any::<usize>(), 0..VALUES.len()).prop_map(|(l, v)| Mutation::ReplaceValue(l, v)),
-        (any::<usize>(), any::<usize>()).prop_map(|(a, b)| Mutation::SwapLines(a, b)),
-        any::<usize>().prop_map(Mutation::TruncateAt),
-    ]
-}
-
-fn mutate(text: &str, mutations: &[Mutation]) -> String {
-    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
-    for m in mutations {
-        let n = lines.len().max(1);
-        match *m {
-            Mutation::DeleteLine(i) if !lines.is_empty() => {
-                lines.remove(i % n);
-            }
-            Mutation::DuplicateLine(i) if !lines.is_empty() => {
-                let l = lines[i % n].clone();
-                lines.insert(i % n, l);
-            }
-            Mutation::InsertSnippet(i, s) => {
-                lines.insert(i % (lines.len() + 1), SNIPPETS[s].into())
-            }
-            Mutation::ReplaceValue(i, v) if !lines.is_empty() => {
-                let l = &mut lines[i % n];
-                if let Some(eq) = l.find('=') {
-                    l.truncate(eq + 1);
-                    l.push(' ');
-                    l.push_str(VALUES[v]);
-                }
-            }
-            Mutation::SwapLines(a, b) if !lines.is_empty() => lines.swap(a % n, b % n),
-            Mutation::TruncateAt(i) => lines.truncate(i % (lines.len() + 1)),
-            _ => {}
-        }
-    }
-    lines.join("\n") + "\n"
-}
-
-/// The loader on `text`: no panic; an error names the file and a line of the text; no
-/// allocation beyond a small multiple of the text (nothing is sized by a value in the
-/// file); a config it accepts survives the round trip through the effective config that
-/// spawned agents receive.
-fn check_loader(text: &str) -> Result<(), TestCaseError> {
-    let path = Path::new("fuzz.toml");
-    let (result, cost) = allocations_in(|| Config::from_toml_str(text, path));
-    let limit = 256 * 1024 + 64 * text.len();
-    prop_assert!(
-        cost.largest <= limit,
-        "loading {} bytes allocated {} bytes at once",
-        text.len(),
-        cost.largest
-    );
-    match result {
-        Ok(config) => {
-            let effective = config.to_toml_string();
-            let back = Config::from_toml_str(&effective, Path::new("effective.toml"));
-            prop_assert!(
-                back.is_ok(),
-                "effective config does not load: {:?}\n{effective}",
-                back.err()
-            );
-            if let Ok(back) = back {
-                prop_assert_eq!(&back.session, &config.session);
-                prop_assert_eq!(back.seed, config.seed);
-                prop_assert_eq!(&back.sync, &config.sync);
-                prop_assert_eq!(&back.transport, &config.transport);
-                prop_assert_eq!(&back.agents, &config.agents);
-            }
-        }
-        Err(e) => {
-            let msg = e.to_string();
-            prop_assert!(msg.starts_with("fuzz.toml:"), "{msg}");
-            let line = match e {
-                ConfigLoadError::Parse { line, .. } | ConfigLoadError::Invalid { line, .. } => line,
-                other => return Err(TestCaseError::fail(format!("unexpected {other:?}"))),
-            };
-            prop_assert!(
-                line >= 1 && line <= text.lines().count().max(1) + 1,
-                "{msg}"
-            );
-        }
-    }
-    Ok(())
-}
-
-/// `s` as a TOML basic string, every character but ASCII letters and digits escaped.
-fn toml_string(s: &str) -> String {
-    let mut out = String::from("\"");
-    for c in s.chars() {
-        if c.is_ascii_alphanumeric() {
-            out.push(c);
-        } else {
-            out += &format!("\\U{:08X}", c as u32);
-        }
-    }
-    out + "\""
-}
-
-proptest! {
-    #![proptest_config(ProptestConfig::with_cases(256))]
-
-    /// Spawned agents get the host's effective config: camera names and tokens with any
-    /// characters must survive it.
-    #[test]
-    fn effective_config_keeps_any_camera_name_and_token(
-        name in "(?s).{1,6}",
-        token in "(?s).{1,40}",
-    ) {
-        let text = format!(
-            "[transport]\nkind = \"tcp\"\ntcp_token = {}\n[[agent]]\nid = 0\n\
-             [[agent.camera]]\nname = {}\nwidth = 8\n",
-            toml_string(&token),
-            toml_string(&name)
-        );
-        check_loader(&text)?;
-    }
-
-    #[test]
-    fn config_loader_survives_arbitrary_text(text in "(?s).{0,300}") {
-        check_loader(&text)?;
-    }
-
-    #[test]
-    fn config_loader_survives_toml_like_text(
-        text in "([a-z_]{1,12}( ?= ?([0-9.e-]{1,6}|\"[a-z0-9:.]{0,8}\"|true|\\[\\])?)?|\\[{1,2}[a-z.]{1,12}\\]{1,2}|#.{0,5})?(\n([a-z_]{1,12}( ?= ?([0-9.e-]{1,6}|\"[a-z0-9:.]{0,8}\"|true|\\[\\])?)?|\\[{1,2}[a-z.]{1,12}\\]{1,2}|#.{0,5})?){0,20}"
-    ) {
-        check_loader(&text)?;
-    }
-
-    #[test]
-    fn config_loader_survives_mutated_default_toml(
-        mutations in proptest::collection::vec(mutation(), 1..6)
-    ) {
-        check_loader(&mutate(DEFAULT_CONFIG_TOML, &mutations))?;
-    }
 }
