@@ -8,22 +8,12 @@ use std::time::Duration;
 
 use crate::util::{self, Proc};
 
-/// The packages `vrsync-agent` links with `features` (comma-separated, may be empty), by
-/// name.
-fn sdk_packages(features: &str) -> Vec<String> {
+/// The packages `package` links with `features` (comma-separated, may be empty), by name.
+fn packages(package: &str, features: &str) -> Vec<String> {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let mut cmd = Command::new(cargo);
     cmd.current_dir(util::workspace()).args([
-        "tree",
-        "--locked",
-        "-p",
-        "vrsync-agent",
-        "-e",
-        "normal",
-        "--prefix",
-        "none",
-        "-f",
-        "{p}",
+        "tree", "--locked", "-p", package, "-e", "normal", "--prefix", "none", "-f", "{p}",
     ]);
     if !features.is_empty() {
         cmd.args(["--features", features]);
@@ -59,7 +49,7 @@ const NOT_IN_THE_SDK: [&str; 10] = [
 
 #[test]
 fn the_agent_sdk_links_no_program_crates_and_zenoh_only_with_its_feature() {
-    let lean = sdk_packages("");
+    let lean = packages("vrsync-agent", "");
     assert!(lean.iter().any(|p| p == "vrsync-bridge"), "{lean:?}");
     for name in NOT_IN_THE_SDK {
         assert!(
@@ -69,7 +59,7 @@ fn the_agent_sdk_links_no_program_crates_and_zenoh_only_with_its_feature() {
     }
     // The feature is what brings zenoh (and with it, its own anyhow, rand, tokio and
     // tracing-subscriber), and nothing of the programs.
-    let with_zenoh = sdk_packages("zenoh");
+    let with_zenoh = packages("vrsync-agent", "zenoh");
     for name in ["zenoh", "tokio"] {
         assert!(
             with_zenoh.iter().any(|p| p == name),
@@ -82,4 +72,16 @@ fn the_agent_sdk_links_no_program_crates_and_zenoh_only_with_its_feature() {
             "with --features zenoh: {name} in {with_zenoh:?}"
         );
     }
+}
+
+/// The Python extension counts its allocations with `vrsync-alloc-count` and links nothing
+/// else of the benchmark (the transport floors of `vrsync-floor`).
+#[test]
+fn the_python_extension_links_the_counting_allocator_and_no_floors() {
+    let python = packages("vrsync-python", "");
+    assert!(
+        python.iter().any(|p| p == "vrsync-alloc-count"),
+        "{python:?}"
+    );
+    assert!(!python.iter().any(|p| p == "vrsync-floor"), "{python:?}");
 }

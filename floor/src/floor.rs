@@ -319,7 +319,7 @@ pub fn shm_floor_agent(
     let mut allocs_at_warmup = None;
     while done < cycles {
         if done >= warmup && allocs_at_warmup.is_none() {
-            allocs_at_warmup = Some((crate::alloc_count::allocations(), done));
+            allocs_at_warmup = Some((vrsync_alloc_count::allocations(), done));
         }
         if Instant::now() >= deadline {
             return Err(FloorError::Timeout(timeout));
@@ -363,7 +363,7 @@ impl FloorAgentReport {
     pub(crate) fn new(checksum: u64, at_warmup: Option<(u64, u64)>, done: u64) -> Self {
         let allocs_per_cycle = match at_warmup {
             Some((a, c)) if done > c => {
-                (crate::alloc_count::allocations() - a) as f64 / (done - c) as f64
+                (vrsync_alloc_count::allocations() - a) as f64 / (done - c) as f64
             }
             _ => f64::NAN,
         };
@@ -460,7 +460,7 @@ pub fn tcp_floor_agent(
     let mut allocs_at_warmup = None;
     for cycle in 0..cycles {
         if cycle == warmup {
-            allocs_at_warmup = Some((crate::alloc_count::allocations(), cycle));
+            allocs_at_warmup = Some((vrsync_alloc_count::allocations(), cycle));
         }
         s.read_exact(&mut frame)?;
         sum = sum.wrapping_add(touch_rows(&frame, row_len));

@@ -6,11 +6,10 @@
 //!   `vr-sim bench` with the same bytes and fan-out as a vrsync cycle and nothing else
 //!   (host side [`ShmFloorHost`] / [`TcpFloorHost`] / [`ZenohFloorHost`], agent side
 //!   [`shm_floor_agent`] / [`tcp_floor_agent`] / [`zenoh_floor_agent`], run by
-//!   `vr-bench-agent --mode floor-shm|floor-tcp|floor-zenoh`);
-//! - a **counting global allocator** ([`alloc_count::CountingAlloc`]) for the benchmark's
-//!   allocations-per-cycle figure.
+//!   `vr-bench-agent --mode floor-shm|floor-tcp|floor-zenoh`), each reporting its
+//!   allocations per cycle when the program installed `vrsync-alloc-count`'s counting
+//!   allocator.
 
-pub mod alloc_count;
 mod floor;
 mod zenoh_floor;
 

@@ -202,7 +202,7 @@ pub fn zenoh_floor_agent(
     let mut allocs_at_warmup = None;
     for cycle in 0..cycles {
         if cycle == warmup {
-            allocs_at_warmup = Some((crate::alloc_count::allocations(), cycle));
+            allocs_at_warmup = Some((vrsync_alloc_count::allocations(), cycle));
         }
         let sample = match frames.recv_timeout(timeout) {
             Ok(Some(s)) => s,

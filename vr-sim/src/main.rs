@@ -27,7 +27,7 @@ use crate::run::{RunOptions, print_summary};
 // Counts allocations for `vr-sim bench` (allocs_per_cycle); one relaxed atomic add per
 // allocation otherwise.
 #[global_allocator]
-static ALLOC: vrsync_floor::alloc_count::CountingAlloc = vrsync_floor::alloc_count::CountingAlloc;
+static ALLOC: vrsync_alloc_count::CountingAlloc = vrsync_alloc_count::CountingAlloc;
 
 /// Exit code of bad usage or bad config.
 const EXIT_USAGE: u8 = 2;

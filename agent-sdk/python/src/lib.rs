@@ -58,13 +58,13 @@ fn _remove_dead_nodes_for_tests(prefix: &str) -> u64 {
 /// Rust's allocations in the extension are counted (a relaxed atomic add each), so that
 /// the benchmark can show what a step allocates ([`_allocations`]).
 #[global_allocator]
-static ALLOC: vrsync_floor::alloc_count::CountingAlloc = vrsync_floor::alloc_count::CountingAlloc;
+static ALLOC: vrsync_alloc_count::CountingAlloc = vrsync_alloc_count::CountingAlloc;
 
 /// Benchmark aid, not API: how many allocations (and reallocations) the extension's Rust
 /// code made so far in this process.
 #[pyfunction]
 fn _allocations() -> u64 {
-    vrsync_floor::alloc_count::allocations()
+    vrsync_alloc_count::allocations()
 }
 
 /// The extension module `vrsync._vrsync`.

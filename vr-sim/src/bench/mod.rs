@@ -15,8 +15,8 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use hdrhistogram::Histogram;
 use serde::Serialize;
+use vrsync_alloc_count::allocations;
 use vrsync_bridge::{Config, Host, SignalHandling};
-use vrsync_floor::alloc_count::allocations;
 use vrsync_floor::{ShmFloorHost, TcpFloorHost, ZenohFloorHost};
 
 mod floor;

@@ -1,9 +1,4 @@
-//! A counting global allocator, for the benchmark's allocations-per-cycle figure.
-//!
-//! ```ignore
-//! #[global_allocator]
-//! static ALLOC: vrsync_floor::alloc_count::CountingAlloc = vrsync_floor::alloc_count::CountingAlloc;
-//! ```
+//! The counting allocator and its count.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicU64, Ordering};
