@@ -5,11 +5,11 @@ use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::time::{Duration, Instant};
 
 use iceoryx2::port::listener::Listener;
-use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as ps_factory};
+use vrsync_bridge::shm::WakeWord;
 
 type Svc = ipc::Service;
 
@@ -40,6 +40,11 @@ fn name(session: &str, suffix: &str) -> Result<ServiceName, FloorError> {
         .map_err(|e| ice("service name", e))
 }
 
+/// The floor's wake word's key: its own, beside any vrsync session of the same name.
+fn wake_key(session: &str) -> String {
+    format!("vrsync-floor/{session}")
+}
+
 /// Reads the first and last byte of every row of every image, as the benchmark agent does.
 /// Returns a checksum so the reads cannot be optimised away.
 pub fn touch_rows(bytes: &[u8], row_len: usize) -> u64 {
@@ -59,7 +64,7 @@ pub fn touch_rows(bytes: &[u8], row_len: usize) -> u64 {
 pub struct ShmFloorHost {
     _node: Node<Svc>,
     _start_service: event_factory::PortFactory<Svc>,
-    start: Notifier<Svc>,
+    wake: WakeWord,
     _back_service: event_factory::PortFactory<Svc>,
     back: Listener<Svc>,
     services: Vec<ps_factory::PortFactory<Svc, [u8], u64>>,
@@ -134,22 +139,19 @@ impl ShmFloorHost {
             .listener_builder()
             .create()
             .map_err(|e| ice("listener", e))?;
+        // *Start* reaches every agent the way vrsync's shared-memory host sends it: one
+        // bump of a wake word (`start` is only the service agents open first).
+        let wake = WakeWord::create(&wake_key(session)).map_err(|e| ice("wake word", e))?;
         let start_service = node
             .service_builder(&name(session, "start")?)
             .event()
-            .max_listeners(n + 2)
-            .max_notifiers(2)
             .max_nodes(n + 4)
             .create()
             .map_err(|e| ice("start service", e))?;
-        let start = start_service
-            .notifier_builder()
-            .create()
-            .map_err(|e| ice("notifier", e))?;
         Ok(Self {
             _node: node,
             _start_service: start_service,
-            start,
+            wake,
             _back_service: back_service,
             back,
             services,
@@ -185,7 +187,7 @@ impl ShmFloorHost {
         Ok(())
     }
 
-    /// One round trip: a sample to every agent, one notify, every agent's notify back.
+    /// One round trip: a sample to every agent, one wake, every agent's notify back.
     ///
     /// # Errors
     /// [`FloorError`].
@@ -205,7 +207,7 @@ impl ShmFloorHost {
             };
             s.send().map_err(|e| ice("send", e))?;
         }
-        self.start.notify().map_err(|e| ice("notify", e))?;
+        self.wake.bump();
         self.seen.fill(false);
         let mut missing = self.seen.len();
         let wait_started = Instant::now();
@@ -281,7 +283,8 @@ pub fn shm_floor_agent(
     let deadline = Instant::now() + timeout;
     let open_retry = |suffix: &str| -> Result<ServiceName, FloorError> { name(session, suffix) };
     let start_name = open_retry("start")?;
-    let start_service = loop {
+    // Kept open while the agent runs (the host created it last: everything else exists).
+    let _start_service = loop {
         match node.service_builder(&start_name).event().open() {
             Ok(s) => break s,
             Err(_) if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(5)),
@@ -304,10 +307,7 @@ pub fn shm_floor_agent(
         .default_event_id(EventId::new(id as usize))
         .create()
         .map_err(|e| ice("notifier", e))?;
-    let start = start_service
-        .listener_builder()
-        .create()
-        .map_err(|e| ice("listener", e))?;
+    let wake = WakeWord::open(&wake_key(session)).map_err(|e| ice("open wake word", e))?;
     let sub: Subscriber<Svc, [u8], u64> = frame_service
         .subscriber_builder()
         .buffer_size(1)
@@ -330,8 +330,10 @@ pub fn shm_floor_agent(
             while Instant::now() < until && !sub.has_samples().unwrap_or(true) {
                 std::hint::spin_loop();
             }
+            // The word's value before the last look: a frame sent after it bumped it.
+            let seen = wake.value();
             if !sub.has_samples().unwrap_or(true) {
-                let _ = start.timed_wait(|_| {}, Duration::from_millis(100));
+                wake.wait_change(seen, Duration::from_millis(100));
             }
         }
         while let Some(sample) = sub.receive().map_err(|e| ice("receive", e))? {

@@ -113,6 +113,14 @@ impl Channel {
     }
 }
 
+/// The 64-bit FNV-1a hash of `bytes`: a layout's hash (over its canonical text), and the
+/// short stable name the shared-memory transport derives from a session name.
+pub fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325_u64, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
 fn valid_name(name: &str) -> bool {
     !name.is_empty()
         && name.len() <= CHANNEL_NAME_LEN
@@ -210,11 +218,7 @@ impl ChannelLayout {
     /// Two layouts have the same hash when their texts are equal (and, with odds of
     /// 2⁻⁶⁴, otherwise).
     pub fn hash(&self) -> u64 {
-        self.to_text()
-            .bytes()
-            .fold(0xcbf2_9ce4_8422_2325_u64, |h, b| {
-                (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
-            })
+        fnv1a(self.to_text().as_bytes())
     }
 
     /// How the `agent`'s layout differs from this one, the host's: the first channel (in

@@ -1,4 +1,4 @@
-//! Readiness: the bridge's only calls to `poll(2)`, `epoll(7)` and `eventfd(2)`.
+//! Readiness: the bridge's only calls to `poll(2)`, `epoll(7)`, `eventfd(2)` and `futex(2)`.
 //!
 //! Every host transport's readiness is one descriptor (an [`EpollSet`] of its sockets, an
 //! iceoryx2 listener, a [`WakeFd`] written by zenoh's callbacks), so a host over several
@@ -8,6 +8,7 @@
 
 use std::io::{self, ErrorKind, Write};
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd, RawFd};
+use std::sync::atomic::AtomicU32;
 use std::time::{Duration, Instant};
 
 /// `timeout` in whole milliseconds for `poll`/`epoll_wait`: sub-millisecond timeouts
@@ -265,6 +266,47 @@ impl WakeFd {
     /// The descriptor.
     pub(crate) fn raw(&self) -> RawFd {
         self.0.as_raw_fd()
+    }
+}
+
+/// Sleeps while `word` (in memory shared between processes) holds `expected`, at most
+/// `timeout`. Returns on a wake, a changed value, a signal, the timeout, or spuriously:
+/// the caller looks again.
+pub(crate) fn futex_wait(word: &AtomicU32, expected: u32, timeout: Duration) {
+    let ts = libc::timespec {
+        tv_sec: libc::time_t::try_from(timeout.as_secs()).unwrap_or(libc::time_t::MAX),
+        tv_nsec: libc::c_long::from(timeout.subsec_nanos()),
+    };
+    // SAFETY: FUTEX_WAIT reads the 32-bit word at a valid, aligned address that outlives
+    // the call (`word` is borrowed) and the timespec on the stack; it writes nothing. Not
+    // FUTEX_PRIVATE: the word is shared with other processes. Every outcome (woken,
+    // EAGAIN for a changed value, ETIMEDOUT, EINTR) is a return to the caller's check.
+    unsafe {
+        libc::syscall(
+            libc::SYS_futex,
+            word.as_ptr(),
+            libc::FUTEX_WAIT,
+            expected,
+            &ts as *const libc::timespec,
+            std::ptr::null::<u32>(),
+            0u32,
+        );
+    }
+}
+
+/// Wakes every process and thread asleep in [`futex_wait`] on `word`: one system call.
+pub(crate) fn futex_wake_all(word: &AtomicU32) {
+    // SAFETY: FUTEX_WAKE only uses the address as the key of the wait queue.
+    unsafe {
+        libc::syscall(
+            libc::SYS_futex,
+            word.as_ptr(),
+            libc::FUTEX_WAKE,
+            i32::MAX,
+            std::ptr::null::<libc::timespec>(),
+            std::ptr::null::<u32>(),
+            0u32,
+        );
     }
 }
 

@@ -18,8 +18,10 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 /// Version of the vrsync protocol. Bumped on every incompatible change of the wire types
 /// or of the cycle semantics (4: the network hello carries the agent's channel layout
-/// hash, refused at connect with [`crate::record::reject::CHANNELS`] when it differs).
-pub const PROTOCOL_VERSION: u32 = 4;
+/// hash, refused at connect with [`crate::record::reject::CHANNELS`] when it differs;
+/// 5: shared-memory agents are woken through the session's wake word, a futex word in
+/// shared memory, instead of an iceoryx2 event per agent).
+pub const PROTOCOL_VERSION: u32 = 5;
 
 /// Maximum number of cameras (images) per agent and sensor frame.
 pub const MAX_CAMERAS: usize = 4;

@@ -6,21 +6,6 @@ use super::*;
 // Agent side
 // ---------------------------------------------------------------------------------------
 
-/// What a wait on the start listener saw: whether the host closed the session (a start
-/// needs no note: the frame says it).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-struct StartSignal {
-    shutdown: bool,
-}
-
-impl StartSignal {
-    fn record(&mut self, e: EventActivation) {
-        if e.id.as_value() == SHUTDOWN_EVENT {
-            self.shutdown = true;
-        }
-    }
-}
-
 /// A received sensor frame in shared memory, owned by the agent until dropped.
 pub struct ShmFrame {
     sample: Sample<Svc, [u8], SensorHeader>,
@@ -53,7 +38,9 @@ pub struct ShmAgent {
     _node: Node<Svc>,
     signals: SignalHandling,
     _start_service: event_factory::PortFactory<Svc>,
-    start: Listener<Svc>,
+    wake: WakeWord,
+    /// The wake word's value at the last `discard_wakeups` or wake.
+    seen: u32,
     _stop_service: event_factory::PortFactory<Svc>,
     stop: Notifier<Svc>,
     _sensor_service: ps_factory::PortFactory<Svc, [u8], SensorHeader>,
@@ -244,6 +231,7 @@ impl AgentTransport for ShmAgent {
             Err(e) => e,
         })?;
         check_host_version(start_service.attributes(), session)?;
+        let wake = WakeWord::open(session).map_err(|e| ice(e.to_string()))?;
 
         let sensors = format!("agent/{id}/sensors");
         let motor = format!("agent/{id}/motor");
@@ -298,8 +286,7 @@ impl AgentTransport for ShmAgent {
         };
         let max_commands = config.transport.max_commands_per_cycle as usize;
         // Order matters: the host treats the agent as connected once the sensor subscriber
-        // exists, so everything else (stop notifier, motor publisher, start listener) is
-        // created first.
+        // exists, so everything else (stop notifier, motor publisher) is created first.
         let stop = stop_service
             .notifier_builder()
             .default_event_id(EventId::new(id as usize))
@@ -310,10 +297,6 @@ impl AgentTransport for ShmAgent {
             .initial_max_slice_len(max_commands)
             .allocation_strategy(AllocationStrategy::Static)
             .max_loaned_samples(1)
-            .create()
-            .map_err(|e| in_use(&e))?;
-        let start = start_service
-            .listener_builder()
             .create()
             .map_err(|e| in_use(&e))?;
         let sensor_sub = sensor_service
@@ -330,7 +313,8 @@ impl AgentTransport for ShmAgent {
             _node: node,
             signals,
             _start_service: start_service,
-            start,
+            seen: wake.value(),
+            wake,
             _stop_service: stop_service,
             stop,
             _sensor_service: sensor_service,
@@ -377,7 +361,7 @@ impl AgentTransport for ShmAgent {
                 }
                 std::hint::spin_loop();
             }
-            self.discard_wakeups();
+            self.shutdown_seen |= self.wake.closed();
             return;
         }
         // Poll for a frame for up to `spin_before_block_us` first.
@@ -390,21 +374,15 @@ impl AgentTransport for ShmAgent {
                 std::hint::spin_loop();
             }
         }
-        let mut signal = StartSignal::default();
-        let mut record = |e: EventActivation| signal.record(e);
-        if let Ok(n) = self.start.timed_wait(&mut record, timeout)
-            && n > 0
-        {
-            let _ = self.start.try_wait(&mut record);
-        }
-        self.shutdown_seen |= signal.shutdown;
+        // A frame published since the last `discard_wakeups` (or wake) has bumped the word
+        // past `seen`: the sleep then ends at once.
+        self.seen = self.wake.wait_change(self.seen, timeout);
+        self.shutdown_seen |= self.wake.closed();
     }
 
-    /// Also notes a pending shutdown.
     fn discard_wakeups(&mut self) {
-        let mut signal = StartSignal::default();
-        let _ = self.start.try_wait(|e: EventActivation| signal.record(e));
-        self.shutdown_seen |= signal.shutdown;
+        self.seen = self.wake.value();
+        self.shutdown_seen |= self.wake.closed();
     }
 
     fn host_liveness(&mut self, check_process: bool) -> HostLiveness {
@@ -417,9 +395,9 @@ impl AgentTransport for ShmAgent {
         match self.host_node_state() {
             HostState::Alive => HostLiveness::Alive,
             state => {
-                // The shutdown event may have raced with the node's removal: look once
-                // more before calling the host gone.
-                self.discard_wakeups();
+                // The close may have raced with the node's removal: look once more before
+                // calling the host gone.
+                self.shutdown_seen |= self.wake.closed();
                 if self.shutdown_seen {
                     HostLiveness::Closed
                 } else {

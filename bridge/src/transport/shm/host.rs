@@ -79,7 +79,7 @@ pub struct ShmHost {
     spin: bool,
     spins: u32,
     _start_service: event_factory::PortFactory<Svc>,
-    start: Notifier<Svc>,
+    wake: WakeWord,
     _stop_service: event_factory::PortFactory<Svc>,
     stop: Listener<Svc>,
     agents: Vec<HostAgentPorts>,
@@ -117,6 +117,9 @@ pub enum ShmHostCreateError {
     /// iceoryx2 refused to create a node, service or port.
     #[error("iceoryx2: {0}")]
     Iceoryx(String),
+    /// The session's wake word could not be created.
+    #[error(transparent)]
+    WakeWord(#[from] WakeWordError),
 }
 
 impl ShmHost {
@@ -240,22 +243,18 @@ impl ShmHost {
                 verified: Cell::new(None),
             });
         }
+        let wake = WakeWord::create(session)?;
         // `start` is created last: agents open it first, so once it exists every other
-        // service of the session does too.
+        // service of the session (and the wake word) does too. It has no ports: its
+        // attributes are what agents read.
         let start_service = node
             .service_builder(&svc_name(session, "start").map_err(ice)?)
             .event()
-            .max_listeners(max_ports)
-            .max_notifiers(2)
+            .max_listeners(1)
+            .max_notifiers(1)
             .max_nodes(max_ports)
-            .event_id_max_value(SHUTDOWN_EVENT + 1)
             .create_with_attributes(&attrs)
             .map_err(|e| exists("start", &e))?;
-        let start = start_service
-            .notifier_builder()
-            .default_event_id(EventId::new(START_EVENT))
-            .create()
-            .map_err(|e| ice(format!("cannot create the start notifier: {e:?}")))?;
         Ok(Self {
             _node: node,
             spin_before_block: config.sync.effective_spin_before_block(config.agents.len()),
@@ -268,7 +267,7 @@ impl ShmHost {
             spin: config.sync.wait == crate::config::WaitMode::Spin,
             spins: 0,
             _start_service: start_service,
-            start,
+            wake,
             _stop_service: stop_service,
             stop,
             agents,
@@ -286,9 +285,7 @@ impl Drop for ShmHost {
     fn drop(&mut self) {
         // Wake every agent at once with "session closed" instead of letting each find out
         // by its liveness check.
-        let _ = self
-            .start
-            .notify_with_custom_event_id(EventId::new(SHUTDOWN_EVENT));
+        self.wake.close();
     }
 }
 
@@ -449,13 +446,8 @@ impl HostTransport for ShmHost {
     }
 
     fn signal_start(&mut self) -> Result<(), HostTransportError> {
-        self.start
-            .notify()
-            .map(|_| ())
-            .map_err(|e| HostTransportError::Send {
-                what: "start".into(),
-                reason: format!("{e:?}"),
-            })
+        self.wake.bump();
+        Ok(())
     }
 
     fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError> {

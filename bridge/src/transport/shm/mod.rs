@@ -6,8 +6,12 @@
 //! |----------------------|-----------------------------------------|-----------------|
 //! | `agent/<id>/sensors` | pub-sub `[u8]` + [`SensorHeader`]       | host → agent    |
 //! | `agent/<id>/motor`   | pub-sub `[MotorCommand]` + [`MotorHeader`] | agent → host |
-//! | `start`              | event, id [`START_EVENT`]               | host → agents   |
+//! | `start`              | event, no ports: its attributes         | host → agents   |
 //! | `stop`               | event, id = agent id                    | agents → host   |
+//!
+//! *Start* (a frame is there) and *closed* reach every agent at once through the session's
+//! [`WakeWord`], a futex word in shared memory: one system call wakes all the agents
+//! (an iceoryx2 event would send a datagram to each).
 //!
 //! The host `create`s every service; agents `open` them. Buffers are sized explicitly: the
 //! sensor publisher of an agent holds at most [`SENSOR_POOL_SAMPLES`] frames (one loaned by
@@ -43,10 +47,6 @@ use vrsync_protocol::channel_layout::ChannelLayout;
 
 type Svc = ipc::Service;
 
-/// Event id of *start* on the `start` service.
-pub const START_EVENT: usize = 0;
-/// Event id on the `start` service telling agents the host closed the session cleanly.
-pub const SHUTDOWN_EVENT: usize = 1;
 /// Frames an agent may hold at once (the current one and the one being received).
 pub const AGENT_BORROWED_FRAMES: usize = AGENT_MAX_HELD_FRAMES;
 /// Sensor frames queued per agent: only the newest is kept (safe overflow).
@@ -387,8 +387,12 @@ fn node_of_session(name: &str, session: &str) -> bool {
 /// many nodes were cleaned.
 pub fn cleanup_dead_nodes(session: &str) -> u64 {
     let mut cleaned = 0;
+    let host = host_node_name(session);
     for_each_dead_node(|view, name| {
         if node_of_session(name, session) && view.try_remove_stale_resources().is_ok() {
+            if name == host {
+                remove_wake_word(session);
+            }
             cleaned += 1;
         }
     });
@@ -417,6 +421,10 @@ fn for_each_dead_node(mut f: impl FnMut(iceoryx2::node::DeadNodeView<Svc>, &str)
 mod agent;
 mod host;
 mod ice_errors;
+mod wake;
+
+use wake::remove_wake_word;
+pub use wake::{WakeWord, WakeWordError, wake_word_name};
 
 use ice_errors::IceError;
 
