@@ -66,4 +66,6 @@ pub use types::*;
 #[cfg(test)]
 mod channel_tests;
 #[cfg(test)]
+mod cycle_tests;
+#[cfg(test)]
 mod tests;
