@@ -354,6 +354,23 @@ impl RecordReader {
         if self.complete { self.buf.body() } else { &[] }
     }
 
+    /// Swaps the record the last [`RecordReader::read_from`] completed into `spare` and
+    /// reads on into `spare`'s old buffer (grown to the largest acceptable record if it
+    /// is smaller): a reader of large records (camera frames) hands them on without a
+    /// copy. Returns `false`, and leaves `spare` alone, when no record is complete.
+    pub fn take_record(&mut self, spare: &mut RecordBuf) -> bool {
+        if !self.complete {
+            return false;
+        }
+        spare.reserve_body(self.max_body);
+        core::mem::swap(&mut self.buf, spare);
+        self.buf.len = PREFIX;
+        self.complete = false;
+        self.fill = 0;
+        self.head = None;
+        true
+    }
+
     /// Bytes of an incomplete record read so far (0 between records).
     pub fn buffered(&self) -> usize {
         if self.complete { 0 } else { self.fill }
@@ -588,6 +605,39 @@ mod tests {
             let clean = matches!(end, End::Closed { buffered: 0 });
             prop_assert!(clean, "stream did not end cleanly between records");
         }
+    }
+
+    /// Records taken out of the reader keep their bytes while the reader goes on into the
+    /// spare buffer, split however the stream is.
+    #[test]
+    fn taken_records_keep_their_bytes_and_the_reader_goes_on() {
+        let bodies: [&[u8]; 3] = [b"first body", b"", b"the third, longer body"];
+        let mut data = Vec::new();
+        for (k, body) in bodies.iter().enumerate() {
+            data.extend_from_slice(&(body.len() as u32).to_le_bytes());
+            data.extend_from_slice(&(k as u32).to_le_bytes());
+            data.extend_from_slice(body);
+        }
+        let mut reader = RecordReader::new(32);
+        let mut spare = RecordBuf::default();
+        assert!(!reader.take_record(&mut spare), "nothing complete yet");
+        let mut src = Chunked::new(&data, &[3, 5, 7, 1, 40]);
+        let mut taken = Vec::new();
+        loop {
+            match reader.read_from(&mut src).unwrap() {
+                ReadProgress::Record(k) => {
+                    assert!(reader.take_record(&mut spare));
+                    assert_eq!(reader.body(), b"", "handed on");
+                    let record = core::mem::take(&mut spare);
+                    taken.push((k, record));
+                }
+                ReadProgress::Pending => {}
+                ReadProgress::Closed => break,
+            }
+        }
+        assert_eq!(reader.buffered(), 0);
+        let got: Vec<(u32, &[u8])> = taken.iter().map(|(k, r)| (*k, r.body())).collect();
+        assert_eq!(got, [(0, bodies[0]), (1, bodies[1]), (2, bodies[2])]);
     }
 
     /// Hands out `data` in chunks of the given sizes with a `WouldBlock` before each chunk
