@@ -72,10 +72,10 @@ pub use barrier::AgentOutcome;
 pub use colour::ansi_on_stderr;
 pub use config::{
     ActionConfig, ActionSpace, AgentConfig, AgentLostPolicy, CameraConfig, Config, ConfigLoadError,
-    DEFAULT_CONFIG_TOML, DEFAULT_SPIN_BEFORE_BLOCK_US, DEFAULT_ZENOH_ENDPOINT, LegacyConfig,
-    LegacyDialect, MAX_AGENT_ID, MAX_CONFIG_BYTES, MAX_IMAGE_SIDE_PX, PngCompression, SyncConfig,
-    TransportConfig, TransportKind, VectorConfig, WaitForStop, WaitMode, ZenohConfig, ZenohTls,
-    derived_height,
+    DEFAULT_CONFIG_TOML, DEFAULT_RESUME_WINDOW_S, DEFAULT_SPIN_BEFORE_BLOCK_US,
+    DEFAULT_ZENOH_ENDPOINT, LegacyConfig, LegacyDialect, MAX_AGENT_ID, MAX_CONFIG_BYTES,
+    MAX_IMAGE_SIDE_PX, PngCompression, SyncConfig, TransportConfig, TransportKind, VectorConfig,
+    WaitForStop, WaitMode, ZenohConfig, ZenohTls, derived_height,
 };
 pub use host::{
     ActionValue, AgentReport, CycleReport, Host, HostBuilder, HostCreateError, HostCycleError,

@@ -11,9 +11,10 @@ use toml::Spanned;
 
 use super::raw::{RawAgent, RawCamera, RawConfig, RawLegacy, RawSync, RawTransport, RawZenoh};
 use super::{
-    AgentConfig, CameraConfig, ConfigLoadError, DEFAULT_SPIN_BEFORE_BLOCK_US,
-    DEFAULT_ZENOH_ENDPOINT, LegacyConfig, MAX_AGENT_ID, MAX_IMAGE_SIDE_PX, SyncConfig,
-    TransportConfig, TransportKind, WaitForStop, ZenohConfig, ZenohTls, derived_height,
+    AgentConfig, CameraConfig, ConfigLoadError, DEFAULT_RESUME_WINDOW_S,
+    DEFAULT_SPIN_BEFORE_BLOCK_US, DEFAULT_ZENOH_ENDPOINT, LegacyConfig, MAX_AGENT_ID,
+    MAX_IMAGE_SIDE_PX, SyncConfig, TransportConfig, TransportKind, WaitForStop, ZenohConfig,
+    ZenohTls, derived_height,
 };
 use crate::wire::{CAMERA_NAME_LEN, MAX_CAMERAS, MAX_TOKEN, PixelFormat};
 
@@ -370,6 +371,11 @@ impl Ctx<'_> {
             },
             on_agent_lost: rs.on_agent_lost.unwrap_or_default(),
             wait_for_stop: rs.wait_for_stop,
+            resume_window: match rs.resume_window {
+                // Zero turns resuming off: a lost link ends the agent's connection.
+                Some(v) if *v.get_ref() == 0.0 => Duration::ZERO,
+                v => self.seconds(v, "sync.resume_window", DEFAULT_RESUME_WINDOW_S)?,
+            },
         })
     }
 

@@ -53,6 +53,7 @@ fn write_sync(s: &mut String, sync: &SyncConfig) {
             AgentLostPolicy::Abort => "abort",
         }
     );
+    let _ = writeln!(s, "resume_window = {:?}", sync.resume_window.as_secs_f64());
     if let Some(w) = sync.wait_for_stop {
         let _ = writeln!(s, "wait_for_stop = {:?}", w.as_str());
     }

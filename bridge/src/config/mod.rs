@@ -36,6 +36,10 @@ use checks::{Ctx, valid_session};
 /// Default of `[sync] spin_before_block_us`.
 pub const DEFAULT_SPIN_BEFORE_BLOCK_US: u64 = 50;
 
+/// Default `[sync] resume_window`, seconds: how long a network agent whose link was lost
+/// is held for its return (and tries to come back) before it is evicted (gives up).
+pub const DEFAULT_RESUME_WINDOW_S: f64 = 30.0;
+
 /// Highest agent id accepted (ids are also iceoryx2 event ids).
 pub const MAX_AGENT_ID: u32 = 250;
 /// Largest accepted image side in pixels.
@@ -262,6 +266,9 @@ pub struct SyncConfig {
     /// How long to wait for a stop, for agents that do not choose (`wait_for_stop`;
     /// `None`: not set, see [`WaitForStop::default_for`]).
     pub wait_for_stop: Option<WaitForStop>,
+    /// How long a network agent whose link was lost is held for its return, and how long
+    /// it tries to reconnect before it gives up (`resume_window`; zero: not at all).
+    pub resume_window: Duration,
 }
 
 impl SyncConfig {

@@ -37,6 +37,7 @@ pub(super) struct RawSync {
     pub(super) spin_before_block_us: Option<Spanned<i64>>,
     pub(super) on_agent_lost: Option<AgentLostPolicy>,
     pub(super) wait_for_stop: Option<WaitForStop>,
+    pub(super) resume_window: Option<Spanned<f64>>,
 }
 
 #[derive(Deserialize, Default)]

@@ -211,6 +211,25 @@ fn wait_for_stop_defaults_to_alive_and_each_agent_may_override_it() {
 }
 
 #[test]
+fn resume_window_defaults_to_30_s_and_zero_turns_it_off() {
+    let c = parse(MINIMAL).unwrap();
+    assert_eq!(c.sync.resume_window, Duration::from_secs(30));
+    let c = parse("[sync]\nresume_window = 0\n[[agent]]\nid = 0\n").unwrap();
+    assert_eq!(c.sync.resume_window, Duration::ZERO);
+    assert_eq!(
+        parse(&c.to_toml_string()).unwrap().sync.resume_window,
+        Duration::ZERO
+    );
+    let c = parse("[sync]\nresume_window = 2.5\n[[agent]]\nid = 0\n").unwrap();
+    assert_eq!(c.sync.resume_window, Duration::from_millis(2500));
+    expect_err(
+        "[sync]\nresume_window = -1.0\n[[agent]]\nid = 0\n",
+        2,
+        "sync.resume_window",
+    );
+}
+
+#[test]
 fn original_names_are_aliases() {
     let c = parse("[sync]\nSyncMode = false\nSimulationTimePerFrame = 0.05\n[[agent]]\nid = 0\n")
         .unwrap();

@@ -43,6 +43,7 @@ pub(crate) fn poll_one(fd: RawFd, events: i16, timeout: Duration) -> io::Result<
 }
 
 /// Whether `fd` is readable right now (data, or the peer's close).
+#[cfg(test)]
 pub(crate) fn readable_now(fd: RawFd) -> bool {
     poll_one(fd, libc::POLLIN, Duration::ZERO).is_ok_and(|r| r != 0)
 }

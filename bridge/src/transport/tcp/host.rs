@@ -4,7 +4,7 @@
 use super::*;
 use crate::rounded::Rounded;
 use crate::transport::wait::{self, EpollSet};
-use crate::transport::{PeerRefusal, RefusalKind, Refusals};
+use crate::transport::{PeerRefusal, Refusals};
 use std::os::fd::RawFd;
 use vrsync_protocol::channel_layout::ChannelLayout;
 
@@ -60,10 +60,26 @@ pub(super) struct TcpSlot {
     pub(super) buf: Option<RecordBuf>,
     pub(super) header: Option<Box<SensorHeader>>,
     pub(super) body_len: usize,
+    /// Its link was lost (not the agent's own end): the slot is held for its return, and
+    /// counts as connected meanwhile.
+    pub(super) resuming: Option<Held>,
+    /// The cycle of the frame in `buf` that was published last (none while it is loaned).
+    pub(super) published: Option<u64>,
+    /// The newest cycle whose stop batch arrived from this agent.
+    pub(super) stopped: Option<u64>,
 }
 
 /// What `drain_conn` reports for a leave batch (not a failure: the connection ends).
 const LEFT: &str = "left the session";
+
+/// A slot held for its agent's return.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Held {
+    /// When the link was lost.
+    pub(super) since: Instant,
+    /// When the slot is let go.
+    pub(super) until: Instant,
+}
 
 /// The host side of the TCP transport.
 #[derive(Debug)]
@@ -93,6 +109,8 @@ pub struct TcpHost {
     pub(super) refusals: Refusals,
     /// Each slot's channels, as the hellos must declare them.
     pub(super) layouts: Vec<ChannelLayout>,
+    /// `[sync] resume_window` (zero: a lost link ends the connection).
+    pub(super) resume_window: Duration,
 }
 
 /// Why the TCP host could not be created.
@@ -144,6 +162,9 @@ impl TcpHost {
                     buf: Some(RecordBuf::with_capacity(body_len)),
                     header: Some(Box::default()),
                     body_len,
+                    resuming: None,
+                    published: None,
+                    stopped: None,
                 }
             })
             .collect();
@@ -173,6 +194,7 @@ impl TcpHost {
                 .iter()
                 .map(crate::config::AgentConfig::channel_layout)
                 .collect(),
+            resume_window: config.sync.resume_window,
         })
     }
 
@@ -202,9 +224,10 @@ impl TcpHost {
                 && now.duration_since(since) >= self.stall_timeout
             {
                 let why = stall_reason(&c.reader, self.stall_timeout);
-                self.drop_conn(slot, &why);
+                self.drop_conn(slot, &why, Loss::Lost);
             }
         }
+        self.expire_resumes(now);
         if agent_ready {
             // Agent sockets whose data the caller has not drained since the last wait stay
             // readable: waiting on them again would return at once, and a caller that
@@ -243,308 +266,98 @@ impl TcpHost {
         self.local_addr
     }
 
-    fn drop_conn(&mut self, slot: usize, why: &str) {
+    /// Drops slot `slot`'s connection; with a resume window, a lost link (see [`Loss`]) holds
+    /// the slot for the agent's return.
+    pub(super) fn drop_conn(&mut self, slot: usize, why: &str, loss: Loss) {
         // (A leave is not a failure: see `drain`.)
-        if let Some(c) = self.slots[slot].conn.take() {
-            warn!(agent = self.slots[slot].id, peer = %c.peer, "TCP agent dropped: {why}");
-        }
-    }
-
-    fn accept_new(&mut self) {
-        let mut turned_away = 0usize;
-        loop {
-            match self.listener.accept() {
-                Ok((stream, peer)) => {
-                    if self.pending.len() >= MAX_PENDING {
-                        // Closed at once: a flood of silent connections costs a bounded
-                        // number of descriptors and buffers.
-                        debug!(%peer, "TCP peer dropped: too many connections waiting for their hello");
-                        turned_away += 1;
-                        continue;
-                    }
-                    if stream.set_nonblocking(true).is_err()
-                        || set_nodelay(&stream).is_err()
-                        || self
-                            .poll
-                            .add(stream.as_raw_fd(), stream.as_raw_fd() as u64)
-                            .is_err()
-                    {
-                        continue;
-                    }
-                    debug!(%peer, "TCP connection");
-                    self.pending.push(Pending {
-                        stream,
-                        peer,
-                        since: Instant::now(),
-                        reader: RecordReader::new(MAX_HELLO),
-                        hello: None,
-                    });
-                }
-                Err(e) if e.kind() == ErrorKind::WouldBlock => break,
-                Err(e) if e.kind() == ErrorKind::Interrupted => {}
-                Err(e) => {
-                    warn!("TCP accept failed: {e}");
-                    break;
-                }
-            }
-        }
-        if turned_away > 0 {
-            self.refusals.count(turned_away as u64);
-            warn!(
-                "TCP peer dropped: {turned_away} connection(s) closed at once, {MAX_PENDING} are already waiting for their hello"
-            );
-        }
-    }
-
-    /// Whether a complete hello must wait before it is admitted: its id's connection is
-    /// closed by its peer (the agent left, died or reconnects) but not read to its end. Its
-    /// last records (a stop, a leave batch) and its loss belong to the cycle the host
-    /// waits for, and the host must see the old connection go before a new one of the
-    /// same id counts as connected: else it would wait for a stop the new connection
-    /// never got a frame for. The host's next drain reads the old connection to its end;
-    /// the wait after it admits the new one. A host that does not drain within
-    /// [`HELLO_TIMEOUT`] (it waits for agents, not for stops) gets the new connection
-    /// anyway, the old one dropped with what it still held.
-    fn must_defer(&self, hello: &Hello) -> bool {
-        self.slots
-            .iter()
-            .find(|s| s.id == hello.agent_id)
-            .and_then(|s| s.conn.as_ref())
-            .is_some_and(|c| wait::peer_closed(c.stream.as_raw_fd()))
-    }
-
-    /// Admits the deferred hellos whose id's old connection is gone, or that waited
-    /// [`HELLO_TIMEOUT`]. Returns whether one was admitted.
-    fn admit_deferred(&mut self) -> bool {
-        let mut admitted = false;
-        let mut i = 0;
-        while i < self.pending.len() {
-            let Some(hello) = &self.pending[i].hello else {
-                i += 1;
-                continue;
-            };
-            let gone = !self
-                .slots
-                .iter()
-                .any(|s| s.id == hello.agent_id && s.conn.is_some());
-            if gone || self.pending[i].since.elapsed() >= HELLO_TIMEOUT {
-                let mut p = self.pending.swap_remove(i);
-                if let Some(hello) = p.hello.take() {
-                    self.admit(p, hello);
-                    admitted = true;
-                }
-            } else {
-                i += 1;
-            }
-        }
-        admitted
-    }
-
-    /// Reads pending hellos; admits, rejects or times out each connection.
-    fn handle_pending(&mut self) {
-        // A deferred hello whose predecessor the host has let go since is admitted now.
-        self.admit_deferred();
-        let mut i = 0;
-        while i < self.pending.len() {
-            if self.pending[i].hello.is_some() {
-                i += 1;
-                continue;
-            }
-            match self.progress_hello(i) {
-                Ok(None) => {
-                    let p = &self.pending[i];
-                    if p.since.elapsed() >= HELLO_TIMEOUT {
-                        let why = if p.reader.buffered() == 0 {
-                            format!(
-                                "sent nothing within {} of connecting (no hello)",
-                                Rounded(HELLO_TIMEOUT)
-                            )
-                        } else {
-                            format!(
-                                "stalled mid-record: {} of its hello within {} of connecting",
-                                p.reader.progress(),
-                                Rounded(HELLO_TIMEOUT)
-                            )
-                        };
-                        let p = self.pending.swap_remove(i);
-                        self.refuse(RefusalKind::Silent, None, p.peer, why);
-                    } else {
-                        i += 1;
-                    }
-                }
-                Ok(Some(hello)) if self.must_defer(&hello) => {
-                    // It waits for the host's next drain, not for its socket.
-                    let fd = self.pending[i].stream.as_raw_fd();
-                    let _ = self.poll.set_readable(fd, fd as u64, false);
-                    self.pending[i].hello = Some(hello);
-                    i += 1;
-                }
-                Ok(Some(hello)) => {
-                    let p = self.pending.swap_remove(i);
-                    self.admit(p, hello);
-                }
-                Err((why, closed)) => {
-                    let mut p = self.pending.swap_remove(i);
-                    let kind = if closed {
-                        RefusalKind::Silent
-                    } else {
-                        RefusalKind::Malformed
-                    };
-                    self.refuse(kind, None, p.peer, why.clone());
-                    if !closed {
-                        let _ = p.stream.set_nonblocking(false);
-                        let _ = p.stream.set_write_timeout(Some(Duration::from_millis(200)));
-                        let _ = write_record(
-                            &mut p.stream,
-                            kind::REJECT,
-                            &Reject::new(reject::MALFORMED, why.as_str()).encode(),
-                        );
-                    }
-                }
-            }
-        }
-    }
-
-    /// Reads what has arrived of connection `i`'s hello. `Err((why, closed))` drops it.
-    fn progress_hello(&mut self, i: usize) -> Result<Option<Hello>, (String, bool)> {
-        let p = &mut self.pending[i];
-        match p.reader.read_from(&mut p.stream) {
-            Ok(ReadProgress::Record(kind::HELLO)) => decode_hello(p.reader.body())
-                .map(Some)
-                .map_err(|e| (e.to_string(), false)),
-            Ok(ReadProgress::Record(k)) => {
-                Err((format!("expected a hello, got record kind {k}"), false))
-            }
-            Ok(ReadProgress::Pending) => match p.reader.head() {
-                // Refuse a wrong kind as soon as its prefix is in.
-                Some((_, k)) if k != kind::HELLO => {
-                    Err((format!("expected a hello, got record kind {k}"), false))
-                }
-                _ => Ok(None),
-            },
-            Ok(ReadProgress::Closed) if p.reader.buffered() == 0 => {
-                Err(("closed the connection without a hello".into(), true))
-            }
-            Ok(ReadProgress::Closed) => Err((
-                format!(
-                    "closed the connection mid-record after {} of its hello",
-                    p.reader.progress()
-                ),
-                true,
-            )),
-            Err(e) => Err((e.to_string(), false)),
-        }
-    }
-
-    /// Logs and records a refused peer.
-    fn refuse(&mut self, kind: RefusalKind, agent: Option<u32>, peer: SocketAddr, why: String) {
-        match agent {
-            Some(agent) => warn!(%peer, agent, "TCP agent refused: {why}"),
-            None => warn!(%peer, "TCP peer dropped: {why}"),
-        }
-        self.refusals.push(PeerRefusal {
-            kind,
-            agent,
-            peer: peer.to_string(),
-            reason: why,
-        });
-    }
-
-    /// Tells a peer why its hello is refused (best effort), then logs and records it.
-    fn refuse_hello(&mut self, stream: &mut TcpStream, peer: SocketAddr, agent: u32, r: Reject) {
-        let _ = stream.set_nonblocking(false);
-        let _ = stream.set_write_timeout(Some(Duration::from_millis(200)));
-        let _ = write_record(stream, kind::REJECT, &r.encode());
-        self.refuse(RefusalKind::of_reject(r.code), Some(agent), peer, r.message);
-    }
-
-    fn admit(&mut self, p: Pending, hello: Hello) {
-        let mut stream = p.stream;
-        let peer = p.peer;
-        let agent = hello.agent_id;
-        let served: Vec<u32> = self.slots.iter().map(|s| s.id).collect();
-        let slot = match admit(
-            &hello,
-            self.token.as_deref(),
-            "wrong tcp_token",
-            &served,
-            &self.layouts,
-        ) {
-            Ok(slot) => slot,
-            Err(r) => return self.refuse_hello(&mut stream, peer, agent, r),
+        let window = self.resume_window;
+        let s = &mut self.slots[slot];
+        let Some(c) = s.conn.take() else {
+            return;
         };
-        if let Some(old) = &self.slots[slot].conn
-            && wait::peer_closed(old.stream.as_raw_fd())
-        {
-            // The agent died or reconnects; its old connection is gone already.
-            self.drop_conn(slot, "connection closed (a new connection takes its place)");
+        let hold = match loss {
+            Loss::Ended => Duration::ZERO,
+            Loss::Reset => window.min(RESET_GRACE),
+            Loss::Lost => window,
+        };
+        if !hold.is_zero() {
+            warn!(
+                agent = s.id,
+                peer = %c.peer,
+                "TCP agent's link lost: {why}; its place is held for {} (sync.resume_window)",
+                Rounded(hold)
+            );
+            let since = Instant::now();
+            s.resuming = Some(Held {
+                since,
+                until: since + hold,
+            });
+        } else {
+            warn!(agent = s.id, peer = %c.peer, "TCP agent dropped: {why}");
         }
-        if self.slots[slot].conn.is_some() {
-            return self.refuse_hello(&mut stream, peer, agent, Reject::id_in_use(agent));
+    }
+
+    /// Lets go of the slots whose agent was not back within the resume window: they are
+    /// no longer connected, and the host evicts them.
+    fn expire_resumes(&mut self, now: Instant) {
+        for s in &mut self.slots {
+            if let Some(held) = s.resuming
+                && now >= held.until
+            {
+                warn!(
+                    agent = s.id,
+                    "TCP agent not back within {} of losing its link: lost",
+                    Rounded(held.until - held.since)
+                );
+                s.resuming = None;
+            }
         }
-        let mut welcome = [0u8; 16];
-        welcome[..4].copy_from_slice(&PROTOCOL_VERSION.to_le_bytes());
-        welcome[4..12].copy_from_slice(&LAYOUT_HASH.to_le_bytes());
-        welcome[12..].copy_from_slice(&(self.slots[slot].body_len as u32).to_le_bytes());
-        let sent = stream
-            .set_nonblocking(false)
-            .and_then(|()| stream.set_write_timeout(Some(Duration::from_secs(1))))
-            .and_then(|()| write_record(&mut stream, kind::WELCOME, &welcome))
-            .and_then(|()| stream.set_nonblocking(true));
-        if let Err(e) = sent {
-            warn!(peer = %p.peer, "TCP agent lost during welcome: {e}");
-            return;
-        }
-        // Watched like the other agents' sockets (a deferred hello's socket was muted).
-        let fd = stream.as_raw_fd();
-        if let Err(e) = self.poll.set_readable(fd, fd as u64, !self.muted) {
-            warn!(peer = %p.peer, "TCP agent lost during welcome: epoll: {e}");
-            return;
-        }
-        info!(agent = hello.agent_id, peer = %p.peer, "TCP agent connected");
-        self.slots[slot].conn = Some(Conn {
-            stream,
-            peer: p.peer,
-            reader: RecordReader::new(self.max_motor_body),
-            partial_since: None,
-        });
     }
 
     /// Writes a whole record to a non-blocking socket, waiting for writability with a
     /// deadline (a stalled agent cannot hold the host forever).
-    fn send_all(stream: &mut TcpStream, data: &[u8], deadline: Instant) -> io::Result<()> {
+    pub(super) fn send_all(
+        stream: &mut TcpStream,
+        data: &[u8],
+        deadline: Instant,
+    ) -> io::Result<()> {
         wait::write_all_until(stream, data, deadline, "agent does not read")
     }
 
     /// Reads what has arrived from `c`, handing complete motor batches to `sink`.
-    /// `Err(why)` drops the connection, and so does a leave batch (`Err` with
+    /// `Err((why, loss))` drops the connection, and so does a leave batch (`Err` with
     /// [`LEFT`]).
     fn drain_conn(
         c: &mut Conn,
         slot: usize,
         stall_timeout: Duration,
         sink: &mut BatchSink<'_>,
-    ) -> Result<(), String> {
+    ) -> Result<(), (String, Loss)> {
+        let ended = |why: String| (why, Loss::Ended);
         for _ in 0..MAX_RECORDS_PER_DRAIN {
             match c.reader.read_from(&mut c.stream) {
                 Ok(ReadProgress::Record(kind::MOTOR)) => {
                     c.partial_since = None;
                     let (header, commands) =
-                        decode_motor(c.reader.body()).map_err(|e| e.to_string())?;
+                        decode_motor(c.reader.body()).map_err(|e| ended(e.to_string()))?;
                     sink(slot, &header, commands);
                     if header.is_leave() {
                         // The agent is gone: free its id for a new connection now.
-                        return Err(LEFT.into());
+                        return Err(ended(LEFT.into()));
                     }
                 }
                 Ok(ReadProgress::Record(k)) => {
-                    return Err(format!("sent record kind {k}, expected motor batches"));
+                    return Err(ended(format!(
+                        "sent record kind {k}, expected motor batches"
+                    )));
                 }
                 Ok(ReadProgress::Pending) => {
                     if let Some((_, k)) = c.reader.head()
                         && k != kind::MOTOR
                     {
-                        return Err(format!("sent record kind {k}, expected motor batches"));
+                        return Err(ended(format!(
+                            "sent record kind {k}, expected motor batches"
+                        )));
                     }
                     if c.reader.buffered() == 0 {
                         c.partial_since = None;
@@ -555,20 +368,22 @@ impl TcpHost {
                     let now = Instant::now();
                     let since = *c.partial_since.get_or_insert(now);
                     if now.duration_since(since) >= stall_timeout {
-                        return Err(stall_reason(&c.reader, stall_timeout));
+                        return Err((stall_reason(&c.reader, stall_timeout), Loss::Lost));
                     }
                     return Ok(());
                 }
+                // A close is the agent's own end (its process ended): not a lost link.
                 Ok(ReadProgress::Closed) if c.reader.buffered() == 0 => {
-                    return Err("connection closed".into());
+                    return Err(ended("connection closed".into()));
                 }
                 Ok(ReadProgress::Closed) => {
-                    return Err(format!(
+                    return Err(ended(format!(
                         "connection closed mid-record after {} of a motor batch",
                         c.reader.progress()
-                    ));
+                    )));
                 }
-                Err(e) => return Err(e.to_string()),
+                Err(RecordReadError::Io(e)) => return Err((e.to_string(), loss_of(&e))),
+                Err(e) => return Err(ended(e.to_string())),
             }
         }
         Ok(())
@@ -582,7 +397,12 @@ impl TcpHost {
             .iter()
             .filter_map(|s| s.conn.as_ref()?.partial_since)
             .map(|t| t + self.stall_timeout);
-        hellos.chain(stalls).min()
+        let resumes = self
+            .slots
+            .iter()
+            .filter_map(|s| s.resuming)
+            .map(|held| held.until);
+        hellos.chain(stalls).chain(resumes).min()
     }
 
     fn writable_now(stream: &TcpStream) -> bool {
@@ -629,7 +449,11 @@ impl HostTransport for TcpHost {
     }
 
     fn is_connected(&self, slot: usize) -> bool {
-        self.slots.get(slot).is_some_and(|s| s.conn.is_some())
+        // A slot held for its agent's return counts as connected: its frames go out when
+        // the agent is back.
+        self.slots
+            .get(slot)
+            .is_some_and(|s| s.conn.is_some() || s.resuming.is_some())
     }
 
     fn loan(&mut self, slot: usize) -> Result<TcpFrameLoan, HostTransportError> {
@@ -646,6 +470,7 @@ impl HostTransport for TcpHost {
         buf.reserve_body(s.body_len);
         let mut header = s.header.take().unwrap_or_default();
         *header = SensorHeader::default();
+        s.published = None;
         Ok(TcpFrameLoan { header, buf })
     }
 
@@ -658,7 +483,10 @@ impl HostTransport for TcpHost {
         let Some(s) = self.slots.get_mut(slot) else {
             return Ok(false);
         };
+        s.published = Some(header.cycle);
         let result = match &mut s.conn {
+            // Held for its agent's return: the frame goes out when it is back.
+            None if s.resuming.is_some() => Ok(true),
             None => Ok(false),
             // Async mode: a slow agent whose socket is full misses this frame instead of
             // stalling the host (it reads the newest when it catches up).
@@ -670,8 +498,8 @@ impl HostTransport for TcpHost {
         match result {
             Ok(delivered) => Ok(delivered),
             Err(e) => {
-                self.drop_conn(slot, &format!("cannot send its frame: {e}"));
-                Ok(false)
+                self.drop_conn(slot, &format!("cannot send its frame: {e}"), loss_of(&e));
+                Ok(self.is_connected(slot))
             }
         }
     }
@@ -686,17 +514,27 @@ impl HostTransport for TcpHost {
         self.set_agents_readable(true);
         let stall_timeout = self.stall_timeout;
         for slot in 0..self.slots.len() {
-            let failure = match &mut self.slots[slot].conn {
-                Some(c) => Self::drain_conn(c, slot, stall_timeout, sink).err(),
+            let s = &mut self.slots[slot];
+            let failure = match &mut s.conn {
+                Some(c) => {
+                    let stopped = &mut s.stopped;
+                    let mut note = |slot, header: &MotorHeader, commands: &[MotorCommand]| {
+                        if header.is_stop() {
+                            *stopped = Some(stopped.map_or(header.cycle, |c| c.max(header.cycle)));
+                        }
+                        sink(slot, header, commands);
+                    };
+                    Self::drain_conn(c, slot, stall_timeout, &mut note).err()
+                }
                 None => None,
             };
             match failure {
-                Some(why) if why == LEFT => {
+                Some((why, _)) if why == LEFT => {
                     if let Some(c) = self.slots[slot].conn.take() {
                         debug!(agent = self.slots[slot].id, peer = %c.peer, "TCP agent left");
                     }
                 }
-                Some(why) => self.drop_conn(slot, &why),
+                Some((why, lost)) => self.drop_conn(slot, &why, lost),
                 None => {}
             }
         }
@@ -730,6 +568,13 @@ impl HostTransport for TcpHost {
 
     fn update_connections(&mut self) -> Result<(), HostTransportError> {
         Ok(())
+    }
+
+    fn forget_connection(&mut self, slot: usize) {
+        // Evicted (its resume window passed) or left: a new connection starts afresh.
+        if let Some(s) = self.slots.get_mut(slot) {
+            s.resuming = None;
+        }
     }
 
     fn termination_requested(&self) -> bool {

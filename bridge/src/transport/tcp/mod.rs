@@ -31,11 +31,25 @@
 //!   their hello at once, more are closed at once;
 //! - an admitted agent that stalls in the middle of a record: dropped once the record is
 //!   not complete [`STALL_TIMEOUT`] (or the `stop_timeout`, if shorter) after its first
-//!   bytes were seen; it is then no longer connected, so the barrier stops waiting for it;
+//!   bytes were seen; it is then no longer connected (with a resume window: once the
+//!   window has passed, see below), so the barrier stops waiting for it;
 //! - an agent that stops reading its frames: dropped when a frame cannot be written within
 //!   the `stop_timeout` (at least 1 s);
 //! - a flood of batches: each drain takes at most [`MAX_RECORDS_PER_DRAIN`] records per
 //!   agent, so one agent cannot hold the host inside a drain.
+//!
+//! # A lost link (`[sync] resume_window`)
+//! With a resume window (30 s by default), a connection that times out, stalls mid-record
+//! or cannot take its frame is a lost link, not the agent's end: the host holds the
+//! agent's place for the window (a reset connection for [`RESET_GRACE`]) and it counts as
+//! connected (frames published to it meanwhile count as delivered and wait for it), so in
+//! sync mode the cycle waits for its stop. A hello of that id within the window takes the
+//! place again, and the frame published last goes out again unless its stop arrived. Past
+//! the window the place is let go: the agent is no longer connected and the host evicts
+//! it. A close (the agent's process ended) and a protocol violation end the connection at
+//! once, as without a window. Both sides watch the link ([`LINK_TIMEOUT`]). The agent
+//! connects again by itself and sends its stop again if the host asks for that cycle
+//! again ([`TcpAgent`]).
 
 use std::io::{self, ErrorKind, Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};
@@ -69,6 +83,83 @@ pub const MAX_RECORDS_PER_DRAIN: usize = 256;
 
 fn set_nodelay(s: &TcpStream) -> io::Result<()> {
     s.set_nodelay(true)
+}
+
+/// With a resume window (`[sync] resume_window`), how long either side of a connection
+/// goes without an answer from the other before it declares the link lost: keep-alive
+/// probes every second while idle, and `TCP_USER_TIMEOUT` for data not acknowledged.
+/// (Without a window the connection lives as long as TCP keeps it: a long partition is
+/// waited out, up to TCP's own retransmission limit of many minutes.)
+pub const LINK_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// Makes the kernel declare `s`'s link lost after [`LINK_TIMEOUT`] without an answer
+/// (the next read or write then fails with `TimedOut`).
+fn watch_link(s: &TcpStream) -> io::Result<()> {
+    let secs = LINK_TIMEOUT.as_secs() as libc::c_int;
+    let options = [
+        (libc::SOL_SOCKET, libc::SO_KEEPALIVE, 1),
+        (libc::IPPROTO_TCP, libc::TCP_KEEPIDLE, 1),
+        (libc::IPPROTO_TCP, libc::TCP_KEEPINTVL, 1),
+        (libc::IPPROTO_TCP, libc::TCP_KEEPCNT, secs),
+        (libc::IPPROTO_TCP, libc::TCP_USER_TIMEOUT, secs * 1000),
+    ];
+    for (level, name, value) in options {
+        // SAFETY: setsockopt(2) on a socket we own, with a pointer to a c_int and its size.
+        let rc = unsafe {
+            libc::setsockopt(
+                s.as_raw_fd(),
+                level,
+                name,
+                (&raw const value).cast(),
+                core::mem::size_of::<libc::c_int>() as libc::socklen_t,
+            )
+        };
+        if rc != 0 {
+            return Err(io::Error::last_os_error());
+        }
+    }
+    Ok(())
+}
+
+/// With a resume window, how long the host holds the place of an agent whose connection
+/// was reset: not the whole window, since a process killed with a frame it had not read
+/// resets its connection too, while an agent whose link was reset connects again at once.
+pub const RESET_GRACE: Duration = Duration::from_secs(2);
+
+/// How an admitted agent's connection ended, as the host sees it (and so how long it
+/// holds the agent's place, with a resume window).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Loss {
+    /// The agent's own end (a close: its process ended) or a protocol violation: not held.
+    Ended,
+    /// A reset: a process killed with a frame it had not read, or a link reset on the way
+    /// (a middlebox, the agent's side of a link that timed out). The host cannot tell them
+    /// apart; an agent whose link was reset connects again at once, so its place is held
+    /// for [`RESET_GRACE`] (at most the window).
+    Reset,
+    /// The link timed out, was unreachable, or could not carry a record or a frame in
+    /// time: held for the resume window.
+    Lost,
+}
+
+/// What an I/O error on an agent's connection means.
+fn loss_of(e: &io::Error) -> Loss {
+    match e.kind() {
+        ErrorKind::ConnectionReset | ErrorKind::ConnectionAborted | ErrorKind::BrokenPipe => {
+            Loss::Reset
+        }
+        ErrorKind::TimedOut
+        | ErrorKind::HostUnreachable
+        | ErrorKind::NetworkUnreachable
+        | ErrorKind::NetworkDown => Loss::Lost,
+        _ => Loss::Ended,
+    }
+}
+
+/// Whether an I/O error means the link to the peer broke (reset, timed out, unreachable)
+/// rather than that the peer spoke nonsense.
+fn link_lost(e: &io::Error) -> bool {
+    loss_of(e) != Loss::Ended
 }
 
 fn write_record(stream: &mut TcpStream, kind: u32, body: &[u8]) -> io::Result<()> {
@@ -121,7 +212,10 @@ fn read_exact_deadline(
 const HEADER: usize = core::mem::size_of::<SensorHeader>();
 
 mod agent;
+mod hellos;
 mod host;
+#[cfg(test)]
+mod resume_tests;
 
 pub use agent::*;
 pub use host::*;
@@ -134,9 +228,11 @@ mod tests {
 
     // --- TcpHost against raw sockets (no simulator) ------------------------------------
 
+    /// A TCP host of agents 0 and 1 without a resume window (a lost link ends the
+    /// connection: what these tests look at).
     fn tcp_host(stop_timeout: f64) -> TcpHost {
         let text = format!(
-            "[sync]\nstop_timeout = {stop_timeout}\n[transport]\nkind = \"tcp\"\n\
+            "[sync]\nstop_timeout = {stop_timeout}\nresume_window = 0\n[transport]\nkind = \"tcp\"\n\
              tcp_listen = \"127.0.0.1:0\"\n\
              [[agent]]\nid = 0\n[[agent.camera]]\nname = \"c\"\nwidth = 8\n\
              [[agent]]\nid = 1\n[[agent.camera]]\nname = \"c\"\nwidth = 8\n"
