@@ -26,7 +26,8 @@
 //! comes from these lines).
 //!
 //! CI runs, per remote transport: the clean link, 1 % and 5 % loss, a 3 s partition
-//! (shorter than the zenoh lease of these runs, 10 s). The heavier cases (20 % loss, a
+//! (shorter than the zenoh lease of these runs, 10 s); over TCP also a partition past the
+//! link timeout, back within the resume window ([`resume`]). The heavier cases (20 % loss, a
 //! 30 s partition, a 3 s partition with the default 2 s lease, delay, duplication) are
 //! `#[ignore]`d: `cargo test --workspace --features vrsync-sim/rerun --test tests --
 //! --ignored --nocapture netfaults`.
@@ -42,6 +43,7 @@
 
 mod nft;
 mod relay;
+mod resume;
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -703,11 +705,11 @@ fn delay_and_duplication_leave_the_run_intact(remote: Remote) {
     }
 }
 
-/// On demand, recorded (not asserted to work: a resume window for links that come back
-/// is not built yet): 20 % loss, a 30 s partition, a 3 s partition with the default lease.
-/// What must hold whatever happens to the remote agents: the host ends its run, the
+/// On demand: 20 % loss, a 30 s partition, a 3 s partition with the default lease. What
+/// must hold whatever happens to the remote agents: the host ends its run, the
 /// shared-memory agent takes part in every cycle, nobody is waited for until a stop
-/// timeout.
+/// timeout. Over TCP (resume window) the run must be intact too; over zenoh (no resume
+/// window yet: its lease decides) the outcome is recorded.
 fn heavy_faults_are_recorded(remote: Remote) {
     let Some(bench) = Bench::new(remote) else {
         return;
@@ -741,6 +743,9 @@ fn heavy_faults_are_recorded(remote: Remote) {
         assert_eq!(out.frames, FRAMES, "{out:#?}");
         assert_eq!(out.stop_timeouts, 0, "{out:#?}");
         assert!(out.commands[0].1.is_ok(), "shm agent: {out:#?}");
+        if remote == Remote::Tcp {
+            out.assert_intact(&clean);
+        }
     }
 }
 
