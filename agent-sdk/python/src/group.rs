@@ -12,7 +12,7 @@ use std::time::Duration;
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
-use vrsync_agent::{Agent, PixelFormat};
+use vrsync_agent::Agent;
 use vrsync_bridge::{Command, Config};
 
 use crate::agent::{PyCamera, cameras_of, connect_one, default_frame_wait, load_config, secs};
@@ -27,7 +27,7 @@ mod wait;
 
 use args::{Planned, indices, mask, planned, reset_command};
 use channels::{GroupChannels, act_row};
-use sink::{ImageSink, Out, Sink};
+use sink::{Out, Sink, image_outputs};
 
 /// Room for this many commands per agent and step from the start (a table entry with
 /// more grows the buffer once).
@@ -128,6 +128,34 @@ impl AgentGroup {
     }
 }
 
+/// The agent ids of a group: `agent_ids` (each ≥ 0), else every `[[agent]]` of `cfg`; at
+/// least one, none twice.
+fn group_ids(cfg: &Config, agent_ids: Option<Vec<i64>>) -> PyResult<Vec<u32>> {
+    let ids: Vec<u32> = match agent_ids {
+        Some(ids) => ids
+            .into_iter()
+            .map(|i| {
+                u32::try_from(i)
+                    .map_err(|_| PyValueError::new_err(format!("agent ids must be ≥ 0, got {i}")))
+            })
+            .collect::<PyResult<_>>()?,
+        None => cfg.agents.iter().map(|a| a.id).collect(),
+    };
+    if ids.is_empty() {
+        return Err(PyValueError::new_err(
+            "an AgentGroup needs at least one agent",
+        ));
+    }
+    for (i, id) in ids.iter().enumerate() {
+        if ids[..i].contains(id) {
+            return Err(PyValueError::new_err(format!(
+                "agent id {id} is given twice"
+            )));
+        }
+    }
+    Ok(ids)
+}
+
 /// The error of a use after `close()`.
 fn closed(session: &str) -> PyErr {
     pyo3::exceptions::PyRuntimeError::new_err(format!(
@@ -160,29 +188,7 @@ impl AgentGroup {
         if let Some(s) = session {
             cfg.session = s;
         }
-        let ids: Vec<u32> = match agent_ids {
-            Some(ids) => ids
-                .into_iter()
-                .map(|i| {
-                    u32::try_from(i).map_err(|_| {
-                        PyValueError::new_err(format!("agent ids must be ≥ 0, got {i}"))
-                    })
-                })
-                .collect::<PyResult<_>>()?,
-            None => cfg.agents.iter().map(|a| a.id).collect(),
-        };
-        if ids.is_empty() {
-            return Err(PyValueError::new_err(
-                "an AgentGroup needs at least one agent",
-            ));
-        }
-        for (i, id) in ids.iter().enumerate() {
-            if ids[..i].contains(id) {
-                return Err(PyValueError::new_err(format!(
-                    "agent id {id} is given twice"
-                )));
-            }
-        }
+        let ids = group_ids(&cfg, agent_ids)?;
         let config_error =
             |msg: String| error(py, "ConfigError", msg, &[("path", obj(py, config.clone()))]);
         let mut cameras: Option<Vec<PyCamera>> = None;
@@ -217,28 +223,7 @@ impl AgentGroup {
         let channels = GroupChannels::new(py, &agent_cfgs, n)?
             .map_err(|e| config_error(format!("{}: {e}", config.display())))?;
         let numpy = py.import("numpy")?;
-        let mut images = Vec::new();
-        let mut image_sinks = Vec::new();
-        for c in &cameras {
-            let format = match c.format.as_str() {
-                "rgb8" => PixelFormat::Rgb8,
-                "rgba8" => PixelFormat::Rgba8,
-                "gray8" => PixelFormat::Gray8,
-                _ => PixelFormat::Depth32f,
-            };
-            let mut shape = vec![n];
-            shape.extend(c.shape().iter().map(|&d| d as usize));
-            let out = Out::new(py, &numpy, &shape, c.dtype())?;
-            image_sinks.push(ImageSink {
-                name: c.name.clone(),
-                width: c.width,
-                height: c.height,
-                format,
-                row_bytes: c.width as usize * format.bytes_per_pixel(),
-                ptr: out.ptr,
-            });
-            images.push((c.name.clone(), out));
-        }
+        let (images, image_sinks) = image_outputs(py, &numpy, &cameras, n)?;
         let outs = vec![
             ("positions", Out::new(py, &numpy, &[n, 3], "float32")?),
             ("rotations", Out::new(py, &numpy, &[n, 4], "float32")?),

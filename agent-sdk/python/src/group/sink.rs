@@ -8,6 +8,7 @@ use vrsync_agent::{Frame, PixelFormat};
 use vrsync_bridge::WireOutcome;
 
 use super::channels::{VectorSink, check_vectors, write_vectors};
+use crate::agent::PyCamera;
 
 /// A writable, C-contiguous numpy array owned by the group, with its buffer export held
 /// (numpy cannot resize or free it while exported).
@@ -70,6 +71,42 @@ pub(super) struct ImageSink {
     pub(super) format: PixelFormat,
     pub(super) row_bytes: usize,
     pub(super) ptr: usize,
+}
+
+/// An output array and its name.
+pub(super) type NamedOut = (String, Out);
+
+/// One stacked array per camera of `cameras`, `(n, ...)` for `n` agents (named by the
+/// camera), and the sink that writes each agent's image into its row.
+pub(super) fn image_outputs(
+    py: Python<'_>,
+    numpy: &Bound<'_, PyModule>,
+    cameras: &[PyCamera],
+    n: usize,
+) -> PyResult<(Vec<NamedOut>, Vec<ImageSink>)> {
+    let mut images = Vec::new();
+    let mut image_sinks = Vec::new();
+    for c in cameras {
+        let format = match c.format.as_str() {
+            "rgb8" => PixelFormat::Rgb8,
+            "rgba8" => PixelFormat::Rgba8,
+            "gray8" => PixelFormat::Gray8,
+            _ => PixelFormat::Depth32f,
+        };
+        let mut shape = vec![n];
+        shape.extend(c.shape().iter().map(|&d| d as usize));
+        let out = Out::new(py, numpy, &shape, c.dtype())?;
+        image_sinks.push(ImageSink {
+            name: c.name.clone(),
+            width: c.width,
+            height: c.height,
+            format,
+            row_bytes: c.width as usize * format.bytes_per_pixel(),
+            ptr: out.ptr,
+        });
+        images.push((c.name.clone(), out));
+    }
+    Ok((images, image_sinks))
 }
 
 /// Raw pointers into the output arrays, for writing with the GIL released.
