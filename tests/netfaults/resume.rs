@@ -1,7 +1,12 @@
 //! A lost TCP link that comes back within the resume window (`[sync] resume_window`,
 //! 30 s by default) is resumed, not ended.
 
-use super::{Bench, FRAMES, Fault, LEASE_S, Remote};
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use super::nft::partition_table;
+use super::{Bench, FRAMES, Fault, LEASE_S, REMOTE_IDS, Remote};
+use crate::util::{self, EVENT_DEADLINE, Events, bin};
 use vrsync_bridge::tcp::LINK_TIMEOUT;
 
 /// CI: the link cut for longer than TCP's link timeout, so that both sides declare it lost
@@ -24,5 +29,116 @@ fn a_tcp_link_lost_past_the_link_timeout_and_back_within_the_window_is_resumed()
     assert!(
         answered < 8.0,
         "answered {answered} s after the link returned: {out:#?}"
+    );
+}
+
+/// CI: the link cut until the resume window (2 s here) has passed: the host evicts the
+/// remote agents within the bound (the link timeout, then the window), the world goes on
+/// without them, they give up (exit 1, "the host is gone"), and, started again once the
+/// link is back, they rejoin at the next cycle.
+#[test]
+fn a_tcp_agent_not_back_within_the_window_is_evicted_in_bound_and_rejoins_when_back() {
+    let Some(ns) = super::link() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let session = util::session("nfwindow");
+    super::wire_sized_packets(&ns);
+    let window = Duration::from_secs(2);
+    let config = |side: &str| {
+        let text = super::config_text(&session, Remote::Tcp, LEASE_S, side, false);
+        let with_window = format!("[sync]\nresume_window = {:?}\n", window.as_secs_f64());
+        let path = dir.path().join(format!("{side}.toml"));
+        std::fs::write(&path, text.replacen("[sync]\n", &with_window, 1)).unwrap();
+        path
+    };
+    let (host_cfg, agent_cfg) = (config("host"), config("agent"));
+    let events = Events::in_dir(dir.path());
+    let sum_path = dir.path().join("summary.json");
+    // No --frames: the run goes on until SIGTERM.
+    let host = ns.spawn(
+        &ns.host,
+        &bin("vr-sim"),
+        &[
+            "run",
+            "--config",
+            host_cfg.to_str().unwrap(),
+            "--events",
+            events.arg(),
+            "--summary-json",
+            sum_path.to_str().unwrap(),
+            "--quiet",
+        ],
+    );
+    events.wait_for("listening", EVENT_DEADLINE);
+    let agent = |id: u32, namespace: &str, cfg: &Path, log: &str| {
+        let (id_arg, log) = (id.to_string(), dir.path().join(log));
+        let p = ns.spawn(
+            namespace,
+            &bin("vr-agent"),
+            &[
+                "--config",
+                cfg.to_str().unwrap(),
+                "--id",
+                &id_arg,
+                "--policy",
+                "circle",
+                "--log-cycles",
+                log.to_str().unwrap(),
+            ],
+        );
+        (p, log)
+    };
+    let (shm_agent, shm_log) = agent(0, &ns.host, &host_cfg, "a0.log");
+    let remotes: Vec<_> = REMOTE_IDS
+        .iter()
+        .map(|&id| agent(id, &ns.agents, &agent_cfg, &format!("a{id}.log")))
+        .collect();
+    for (_, log) in &remotes {
+        util::wait_for_cycle_line(log, 20, EVENT_DEADLINE);
+    }
+    let cut = partition_table(&ns);
+    let cut_at = Instant::now();
+    let bound = LINK_TIMEOUT + window + Duration::from_secs(5);
+    for id in REMOTE_IDS {
+        events.wait_for_match("agent_evicted", |e| e["agent"] == id, bound);
+    }
+    let evicted_after = cut_at.elapsed();
+    // The world goes on without them.
+    let at = super::last_cycle(&shm_log);
+    util::wait_for_cycle_line(&shm_log, at + 5, EVENT_DEADLINE);
+    drop(cut);
+    for (p, _) in remotes {
+        let out = p.wait(EVENT_DEADLINE);
+        assert_eq!(out.code(), Some(1), "gave up: {}", out.stderr);
+    }
+    // Back (started again), each rejoins at the next cycle and takes part.
+    let back: Vec<_> = REMOTE_IDS
+        .iter()
+        .map(|&id| agent(id, &ns.agents, &agent_cfg, &format!("back{id}.log")))
+        .collect();
+    for (&id, (_, log)) in REMOTE_IDS.iter().zip(&back) {
+        let rejoined =
+            events.wait_for_match("agent_rejoined", |e| e["agent"] == id, EVENT_DEADLINE);
+        let cycle = rejoined["cycle"].as_u64().unwrap();
+        util::wait_for_cycle_line(log, cycle + 1, EVENT_DEADLINE);
+    }
+    host.signal(libc::SIGTERM);
+    let out = host.wait(EVENT_DEADLINE);
+    assert_eq!(out.code(), Some(0), "{}", out.stderr);
+    assert_eq!(shm_agent.wait(EVENT_DEADLINE).code(), Some(0));
+    for (p, _) in back {
+        assert_eq!(p.wait(EVENT_DEADLINE).code(), Some(0));
+    }
+    let sum = util::summary(&sum_path);
+    assert_eq!(sum["evictions"], 2, "{sum}");
+    assert_eq!(sum["rejoins"], 2, "{sum}");
+    assert_eq!(sum["stop_timeouts"], 0, "{sum}");
+    eprintln!(
+        "netfaults: tcp link cut past the resume window ({} s): both remote agents evicted \
+         {:.1} s after the cut (bound: link timeout {} s + window), rejoined when back",
+        window.as_secs_f64(),
+        evicted_after.as_secs_f64(),
+        LINK_TIMEOUT.as_secs()
     );
 }
