@@ -29,7 +29,7 @@ pub mod zenoh;
 /// Without the `zenoh` feature, the zenoh entry of the registry: stand-ins whose host and
 /// agent constructors fail with an error naming the feature.
 #[cfg(not(feature = "zenoh"))]
-#[path = "zenoh_off.rs"]
+#[path = "zenoh/off.rs"]
 pub mod zenoh;
 
 pub use refusal::{MAX_KEPT_REFUSALS, PeerRefusal, RefusalKind, Refusals};

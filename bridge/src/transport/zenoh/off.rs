@@ -7,6 +7,10 @@
 //! one config file works with every build; what fails is creating a host or connecting an
 //! agent for which the config names zenoh, with an error naming the feature (stand-ins of
 //! [`super::absent`]).
+//!
+//! Not a module of `zenoh/mod.rs`: `transport/mod.rs` takes this file as the whole `zenoh`
+//! module in a build without the feature (kept in the transport's folder, as the legacy
+//! transport keeps its stand-in in `legacy/mod.rs`).
 
 use crate::transport::absent::{absent_agent, absent_host};
 
