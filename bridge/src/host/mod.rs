@@ -281,7 +281,9 @@ impl<T: HostTransport> Host<T> {
         &self.stats
     }
 
-    /// Whether agent `id` is connected (its receiving side is attached).
+    /// Whether agent `id` is connected (its receiving side is attached), or its link was
+    /// lost and the host holds its place for its return (`[sync] resume_window`): frames
+    /// published to it reach it when it is back, and in sync mode the cycle waits for it.
     pub fn is_connected(&self, id: u32) -> bool {
         self.slot_of(id)
             .is_some_and(|s| self.backend.is_connected(s))

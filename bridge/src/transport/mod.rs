@@ -284,7 +284,9 @@ pub trait HostTransport {
     /// A loaned sensor frame of this transport: only this transport's own loans come back
     /// to [`HostTransport::publish`], so no backend checks at run time what it got.
     type Loan: FrameLoanMut;
-    /// Whether agent `slot` has attached its receiving side.
+    /// Whether agent `slot` has attached its receiving side. A slot a network transport
+    /// holds for its agent's return after a lost link (TCP's `[sync] resume_window`) counts
+    /// as connected: a frame published to it is delivered when the agent is back.
     fn is_connected(&self, slot: usize) -> bool;
     /// Loans writable memory for agent `slot`'s next sensor frame.
     ///
