@@ -412,7 +412,8 @@ impl AgentTransport for ShmAgent {
         }
     }
 
-    /// Publishes the batch and, if it carries the stop flag, notifies *stop*.
+    /// Publishes the batch and, if it carries the stop flag, notifies *stop* (unless the
+    /// host polls the motor queues: see [`WakeWord::host_polling`]).
     fn send_batch(
         &mut self,
         header: &MotorHeader,
@@ -432,7 +433,9 @@ impl AgentTransport for ShmAgent {
         sample
             .send()
             .map_err(|e| fail(format!("cannot send the motor batch: {e:?}")))?;
-        if header.is_stop() {
+        // No notification while the host polls the motor queues itself: it finds the batch
+        // (one system call less per agent and cycle; see `WakeWord::set_host_polling`).
+        if header.is_stop() && !self.wake.host_polling() {
             self.stop
                 .notify()
                 .map_err(|e| fail(format!("cannot notify stop: {e:?}")))?;

@@ -274,6 +274,13 @@ impl ShmHost {
         })
     }
 
+    /// Whether some agent's motor queue holds a batch (or cannot be read: look).
+    fn any_batch_waiting(&self) -> bool {
+        self.agents
+            .iter()
+            .any(|p| p.motor_sub.has_samples().unwrap_or(true))
+    }
+
     fn agent(&self, slot: usize) -> Result<&HostAgentPorts, HostTransportError> {
         self.agents
             .get(slot)
@@ -473,6 +480,10 @@ impl HostTransport for ShmHost {
             // Busy-poll: the caller drains the subscribers again right away. Check for a
             // termination request now and then only (it costs a syscall).
             let _ = timeout;
+            if self.spins == 0 {
+                // The host never sleeps on the stop listener: agents need not notify.
+                self.wake.set_host_polling(true);
+            }
             std::hint::spin_loop();
             self.spins = self.spins.wrapping_add(1);
             if self.spins.is_multiple_of(4096) && self.termination_requested() {
@@ -482,20 +493,25 @@ impl HostTransport for ShmHost {
         }
         // Poll the subscribers briefly first: a quick answer is then seen without paying
         // for a sleep and a wake-up (see `spin_before_block_us`).
+        // While it polls, agents leave out their *stop* notifications (the flag stays set
+        // while the host works on what it found: it polls again before it sleeps).
         if !self.spin_before_block.is_zero() {
+            self.wake.set_host_polling(true);
             let until = Instant::now() + self.spin_before_block.min(timeout);
             loop {
-                if self
-                    .agents
-                    .iter()
-                    .any(|p| p.motor_sub.has_samples().unwrap_or(true))
-                {
+                if self.any_batch_waiting() {
                     return Ok(());
                 }
                 if Instant::now() >= until {
                     break;
                 }
                 std::hint::spin_loop();
+            }
+            // About to sleep: agents notify again from here on. A batch published before
+            // an agent saw the flag cleared is found by this last look.
+            self.wake.set_host_polling(false);
+            if self.any_batch_waiting() {
+                return Ok(());
             }
         }
         // A zero timeout polls: iceoryx2's timed wait does not return at once for it.

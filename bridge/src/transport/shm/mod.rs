@@ -11,7 +11,8 @@
 //!
 //! *Start* (a frame is there) and *closed* reach every agent at once through the session's
 //! [`WakeWord`], a futex word in shared memory: one system call wakes all the agents
-//! (an iceoryx2 event would send a datagram to each).
+//! (an iceoryx2 event would send a datagram to each). The same page says whether the host
+//! polls the motor queues; while it does, an agent's *stop* is not notified on `stop`.
 //!
 //! The host `create`s every service; agents `open` them. Buffers are sized explicitly: the
 //! sensor publisher of an agent holds at most [`SENSOR_POOL_SAMPLES`] frames (one loaned by

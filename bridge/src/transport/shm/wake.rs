@@ -34,6 +34,9 @@ const CLOSED: u32 = 1 << 31;
 const SLEEPERS_AT: usize = 64;
 /// Byte offset of [`MAGIC`].
 const MAGIC_AT: usize = 128;
+/// Byte offset of the host's "polling" flag (its own cache line): 1 while the host looks
+/// at the agents' motor queues itself, so an agent's *stop* needs no notification.
+const HOST_POLLING_AT: usize = 192;
 /// Written by the host once the page is set up: an agent that opens a page without it
 /// (another program's file of the same name, or one being created) does not use it.
 const MAGIC: u32 = u32::from_le_bytes(*b"vrsW");
@@ -191,6 +194,24 @@ impl WakeWord {
         }
     }
 
+    /// Host: says whether it polls the agents' motor queues itself (`true`) or may go to
+    /// sleep on the *stop* listener (`false`). After `false` the host must look at the
+    /// queues once more before it sleeps: a batch an agent published before it read the
+    /// flag as `true` is then seen (both sides order their accesses with full fences).
+    pub fn set_host_polling(&self, polling: bool) {
+        self.at(HOST_POLLING_AT)
+            .store(u32::from(polling), Ordering::SeqCst);
+        std::sync::atomic::fence(Ordering::SeqCst);
+    }
+
+    /// Agent, after publishing a batch with the stop flag: whether the host polls, so the
+    /// *stop* notification (a system call that may wake it) can be left out.
+    pub fn host_polling(&self) -> bool {
+        // Orders the batch's publication before this read (the host's side pairs with it).
+        std::sync::atomic::fence(Ordering::SeqCst);
+        self.at(HOST_POLLING_AT).load(Ordering::SeqCst) != 0
+    }
+
     /// Agent: sleeps while the word still holds `seen` (the value of an earlier
     /// [`Self::value`]), at most `timeout`; returns the value now. Wakes early on a bump,
     /// the close, a signal, or spuriously: the caller looks for its frame again.
@@ -296,6 +317,19 @@ mod tests {
         assert!(WakeWord::open(&s).is_ok());
         remove_wake_word(&s);
         assert!(WakeWord::open(&s).is_err());
+    }
+
+    #[test]
+    fn an_agent_sees_whether_the_host_polls() {
+        let s = session("polling");
+        let host = WakeWord::create(&s).unwrap();
+        let agent = WakeWord::open(&s).unwrap();
+        // A new host sleeps on its listener until it says otherwise: stops are notified.
+        assert!(!agent.host_polling());
+        host.set_host_polling(true);
+        assert!(agent.host_polling());
+        host.set_host_polling(false);
+        assert!(!agent.host_polling());
     }
 
     #[test]
