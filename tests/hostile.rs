@@ -58,10 +58,16 @@ struct Session {
 impl Session {
     /// Starts the host and agent 0; `token` becomes `tcp_token` when not empty.
     fn start(tag: &str, token: &str) -> (Self, Scripted) {
+        Self::start_with(tag, token, "")
+    }
+
+    /// [`Session::start`] with `sync_extra` lines appended to the `[sync]` table.
+    fn start_with(tag: &str, token: &str, sync_extra: &str) -> (Self, Scripted) {
         let dir = tempfile::tempdir().unwrap();
         let mut cfg = TestConfig::with_transport(tag, 2, Transport::Tcp);
         // Long enough that any stop timeout in these tests means a bug, not a slow machine.
         cfg.stop_timeout_s = 30.0;
+        cfg.sync_extra = sync_extra.to_owned();
         let mut text = cfg.toml();
         if !token.is_empty() {
             text = text.replacen(
@@ -521,14 +527,16 @@ fn a_batch_longer_than_the_maximum_drops_the_agent() {
 }
 
 #[test]
-fn an_agent_stalling_mid_batch_is_dropped_and_not_waited_for() {
-    let (s, mut a1) = Session::start("stallbatch", "");
+fn an_agent_stalling_mid_batch_is_dropped_and_evicted_when_its_resume_window_ends() {
+    // A record that stalls is a lost link to the host: the agent's place is held for the
+    // resume window (here 2 s, not the default 30) in case it comes back.
+    let (s, mut a1) = Session::start_with("stallbatch", "", "resume_window = 2.0\n");
     a1.hold_at(ATTACK_AT);
     let batch = a1.held_batch();
     a1.s.write_all(&batch[..PREFIX + 10]).unwrap();
     // Agent 1 now keeps its socket open and says nothing more. The host drops it after
-    // the stall timeout (2 s, well inside the 30 s stop timeout) and evicts it, so the
-    // cycle ends without a stop timeout.
+    // the stall timeout (2 s), holds its place for the window and then evicts it (both
+    // well inside the 30 s stop timeout), so the cycle ends without a stop timeout.
     s.host_evicts(1);
     assert_closed_by_host(&mut a1.s);
     s.finish(&[1], &[]);
