@@ -208,11 +208,17 @@ fn zenoh_agents_across_network_namespaces_run_in_lock_step_and_survive_faults() 
         return;
     };
     let dir = tempfile::tempdir().unwrap();
+    runs_the_all_shm_trajectory(&ns, dir.path());
+    survives_faults(&ns, dir.path());
+    drop(ns);
+}
 
-    // --- 300 cycles: the all-shm trajectory, 0 timeouts --------------------------------
-    let reference = dir.path().join("shm.toml");
+/// 300 cycles, two agents across the link and one local: the all-shm trajectory, 0
+/// timeouts, every agent in every cycle. Leaves `dir/zenoh.toml`.
+fn runs_the_all_shm_trajectory(ns: &Netns, dir: &Path) {
+    let reference = dir.join("shm.toml");
     std::fs::write(&reference, config_text(&util::session("nsref"), "shm")).unwrap();
-    let ref_sum = dir.path().join("shm.json");
+    let ref_sum = dir.join("shm.json");
     let out = util::run(
         "vr-sim",
         &[
@@ -233,10 +239,10 @@ fn zenoh_agents_across_network_namespaces_run_in_lock_step_and_survive_faults() 
     );
     assert_eq!(out.code(), Some(0), "reference run: {}", out.stderr);
 
-    let config_path = dir.path().join("zenoh.toml");
+    let config_path = dir.join("zenoh.toml");
     std::fs::write(&config_path, config_text(&util::session("ns"), "zenoh")).unwrap();
     let config = config_path.to_str().unwrap();
-    let sum_path = dir.path().join("zenoh.json");
+    let sum_path = dir.join("zenoh.json");
     let host = ns.spawn(
         &ns.host,
         &bin("vr-sim"),
@@ -251,9 +257,7 @@ fn zenoh_agents_across_network_namespaces_run_in_lock_step_and_survive_faults() 
             "--quiet",
         ],
     );
-    let logs: Vec<_> = (0..3)
-        .map(|i| dir.path().join(format!("a{i}.log")))
-        .collect();
+    let logs: Vec<_> = (0..3).map(|i| dir.join(format!("a{i}.log"))).collect();
     let a0 = ns.spawn(
         &ns.host,
         &bin("vr-agent"),
@@ -290,12 +294,18 @@ fn zenoh_agents_across_network_namespaces_run_in_lock_step_and_survive_faults() 
         "netns zenoh run: 300 cycles in {wall:.2} s, {:.2} ms per cycle (2 remote zenoh agents + 1 shm agent, 3 x 160x120 rgb8)",
         wall * 1000.0 / 300.0
     );
+}
 
-    // --- faults: a killed agent, a pulled link, a killed host ---------------------------
+/// A killed remote agent is evicted and another rejoins; a pulled link evicts both remote
+/// agents by the lease, not the stop timeout, and they see their host gone; after the link
+/// comes back new agents join; a killed host is gone for them all.
+fn survives_faults(ns: &Netns, dir: &Path) {
+    let config_path = dir.join("zenoh.toml");
+    let config = config_path.to_str().unwrap();
     let session = util::session("nsfault");
     std::fs::write(&config_path, config_text(&session, "zenoh")).unwrap();
-    let events = Events::in_dir(dir.path());
-    let sum_path = dir.path().join("faults.json");
+    let events = Events::in_dir(dir);
+    let sum_path = dir.join("faults.json");
     let host = ns.spawn(
         &ns.host,
         &bin("vr-sim"),
@@ -310,9 +320,7 @@ fn zenoh_agents_across_network_namespaces_run_in_lock_step_and_survive_faults() 
             "--quiet",
         ],
     );
-    let logs: Vec<_> = (0..3)
-        .map(|i| dir.path().join(format!("f{i}.log")))
-        .collect();
+    let logs: Vec<_> = (0..3).map(|i| dir.join(format!("f{i}.log"))).collect();
     let a0 = ns.spawn(
         &ns.host,
         &bin("vr-agent"),
@@ -338,7 +346,7 @@ fn zenoh_agents_across_network_namespaces_run_in_lock_step_and_survive_faults() 
     let at = evicted["cycle"].as_u64().unwrap();
     wait_for_cycle_line(&logs[2], at + 3, EVENT_DEADLINE);
     wait_for_cycle_line(&logs[0], at + 3, EVENT_DEADLINE);
-    let back_log = dir.path().join("f1-back.log");
+    let back_log = dir.join("f1-back.log");
     let a1 = ns.spawn(
         &ns.agents,
         &bin("vr-agent"),
@@ -388,8 +396,8 @@ fn zenoh_agents_across_network_namespaces_run_in_lock_step_and_survive_faults() 
     // The link comes back: new remote agents join; then the host is killed and they exit
     // with "host gone".
     ns.link(true);
-    let r1_log = dir.path().join("f1-again.log");
-    let r2_log = dir.path().join("f2-again.log");
+    let r1_log = dir.join("f1-again.log");
+    let r2_log = dir.join("f2-again.log");
     let r1 = ns.spawn(
         &ns.agents,
         &bin("vr-agent"),
@@ -422,7 +430,6 @@ fn zenoh_agents_across_network_namespaces_run_in_lock_step_and_survive_faults() 
     }
     let out = a0.wait(EVENT_DEADLINE);
     assert_eq!(out.code(), Some(1), "agent 0: {}", out.stderr);
-    drop(ns);
 }
 
 /// The same lock-step run as the plain zenoh one, over mutual TLS: the host's config
