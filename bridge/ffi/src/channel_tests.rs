@@ -7,6 +7,7 @@ use std::ffi::{CStr, c_char};
 use std::mem::MaybeUninit;
 use std::path::{Path, PathBuf};
 use std::ptr;
+use std::thread::JoinHandle;
 use std::time::Duration;
 
 use crate::tests::{connect_agent, create, last_error, session, wait_for_close};
@@ -177,8 +178,29 @@ fn vectors_reach_the_agent_and_actions_reach_the_report() {
     let path = write_config(dir.path(), "cycle");
     let host = create(&path);
     let torque = [0.1f32, -0.2, 0.3, -0.4, 1.0];
-    let agent_path = path.clone();
-    let agent = std::thread::spawn(move || -> Read {
+    let agent = spawn_agent(path.clone(), torque);
+    // SAFETY: `host` is a live handle from create until the destroy below.
+    unsafe {
+        writes_vectors_and_collects(host);
+        reads_the_actions(host, &torque);
+        reports_no_action_when_none_was_sent(host);
+        assert_eq!(vrs_host_destroy(host), VRS_HOST_OK);
+    }
+    let read = agent.join().unwrap();
+    assert_eq!(
+        read,
+        [
+            ("joints".to_owned(), vec![0.5, -0.5, 0.25]),
+            ("vel".to_owned(), vec![0.0, 10.0, 20.0, 30.0, 40.0]),
+        ]
+    );
+}
+
+/// Agent 0 of the config at `agent_path`, on its own thread: reads its vectors in cycle 0
+/// and acts (`torque`, gear 2, then a torque out of bounds sent raw); no action in cycle
+/// 1; then it waits for the host to close the session.
+fn spawn_agent(agent_path: PathBuf, torque: [f32; 5]) -> JoinHandle<Read> {
+    std::thread::spawn(move || -> Read {
         let mut agent = connect_agent(&agent_path, 0);
         let frame = agent.wait_start(Some(Duration::from_secs(5))).unwrap();
         let read = frame
@@ -205,14 +227,20 @@ fn vectors_reach_the_agent_and_actions_reach_the_report() {
         agent.stop().unwrap();
         wait_for_close(&mut agent);
         read
-    });
+    })
+}
 
+/// Cycle 0: agent 0's vectors written through the ABI while its frame is loaned (bad
+/// indices, names and agents refused), the frame published, the cycle started and
+/// collected.
+///
+/// # Safety
+/// `host` is a live handle.
+unsafe fn writes_vectors_and_collects(host: *mut vrs_host_t) {
     let mut vector = MaybeUninit::<vrs_host_vector_t>::uninit();
     let mut value = MaybeUninit::<vrs_host_action_value_t>::uninit();
-    let mut rejected = 0u32;
-    let mut report = MaybeUninit::<vrs_host_agent_report_t>::uninit();
-    // SAFETY: every pointer below is valid for its use; vectors are written within `len`
-    // while the frame is loaned, action values read within `len` before the cycle ends.
+    // SAFETY: `host` is live (the caller's promise); every pointer below is valid for its
+    // use; vectors are written within `len` while the frame is loaned.
     unsafe {
         assert_eq!(
             vrs_host_wait_for_agents(host, 5000, ptr::null_mut(), 0, ptr::null_mut()),
@@ -291,7 +319,22 @@ fn vectors_reach_the_agent_and_actions_reach_the_report() {
             "{}",
             last_error()
         );
+    }
+}
 
+/// Cycle 0, collected: agent 0's actions in the report (the torque it sent, gear 2; bad
+/// indices, names and agents refused), its two rejected chunks, no command; then the
+/// cycle ends.
+///
+/// # Safety
+/// `host` is a live handle whose cycle 0 was collected.
+unsafe fn reads_the_actions(host: *mut vrs_host_t, torque: &[f32; 5]) {
+    let mut value = MaybeUninit::<vrs_host_action_value_t>::uninit();
+    let mut rejected = 0u32;
+    let mut report = MaybeUninit::<vrs_host_agent_report_t>::uninit();
+    // SAFETY: `host` is live (the caller's promise); every pointer below is valid for its
+    // use; action values are read within `len` before the cycle ends.
+    unsafe {
         assert_eq!(
             vrs_host_action_by_name(host, 0, c"torque".as_ptr(), value.as_mut_ptr()),
             VRS_HOST_OK
@@ -350,7 +393,18 @@ fn vectors_reach_the_agent_and_actions_reach_the_report() {
             VRS_HOST_ERROR_WRONG_STATE,
             &["vrs_host_actions_rejected"],
         );
+    }
+}
 
+/// Cycle 1: nothing sent, nothing reported; the statistics count cycle 0's rejected chunks.
+///
+/// # Safety
+/// `host` is a live handle after cycle 0.
+unsafe fn reports_no_action_when_none_was_sent(host: *mut vrs_host_t) {
+    let mut value = MaybeUninit::<vrs_host_action_value_t>::uninit();
+    let mut rejected = 0u32;
+    // SAFETY: `host` is live (the caller's promise); every pointer below is valid for its use.
+    unsafe {
         // Cycle 1: nothing sent, nothing reported.
         assert_eq!(vrs_host_loan_frame(host, 0, ptr::null_mut()), VRS_HOST_OK);
         assert_eq!(vrs_host_publish(host, 0, ptr::null()), VRS_HOST_OK);
@@ -371,16 +425,7 @@ fn vectors_reach_the_agent_and_actions_reach_the_report() {
         let mut stats = MaybeUninit::<vrs_host_stats_t>::uninit();
         assert_eq!(vrs_host_stats(host, stats.as_mut_ptr()), VRS_HOST_OK);
         assert_eq!(stats.assume_init().actions_rejected, 2);
-        assert_eq!(vrs_host_destroy(host), VRS_HOST_OK);
     }
-    let read = agent.join().unwrap();
-    assert_eq!(
-        read,
-        [
-            ("joints".to_owned(), vec![0.5, -0.5, 0.25]),
-            ("vel".to_owned(), vec![0.0, 10.0, 20.0, 30.0, 40.0]),
-        ]
-    );
 }
 
 /// Every status of the header has its name in `vrs_host_status_name` (the table there is
