@@ -222,12 +222,46 @@ fn vectors_reach_the_agent_and_actions_reach_the_host() {
     host.publish(frame).unwrap();
     host.start().unwrap();
 
-    let torque = c"torque";
-    let gear = c"gear";
     let value = [0.1f32, -0.2, 0.3, -0.4, 1.0];
+    // SAFETY: `agent` is a live handle from connect until the disconnect below.
+    unsafe {
+        reads_the_vectors(agent);
+        refuses_bad_actions(agent, &value);
+        acts_until_the_queue_is_full(agent, &value);
+    }
+
+    let report = host.collect().unwrap();
+    let r = &report.agents()[0];
+    assert_eq!(r.action("torque"), Some(ActionValue::Box(&value)));
+    assert_eq!(r.action("gear"), Some(ActionValue::Discrete(2)));
+    assert_eq!(r.actions_rejected(), 0);
+    let commands: Vec<_> = r
+        .commands()
+        .iter()
+        .map(|c| c.decode().unwrap().name())
+        .collect();
+    assert_eq!(commands, ["turn"], "actions are not commands");
+    assert_eq!(host.stats().actions_rejected, 0);
+
+    drop(host);
+    // SAFETY: as above.
+    unsafe {
+        assert_eq!(
+            vrs_agent_wait_start(agent, 5000, ptr::null_mut()),
+            VRS_SESSION_CLOSED
+        );
+        assert_eq!(vrs_agent_disconnect(agent), VRS_OK);
+    }
+}
+
+/// Cycle 0's vectors, as the host wrote them; bad indices, names and pointers refused.
+///
+/// # Safety
+/// `agent` is a live handle.
+unsafe fn reads_the_vectors(agent: *mut vrs_agent_t) {
     let mut vector = MaybeUninit::<vrs_vector_t>::uninit();
-    // SAFETY: every pointer below is valid for its use; vectors are read within `len`
-    // while the frame is current.
+    // SAFETY: `agent` is live (the caller's promise); every pointer below is valid for its
+    // use; vectors are read within `len` while the frame is current.
     unsafe {
         assert_eq!(vrs_agent_wait_start(agent, 5000, ptr::null_mut()), VRS_OK);
         assert_eq!(
@@ -270,8 +304,19 @@ fn vectors_reach_the_agent_and_actions_reach_the_host() {
             VRS_ERROR_INVALID_ARGUMENT,
             &["out_vector"],
         );
+    }
+}
 
-        // Each refusal has its status and names the action.
+/// Each refusal has its status and names the action.
+///
+/// # Safety
+/// `agent` is a live handle with a current frame.
+unsafe fn refuses_bad_actions(agent: *mut vrs_agent_t, value: &[f32; 5]) {
+    let torque = c"torque";
+    let gear = c"gear";
+    // SAFETY: `agent` is live (the caller's promise); every pointer below is valid for its
+    // use.
+    unsafe {
         refused(
             vrs_agent_act(agent, c"thrust".as_ptr(), value.as_ptr(), 5),
             VRS_ERROR_UNKNOWN_CHANNEL,
@@ -335,7 +380,20 @@ fn vectors_reach_the_agent_and_actions_reach_the_host() {
             VRS_ERROR_INVALID_ARGUMENT,
             &["not UTF-8"],
         );
+    }
+}
 
+/// `value` for torque and gear 2 fill the queue but for a turn; the stop ends the frame.
+///
+/// # Safety
+/// `agent` is a live handle with a current frame.
+unsafe fn acts_until_the_queue_is_full(agent: *mut vrs_agent_t, value: &[f32; 5]) {
+    let torque = c"torque";
+    let gear = c"gear";
+    let mut vector = MaybeUninit::<vrs_vector_t>::uninit();
+    // SAFETY: `agent` is live (the caller's promise); every pointer below is valid for its
+    // use.
+    unsafe {
         // Five floats take two of the four queue entries, a choice one; a second value of
         // torque does not fit, a command still does.
         assert_eq!(
@@ -365,28 +423,5 @@ fn vectors_reach_the_agent_and_actions_reach_the_host() {
             VRS_ERROR_NO_FRAME,
             &[],
         );
-    }
-
-    let report = host.collect().unwrap();
-    let r = &report.agents()[0];
-    assert_eq!(r.action("torque"), Some(ActionValue::Box(&value)));
-    assert_eq!(r.action("gear"), Some(ActionValue::Discrete(2)));
-    assert_eq!(r.actions_rejected(), 0);
-    let commands: Vec<_> = r
-        .commands()
-        .iter()
-        .map(|c| c.decode().unwrap().name())
-        .collect();
-    assert_eq!(commands, ["turn"], "actions are not commands");
-    assert_eq!(host.stats().actions_rejected, 0);
-
-    drop(host);
-    // SAFETY: as above.
-    unsafe {
-        assert_eq!(
-            vrs_agent_wait_start(agent, 5000, ptr::null_mut()),
-            VRS_SESSION_CLOSED
-        );
-        assert_eq!(vrs_agent_disconnect(agent), VRS_OK);
     }
 }

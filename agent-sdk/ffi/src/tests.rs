@@ -220,10 +220,50 @@ fn a_cycle_through_the_c_abi_and_double_free() {
     host.wait_for_agents(Duration::from_secs(5)).unwrap();
 
     let mut frame = std::mem::MaybeUninit::<vrs_frame_t>::uninit();
-    let mut image = std::mem::MaybeUninit::<vrs_image_t>::uninit();
-    let mut id = 0u32;
-    let first;
-    // SAFETY: every pointer below is valid for its use.
+    // SAFETY: `agent` is a live handle from connect until the disconnect below.
+    let first = unsafe {
+        reads_the_first_frame(agent, &mut host);
+        reads_images_statuses_and_collisions(agent);
+        sends_commands_and_stops(agent)
+    };
+    let report = host.collect().unwrap();
+    let got: Vec<_> = report.agents()[0]
+        .commands()
+        .iter()
+        .map(|c| (c.decode().unwrap().name(), c.action_id))
+        .collect();
+    assert_eq!(got.len(), 4);
+    assert_eq!(got[0], ("move", first));
+    assert_eq!(got[2], ("turn", 4242));
+    assert_eq!(got[3].0, "cancel_move");
+
+    // SAFETY: as above.
+    unsafe {
+        drop(host);
+        assert_eq!(
+            vrs_agent_wait_start(agent, 5000, frame.as_mut_ptr()),
+            VRS_SESSION_CLOSED
+        );
+        assert_eq!(vrs_agent_disconnect(agent), VRS_OK);
+        assert_eq!(vrs_agent_disconnect(agent), VRS_ERROR_INVALID_HANDLE);
+        assert!(
+            last_error().contains("already disconnected"),
+            "{}",
+            last_error()
+        );
+        assert_eq!(vrs_agent_stop(agent), VRS_ERROR_INVALID_HANDLE);
+    }
+}
+
+/// Nothing before the first frame (a poll is a timeout); then cycle 0's frame, as the
+/// host published it, read twice alike.
+///
+/// # Safety
+/// `agent` is a live handle.
+unsafe fn reads_the_first_frame(agent: *mut vrs_agent_t, host: &mut Host) {
+    let mut frame = std::mem::MaybeUninit::<vrs_frame_t>::uninit();
+    // SAFETY: `agent` is live (the caller's promise); every pointer below is valid for its
+    // use.
     unsafe {
         // Before the first frame.
         assert_eq!(
@@ -243,7 +283,7 @@ fn a_cycle_through_the_c_abi_and_double_free() {
         );
         assert!(last_error().contains("no start"), "{}", last_error());
 
-        publish(&mut host);
+        publish(host);
         assert_eq!(
             vrs_agent_wait_start(agent, 5000, frame.as_mut_ptr()),
             VRS_OK
@@ -267,7 +307,19 @@ fn a_cycle_through_the_c_abi_and_double_free() {
             vrs_agent_frame(agent, ptr::null_mut()),
             VRS_ERROR_INVALID_ARGUMENT
         );
+    }
+}
 
+/// The current frame's images (zero copy, in camera order), status and collision; bad
+/// indices and names refused.
+///
+/// # Safety
+/// `agent` is a live handle with a current frame.
+unsafe fn reads_images_statuses_and_collisions(agent: *mut vrs_agent_t) {
+    let mut image = std::mem::MaybeUninit::<vrs_image_t>::uninit();
+    // SAFETY: `agent` is live (the caller's promise); every pointer below is valid for its
+    // use.
+    unsafe {
         assert_eq!(vrs_agent_image(agent, 0, image.as_mut_ptr()), VRS_OK);
         let left = image.assume_init();
         assert_eq!(
@@ -310,7 +362,21 @@ fn a_cycle_through_the_c_abi_and_double_free() {
         let mut collision = vrs_collision_t::default();
         assert_eq!(vrs_agent_collision(agent, 0, &mut collision), VRS_OK);
         assert_eq!((collision.action_id, collision.collider_id), (7, 99));
+    }
+}
 
+/// Commands: typed, generic, with an id of our own; bad ones refused here; then the stop,
+/// which ends the frame. Returns the first command's action id.
+///
+/// # Safety
+/// `agent` is a live handle with a current frame.
+unsafe fn sends_commands_and_stops(agent: *mut vrs_agent_t) -> u32 {
+    let mut image = std::mem::MaybeUninit::<vrs_image_t>::uninit();
+    let mut id = 0u32;
+    let first;
+    // SAFETY: `agent` is live (the caller's promise); every pointer below is valid for its
+    // use.
+    unsafe {
         // Commands: typed, generic, with an id of our own; bad ones refused here.
         assert_eq!(vrs_agent_send_move(agent, 90.0, 1.0, &mut id), VRS_OK);
         first = id;
@@ -357,33 +423,7 @@ fn a_cycle_through_the_c_abi_and_double_free() {
             VRS_ERROR_NO_FRAME
         );
     }
-    let report = host.collect().unwrap();
-    let got: Vec<_> = report.agents()[0]
-        .commands()
-        .iter()
-        .map(|c| (c.decode().unwrap().name(), c.action_id))
-        .collect();
-    assert_eq!(got.len(), 4);
-    assert_eq!(got[0], ("move", first));
-    assert_eq!(got[2], ("turn", 4242));
-    assert_eq!(got[3].0, "cancel_move");
-
-    // SAFETY: as above.
-    unsafe {
-        drop(host);
-        assert_eq!(
-            vrs_agent_wait_start(agent, 5000, frame.as_mut_ptr()),
-            VRS_SESSION_CLOSED
-        );
-        assert_eq!(vrs_agent_disconnect(agent), VRS_OK);
-        assert_eq!(vrs_agent_disconnect(agent), VRS_ERROR_INVALID_HANDLE);
-        assert!(
-            last_error().contains("already disconnected"),
-            "{}",
-            last_error()
-        );
-        assert_eq!(vrs_agent_stop(agent), VRS_ERROR_INVALID_HANDLE);
-    }
+    first
 }
 
 #[test]
