@@ -9,7 +9,8 @@ use std::path::Path;
 use glam::Vec3;
 use vrsync_bridge::{CAMERA_NAME_LEN, Command, Config, ImageDesc, ImageMut, PixelFormat};
 
-use super::Renderer;
+use super::{Entry, Prim, Renderer, RowRays, Tiles, hit_prim};
+use crate::geometry::Camera;
 use crate::world::World;
 
 /// A camera: name, format, width, height, fov h × v.
@@ -527,12 +528,12 @@ fn crowd_render_speed() {
 #[test]
 #[ignore = "prints timings; run on demand in release mode"]
 fn crowd_per_ray_floor() {
-    use super::{Entry, RowRays, Scratch, Tiles, draw, hit_prim, row_shader, view_of};
+    use super::{Scratch, draw, row_shader, view_of};
     let cams = CROWD_EYES;
     let shader = row_shader();
     for agents in [1, 4, 16, 64] {
         let w = crowd_world_with(agents, &cams);
-        let (room_min, room_max) = w.room_bounds();
+        let room = w.room_bounds();
         // Per image: camera, primitives, the renderer's tiles, the floor's tiles.
         let mut images = Vec::new();
         let mut scratch = Scratch::default();
@@ -543,102 +544,12 @@ fn crowd_per_ray_floor() {
                 scratch.collect_prims(&w, body, &cam, Vec3::ZERO);
                 scratch.bin_prims(&cam);
                 let prims = scratch.prims.clone();
-                // Each pixel's nearest primitive, as the renderer decides it: among those
-                // whose rectangle holds the pixel, the nearest hit nearer than the room,
-                // on equal depth the first.
                 let packets = cam.width_px.div_ceil(8);
-                let mut lists: Vec<Vec<u32>> = vec![Vec::new(); (packets * cam.height_px) as usize];
-                // Per packet, every primitive some pixel's ray hits (seen or hidden).
-                let mut hit_lists = lists.clone();
-                for y in 0..cam.height_px {
-                    let rr = RowRays::of(&cam, y);
-                    for x in 0..cam.width_px {
-                        let d = rr.dir(cam.right, x);
-                        let inv = crate::geometry::recip(d);
-                        let mut t =
-                            crate::geometry::exit_box(cam.origin, inv, room_min, room_max).0;
-                        let mut nearest = None;
-                        let hit_list = &mut hit_lists[(y * packets + x / 8) as usize];
-                        for p in &prims {
-                            if (p.x0..=p.x1).contains(&x)
-                                && (p.y0..=p.y1).contains(&y)
-                                && let Some(th) = hit_prim(p, cam.origin, d, inv)
-                            {
-                                if !hit_list.contains(&p.index) {
-                                    hit_list.push(p.index);
-                                }
-                                if th < t {
-                                    (t, nearest) = (th, Some(p.index));
-                                }
-                            }
-                        }
-                        let list = &mut lists[(y * packets + x / 8) as usize];
-                        if let Some(k) = nearest
-                            && !list.contains(&k)
-                        {
-                            list.push(k);
-                        }
-                    }
-                }
-                let mut floor = Tiles {
-                    width: 8,
-                    height: 1,
-                    cols: packets,
-                    ..Tiles::default()
-                };
-                floor.start.push(0);
-                for list in &mut lists {
-                    list.sort_by(|&a, &b| {
-                        let (a, b) = (&prims[a as usize], &prims[b as usize]);
-                        a.near.total_cmp(&b.near).then(a.index.cmp(&b.index))
-                    });
-                    floor
-                        .items
-                        .extend(list.iter().map(|&k| Entry::of(&prims[k as usize])));
-                    floor.start.push(floor.items.len() as u32);
-                }
-                // Entries a packet walks (at most; it stops at the first beyond its hits),
-                // and those it tests: walking its list as the renderer does.
-                let t = &scratch.tiles;
-                for y in 0..cam.height_px {
-                    let rr = RowRays::of(&cam, y);
-                    for x0 in (0..cam.width_px).step_by(8) {
-                        let tile = (y / t.height * t.cols + x0 / t.width) as usize;
-                        let list = &t.items[t.start[tile] as usize..t.start[tile + 1] as usize];
-                        listed += list.len();
-                        let rays: Vec<(u32, glam::Vec3)> = (x0..(x0 + 8).min(cam.width_px))
-                            .map(|x| (x, rr.dir(cam.right, x)))
-                            .collect();
-                        let mut depth: Vec<f32> = rays
-                            .iter()
-                            .map(|&(_, d)| {
-                                let inv = crate::geometry::recip(d);
-                                crate::geometry::exit_box(cam.origin, inv, room_min, room_max).0
-                            })
-                            .collect();
-                        for e in list {
-                            if e.near > depth.iter().fold(f32::MIN, |m, &v| m.max(v)) {
-                                break;
-                            }
-                            let (y, first, last) =
-                                (y as u16, x0 as u16, rays[rays.len() - 1].0 as u16);
-                            if y < e.y0 || y > e.y1 || last < e.x0 || first > e.x1 {
-                                continue;
-                            }
-                            tested += 1;
-                            let p = &prims[e.index as usize];
-                            for (&(x, d), t) in rays.iter().zip(&mut depth) {
-                                if (p.x0..=p.x1).contains(&x)
-                                    && let Some(th) =
-                                        hit_prim(p, cam.origin, d, crate::geometry::recip(d))
-                                    && th < *t
-                                {
-                                    *t = th;
-                                }
-                            }
-                        }
-                    }
-                }
+                let (mut lists, hit_lists) = seen_and_hit_per_packet(&cam, &prims, room);
+                let floor = floor_tiles(&mut lists, &prims, packets);
+                let (walked, tests) = walked_and_tested(&cam, &scratch.tiles, &prims, room);
+                listed += walked;
+                tested += tests;
                 seen += floor.items.len();
                 hit += hit_lists.iter().map(Vec::len).sum::<usize>();
                 seeing += lists.iter().filter(|l| !l.is_empty()).count();
@@ -697,4 +608,123 @@ fn crowd_per_ray_floor() {
             seeing as f64 / pixels * 800.0,
         );
     }
+}
+
+/// Per packet (8 × 1 pixels) of `cam`, the primitives its pixels see: each pixel's nearest
+/// primitive, as the renderer decides it (among those whose rectangle holds the pixel, the
+/// nearest hit nearer than the room, on equal depth the first); and every primitive some
+/// pixel's ray hits, seen or hidden.
+fn seen_and_hit_per_packet(
+    cam: &Camera,
+    prims: &[Prim],
+    (room_min, room_max): (Vec3, Vec3),
+) -> (Vec<Vec<u32>>, Vec<Vec<u32>>) {
+    let packets = cam.width_px.div_ceil(8);
+    let mut lists: Vec<Vec<u32>> = vec![Vec::new(); (packets * cam.height_px) as usize];
+    // Per packet, every primitive some pixel's ray hits (seen or hidden).
+    let mut hit_lists = lists.clone();
+    for y in 0..cam.height_px {
+        let rr = RowRays::of(cam, y);
+        for x in 0..cam.width_px {
+            let d = rr.dir(cam.right, x);
+            let inv = crate::geometry::recip(d);
+            let mut t = crate::geometry::exit_box(cam.origin, inv, room_min, room_max).0;
+            let mut nearest = None;
+            let hit_list = &mut hit_lists[(y * packets + x / 8) as usize];
+            for p in prims {
+                if (p.x0..=p.x1).contains(&x)
+                    && (p.y0..=p.y1).contains(&y)
+                    && let Some(th) = hit_prim(p, cam.origin, d, inv)
+                {
+                    if !hit_list.contains(&p.index) {
+                        hit_list.push(p.index);
+                    }
+                    if th < t {
+                        (t, nearest) = (th, Some(p.index));
+                    }
+                }
+            }
+            let list = &mut lists[(y * packets + x / 8) as usize];
+            if let Some(k) = nearest
+                && !list.contains(&k)
+            {
+                list.push(k);
+            }
+        }
+    }
+    (lists, hit_lists)
+}
+
+/// The floor's tiles: one per packet, listing exactly the primitives it sees (`lists`,
+/// sorted here by nearest depth, then index).
+fn floor_tiles(lists: &mut [Vec<u32>], prims: &[Prim], packets: u32) -> Tiles {
+    let mut floor = Tiles {
+        width: 8,
+        height: 1,
+        cols: packets,
+        ..Tiles::default()
+    };
+    floor.start.push(0);
+    for list in lists.iter_mut() {
+        list.sort_by(|&a, &b| {
+            let (a, b) = (&prims[a as usize], &prims[b as usize]);
+            a.near.total_cmp(&b.near).then(a.index.cmp(&b.index))
+        });
+        floor
+            .items
+            .extend(list.iter().map(|&k| Entry::of(&prims[k as usize])));
+        floor.start.push(floor.items.len() as u32);
+    }
+    floor
+}
+
+/// The list entries the packets of `cam` walk over the renderer's `tiles` (at most; a
+/// packet stops at the first beyond its hits), and those they test: walking each list as
+/// the renderer does.
+fn walked_and_tested(
+    cam: &Camera,
+    tiles: &Tiles,
+    prims: &[Prim],
+    (room_min, room_max): (Vec3, Vec3),
+) -> (usize, usize) {
+    let t = tiles;
+    let (mut listed, mut tested) = (0, 0);
+    for y in 0..cam.height_px {
+        let rr = RowRays::of(cam, y);
+        for x0 in (0..cam.width_px).step_by(8) {
+            let tile = (y / t.height * t.cols + x0 / t.width) as usize;
+            let list = &t.items[t.start[tile] as usize..t.start[tile + 1] as usize];
+            listed += list.len();
+            let rays: Vec<(u32, glam::Vec3)> = (x0..(x0 + 8).min(cam.width_px))
+                .map(|x| (x, rr.dir(cam.right, x)))
+                .collect();
+            let mut depth: Vec<f32> = rays
+                .iter()
+                .map(|&(_, d)| {
+                    let inv = crate::geometry::recip(d);
+                    crate::geometry::exit_box(cam.origin, inv, room_min, room_max).0
+                })
+                .collect();
+            for e in list {
+                if e.near > depth.iter().fold(f32::MIN, |m, &v| m.max(v)) {
+                    break;
+                }
+                let (y, first, last) = (y as u16, x0 as u16, rays[rays.len() - 1].0 as u16);
+                if y < e.y0 || y > e.y1 || last < e.x0 || first > e.x1 {
+                    continue;
+                }
+                tested += 1;
+                let p = &prims[e.index as usize];
+                for (&(x, d), t) in rays.iter().zip(&mut depth) {
+                    if (p.x0..=p.x1).contains(&x)
+                        && let Some(th) = hit_prim(p, cam.origin, d, crate::geometry::recip(d))
+                        && th < *t
+                    {
+                        *t = th;
+                    }
+                }
+            }
+        }
+    }
+    (listed, tested)
 }
