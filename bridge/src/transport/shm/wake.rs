@@ -238,27 +238,33 @@ mod tests {
         format!("wake-test-{tag}-{}", std::process::id())
     }
 
+    /// An agent in another thread that opens `session`'s word and sleeps on `seen` (for up to
+    /// a minute: a lost wake-up would show as `seen` returned); returns, once it has opened
+    /// the word, the handle yielding the value it woke to and whether it saw the close.
+    fn sleeper(session: &str, seen: u32) -> std::thread::JoinHandle<(u32, bool)> {
+        let (tx, rx) = mpsc::channel();
+        let s = session.to_owned();
+        let handle = std::thread::spawn(move || {
+            let agent = WakeWord::open(&s).unwrap();
+            tx.send(()).unwrap();
+            let v = agent.wait_change(seen, Duration::from_secs(60));
+            (v, agent.closed())
+        });
+        rx.recv_timeout(Duration::from_secs(10)).unwrap();
+        handle
+    }
+
     #[test]
     fn a_bump_ends_a_sleep_on_the_value_before_it() {
         let s = session("bump");
         let host = WakeWord::create(&s).unwrap();
         let seen = host.value();
-        let (tx, rx) = mpsc::channel();
-        let sleeper = std::thread::spawn({
-            let s = s.clone();
-            move || {
-                let agent = WakeWord::open(&s).unwrap();
-                tx.send(()).unwrap();
-                // A lost wake-up would return `seen` after the whole minute.
-                agent.wait_change(seen, Duration::from_secs(60))
-            }
-        });
-        rx.recv_timeout(Duration::from_secs(10)).unwrap();
+        let sleeper = sleeper(&s, seen);
         host.bump();
-        let now = sleeper.join().unwrap();
+        let (now, closed) = sleeper.join().unwrap();
         assert_ne!(now, seen);
         assert_eq!(now, host.value());
-        assert!(!host.closed());
+        assert!(!closed);
     }
 
     #[test]
@@ -280,17 +286,7 @@ mod tests {
         let s = session("close");
         let host = WakeWord::create(&s).unwrap();
         let seen = host.value();
-        let (tx, rx) = mpsc::channel();
-        let sleeper = std::thread::spawn({
-            let s = s.clone();
-            move || {
-                let agent = WakeWord::open(&s).unwrap();
-                tx.send(()).unwrap();
-                let v = agent.wait_change(seen, Duration::from_secs(60));
-                (v, agent.closed())
-            }
-        });
-        rx.recv_timeout(Duration::from_secs(10)).unwrap();
+        let sleeper = sleeper(&s, seen);
         host.close();
         let (v, closed) = sleeper.join().unwrap();
         assert!(closed);
