@@ -359,7 +359,8 @@ impl PyHost {
         Ok(())
     }
 
-    /// Whether agent `agent_id` is connected now.
+    /// Whether agent `agent_id` is connected now; a TCP agent whose link was lost counts as
+    /// connected while its place is held for its return (`[sync] resume_window`).
     fn is_connected(&mut self, py: Python<'_>, agent_id: i64) -> PyResult<bool> {
         let id = self::agent_id(agent_id)?;
         Ok(self.host(py)?.is_connected(id))

@@ -318,7 +318,8 @@ typedef struct vrs_host_agent_info_t {
   uint32_t agent_id;
   // Number of cameras (`vrs_host_camera` indices `0..camera_count`).
   uint32_t camera_count;
-  // 1 if the agent is connected now, else 0.
+  // 1 if the agent is connected now, else 0 (a TCP agent whose link was lost counts as
+  // connected while its place is held for its return: `[sync] resume_window`).
   uint32_t connected;
   // Reserved, zero.
   uint32_t reserved;

@@ -368,7 +368,8 @@ pub struct vrs_host_agent_info_t {
     pub agent_id: u32,
     /// Number of cameras (`vrs_host_camera` indices `0..camera_count`).
     pub camera_count: u32,
-    /// 1 if the agent is connected now, else 0.
+    /// 1 if the agent is connected now, else 0 (a TCP agent whose link was lost counts as
+    /// connected while its place is held for its return: `[sync] resume_window`).
     pub connected: u32,
     /// Reserved, zero.
     pub reserved: u32,

@@ -708,7 +708,10 @@ class Host:
         """Ends the cycle (waits for the stops, or the tick in async mode; Ctrl-C ends it)."""
     def set_rejected(self, agent_id: int, rejected: int) -> None:
         """How many of the agent's commands of this cycle the simulator rejected."""
-    def is_connected(self, agent_id: int) -> bool: ...
+    def is_connected(self, agent_id: int) -> bool:
+        """Whether agent ``agent_id`` is connected now; a TCP agent whose link was lost
+        counts as connected while its place is held for its return (``[sync]
+        resume_window``)."""
     def stats(self) -> dict[str, int]:
         """Counters since the host was created."""
     def cameras(self, agent_id: int) -> list[Camera]:

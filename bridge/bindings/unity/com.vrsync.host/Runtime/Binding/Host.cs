@@ -452,7 +452,9 @@ namespace Vrsync
             get { return agents; }
         }
 
-        /// <summary>Whether agent <paramref name="agentId"/> is connected now.</summary>
+        /// <summary>Whether agent <paramref name="agentId"/> is connected now; a TCP agent whose link
+        /// was lost counts as connected while its place is held for its return
+        /// (<c>[sync] resume_window</c>).</summary>
         public bool IsConnected(uint agentId)
         {
             for (uint i = 0; i < agents.Length; i++)
