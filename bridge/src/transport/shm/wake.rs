@@ -9,7 +9,9 @@
 //! `FUTEX_WAKE`; an agent that finds no frame sleeps with `FUTEX_WAIT` on the value it
 //! last saw (the kernel compares the value before it sleeps, so a bump between the
 //! agent's look and its sleep is never missed). The top bit says the host closed the
-//! session.
+//! session. An agent killed while asleep leaves the sleeper count one too high: the host
+//! then makes its one `FUTEX_WAKE` per cycle even when nobody sleeps, which costs that
+//! system call and nothing else.
 //!
 //! The page is named after the session (`vrsync_<hash of the session name>.wake` in
 //! `/dev/shm`); the host owns it and removes it when it ends. A host that crashed leaves
