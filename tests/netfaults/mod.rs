@@ -318,6 +318,26 @@ fn link() -> Option<Netns> {
 /// The remote agents' ids.
 const REMOTE_IDS: [u32; 2] = [1, 2];
 
+/// `vr-agent --policy circle` as agent `id` of `cfg` in network namespace `namespace`,
+/// logging each cycle to `log` (what every case's agents run).
+fn circle_agent(ns: &Netns, namespace: &str, cfg: &Path, id: u32, log: &Path) -> Proc {
+    let id_arg = id.to_string();
+    ns.spawn(
+        namespace,
+        &bin("vr-agent"),
+        &[
+            "--config",
+            cfg.to_str().unwrap(),
+            "--id",
+            &id_arg,
+            "--policy",
+            "circle",
+            "--log-cycles",
+            log.to_str().unwrap(),
+        ],
+    )
+}
+
 /// Runs the world for `frames` cycles with `fault` on the link of `ns`, in `dir`
 /// (which holds the certificates for TLS).
 fn run_case(
@@ -400,24 +420,8 @@ fn run_case(
         ],
     );
     let log = |id: u32| case_dir.join(format!("a{id}.log"));
-    let agent = |id: u32, namespace: &str, cfg: &Path| {
-        let id_arg = id.to_string();
-        let log = log(id);
-        ns.spawn(
-            namespace,
-            &bin("vr-agent"),
-            &[
-                "--config",
-                cfg.to_str().unwrap(),
-                "--id",
-                &id_arg,
-                "--policy",
-                "circle",
-                "--log-cycles",
-                log.to_str().unwrap(),
-            ],
-        )
-    };
+    let agent =
+        |id: u32, namespace: &str, cfg: &Path| circle_agent(ns, namespace, cfg, id, &log(id));
     // A relayed TCP agent that connects before the host listens loses its connection in
     // the hello (the relay cannot reach the host) and exits: start agents afterwards.
     events.wait_for("listening", EVENT_DEADLINE);

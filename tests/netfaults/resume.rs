@@ -72,22 +72,8 @@ fn a_tcp_agent_not_back_within_the_window_is_evicted_in_bound_and_rejoins_when_b
     );
     events.wait_for("listening", EVENT_DEADLINE);
     let agent = |id: u32, namespace: &str, cfg: &Path, log: &str| {
-        let (id_arg, log) = (id.to_string(), dir.path().join(log));
-        let p = ns.spawn(
-            namespace,
-            &bin("vr-agent"),
-            &[
-                "--config",
-                cfg.to_str().unwrap(),
-                "--id",
-                &id_arg,
-                "--policy",
-                "circle",
-                "--log-cycles",
-                log.to_str().unwrap(),
-            ],
-        );
-        (p, log)
+        let log = dir.path().join(log);
+        (super::circle_agent(&ns, namespace, cfg, id, &log), log)
     };
     let (shm_agent, shm_log) = agent(0, &ns.host, &host_cfg, "a0.log");
     let remotes: Vec<_> = REMOTE_IDS
