@@ -16,10 +16,11 @@ with the folder of the `vr-agent` built from the same tree (say, before and afte
 change: the protocol versions must match); they take turns within each round, so a
 change of the machine's state hits all alike.
 
-`vr-sim bench`'s `python-host` rows report the wall time only (their `sdk µs/step`), with
-`vr-bench-agent` processes that touch every image row: on 2 cores those agents, woken by
-`start()`, take the cores before it returns, and their work lands in the host's wall
-time. This script's idle agents and its CPU column separate the host's own cost.
+`vr-sim bench`'s `python-host` rows report both too (the ratio lines `python-host own CPU
+µs per agent-cycle` and `… own wall …`), with `vr-bench-agent` processes that touch every
+image row: on 2 cores those agents, woken by `start()`, take the cores before it returns,
+and their work lands in the host's wall time. This script's idle agents and its split of
+`start()` separate the host's own cost further.
 """
 
 from __future__ import annotations

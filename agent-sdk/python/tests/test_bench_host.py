@@ -24,15 +24,22 @@ DEADLINE = 120.0
 
 
 def test_result_reports_the_own_time_per_agent_cycle_in_us() -> None:
-    r = bench_host.result(4, 2, [100_000, 300_000, 200_000], [8_000, 12_000, 10_000])
+    r = bench_host.result(
+        4, 2, [100_000, 300_000, 200_000], [8_000, 12_000, 10_000], [4_000, 6_000, 8_000]
+    )
     assert (r["agents"], r["warmup"], r["cycles"]) == (4, 2, 3)
     assert r["round_trip_ns"] == [100_000, 300_000, 200_000]
-    # 10 µs per cycle (mean and median) over 4 agents.
+    # 10 µs per cycle (mean and median) of wall time over 4 agents.
     assert r["host_us_per_agent_cycle"] == pytest.approx(2.5)
     assert r["host_us_per_agent_cycle_p50"] == pytest.approx(2.5)
+    # 6 µs of CPU time per cycle (mean and median) over 4 agents.
+    assert r["own_cpu_ns"] == [4_000, 6_000, 8_000]
+    assert r["host_cpu_us_per_agent_cycle"] == pytest.approx(1.5)
+    assert r["host_cpu_us_per_agent_cycle_p50"] == pytest.approx(1.5)
     # Nothing measured: JSON null, not NaN (which is not JSON).
-    empty = bench_host.result(4, 0, [], [])
+    empty = bench_host.result(4, 0, [], [], [])
     assert empty["host_us_per_agent_cycle"] is None
+    assert empty["host_cpu_us_per_agent_cycle"] is None
     json.loads(json.dumps(empty, allow_nan=False))
 
 
@@ -90,9 +97,10 @@ class _StandIn:
 
 def test_measure_does_the_rust_hosts_work_per_cycle_and_times_the_measured_ones() -> None:
     host = _StandIn()
-    round_trips, own = bench_host.measure(host, warmup=2, cycles=3)
-    assert len(round_trips) == len(own) == 3
+    round_trips, own, own_cpu = bench_host.measure(host, warmup=2, cycles=3)
+    assert len(round_trips) == len(own) == len(own_cpu) == 3
     assert all(0 < o <= t for o, t in zip(own, round_trips, strict=True))
+    assert all(c > 0 for c in own_cpu)
     one_cycle = ["loan 0", "publish 0", "loan 1", "publish 1", "start", "collect"]
     assert host.calls == one_cycle * 5
     # The first byte of each image carries the cycle number.
@@ -141,6 +149,8 @@ def test_bench_host_serves_the_rust_bench_agents(tmp_path: Path) -> None:
     assert len(r["round_trip_ns"]) == len(r["own_ns"]) == 25
     assert all(0 < o <= t for o, t in zip(r["own_ns"], r["round_trip_ns"], strict=True))
     assert r["host_us_per_agent_cycle"] > 0
+    assert len(r["own_cpu_ns"]) == 25 and all(c > 0 for c in r["own_cpu_ns"])
+    assert r["host_cpu_us_per_agent_cycle"] > 0
     # Every agent took part to the end and reported its figures.
     for stdout, _ in outputs[1:]:
         assert "allocs_per_cycle" in stdout

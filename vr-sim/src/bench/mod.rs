@@ -108,8 +108,15 @@ pub struct Row {
     /// for the host excluded), as the agent process reports it. `python-host` rows: the
     /// Python host's time per agent-cycle outside `Host.collect` (loans, one byte written
     /// per image, publishes, `start`, the report's check: everything but the wait for
-    /// the agents), as `vrsync.bench_host` reports it (its `host_us_per_agent_cycle`).
+    /// the agents), as `vrsync.bench_host` reports it (its `host_us_per_agent_cycle`):
+    /// wall time, so with more agents than cores it also holds the agents that `start`
+    /// woke and that took the cores before it returned.
     pub sdk_us_per_agent_step: f64,
+    /// `python-host` rows: the Python host thread's CPU time per agent-cycle in the same
+    /// parts of the cycle, µs (median of the rounds; `vrsync.bench_host`'s
+    /// `host_cpu_us_per_agent_cycle`): the host's own cost, DESIGN §9's target. `null`
+    /// elsewhere.
+    pub host_cpu_us_per_agent_cycle: f64,
 }
 
 const CAMERAS: u32 = 3;
@@ -261,6 +268,8 @@ struct Measured {
     round_p50s_us: Vec<f64>,
     /// The agent's SDK time per agent-step of each round that reports it, µs.
     round_sdk_us: Vec<f64>,
+    /// The Python host's CPU time per agent-cycle of each round that reports it, µs.
+    round_host_cpu_us: Vec<f64>,
     allocs: f64,
     agent_allocs: f64,
     render_us: f64,
@@ -272,6 +281,7 @@ impl Measured {
         Self {
             round_p50s_us: vec![hist.value_at_quantile(0.5) as f64 / 1000.0],
             round_sdk_us: Vec::new(),
+            round_host_cpu_us: Vec::new(),
             hist,
             allocs,
             agent_allocs,
@@ -285,6 +295,7 @@ impl Measured {
         self.hist.add(&other.hist).context("merge histograms")?;
         self.round_p50s_us.extend(other.round_p50s_us);
         self.round_sdk_us.extend(other.round_sdk_us);
+        self.round_host_cpu_us.extend(other.round_host_cpu_us);
         self.allocs = self.allocs.max(other.allocs);
         self.agent_allocs = self.agent_allocs.max(other.agent_allocs);
         if self.render_us.is_nan() {
@@ -328,6 +339,7 @@ fn row(case: &Case, m: &Measured) -> Row {
         render_us: m.render_us,
         png_us: m.png_us,
         sdk_us_per_agent_step: median(&m.round_sdk_us),
+        host_cpu_us_per_agent_cycle: median(&m.round_host_cpu_us),
     }
 }
 

@@ -328,7 +328,9 @@ fn the_python_hosts_report_becomes_the_rows_histogram_and_own_time() {
     // As `python -m vrsync.bench_host` writes it (keys Rust does not read included).
     let text = r#"{"agents": 4, "warmup": 2, "cycles": 3,
         "round_trip_ns": [100000, 120000, 5000000], "own_ns": [8000, 9000, 8500],
-        "host_us_per_agent_cycle": 2.125, "host_us_per_agent_cycle_p50": 2.125}"#;
+        "host_us_per_agent_cycle": 2.125, "host_us_per_agent_cycle_p50": 2.125,
+        "own_cpu_ns": [4000, 5000, 6000], "host_cpu_us_per_agent_cycle": 1.25,
+        "host_cpu_us_per_agent_cycle_p50": 1.25}"#;
     let m = PythonHostReport::parse(text, &case)
         .unwrap()
         .measured(0.0)
@@ -337,8 +339,10 @@ fn the_python_hosts_report_becomes_the_rows_histogram_and_own_time() {
     assert_eq!(r.frames, 3);
     assert!((r.p50_us - 120.0).abs() < 0.5, "{}", r.p50_us);
     assert_eq!(r.sdk_us_per_agent_step, 2.125);
+    assert_eq!(r.host_cpu_us_per_agent_cycle, 1.25);
     let json = serde_json::to_value(&r).unwrap();
     assert_eq!(json["sdk_us_per_agent_step"], 2.125);
+    assert_eq!(json["host_cpu_us_per_agent_cycle"], 1.25);
     // A Python host's allocations are not counted.
     assert!(json["allocs_per_cycle"].is_null());
     // No own time measured: the row says so (NaN, `null` in JSON).
@@ -348,7 +352,10 @@ fn the_python_hosts_report_becomes_the_rows_histogram_and_own_time() {
         .unwrap()
         .measured(0.0)
         .unwrap();
-    assert!(row(&case, &m).sdk_us_per_agent_step.is_nan());
+    let r = row(&case, &m);
+    assert!(r.sdk_us_per_agent_step.is_nan());
+    // The CPU time absent (a report of an older `vrsync`): NaN too.
+    assert!(r.host_cpu_us_per_agent_cycle.is_nan());
     // Another case's report, a short list, and malformed JSON are refused.
     for bad in [
         r#"{"agents": 16, "cycles": 3, "round_trip_ns": [1, 2, 3], "host_us_per_agent_cycle": 1}"#,
@@ -364,7 +371,7 @@ fn the_python_hosts_report_becomes_the_rows_histogram_and_own_time() {
 fn the_ratio_table_sets_the_python_host_against_the_rust_host() {
     let mut h = histogram().unwrap();
     h.record(1000).unwrap();
-    let row_of = |transport: &'static str, p50_us: f64, sdk_us: f64| {
+    let row_of = |transport: &'static str, p50_us: f64, sdk_us: f64, cpu_us: f64| {
         let case = Case {
             transport,
             agents: 16,
@@ -377,11 +384,12 @@ fn the_ratio_table_sets_the_python_host_against_the_rust_host() {
         let mut r = row(&case, &Measured::new(h.clone(), 0.0, 0.0));
         r.p50_us = p50_us;
         r.sdk_us_per_agent_step = sdk_us;
+        r.host_cpu_us_per_agent_cycle = cpu_us;
         r
     };
     let rows = [
-        row_of("python-host", 300.0, 3.5),
-        row_of("shm", 200.0, f64::NAN),
+        row_of("python-host", 300.0, 6.5, 3.5),
+        row_of("shm", 200.0, f64::NAN, f64::NAN),
     ];
     let lines = report::ratio_lines(&rows);
     let line = |what: &str| {
@@ -393,8 +401,11 @@ fn the_ratio_table_sets_the_python_host_against_the_rust_host() {
     };
     let (_, v, target) = line("python-host / shm (Rust host), 16 agents, 1x84x84");
     assert_eq!((v, target), (Some(1.5), "report"));
-    let (_, v, target) = line("python-host own µs per agent-cycle, 16 agents");
+    // The target is the host's CPU time; its wall time is reported beside it.
+    let (_, v, target) = line("python-host own CPU µs per agent-cycle, 16 agents");
     assert_eq!((v, target), (Some(3.5), "<= 5"));
+    let (_, v, target) = line("python-host own wall µs per agent-cycle, 16 agents");
+    assert_eq!((v, target), (Some(6.5), "report"));
     assert_eq!(
         line("python-host / shm (Rust host), 4 agents, 1x84x84").1,
         None

@@ -208,9 +208,13 @@ pub(super) struct PythonHostReport {
     pub cycles: u64,
     /// Each measured cycle's round trip (first loan to the end of `collect`), ns.
     pub round_trip_ns: Vec<u64>,
-    /// The host's own time (outside `collect`) per agent and cycle, µs (mean over the
-    /// measured cycles; `null` if none were measured).
+    /// The host's own wall time (outside `collect`) per agent and cycle, µs (mean over
+    /// the measured cycles; `null` if none were measured).
     pub host_us_per_agent_cycle: Option<f64>,
+    /// The host thread's CPU time in the same parts, per agent and cycle, µs (mean;
+    /// `null` if none were measured, absent from a report of an older `vrsync`).
+    #[serde(default)]
+    pub host_cpu_us_per_agent_cycle: Option<f64>,
 }
 
 impl PythonHostReport {
@@ -239,8 +243,9 @@ impl PythonHostReport {
         Ok(r)
     }
 
-    /// The round trips as a histogram, the host's own time as the row's SDK time (host
-    /// allocations: not counted in a Python process, NaN).
+    /// The round trips as a histogram, the host's own wall time as the row's SDK time and
+    /// its CPU time as the row's host CPU time (host allocations: not counted in a Python
+    /// process, NaN).
     pub(super) fn measured(&self, agent_allocs: f64) -> anyhow::Result<Measured> {
         let mut hist = histogram()?;
         for &ns in &self.round_trip_ns {
@@ -249,6 +254,9 @@ impl PythonHostReport {
         let mut m = Measured::new(hist, f64::NAN, agent_allocs);
         if let Some(us) = self.host_us_per_agent_cycle.filter(|us| us.is_finite()) {
             m.round_sdk_us.push(us);
+        }
+        if let Some(us) = self.host_cpu_us_per_agent_cycle.filter(|us| us.is_finite()) {
+            m.round_host_cpu_us.push(us);
         }
         Ok(m)
     }
