@@ -15,8 +15,11 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 ALL = sorted(p.name for p in EXAMPLES.glob("*.py"))
 
 
-# The host and the example share two cores in CI: torch gets one thread.
-ONE_THREAD = {**os.environ, "OMP_NUM_THREADS": "1"}
+def one_thread() -> dict[str, str]:
+    """The environment of an example: the host and the example share two cores in CI, so
+    torch gets one thread. Built at the call, not at import: it carries what the test's
+    fixtures set (`SB3_LOGDIR` in the test's tmp_path, see conftest)."""
+    return {**os.environ, "OMP_NUM_THREADS": "1"}
 
 
 def run_example(name: str, *args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
@@ -25,7 +28,7 @@ def run_example(name: str, *args: str, timeout: float = 120) -> subprocess.Compl
         capture_output=True,
         text=True,
         timeout=timeout,
-        env=ONE_THREAD,
+        env=one_thread(),
     )
 
 
