@@ -15,8 +15,11 @@
 //!   order, in both directions. It delays the byte stream, not packets: TCP's own
 //!   behaviour under packet delay (its RTT estimate, its window) is not what a netem
 //!   link would give.
-//! - Packet reordering is not covered: nothing here can reorder packets (a relay above
-//!   TCP cannot, and the kernel has no qdisc for it).
+//! - **reordering**: P % of the packets each way take a second, slower veth pair between
+//!   the namespaces (a token bucket qdisc on it; an nftables route chain marks them,
+//!   policy routing sends the marked ones that way) and arrive behind packets sent after
+//!   them ([`Reorder`]); the TCP stacks' counters (`TCPOFOQueue`, `TCPSACKReorder`, ...)
+//!   show it happened.
 //!
 //! Each case runs the same lock-step world (`circle` agents: a command every cycle) as a
 //! clean run on the same link and compares: the trajectory hash, every agent's commands
@@ -26,9 +29,10 @@
 //! comes from these lines).
 //!
 //! CI runs, per remote transport: the clean link, 1 % and 5 % loss, a 3 s partition
-//! (shorter than the zenoh lease of these runs, 10 s); over TCP also a partition past the
-//! link timeout, back within the resume window ([`resume`]). The heavier cases (20 % loss, a
-//! 30 s partition, a 3 s partition with the default 2 s lease, delay, duplication) are
+//! (shorter than the zenoh lease of these runs, 10 s), 5 % reordering; over TCP also a
+//! partition past the link timeout, back within the resume window ([`resume`]). The heavier
+//! cases (20 % loss, a 30 s partition, a 3 s partition with the default 2 s lease, delay,
+//! duplication, 25 % reordering) are
 //! `#[ignore]`d: `cargo test --workspace --features vrsync-sim/rerun --test tests --
 //! --ignored --nocapture netfaults`.
 //!
@@ -36,13 +40,14 @@
 //! otherwise a veth passes 64 KiB offload packets and one dropped "packet" is a whole
 //! camera frame.
 //!
-//! Needs root, `ip` and `nft` (CI runs as root; `scripts/test-all` and `.ci/run` install
+//! Needs root, `ip`, `tc` and `nft` (CI runs as root; `scripts/test-all` and `.ci/run` install
 //! iproute2 and nftables): skipped with a message otherwise. Namespaces (and with them
 //! every rule), nftables tables, relays and processes are removed by drop guards, also
 //! when a test fails.
 
 mod nft;
 mod relay;
+mod reorder;
 mod resume;
 
 use std::collections::BTreeMap;
@@ -57,6 +62,7 @@ use crate::netns::{AGENT_IP, HOST_IP, Netns};
 use crate::util::{self, EVENT_DEADLINE, Events, Proc, bin, cycle_log, record, summary};
 use nft::{duplicate_table, loss_table, partition_table};
 use relay::Relay;
+use reorder::Reorder;
 
 /// The host's TCP transport port (inside the host namespace: no other test sees it).
 const TCP_PORT: u16 = 7400;
@@ -125,6 +131,10 @@ enum Fault {
         ms: u64,
         jitter_ms: u64,
     },
+    /// `percent` % of the packets each way sent through a slower path ([`Reorder`]).
+    Reorder {
+        percent: u32,
+    },
 }
 
 impl Fault {
@@ -135,6 +145,7 @@ impl Fault {
             Self::Partition { at_cycle, secs } => format!("partition {secs}s at cycle {at_cycle}"),
             Self::Duplicate { percent } => format!("duplicate {percent}%"),
             Self::Delay { ms, jitter_ms } => format!("delay {ms}±{jitter_ms}ms"),
+            Self::Reorder { percent } => format!("reorder {percent}%"),
         }
     }
 }
@@ -374,6 +385,7 @@ fn run_case(
     // The fault's guards live until the end of this function (after every process ended).
     let mut tables = Vec::new();
     let mut relay = None;
+    let mut reorder = None;
     match fault {
         Fault::Loss { percent } => tables.push(loss_table(ns, percent)),
         Fault::Duplicate { percent } => {
@@ -394,6 +406,7 @@ fn run_case(
                 Duration::from_millis(jitter_ms),
             ));
         }
+        Fault::Reorder { percent } => reorder = Some(Reorder::install(ns, percent)),
         Fault::Clean | Fault::Partition { .. } => {}
     }
 
@@ -481,7 +494,13 @@ fn run_case(
     if let Some(r) = &relay {
         counters.insert("relay.chunks".into(), r.chunks.load(Ordering::Relaxed));
     }
+    if let Some(r) = &reorder {
+        for (k, v) in r.counters() {
+            counters.insert(format!("reorder.{k}"), v);
+        }
+    }
     drop(relay);
+    drop(reorder);
     drop(tables);
 
     assert!(
@@ -709,6 +728,28 @@ fn delay_and_duplication_leave_the_run_intact(remote: Remote) {
     }
 }
 
+/// CI: 5 % of the packets each way reordered (on demand: 25 %): the run is intact, and
+/// the TCP stacks saw segments out of order.
+fn reordering_leaves_the_run_intact(remote: Remote, percents: &[u32]) {
+    let Some(bench) = Bench::new(remote) else {
+        return;
+    };
+    let clean = bench.run(Fault::Clean, FRAMES, LEASE_S);
+    clean.report(None);
+    clean.assert_intact(&clean);
+    for &percent in percents {
+        let out = bench.run(Fault::Reorder { percent }, FRAMES, LEASE_S);
+        out.report(Some(&clean));
+        out.assert_intact(&clean);
+        let grew = |k: &str| out.counters.get(k).copied().unwrap_or(0);
+        assert!(
+            grew("reorder.agents.TCPOFOQueue") + grew("reorder.host.TCPOFOQueue") > 0,
+            "no segment arrived out of order: {:?}",
+            out.counters
+        );
+    }
+}
+
 /// On demand: 20 % loss, a 30 s partition, a 3 s partition with the default lease. What
 /// must hold whatever happens to the remote agents: the host ends its run, the
 /// shared-memory agent takes part in every cycle, nobody is waited for until a stop
@@ -768,6 +809,15 @@ macro_rules! remotes {
             #[ignore = "on demand (minutes): cargo test --workspace --test tests -- --ignored netfaults"]
             fn delay_and_duplication_leave_the_run_intact() {
                 super::delay_and_duplication_leave_the_run_intact(Remote::$remote);
+            }
+            #[test]
+            fn reordering_leaves_the_run_intact() {
+                super::reordering_leaves_the_run_intact(Remote::$remote, &[5]);
+            }
+            #[test]
+            #[ignore = "on demand (minutes): cargo test --workspace --test tests -- --ignored netfaults"]
+            fn heavy_reordering_leaves_the_run_intact() {
+                super::reordering_leaves_the_run_intact(Remote::$remote, &[25]);
             }
             #[test]
             #[ignore = "on demand (minutes): cargo test --workspace --test tests -- --ignored netfaults"]

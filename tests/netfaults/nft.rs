@@ -116,3 +116,20 @@ pub(super) fn duplicate_table(ns_name: &str, dev: &str, peer: &str, percent: u32
         ),
     )
 }
+
+/// Marks `percent` % of the packets leaving `ns_name` towards `peer` (`meta mark set
+/// mark`) in a route chain, so that the kernel routes them again by their mark.
+pub(super) fn reorder_table(ns_name: &str, peer: &str, percent: u32, mark: u32) -> NftTable {
+    NftTable::add(
+        ns_name,
+        "ip",
+        "vrreorder",
+        &format!(
+            "counter seen {{}}\ncounter slowed {{}}\n\
+             chain out {{\ntype route hook output priority 0; policy accept;\n\
+             ip daddr {peer} counter name \"seen\"\n\
+             ip daddr {peer} numgen random mod 100 < {percent} \
+             meta mark set {mark} counter name \"slowed\"\n}}"
+        ),
+    )
+}
