@@ -47,8 +47,12 @@ pub fn lib_dir() -> PathBuf {
 
 /// Path of a workspace binary; panics with the command to run when it is missing or
 /// older than one of its sources (a `cargo test -p vrsync-tests` does not rebuild it).
+/// In `$VRSYNC_BIN_DIR` when that is set (e.g. `target/release`: these tests against the
+/// optimized host and agents, as `scripts/under-load --release` runs them), else in
+/// [`bin_dir`].
 pub fn bin(name: &str) -> PathBuf {
-    built(bin_dir().join(format!("{name}{}", std::env::consts::EXE_SUFFIX)))
+    let dir = std::env::var_os("VRSYNC_BIN_DIR").map_or_else(bin_dir, PathBuf::from);
+    built(dir.join(format!("{name}{}", std::env::consts::EXE_SUFFIX)))
 }
 
 /// Path of a workspace example (`target/<profile>/examples/NAME`), checked like [`bin`]:
