@@ -1,40 +1,49 @@
-//! Memory the Rust side owns, exported to Python through the buffer protocol: the N-d
-//! layout of an image, and filling a `Py_buffer` from it. Read-only for an agent's
-//! received frames, writable for a host's loaned frames; the exporting object keeps the
-//! layout (its `shape` and `strides` arrays are pointed to by every export).
+//! Memory the Rust side owns, shown to Python as numpy arrays without a copy: the N-d
+//! layout of an image or a vector, and an array made over it by numpy's C API, whose
+//! `base` is a Python object that keeps the memory valid. Read-only for an agent's
+//! received frames, writable for a host's loaned frames.
+//!
+//! The array is made directly (`PyArray_NewFromDescr` + `PyArray_SetBaseObject`), not
+//! through the buffer protocol (`numpy.asarray` of an exporter): that way made a
+//! memoryview, parsed a PEP 3118 format string and made the array, ~3× the work per view
+//! (the Python host makes one per image per agent per cycle).
 
-use std::ffi::{CStr, c_int, c_void};
+use std::ffi::{c_int, c_void};
 
-use pyo3::exceptions::PyBufferError;
-use pyo3::ffi;
+use numpy::npyffi::{self, NPY_ARRAY_WRITEABLE, PY_ARRAY_API, npy_intp};
+use numpy::{Element, PyArrayDescrMethods};
 use pyo3::prelude::*;
 use vrsync_bridge::PixelFormat;
 
-/// The shape of an up to 3-dimensional array of one item type.
+/// The item type of an array.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Item {
+    U8,
+    F32,
+}
+
+/// The shape of an up to 3-dimensional array of one item type; strides in bytes.
 #[derive(Debug, Clone)]
 pub(crate) struct Layout {
-    format: &'static CStr,
-    itemsize: isize,
+    item: Item,
     ndim: c_int,
-    shape: [isize; 3],
-    strides: [isize; 3],
+    shape: [npy_intp; 3],
+    strides: [npy_intp; 3],
 }
 
 impl Layout {
     /// An image: H×W×3 or H×W×4 `uint8` (rgb8, rgba8), H×W `uint8` (gray8) or H×W
     /// `float32` (depth32f), rows `stride` bytes apart.
     pub(crate) fn image(format: PixelFormat, width: u32, height: u32, stride: usize) -> Self {
-        let (w, h, stride) = (width as isize, height as isize, stride as isize);
-        let (format, itemsize, ndim, shape, strides): (&'static CStr, isize, c_int, _, _) =
-            match format {
-                PixelFormat::Rgb8 => (c"B", 1, 3, [h, w, 3], [stride, 3, 1]),
-                PixelFormat::Rgba8 => (c"B", 1, 3, [h, w, 4], [stride, 4, 1]),
-                PixelFormat::Gray8 => (c"B", 1, 2, [h, w, 0], [stride, 1, 0]),
-                PixelFormat::Depth32f => (c"f", 4, 2, [h, w, 0], [stride, 4, 0]),
-            };
+        let (w, h, stride) = (width as npy_intp, height as npy_intp, stride as npy_intp);
+        let (item, ndim, shape, strides) = match format {
+            PixelFormat::Rgb8 => (Item::U8, 3, [h, w, 3], [stride, 3, 1]),
+            PixelFormat::Rgba8 => (Item::U8, 3, [h, w, 4], [stride, 4, 1]),
+            PixelFormat::Gray8 => (Item::U8, 2, [h, w, 0], [stride, 1, 0]),
+            PixelFormat::Depth32f => (Item::F32, 2, [h, w, 0], [stride, 4, 0]),
+        };
         Self {
-            format,
-            itemsize,
+            item,
             ndim,
             shape,
             strides,
@@ -44,93 +53,75 @@ impl Layout {
     /// A vector of `len` `float32`.
     pub(crate) fn vector(len: usize) -> Self {
         Self {
-            format: c"f",
-            itemsize: 4,
+            item: Item::F32,
             ndim: 1,
-            shape: [len as isize, 0, 0],
+            shape: [len as npy_intp, 0, 0],
             strides: [4, 0, 0],
         }
     }
-
-    /// Whether the rows follow each other without padding.
-    fn contiguous(&self) -> bool {
-        self.ndim == 1 || self.strides[0] == self.shape[1] * self.itemsize * self.shape[2].max(1)
-    }
 }
 
-/// Fills `view` with the `len` bytes at `ptr`, shaped by `layout`, for `owner`.
-/// `readonly`: `Some(why)` exports read-only and refuses a writable request with `why`;
-/// `None` exports writable.
+/// A numpy array over the memory at `ptr`, shaped by `layout`, with `base` as its base
+/// object: the array (and every array made from it) holds a reference to `base`, which
+/// must keep the memory valid. Writable or read-only as `writable` says; a read-only one
+/// cannot be made writable (numpy asks the base for a writable buffer first, which no
+/// base here exports).
 ///
 /// # Safety
-/// `view` is null or a `Py_buffer` to fill (as the buffer protocol hands it over);
-/// `ptr..ptr + len` stays valid (and, when exported writable, writable by nobody else)
-/// as long as `owner` lives; `layout` lives inside `owner` and describes at most `len`
-/// bytes.
-pub(crate) unsafe fn fill(
-    view: *mut ffi::Py_buffer,
-    flags: c_int,
+/// The bytes `layout` describes from `ptr` stay valid as long as `base` lives; when
+/// `writable`, nobody else writes or reads them concurrently while an array is alive.
+pub(crate) unsafe fn array<'py>(
+    base: Bound<'py, PyAny>,
     ptr: *mut u8,
-    len: usize,
     layout: &Layout,
-    readonly: Option<&str>,
-    owner: Bound<'_, PyAny>,
-) -> PyResult<()> {
-    if view.is_null() {
-        return Err(PyBufferError::new_err("null Py_buffer"));
-    }
-    if let Some(why) = readonly
-        && flags & ffi::PyBUF_WRITABLE == ffi::PyBUF_WRITABLE
-    {
-        return Err(PyBufferError::new_err(why.to_owned()));
-    }
-    if flags & ffi::PyBUF_STRIDES != ffi::PyBUF_STRIDES && !layout.contiguous() {
-        return Err(PyBufferError::new_err(
-            "this image has padded rows: request a strided buffer (numpy does)",
-        ));
-    }
-    // SAFETY: `view` is valid (checked non-null, guaranteed by the protocol). The pointers
-    // stored in it (`buf`, `format`, `shape`, `strides`) point into memory that the caller
-    // keeps valid as long as `owner` lives, and into `layout` (inside `owner`), which
-    // `obj` keeps alive until the export is released.
+    writable: bool,
+) -> PyResult<Bound<'py, PyAny>> {
+    let py = base.py();
+    // Importing numpy first turns a missing numpy into an ImportError here, instead of
+    // the panic of the numpy crate's first look-up of its C API.
+    numpy_imported(py)?;
+    let descr = match layout.item {
+        Item::U8 => u8::get_dtype(py),
+        Item::F32 => f32::get_dtype(py),
+    };
+    let (mut shape, mut strides) = (layout.shape, layout.strides);
+    // SAFETY: numpy's C API, imported above; `PyArray_NewFromDescr` steals the descriptor's
+    // reference and copies `shape` and `strides`; the data pointer is valid as the caller
+    // guarantees for as long as `base` lives, and `PyArray_SetBaseObject` makes the array
+    // hold `base` (it steals that reference, also when it fails).
     unsafe {
-        (*view).buf = ptr.cast::<c_void>();
-        (*view).len = len as isize;
-        (*view).readonly = c_int::from(readonly.is_some());
-        (*view).itemsize = layout.itemsize;
-        (*view).format = if flags & ffi::PyBUF_FORMAT == ffi::PyBUF_FORMAT {
-            layout.format.as_ptr().cast_mut()
-        } else {
-            std::ptr::null_mut()
-        };
-        if flags & ffi::PyBUF_ND == ffi::PyBUF_ND {
-            (*view).ndim = layout.ndim;
-            (*view).shape = layout.shape.as_ptr().cast_mut();
-        } else {
-            // A simple request: one dimension of `len` bytes.
-            (*view).ndim = 1;
-            (*view).itemsize = 1;
-            (*view).shape = std::ptr::null_mut();
+        let array = PY_ARRAY_API.PyArray_NewFromDescr(
+            py,
+            npyffi::get_type_object(py, npyffi::NpyTypes::PyArray_Type),
+            descr.into_dtype_ptr(),
+            layout.ndim,
+            shape.as_mut_ptr(),
+            strides.as_mut_ptr(),
+            ptr.cast::<c_void>(),
+            if writable { NPY_ARRAY_WRITEABLE } else { 0 },
+            std::ptr::null_mut(),
+        );
+        if array.is_null() {
+            return Err(PyErr::fetch(py));
         }
-        (*view).strides = if flags & ffi::PyBUF_STRIDES == ffi::PyBUF_STRIDES {
-            layout.strides.as_ptr().cast_mut()
-        } else {
-            std::ptr::null_mut()
-        };
-        (*view).suboffsets = std::ptr::null_mut();
-        (*view).internal = std::ptr::null_mut();
-        (*view).obj = owner.into_ptr();
+        let array = Bound::from_owned_ptr(py, array);
+        if PY_ARRAY_API.PyArray_SetBaseObject(
+            py,
+            array.as_ptr().cast::<npyffi::PyArrayObject>(),
+            base.into_ptr(),
+        ) < 0
+        {
+            return Err(PyErr::fetch(py));
+        }
+        Ok(array)
     }
-    Ok(())
 }
 
-/// `numpy.asarray(obj)`: an array viewing `obj`'s exported buffer (no copy).
-pub(crate) fn as_array<'py>(obj: Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+/// Imports numpy once per process.
+fn numpy_imported(py: Python<'_>) -> PyResult<()> {
     use pyo3::sync::PyOnceLock;
-    static ASARRAY: PyOnceLock<Py<PyAny>> = PyOnceLock::new();
-    let py = obj.py();
-    let asarray = ASARRAY.get_or_try_init(py, || {
-        Ok::<_, PyErr>(py.import("numpy")?.getattr("asarray")?.unbind())
-    })?;
-    asarray.bind(py).call1((obj,))
+    static NUMPY: PyOnceLock<()> = PyOnceLock::new();
+    NUMPY
+        .get_or_try_init(py, || py.import("numpy").map(drop))
+        .map(drop)
 }

@@ -1,4 +1,4 @@
-//! A received frame, and its images as zero-copy, read-only buffers.
+//! A received frame, and its images and vectors as zero-copy, read-only numpy arrays.
 //!
 //! # Threads
 //! The frame owns a sample of the agent's subscriber (shared memory) or a buffer of its
@@ -9,20 +9,18 @@
 //! thread may *read* a frame: the header and the pixels are plain memory that nobody
 //! writes while the frame is held.
 
-use std::ffi::c_int;
 use std::mem::ManuallyDrop;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::{self, ThreadId};
 
 use pyo3::exceptions::PyKeyError;
-use pyo3::ffi;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use vrsync_agent::Frame;
 use vrsync_bridge::{ActionState, WireOutcome};
 
-use crate::buffer::{Layout, as_array, fill};
+use crate::buffer::{Layout, array};
 use crate::sensors::{
     PyActionState, PyActionStatus, PyCollision, PyEyePosition, PyGridPosition, PyHeadMotion, PyPose,
 };
@@ -307,16 +305,17 @@ impl PyFrame {
                 me.vector_names()
             ))
         })?;
-        let buffer = Bound::new(
-            slf.py(),
-            ImageBuffer {
-                _frame: slf.clone().unbind(),
-                ptr: values.as_ptr() as usize,
-                len: std::mem::size_of_val(values),
-                layout: Layout::vector(values.len()),
-            },
-        )?;
-        as_array(buffer.into_any())
+        let ptr = values.as_ptr().cast::<u8>().cast_mut();
+        // SAFETY: the values lie in the frame, which the array's base (the frame itself)
+        // keeps alive and nobody writes while it is held; the array is read-only.
+        unsafe {
+            array(
+                slf.clone().into_any(),
+                ptr,
+                &Layout::vector(values.len()),
+                false,
+            )
+        }
     }
 
     /// Every vector by name (see `vector`), in payload order.
@@ -355,64 +354,15 @@ impl PyFrame {
 }
 
 fn image_at<'py>(frame: &Bound<'py, PyFrame>, index: usize) -> PyResult<Bound<'py, PyAny>> {
-    let py = frame.py();
     let img = frame
         .get()
         .frame()
         .image(index)
         .ok_or_else(|| PyKeyError::new_err(format!("no image {index} in this frame")))?;
     let data = img.data();
-    let buffer = Bound::new(
-        py,
-        ImageBuffer {
-            _frame: frame.clone().unbind(),
-            ptr: data.as_ptr() as usize,
-            len: data.len(),
-            layout: Layout::image(img.format(), img.width(), img.height(), img.stride()),
-        },
-    )?;
-    as_array(buffer.into_any())
-}
-
-/// The memory of one image or vector, exported through the buffer protocol as a read-only
-/// N-dimensional view (what numpy wraps without copying). Keeps its frame alive.
-#[pyclass(module = "vrsync._vrsync", frozen)]
-pub(crate) struct ImageBuffer {
-    _frame: Py<PyFrame>,
-    ptr: usize,
-    len: usize,
-    layout: Layout,
-}
-
-#[pymethods]
-impl ImageBuffer {
-    /// Exports the image read-only. A request for a writable buffer raises `BufferError`.
-    ///
-    /// # Safety
-    /// `view` must be a valid `Py_buffer` to fill (Python's buffer protocol guarantees it).
-    unsafe fn __getbuffer__(
-        slf: Bound<'_, Self>,
-        view: *mut ffi::Py_buffer,
-        flags: c_int,
-    ) -> PyResult<()> {
-        let me = slf.get();
-        let (ptr, len) = (me.ptr as *mut u8, me.len);
-        // SAFETY: the pixels lie in the frame, which `_frame` keeps alive and nobody
-        // writes while it is held (read-only export); the layout lives in `slf`.
-        unsafe {
-            fill(
-                view,
-                flags,
-                ptr,
-                len,
-                &me.layout,
-                Some(
-                    "vrsync images are read-only views of shared memory; copy the array to modify it",
-                ),
-                slf.clone().into_any(),
-            )
-        }
-    }
-
-    unsafe fn __releasebuffer__(&self, _view: *mut ffi::Py_buffer) {}
+    let layout = Layout::image(img.format(), img.width(), img.height(), img.stride());
+    let ptr = data.as_ptr().cast_mut();
+    // SAFETY: the pixels lie in the frame, which the array's base (the frame itself) keeps
+    // alive and nobody writes while it is held; the array is read-only.
+    unsafe { array(frame.clone().into_any(), ptr, &layout, false) }
 }

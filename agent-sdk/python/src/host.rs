@@ -27,7 +27,9 @@ use std::time::Duration;
 use pyo3::exceptions::{PyKeyError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use vrsync_bridge::{Host, HostCycleError, HostTransportError, HostWaitError, SignalHandling};
+use vrsync_bridge::{
+    Host, HostCycleError, HostTransportError, HostWaitError, SensorFrameMut, SignalHandling,
+};
 
 use crate::agent::{PyCamera, SameThread, cameras_of, load_config, secs};
 use crate::errors::{error, obj};
@@ -35,6 +37,7 @@ use crate::errors::{error, obj};
 mod frame;
 mod report;
 
+use frame::FrameNames;
 pub(crate) use frame::PyHostFrame;
 pub(crate) use report::{PyAgentReport, PyCycleReport};
 
@@ -97,6 +100,9 @@ pub(crate) struct PyHost {
     simulation_time_per_frame: Duration,
     connect_timeout: Duration,
     cameras: Vec<(u32, Vec<PyCamera>)>,
+    /// Each agent's camera and vector names, made at its first loan and shared by its
+    /// frames.
+    names: Vec<(u32, Rc<FrameNames>)>,
     raised: Raised,
 }
 
@@ -110,6 +116,23 @@ impl PyHost {
                 format!("the host of session {:?} is closed", self.session),
                 &[("session", obj(py, &self.session))],
             )),
+        }
+    }
+
+    /// The names of `frame`'s agent, shared (see [`FrameNames`]).
+    fn names_of(&mut self, frame: &SensorFrameMut) -> Rc<FrameNames> {
+        let id = frame.agent_id();
+        match self.names.iter_mut().find(|(a, _)| *a == id) {
+            Some((_, names)) if names.fits(frame) => names.clone(),
+            Some((_, names)) => {
+                *names = Rc::new(FrameNames::of(frame));
+                names.clone()
+            }
+            None => {
+                let names = Rc::new(FrameNames::of(frame));
+                self.names.push((id, names.clone()));
+                names
+            }
         }
     }
 
@@ -250,6 +273,7 @@ impl PyHost {
             simulation_time_per_frame: cfg.sync.simulation_time_per_frame,
             connect_timeout: cfg.sync.connect_timeout,
             cameras: cfg.agents.iter().map(|a| (a.id, cameras_of(a))).collect(),
+            names: Vec::new(),
             session,
             raised,
         })
@@ -286,7 +310,10 @@ impl PyHost {
         let token = self.token;
         let frame = self.host(py)?.loan_frame(id);
         match frame {
-            Ok(f) => Ok(PyHostFrame::new(f, token)),
+            Ok(f) => {
+                let names = self.names_of(&f);
+                Ok(PyHostFrame::new(f, token, names))
+            }
             Err(e @ HostCycleError::Transport(HostTransportError::Loan { .. })) => Err(error(
                 py,
                 "TransportError",

@@ -6,15 +6,15 @@
 //!
 //! - `agent::PyAgent` connects, waits (releasing the GIL, in slices short enough that
 //!   Ctrl-C raises `KeyboardInterrupt` at once), sends and stops.
-//! - `frame::PyFrame` holds one received frame; its images are exported through the
-//!   buffer protocol as read-only, zero-copy views whose base keeps the frame alive.
+//! - `frame::PyFrame` holds one received frame; its images and vectors are read-only,
+//!   zero-copy numpy arrays whose base is the frame (which it keeps alive).
 //! - `group::AgentGroup` drives N agents of one session with one call per lock-step
 //!   cycle, writing every frame into stacked numpy arrays (the batched vector envs' core).
 //! - `commands` holds one small class per command of the catalogue, checked when built.
 //! - `host::PyHost` is the other side: a simulator written in Python serves agents
 //!   through the Rust host, writing each agent's images straight into its loaned frame
 //!   through writable numpy views (`host::PyHostFrame`).
-//! - `buffer` exports frame memory through the buffer protocol (both sides).
+//! - `buffer` makes those numpy arrays over frame memory with numpy's C API (both sides).
 //! - Errors are the exception classes of `vrsync.errors` (pure Python, so that they can
 //!   inherit from both `VrsyncError` and the matching built-in such as `TimeoutError`).
 //!
@@ -74,7 +74,6 @@ fn _vrsync(m: &Bound<'_, PyModule>) -> PyResult<()> {
     group::register(m)?;
     host::register(m)?;
     m.add_class::<frame::PyFrame>()?;
-    m.add_class::<frame::ImageBuffer>()?;
     sensors::register(m)?;
     commands::register(m)?;
     channels::register(m)?;

@@ -212,10 +212,6 @@ class Frame:
     def memory_range(self) -> tuple[int, int]:
         """Address range of this frame's images (to check that arrays are views)."""
 
-@final
-class ImageBuffer:
-    """The buffer-protocol exporter behind an image array (internal)."""
-
 class Command:
     """Base class of every command; send one with ``Agent.send``."""
 

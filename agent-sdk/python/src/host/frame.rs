@@ -5,11 +5,12 @@
 //! itself (the agent's shared-memory sample, or the transport's pooled send buffer). `publish` hands
 //! that memory to the transport, after which it may be read by the agent, reused for
 //! another cycle, or unmapped: a write through an old array would corrupt a frame or
-//! crash. So the frame counts the buffers it exported (each array, and each array made
-//! from it, holds one export until it is freed), and `Host.publish` refuses, with
-//! `FrameInUseError`, a frame of which any view is alive. After publish the frame exports
-//! nothing any more (`image` and `vector` raise `UsageError`, and a buffer object dug out
-//! of an old array refuses to export again).
+//! crash. So each view's base object (a [`HostBuffer`], which every array made from the
+//! view refers to through its chain of bases) counts as one export of the frame from its
+//! making until it is freed, and `Host.publish` refuses, with `FrameInUseError`, a frame
+//! of which any export is alive. The base exports nothing itself (it is no buffer), so
+//! the memory is reachable only through arrays that keep it counted. After publish the
+//! frame makes no more views (`image` and `vector` raise `UsageError`).
 //!
 //! # Threads
 //! The loan belongs to the host's transports, which are not thread-safe (iceoryx2
@@ -17,16 +18,14 @@
 //! the thread that loaned them (PyO3 raises `PanicException` on any other).
 
 use std::cell::Cell;
-use std::ffi::c_int;
 use std::rc::Rc;
 
 use pyo3::exceptions::{PyBufferError, PyKeyError, PyValueError};
-use pyo3::ffi;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use vrsync_bridge::{ActionState, EyePosition, GridPosition, HeadMotion, Pose, SensorFrameMut};
 
-use crate::buffer::{Layout, as_array, fill};
+use crate::buffer::{Layout, array};
 use crate::errors::{error, obj};
 use crate::sensors::PyActionState;
 
@@ -52,21 +51,58 @@ pub(crate) struct PyHostFrame {
     agent_id: u32,
     cycle: u64,
     sim_time_ns: u64,
-    /// Camera names, in image order.
+    /// Its agent's camera and vector names, shared by every frame of that agent.
+    names: Rc<FrameNames>,
+}
+
+/// An agent's camera names (in image order) and vector names (`[[agent.vector]]`, in
+/// payload order): the same in every frame of the agent, so made once per agent and
+/// shared, not copied into each loan.
+#[derive(Debug, Default)]
+pub(crate) struct FrameNames {
     cameras: Vec<String>,
-    /// Vector names (`[[agent.vector]]`), in payload order.
     vectors: Vec<String>,
 }
 
+impl FrameNames {
+    /// The names in `frame`'s image and vector tables.
+    pub(crate) fn of(frame: &SensorFrameMut) -> Self {
+        let h = frame.header();
+        Self {
+            cameras: h
+                .images
+                .iter()
+                .take(h.image_count as usize)
+                .map(|d| d.name().to_owned())
+                .collect(),
+            vectors: frame
+                .vector_descs()
+                .iter()
+                .map(|d| d.name().to_owned())
+                .collect(),
+        }
+    }
+
+    /// Whether these could be `frame`'s names: as many cameras and vectors. (An agent's
+    /// tables come from its configuration, which does not change while the host lives;
+    /// this guards the cache against a frame of another layout, without comparing names
+    /// every cycle.)
+    pub(crate) fn fits(&self, frame: &SensorFrameMut) -> bool {
+        self.cameras.len() == frame.header().image_count as usize
+            && self.vectors.len() == frame.vector_descs().len()
+    }
+}
+
 /// A part of a frame that can be exported: an image (by index) or a vector (by name).
-#[derive(Debug, Clone)]
-enum Part {
+#[derive(Debug, Clone, Copy)]
+enum Part<'a> {
     Image(usize),
-    Vector(String),
+    Vector(&'a str),
 }
 
 impl PyHostFrame {
-    pub(crate) fn new(mut frame: SensorFrameMut, host: u64) -> Self {
+    /// A loaned `frame` of host `host`, whose names are `names` (see [`FrameNames::fits`]).
+    pub(crate) fn new(mut frame: SensorFrameMut, host: u64, names: Rc<FrameNames>) -> Self {
         // The memory holds what it held when last used: every frame starts from neutral
         // sensors, so that what a Python world does not set reads the same every cycle.
         let h = frame.header_mut();
@@ -78,27 +114,15 @@ impl PyHostFrame {
         h.grid = GridPosition::default();
         h.head_motion = HeadMotion::default();
         h.eye = EyePosition::default();
-        let h = frame.header();
-        let cameras = h
-            .images
-            .iter()
-            .take(h.image_count as usize)
-            .map(|d| d.name().to_owned())
-            .collect();
-        let vectors = frame
-            .vector_descs()
-            .iter()
-            .map(|d| d.name().to_owned())
-            .collect();
+        let (cycle, sim_time_ns) = (h.cycle, h.sim_time_ns);
         Self {
             agent_id: frame.agent_id(),
-            cycle: h.cycle,
-            sim_time_ns: h.sim_time_ns,
+            cycle,
+            sim_time_ns,
             frame: Some(frame),
             exports: Rc::default(),
             host,
-            cameras,
-            vectors,
+            names,
         }
     }
 
@@ -163,23 +187,27 @@ impl PyHostFrame {
     }
 
     fn camera_index(&self, name: &str) -> PyResult<usize> {
-        self.cameras.iter().position(|c| c == name).ok_or_else(|| {
-            PyKeyError::new_err(format!(
-                "agent {} has no camera {name:?} (its cameras: {:?})",
-                self.agent_id, self.cameras
-            ))
-        })
+        self.names
+            .cameras
+            .iter()
+            .position(|c| c == name)
+            .ok_or_else(|| {
+                PyKeyError::new_err(format!(
+                    "agent {} has no camera {name:?} (its cameras: {:?})",
+                    self.agent_id, self.names.cameras
+                ))
+            })
     }
 
     /// Where `part` is and how it is shaped.
-    fn memory(&mut self, part: &Part) -> PyResult<(*mut u8, usize, Layout)> {
+    fn memory(&mut self, part: Part<'_>) -> PyResult<(*mut u8, Layout)> {
         let frame = self
             .frame
             .as_mut()
             .ok_or_else(|| PyBufferError::new_err("the frame was published"))?;
         match part {
             Part::Image(index) => {
-                let img = frame.images_mut().nth(*index).ok_or_else(|| {
+                let img = frame.images_mut().nth(index).ok_or_else(|| {
                     PyBufferError::new_err(format!("no image {index} in this frame"))
                 })?;
                 let format = img.desc.pixel_format().ok_or_else(|| {
@@ -191,42 +219,42 @@ impl PyHostFrame {
                     img.desc.height_px,
                     img.desc.stride_bytes as usize,
                 );
-                Ok((img.data.as_mut_ptr(), img.data.len(), layout))
+                Ok((img.data.as_mut_ptr(), layout))
             }
             Part::Vector(name) => {
                 let values = frame.vector_mut(name).ok_or_else(|| {
                     PyBufferError::new_err(format!("no vector {name:?} in this frame"))
                 })?;
                 let layout = Layout::vector(values.len());
-                Ok((
-                    values.as_mut_ptr().cast::<u8>(),
-                    std::mem::size_of_val(values),
-                    layout,
-                ))
+                Ok((values.as_mut_ptr().cast::<u8>(), layout))
             }
         }
     }
 }
 
-/// A writable numpy view of `part` of `frame`.
-fn view<'py>(frame: &Bound<'py, PyHostFrame>, part: Part) -> PyResult<Bound<'py, PyAny>> {
+/// A writable numpy view of `part` of `frame`: its base is a new [`HostBuffer`], counted
+/// as an export of the frame until it is freed.
+fn view<'py>(frame: &Bound<'py, PyHostFrame>, part: Part<'_>) -> PyResult<Bound<'py, PyAny>> {
     let py = frame.py();
-    let (layout, exports) = {
+    let (ptr, layout, exports) = {
         let mut me = frame.try_borrow_mut()?;
         me.loaned(py)?;
-        let (_, _, layout) = me.memory(&part)?;
-        (layout, me.exports.clone())
+        let (ptr, layout) = me.memory(part)?;
+        (ptr, layout, me.exports.clone())
     };
+    exports.set(exports.get() + 1);
     let buffer = Bound::new(
         py,
         HostBuffer {
-            frame: frame.clone().unbind(),
-            part,
-            layout,
+            _frame: frame.clone().unbind(),
             exports,
         },
     )?;
-    as_array(buffer.into_any())
+    // SAFETY: the memory is the frame's loan, which lives as long as the frame (kept alive
+    // by the buffer, the array's base) and is not handed on while the buffer is alive:
+    // `PyHostFrame::take` refuses while an export is counted. It is written only through
+    // the arrays, on the frame's thread (unsendable classes).
+    unsafe { array(buffer.into_any(), ptr, &layout, true) }
 }
 
 /// `v` as `N` finite `f32`s; `ValueError` naming `name` otherwise.
@@ -264,7 +292,7 @@ impl PyHostFrame {
     /// Camera names, in image order.
     #[getter]
     fn camera_names(&self) -> Vec<String> {
-        self.cameras.clone()
+        self.names.cameras.clone()
     }
 
     /// Whether the frame was published (its memory is the agent's then).
@@ -298,8 +326,8 @@ impl PyHostFrame {
     fn images<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyDict>> {
         let py = slf.py();
         let d = PyDict::new(py);
-        let names = slf.try_borrow()?.cameras.clone();
-        for (i, name) in names.into_iter().enumerate() {
+        let names = slf.try_borrow()?.names.clone();
+        for (i, name) in names.cameras.iter().enumerate() {
             d.set_item(name, view(slf, Part::Image(i))?)?;
         }
         Ok(d)
@@ -308,7 +336,7 @@ impl PyHostFrame {
     /// Vector names (`[[agent.vector]]`), in payload order.
     #[getter]
     fn vector_names(&self) -> Vec<String> {
-        self.vectors.clone()
+        self.names.vectors.clone()
     }
 
     /// The vector `name` (`[[agent.vector]]`) as a WRITABLE 1-d `float32` numpy array
@@ -319,23 +347,23 @@ impl PyHostFrame {
     fn vector<'py>(slf: &Bound<'py, Self>, name: &str) -> PyResult<Bound<'py, PyAny>> {
         {
             let me = slf.try_borrow()?;
-            if !me.vectors.iter().any(|v| v == name) {
+            if !me.names.vectors.iter().any(|v| v == name) {
                 return Err(PyKeyError::new_err(format!(
                     "agent {} has no vector {name:?} (its vectors: {:?})",
-                    me.agent_id, me.vectors
+                    me.agent_id, me.names.vectors
                 )));
             }
         }
-        view(slf, Part::Vector(name.to_owned()))
+        view(slf, Part::Vector(name))
     }
 
     /// Every vector by name (see `vector`), in payload order.
     #[getter]
     fn vectors<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(slf.py());
-        let names = slf.try_borrow()?.vectors.clone();
-        for name in names {
-            d.set_item(&name, view(slf, Part::Vector(name.clone()))?)?;
+        let names = slf.try_borrow()?.names.clone();
+        for name in &names.vectors {
+            d.set_item(name, view(slf, Part::Vector(name))?)?;
         }
         Ok(d)
     }
@@ -474,7 +502,7 @@ impl PyHostFrame {
             "<vrsync.HostFrame agent={} cycle={} images={:?}{}>",
             self.agent_id,
             self.cycle,
-            self.cameras,
+            self.names.cameras,
             if self.frame.is_none() {
                 " published"
             } else {
@@ -484,50 +512,16 @@ impl PyHostFrame {
     }
 }
 
-/// One image or vector of a `HostFrame`, exported through the buffer protocol as a
-/// writable view (what numpy wraps without copying). Each export counts on the frame
-/// until it is released; exporting fails once the frame is published.
+/// The base object of a `HostFrame`'s numpy views: keeps the frame alive and counts as
+/// one export of it from the view's making until the last array viewing it is freed.
 #[pyclass(module = "vrsync._vrsync", unsendable)]
 pub(crate) struct HostBuffer {
-    frame: Py<PyHostFrame>,
-    part: Part,
-    layout: Layout,
+    _frame: Py<PyHostFrame>,
     exports: Rc<Cell<usize>>,
 }
 
-#[pymethods]
-impl HostBuffer {
-    /// Exports the image or vector, writable.
-    ///
-    /// # Safety
-    /// `view` must be a valid `Py_buffer` to fill (Python's buffer protocol guarantees it).
-    unsafe fn __getbuffer__(
-        slf: Bound<'_, Self>,
-        view: *mut ffi::Py_buffer,
-        flags: c_int,
-    ) -> PyResult<()> {
-        let py = slf.py();
-        let me = slf.try_borrow()?;
-        let (ptr, len, _) = me.frame.bind(py).try_borrow_mut()?.memory(&me.part)?;
-        // SAFETY: the memory is the frame's loan, which lives as long as the frame (kept
-        // alive by `frame`, inside `slf`) and is not handed on while an export is counted
-        // (`PyHostFrame::take` refuses); the layout lives in `slf`.
-        unsafe {
-            fill(
-                view,
-                flags,
-                ptr,
-                len,
-                &me.layout,
-                None,
-                slf.clone().into_any(),
-            )?;
-        }
-        me.exports.set(me.exports.get() + 1);
-        Ok(())
-    }
-
-    unsafe fn __releasebuffer__(&self, _view: *mut ffi::Py_buffer) {
+impl Drop for HostBuffer {
+    fn drop(&mut self) {
         self.exports.set(self.exports.get().saturating_sub(1));
     }
 }
