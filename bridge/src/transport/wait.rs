@@ -295,15 +295,16 @@ pub(crate) fn futex_wait(word: &AtomicU32, expected: u32, timeout: Duration) {
     }
 }
 
-/// Wakes every process and thread asleep in [`futex_wait`] on `word`: one system call.
-pub(crate) fn futex_wake_all(word: &AtomicU32) {
+/// Wakes up to `n` of the processes and threads asleep in [`futex_wait`] on `word`, the
+/// longest-waiting first (the kernel queues waiters of one priority in arrival order).
+pub(crate) fn futex_wake(word: &AtomicU32, n: i32) {
     // SAFETY: FUTEX_WAKE only uses the address as the key of the wait queue.
     unsafe {
         libc::syscall(
             libc::SYS_futex,
             word.as_ptr(),
             libc::FUTEX_WAKE,
-            i32::MAX,
+            n,
             std::ptr::null::<libc::timespec>(),
             std::ptr::null::<u32>(),
             0u32,

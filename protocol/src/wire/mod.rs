@@ -20,8 +20,10 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 /// or of the cycle semantics (4: the network hello carries the agent's channel layout
 /// hash, refused at connect with [`crate::record::reject::CHANNELS`] when it differs;
 /// 5: shared-memory agents are woken through the session's wake word, a futex word in
-/// shared memory, instead of an iceoryx2 event per agent).
-pub const PROTOCOL_VERSION: u32 = 5;
+/// shared memory, instead of an iceoryx2 event per agent; 6: the host wakes two sleepers
+/// and each woken agent passes the wake-up on to two more, so an agent of version 5
+/// would leave the others asleep).
+pub const PROTOCOL_VERSION: u32 = 6;
 
 /// Maximum number of cameras (images) per agent and sensor frame.
 pub const MAX_CAMERAS: usize = 4;
