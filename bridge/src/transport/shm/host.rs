@@ -2,7 +2,7 @@
 //! sensor samples, drains motor batches, waits on the stop event.
 
 use super::*;
-use iceoryx2::identifiers::UniqueSubscriberId;
+use iceoryx2::identifiers::{UniquePublisherId, UniqueSubscriberId};
 use std::cell::Cell;
 // ---------------------------------------------------------------------------------------
 // Host side
@@ -63,11 +63,21 @@ struct HostAgentPorts {
     /// copies its container state), so the check runs at most every
     /// [`IDENTITY_CHECK_PERIOD`], not at every look of the host's wait loop.
     verified: Cell<Option<Instant>>,
+    /// Whether the last check that listed the subscribers found `served` as the only
+    /// one. While it holds, the count of subscribers is still 1 and no motor batch came
+    /// from another publisher than before ([`Self::motor_from`]), the served connection is
+    /// taken as still attached without listing again (see [`still_sole`]).
+    sole: Cell<bool>,
+    /// The publisher of the motor batches received last: the agent's connection. A batch
+    /// from another one (a replaced connection) clears [`Self::sole`] and makes the next
+    /// check list the subscribers.
+    motor_from: Cell<Option<UniquePublisherId>>,
 }
 
 /// How often the host checks that the subscriber it serves is still the one attached:
 /// a replaced connection (the agent left, its leave batch lost, and a new connection of the
-/// id attached before the host looked) is seen within this.
+/// id attached before the host looked) is seen within this when the count of subscribers
+/// changed meanwhile, else at the new connection's first motor batch (see [`still_sole`]).
 const IDENTITY_CHECK_PERIOD: Duration = Duration::from_millis(20);
 
 /// The host side of the shared-memory transport.
@@ -241,6 +251,8 @@ impl ShmHost {
                 served: None,
                 departed: None,
                 verified: Cell::new(None),
+                sole: Cell::new(false),
+                motor_from: Cell::new(None),
             });
         }
         let wake = WakeWord::create(session)?;
@@ -315,11 +327,32 @@ fn is_dyn_connected(p: &HostAgentPorts) -> bool {
     {
         return true;
     }
+    if still_sole(p) {
+        p.verified.set(Some(now));
+        return true;
+    }
     let same = is_attached(p, served);
     if same {
         p.verified.set(Some(now));
     }
+    p.sole.set(same && number_of_subscribers(p) == 1);
     same
+}
+
+fn number_of_subscribers(p: &HostAgentPorts) -> usize {
+    use iceoryx2::service::port_factory::PortFactory as _;
+    p.sensor_service.dynamic_config().number_of_subscribers()
+}
+
+/// Whether the served connection is still the one attached, told without listing the
+/// subscribers (which allocates: in steady state, at 64 agents, a few listings per cycle):
+/// the last listing found it alone, one subscriber is attached now, and every motor batch
+/// since came from the same publisher. A connection replaced between two looks (the old
+/// one's ports removed and a new one attached, so the count is 1 again) is seen at its
+/// first batch, whose publisher differs; until then it gets the served connection's frames,
+/// as it would during the listing's period.
+fn still_sole(p: &HostAgentPorts) -> bool {
+    p.sole.get() && number_of_subscribers(p) == 1
 }
 
 /// Whether a subscriber other than the departed connection's is (or may be) attached: the
@@ -429,11 +462,14 @@ impl HostTransport for ShmHost {
                 .verified
                 .get()
                 .is_none_or(|t| now.saturating_duration_since(t) >= IDENTITY_CHECK_PERIOD);
-            if p.served.is_none() || due {
+            if p.served.is_some() && due && still_sole(p) {
+                p.verified.set(Some(now));
+            } else if p.served.is_none() || due {
                 p.served = sole_subscriber(p).filter(|&s| Some(s) != p.departed);
                 if p.served.is_some() {
                     p.departed = None;
                 }
+                p.sole.set(p.served.is_some());
                 p.verified.set(Some(now));
             }
             // Only the ports of a connection that left got it, in the moment before they
@@ -449,6 +485,7 @@ impl HostTransport for ShmHost {
         if let Some(p) = self.agents.get_mut(slot) {
             p.departed = p.served.take().or_else(|| sole_subscriber(p));
             p.verified.set(None);
+            p.sole.set(false);
         }
     }
 
@@ -461,7 +498,16 @@ impl HostTransport for ShmHost {
         for (slot, p) in self.agents.iter().enumerate() {
             loop {
                 match p.motor_sub.receive() {
-                    Ok(Some(sample)) => sink(slot, sample.user_header(), sample.payload()),
+                    Ok(Some(sample)) => {
+                        let from = sample.origin();
+                        if p.motor_from.replace(Some(from)).is_some_and(|f| f != from) {
+                            // Another connection's batch: list the subscribers again
+                            // at the next check.
+                            p.sole.set(false);
+                            p.verified.set(None);
+                        }
+                        sink(slot, sample.user_header(), sample.payload());
+                    }
                     Ok(None) => break,
                     Err(e) => {
                         return Err(HostTransportError::Receive {
