@@ -14,8 +14,8 @@
 //! Waking N sleepers costs the waker N scheduler wake-ups inside its `FUTEX_WAKE`
 //! (measured on the 2-core test machine: 1.5–2.8 µs of the host's CPU per agent at 16
 //! agents, the largest part of the Python host's own time). So the host wakes only
-//! [`FAN_OUT`] sleepers, and only if an agent sleeps; every agent woken by a change
-//! wakes [`FAN_OUT`] more before it looks at its frame, while sleepers are counted: N
+//! `FAN_OUT` sleepers, and only if an agent sleeps; every agent woken by a change
+//! wakes `FAN_OUT` more before it looks at its frame, while sleepers are counted: N
 //! sleepers are woken in about log2(N) rounds, the work spread over the agents. The
 //! kernel wakes the longest-waiting first, so the sleepers of the cycle before the bump
 //! go before an agent that already read the new frame and sleeps again. An agent that
@@ -60,7 +60,7 @@ const SIZE: usize = 4096;
 
 /// How many sleepers the host wakes at a bump, and each woken agent after it (see the
 /// module docs).
-pub const FAN_OUT: i32 = 2;
+pub(crate) const FAN_OUT: i32 = 2;
 
 /// Why the wake word could not be created or opened.
 #[derive(Debug, thiserror::Error)]
@@ -189,7 +189,7 @@ impl WakeWord {
     }
 
     /// Host: a new frame for the agents; starts the wake tree (one system call waking
-    /// [`FAN_OUT`] sleepers, none when no agent sleeps).
+    /// `FAN_OUT` sleepers, none when no agent sleeps).
     pub fn bump(&self) {
         let old = self.word().load(Ordering::Relaxed);
         self.word().store(
@@ -235,7 +235,7 @@ impl WakeWord {
     /// Agent: sleeps while the word still holds `seen` (the value of an earlier
     /// [`Self::value`]), at most `timeout`; returns the value now. Wakes early on a bump,
     /// the close, a signal, or spuriously: the caller looks for its frame again. Woken by
-    /// a change, it first passes the wake-up on to [`FAN_OUT`] other sleepers (the wake
+    /// a change, it first passes the wake-up on to `FAN_OUT` other sleepers (the wake
     /// tree, see the module docs).
     pub fn wait_change(&self, seen: u32, timeout: Duration) -> u32 {
         if seen & CLOSED != 0 {
