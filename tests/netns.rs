@@ -175,7 +175,7 @@ fn config_text_n(session: &str, remote: &str, agents: u32) -> String {
     let mut s = format!(
         "session = {session:?}\nseed = 11\n[sync]\nsync_mode = true\n\
          simulation_time_per_frame = 0.1\nstop_timeout = {STOP_TIMEOUT_S}\n\
-         connect_timeout = 60.0\n[transport]\nkind = \"shm\"\n\
+         connect_timeout = 60.0\nresume_window = 0.0\n[transport]\nkind = \"shm\"\n\
          [transport.zenoh]\nlisten = [\"tcp/{HOST_IP}:7447\"]\n\
          connect = [\"tcp/{HOST_IP}:7447\"]\nlease = {LEASE_S}\n"
     );

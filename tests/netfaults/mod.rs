@@ -72,6 +72,9 @@ const ZENOH_PORT: u16 = 7447;
 const RELAY_PORT: u16 = 7500;
 /// Cycles of the CI cases.
 const FRAMES: u64 = 200;
+/// Cycles of the CI's short versions of the heavy cases (20 % loss, a 30 s partition):
+/// at 20 % loss a TCP cycle takes seconds.
+const SHORT_FRAMES: u64 = 20;
 /// The zenoh lease of the CI cases: longer than their 3 s partition (the runs
 /// used zenoh's default, 10 s).
 const LEASE_S: f64 = 10.0;
@@ -235,11 +238,7 @@ fn run_case(
     let session = util::session(&format!("nf{}", remote.name()));
     let case_dir = dir.join(&session);
     std::fs::create_dir_all(&case_dir).unwrap();
-    if remote == Remote::ZenohTls {
-        for f in ["ca.pem", "host.pem", "host.key", "agent.pem", "agent.key"] {
-            std::fs::copy(dir.join(f), case_dir.join(f)).unwrap();
-        }
-    }
+    copy_certificates(dir, &case_dir, remote);
     wire_sized_packets(ns);
     let via_relay = matches!(fault, Fault::Delay { .. });
     let host_cfg = case_dir.join("host.toml");
@@ -420,6 +419,16 @@ fn run_case(
             .collect(),
         counters,
         resumed_after_s,
+        resumes: sum["resumes"].as_u64().unwrap(),
+    }
+}
+
+/// With TLS, the certificates of `dir` into `case_dir` (where the configs name them).
+fn copy_certificates(dir: &Path, case_dir: &Path, remote: Remote) {
+    if remote == Remote::ZenohTls {
+        for f in ["ca.pem", "host.pem", "host.key", "agent.pem", "agent.key"] {
+            std::fs::copy(dir.join(f), case_dir.join(f)).unwrap();
+        }
     }
 }
 
@@ -525,6 +534,35 @@ fn loss_and_a_short_partition_leave_the_run_intact(remote: Remote) {
     }
 }
 
+/// CI: the heavy faults, short ([`SHORT_FRAMES`] cycles): 20 % loss each way, and a 30 s
+/// partition (past TCP's 10 s link timeout and zenoh's 10 s lease, back within the 30 s
+/// resume window): the clean run's trajectory, every command once, no eviction, the
+/// agents back by themselves. On demand the same faults run 200 cycles
+/// ([`heavy_faults_are_recorded`]).
+fn heavy_faults_in_short_leave_the_run_intact(remote: Remote) {
+    let Some(bench) = Bench::new(remote) else {
+        return;
+    };
+    let clean = bench.run(Fault::Clean, SHORT_FRAMES, LEASE_S);
+    clean.report(None);
+    clean.assert_intact(&clean);
+    for fault in [
+        Fault::Loss { percent: 20 },
+        Fault::Partition {
+            at_cycle: 5,
+            secs: 30,
+        },
+    ] {
+        let out = bench.run(fault, SHORT_FRAMES, LEASE_S);
+        out.report(Some(&clean));
+        out.assert_intact(&clean);
+        if let Fault::Partition { .. } = fault {
+            assert!(out.resumed_after_s.is_some(), "{out:#?}");
+            assert_eq!(out.resumes, REMOTE_IDS.len() as u64, "{out:#?}");
+        }
+    }
+}
+
 /// On demand: delay with jitter and duplication must leave the run intact too.
 fn delay_and_duplication_leave_the_run_intact(remote: Remote) {
     let Some(bench) = Bench::new(remote) else {
@@ -571,11 +609,9 @@ fn reordering_leaves_the_run_intact(remote: Remote, percents: &[u32]) {
     }
 }
 
-/// On demand: 20 % loss, a 30 s partition, a 3 s partition with the default lease. What
-/// must hold whatever happens to the remote agents: the host ends its run, the
-/// shared-memory agent takes part in every cycle, nobody is waited for until a stop
-/// timeout. Over TCP (resume window) the run must be intact too; over zenoh (no resume
-/// window yet: its lease decides) the outcome is recorded.
+/// On demand: 20 % loss, a 30 s partition, a 3 s partition with the default lease, 200
+/// cycles each. The resume window (30 s) covers every one of them: the run must be intact
+/// over every transport.
 fn heavy_faults_are_recorded(remote: Remote) {
     let Some(bench) = Bench::new(remote) else {
         return;
@@ -609,9 +645,7 @@ fn heavy_faults_are_recorded(remote: Remote) {
         assert_eq!(out.frames, FRAMES, "{out:#?}");
         assert_eq!(out.stop_timeouts, 0, "{out:#?}");
         assert!(out.commands[0].1.is_ok(), "shm agent: {out:#?}");
-        if remote == Remote::Tcp {
-            out.assert_intact(&clean);
-        }
+        out.assert_intact(&clean);
     }
 }
 
@@ -625,6 +659,22 @@ macro_rules! remotes {
             #[test]
             fn loss_and_a_short_partition_leave_the_run_intact() {
                 super::loss_and_a_short_partition_leave_the_run_intact(Remote::$remote);
+            }
+            #[test]
+            fn heavy_faults_in_short_leave_the_run_intact() {
+                super::heavy_faults_in_short_leave_the_run_intact(Remote::$remote);
+            }
+            #[test]
+            fn a_link_lost_past_its_timeout_and_back_within_the_window_is_resumed() {
+                super::resume::a_link_lost_past_its_timeout_and_back_within_the_window_is_resumed(
+                    Remote::$remote,
+                );
+            }
+            #[test]
+            fn not_back_within_the_window_is_evicted_in_bound_and_rejoins_when_back() {
+                super::resume::not_back_within_the_window_is_evicted_in_bound_and_rejoins_when_back(
+                    Remote::$remote,
+                );
             }
             #[test]
             #[ignore = "on demand (minutes): cargo test --workspace --test tests -- --ignored netfaults"]

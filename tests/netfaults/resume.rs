@@ -1,5 +1,6 @@
-//! A lost TCP link that comes back within the resume window (`[sync] resume_window`,
-//! 30 s by default) is resumed, not ended.
+//! A lost link that comes back within the resume window (`[sync] resume_window`, 30 s by
+//! default) is resumed, not ended: over TCP (both sides declare the link lost after
+//! [`LINK_TIMEOUT`]) and over zenoh, plain and mutual TLS (the lease runs out).
 
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -9,25 +10,43 @@ use super::{Bench, FRAMES, Fault, LEASE_S, REMOTE_IDS, Remote};
 use crate::util::{self, EVENT_DEADLINE, Events, bin};
 use vrsync_bridge::tcp::LINK_TIMEOUT;
 
-/// CI: the link cut for longer than TCP's link timeout, so that both sides declare it lost
-/// (the host holds the remote agents' places, they connect again by themselves), and back
-/// well within the window: the clean run's trajectory, every command applied once, nobody
-/// evicted, and the agents answer within seconds of the link's return (TCP's own
-/// retransmission back-off answered a 30 s partition 24 s late).
-#[test]
-fn a_tcp_link_lost_past_the_link_timeout_and_back_within_the_window_is_resumed() {
-    let Some(bench) = Bench::new(Remote::Tcp) else {
+/// The zenoh lease of the resume cases: short, so that a partition outlasts it quickly.
+const RESUME_LEASE_S: f64 = 4.0;
+
+/// How long the link must be silent before `remote`'s transport declares it lost, with
+/// the lease these cases use.
+fn link_timeout(remote: Remote) -> (Duration, f64) {
+    match remote {
+        Remote::Tcp => (LINK_TIMEOUT, LEASE_S),
+        Remote::Zenoh | Remote::ZenohTls => {
+            (Duration::from_secs_f64(RESUME_LEASE_S), RESUME_LEASE_S)
+        }
+    }
+}
+
+/// CI: the link cut for longer than the transport's link timeout (TCP's 10 s, zenoh's
+/// lease), so that both sides declare it lost (the host holds the remote agents' places,
+/// they connect again by themselves), and back well within the window: the clean run's
+/// trajectory, every command applied once, nobody evicted, both agents resumed, and they
+/// answer within seconds of the link's return (TCP's own retransmission back-off answered
+/// a 30 s partition 24 s late).
+pub(super) fn a_link_lost_past_its_timeout_and_back_within_the_window_is_resumed(remote: Remote) {
+    let Some(bench) = Bench::new(remote) else {
         return;
     };
-    let clean = bench.run(Fault::Clean, FRAMES, LEASE_S);
+    let (timeout, lease) = link_timeout(remote);
+    let clean = bench.run(Fault::Clean, FRAMES, lease);
     clean.report(None);
-    let secs = LINK_TIMEOUT.as_secs() + 4;
-    let out = bench.run(Fault::Partition { at_cycle: 40, secs }, FRAMES, LEASE_S);
+    let secs = timeout.as_secs() + 4;
+    let out = bench.run(Fault::Partition { at_cycle: 40, secs }, FRAMES, lease);
     out.report(Some(&clean));
     out.assert_intact(&clean);
+    assert_eq!(out.resumes, REMOTE_IDS.len() as u64, "{out:#?}");
     let answered = out.resumed_after_s.unwrap_or(f64::INFINITY);
+    // zenoh's next connection attempt may be one 10 s open timeout away.
+    let bound = if remote == Remote::Tcp { 8.0 } else { 15.0 };
     assert!(
-        answered < 8.0,
+        answered < bound,
         "answered {answered} s after the link returned: {out:#?}"
     );
 }
@@ -36,25 +55,28 @@ fn a_tcp_link_lost_past_the_link_timeout_and_back_within_the_window_is_resumed()
 /// remote agents within the bound (the link timeout, then the window), the world goes on
 /// without them, they give up (exit 1, "the host is gone"), and, started again once the
 /// link is back, they rejoin at the next cycle.
-#[test]
-fn a_tcp_agent_not_back_within_the_window_is_evicted_in_bound_and_rejoins_when_back() {
-    let Some(ns) = super::link() else {
+pub(super) fn not_back_within_the_window_is_evicted_in_bound_and_rejoins_when_back(remote: Remote) {
+    let Some(bench) = Bench::new(remote) else {
         return;
     };
-    let dir = tempfile::tempdir().unwrap();
-    let session = util::session("nfwindow");
-    super::wire_sized_packets(&ns);
+    let ns = &bench.ns;
+    let session = util::session(&format!("nfwindow{}", remote.name()));
+    let dir = bench.dir.path().join(&session);
+    std::fs::create_dir_all(&dir).unwrap();
+    super::copy_certificates(bench.dir.path(), &dir, remote);
+    super::wire_sized_packets(ns);
     let window = Duration::from_secs(2);
+    let (timeout, lease) = link_timeout(remote);
     let config = |side: &str| {
-        let text = super::config_text(&session, Remote::Tcp, LEASE_S, side, false);
+        let text = super::config_text(&session, remote, lease, side, false);
         let with_window = format!("[sync]\nresume_window = {:?}\n", window.as_secs_f64());
-        let path = dir.path().join(format!("{side}.toml"));
+        let path = dir.join(format!("{side}.toml"));
         std::fs::write(&path, text.replacen("[sync]\n", &with_window, 1)).unwrap();
         path
     };
     let (host_cfg, agent_cfg) = (config("host"), config("agent"));
-    let events = Events::in_dir(dir.path());
-    let sum_path = dir.path().join("summary.json");
+    let events = Events::in_dir(&dir);
+    let sum_path = dir.join("summary.json");
     // No --frames: the run goes on until SIGTERM.
     let host = ns.spawn(
         &ns.host,
@@ -72,8 +94,8 @@ fn a_tcp_agent_not_back_within_the_window_is_evicted_in_bound_and_rejoins_when_b
     );
     events.wait_for("listening", EVENT_DEADLINE);
     let agent = |id: u32, namespace: &str, cfg: &Path, log: &str| {
-        let log = dir.path().join(log);
-        (super::circle_agent(&ns, namespace, cfg, id, &log), log)
+        let log = dir.join(log);
+        (super::circle_agent(ns, namespace, cfg, id, &log), log)
     };
     let (shm_agent, shm_log) = agent(0, &ns.host, &host_cfg, "a0.log");
     let remotes: Vec<_> = REMOTE_IDS
@@ -83,9 +105,9 @@ fn a_tcp_agent_not_back_within_the_window_is_evicted_in_bound_and_rejoins_when_b
     for (_, log) in &remotes {
         util::wait_for_cycle_line(log, 20, EVENT_DEADLINE);
     }
-    let cut = partition_table(&ns);
+    let cut = partition_table(ns);
     let cut_at = Instant::now();
-    let bound = LINK_TIMEOUT + window + Duration::from_secs(5);
+    let bound = timeout + window + Duration::from_secs(5);
     for id in REMOTE_IDS {
         events.wait_for_match("agent_evicted", |e| e["agent"] == id, bound);
     }
@@ -101,6 +123,7 @@ fn a_tcp_agent_not_back_within_the_window_is_evicted_in_bound_and_rejoins_when_b
     for (p, _) in remotes {
         let out = p.wait(EVENT_DEADLINE);
         assert_eq!(out.code(), Some(1), "gave up: {}", out.stderr);
+        assert!(out.stderr.contains("host is gone"), "{}", out.stderr);
     }
     drop(cut);
     // Back (started again), each rejoins at the next cycle and takes part.
@@ -124,12 +147,14 @@ fn a_tcp_agent_not_back_within_the_window_is_evicted_in_bound_and_rejoins_when_b
     let sum = util::summary(&sum_path);
     assert_eq!(sum["evictions"], 2, "{sum}");
     assert_eq!(sum["rejoins"], 2, "{sum}");
+    assert_eq!(sum["resumes"], 0, "{sum}");
     assert_eq!(sum["stop_timeouts"], 0, "{sum}");
     eprintln!(
-        "netfaults: tcp link cut past the resume window ({} s): both remote agents evicted \
+        "netfaults: {} link cut past the resume window ({} s): both remote agents evicted \
          {:.1} s after the cut (bound: link timeout {} s + window), rejoined when back",
+        remote.name(),
         window.as_secs_f64(),
         evicted_after.as_secs_f64(),
-        LINK_TIMEOUT.as_secs()
+        timeout.as_secs_f64()
     );
 }

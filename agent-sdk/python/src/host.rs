@@ -414,6 +414,7 @@ impl PyHost {
             ("collisions_dropped", s.collisions_dropped),
             ("rejoins", s.rejoins),
             ("leaves", s.leaves),
+            ("resumes", s.resumes),
             ("evictions", s.evictions),
             ("peers_refused", s.peers_refused),
             ("actions_rejected", s.actions_rejected),

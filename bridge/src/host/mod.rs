@@ -365,6 +365,7 @@ impl<T: HostTransport> Host<T> {
             }
         });
         stats.peers_refused += unkept;
+        self.stats.resumes += self.backend.take_resumes();
     }
 
     /// The address TCP agents connect to (the bound port when `tcp_listen` has port 0);

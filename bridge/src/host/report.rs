@@ -166,4 +166,7 @@ pub struct HostStats {
     /// Peers refused or dropped before they were admitted as agents (see
     /// [`Host::on_peer_refused`]).
     pub peers_refused: u64,
+    /// Times an agent whose link was lost came back within the resume window
+    /// (`[sync] resume_window`) and went on where it was: not evictions, not rejoins.
+    pub resumes: u64,
 }

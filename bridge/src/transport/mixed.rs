@@ -284,6 +284,14 @@ macro_rules! mixed_each {
                 unkept
             }
 
+            fn take_resumes(&mut self) -> u64 {
+                let mut resumes = 0;
+                $(if let Some(p) = &mut self.$module {
+                    resumes += p.host.take_resumes();
+                })*
+                resumes
+            }
+
             fn reap_dead_agents(&mut self, scratch: &mut Vec<usize>, dead: &mut Vec<usize>) {
                 $(if let Some(p) = &mut self.$module {
                     p.reap_dead_agents(scratch, dead);
@@ -473,6 +481,10 @@ impl HostTransport for Transports {
 
     fn take_refusals(&mut self, sink: &mut dyn FnMut(&PeerRefusal)) -> u64 {
         self.parts.take_refusals(sink)
+    }
+
+    fn take_resumes(&mut self) -> u64 {
+        self.parts.take_resumes()
     }
 
     fn forget_connection(&mut self, slot: usize) {

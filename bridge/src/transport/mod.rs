@@ -337,6 +337,12 @@ pub trait HostTransport {
         let _ = sink;
         0
     }
+    /// How many agents held after a lost link came back within the resume window
+    /// (`[sync] resume_window`) since the last call. Transports without a resume window
+    /// keep the default: none.
+    fn take_resumes(&mut self) -> u64 {
+        0
+    }
     /// Finds agents whose process died (iceoryx2 reports their node dead), removes their
     /// stale resources, and appends their slots to `dead`. Called a few times per second
     /// while the host waits; transports that see disconnects directly (TCP) need nothing.

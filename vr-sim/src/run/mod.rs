@@ -625,6 +625,7 @@ impl Run {
             evictions: stats.evictions,
             rejoins: stats.rejoins,
             leaves: stats.leaves,
+            resumes: stats.resumes,
             frames_delivered: stats.frames_delivered,
             frames_read: stats.frames_read,
             frames_undelivered: stats.frames_undelivered,

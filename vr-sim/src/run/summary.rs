@@ -38,6 +38,9 @@ pub struct Summary {
     pub rejoins: u64,
     /// Graceful leaves (an agent's SDK said it leaves): not evictions, not timeouts.
     pub leaves: u64,
+    /// Times an agent whose link was lost came back within `sync.resume_window` and went
+    /// on where it was (not evictions, not rejoins).
+    pub resumes: u64,
     /// Frames delivered to an agent (one per agent and cycle when nothing goes wrong).
     pub frames_delivered: u64,
     /// Frames an agent acknowledged having read; `frames_delivered - frames_read` were
@@ -87,8 +90,11 @@ pub fn print_summary(s: &Summary) {
         ("future stops dropped", s.future_stops.to_string()),
         ("evicted agents", format!("{:?}", s.evicted_agents)),
         (
-            "evictions, leaves, rejoins",
-            format!("{}, {}, {}", s.evictions, s.leaves, s.rejoins),
+            "evictions, leaves, rejoins, resumes",
+            format!(
+                "{}, {}, {}, {}",
+                s.evictions, s.leaves, s.rejoins, s.resumes
+            ),
         ),
         ("peers refused", s.peers_refused.to_string()),
         (

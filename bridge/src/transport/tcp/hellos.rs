@@ -285,6 +285,7 @@ impl TcpHost {
     /// then sends that stop again if it had sent it before the link went).
     pub(super) fn resume(&mut self, slot: usize, since: Instant) {
         let deadline = Instant::now() + self.write_timeout;
+        self.resumed += 1;
         let s = &mut self.slots[slot];
         info!(
             agent = s.id,

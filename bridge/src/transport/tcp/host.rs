@@ -111,6 +111,8 @@ pub struct TcpHost {
     pub(super) layouts: Vec<ChannelLayout>,
     /// `[sync] resume_window` (zero: a lost link ends the connection).
     pub(super) resume_window: Duration,
+    /// Agents back within the resume window since the host last took the count.
+    pub(super) resumed: u64,
 }
 
 /// Why the TCP host could not be created.
@@ -195,6 +197,7 @@ impl TcpHost {
                 .map(crate::config::AgentConfig::channel_layout)
                 .collect(),
             resume_window: config.sync.resume_window,
+            resumed: 0,
         })
     }
 
@@ -575,6 +578,10 @@ impl HostTransport for TcpHost {
         if let Some(s) = self.slots.get_mut(slot) {
             s.resuming = None;
         }
+    }
+
+    fn take_resumes(&mut self) -> u64 {
+        std::mem::take(&mut self.resumed)
     }
 
     fn termination_requested(&self) -> bool {

@@ -1,4 +1,18 @@
-//! The zenoh transport's agent side: hello, the newest frame, batches, the host's token.
+//! The zenoh transport's agent side: hello, the newest frame, batches, the host's token,
+//! and the wait for the host after a lost link (`[sync] resume_window`).
+//!
+//! # A lost link
+//! When the host's `host/alive` token vanishes without `host/closed` (zenoh's lease ran
+//! out: a partition, heavy loss; or the host's process ended), the agent does not give up
+//! at once: with a resume window its waits see a live host for that long after it saw the
+//! token go, while its zenoh session connects again by itself (the `connect` endpoints are
+//! retried every 0.5 s at most) and declares the agent's token and subscriber again on the
+//! new link. The token back, the agent goes on. The host, back, sends the frame of the
+//! cycle it waits for again if this agent's stop for it did not arrive: if the agent had
+//! sent that stop (the latest stop batch is kept), it sends the batch again instead of
+//! handing the frame to the caller once more. Past the window the agent gives up: its
+//! waits say the host is gone. Meanwhile it beats (`agent/<id>/beat`, every lease / 4), so
+//! that the host tells its lost link from its process's end.
 
 use std::rc::Rc;
 use std::time::{Duration, Instant};
@@ -8,7 +22,7 @@ use ::zenoh::liveliness::LivelinessToken;
 use ::zenoh::pubsub::{Publisher, Subscriber};
 use ::zenoh::qos::CongestionControl;
 use ::zenoh::sample::{Sample, SampleKind};
-use tracing::{debug, warn};
+use tracing::{debug, info, warn};
 use zerocopy::{FromBytes, IntoBytes};
 
 use super::super::record::{Hello, Reject, encode_hello};
@@ -18,6 +32,7 @@ use super::super::{
 };
 use super::*;
 use crate::config::Config;
+use crate::rounded::Rounded;
 use crate::signal::SignalHandling;
 use crate::wire::{LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, SensorHeader};
 use vrsync_protocol::channel_layout::ChannelLayout;
@@ -52,6 +67,16 @@ struct AgentState {
     gone: Option<String>,
     max_frame_body: usize,
     dropped: u64,
+    /// When the host's token vanished without `host/closed` (with a resume window).
+    lost_since: Option<Instant>,
+    /// When the agent last heard from the host: its token, a frame, a beat.
+    heard: Option<Instant>,
+    /// The latest stop batch sent and its cycle.
+    stop: Vec<u8>,
+    stop_cycle: Option<u64>,
+    /// The host, back after a lost link, sent the frame of `stop_cycle` again: it did not
+    /// get that stop, which goes again.
+    resend_stop: bool,
 }
 
 #[derive(Debug)]
@@ -59,6 +84,33 @@ struct AgentShared {
     state: Mutex<AgentState>,
     wake: WakeFd,
     keys: Keys,
+    /// `[sync] resume_window`.
+    resume_window: Duration,
+    /// `[transport.zenoh] lease`.
+    lease: Duration,
+}
+
+/// The cycle in the header of the frame `payload` (wherever its bytes lie).
+fn cycle_of(payload: &::zenoh::bytes::ZBytes) -> Option<u64> {
+    let at = core::mem::offset_of!(SensorHeader, cycle);
+    let mut bytes = [0u8; 8];
+    let mut seen = 0;
+    let mut filled = 0;
+    for s in payload.slices() {
+        let (from, to) = (seen, seen + s.len());
+        seen = to;
+        if to <= at + filled || from >= at + 8 {
+            continue;
+        }
+        while filled < 8 && at + filled < to {
+            bytes[filled] = s[at + filled - from];
+            filled += 1;
+        }
+        if filled == 8 {
+            return Some(u64::from_ne_bytes(bytes));
+        }
+    }
+    None
 }
 
 /// Whether the frame whose first bytes are `frame` carries vectors (`[[agent.vector]]`):
@@ -86,6 +138,14 @@ impl AgentShared {
                     "zenoh frame dropped: {len} bytes (a frame is {HEADER}..={max})"
                 );
             }
+            return;
+        }
+        st.heard = Some(Instant::now());
+        if st.stop_cycle.is_some() && cycle_of(payload) == st.stop_cycle {
+            // The host, back after a lost link, asks for this cycle's stop again.
+            st.resend_stop = true;
+            drop(st);
+            self.wake.wake();
             return;
         }
         let in_place = payload.slices().count() == 1
@@ -118,18 +178,51 @@ impl AgentShared {
         self.wake.wake();
     }
 
+    /// The host's beat (every lease / 4).
+    fn on_host_beat(&self) {
+        lock(&self.state).heard = Some(Instant::now());
+    }
+
     fn on_host_token(&self, sample: &Sample) {
         let key = sample.key_expr().as_str();
         let mut st = lock(&self.state);
         match sample.kind() {
             SampleKind::Put if key == self.keys.host_closed() => st.closed = true,
-            SampleKind::Put if key == self.keys.host_alive() => st.host_seen = true,
+            SampleKind::Put if key == self.keys.host_alive() => {
+                st.host_seen = true;
+                st.heard = Some(Instant::now());
+                if let Some(since) = st.lost_since.take() {
+                    info!(
+                        down_s = since.elapsed().as_secs_f64(),
+                        "the host's zenoh token is back: resumed"
+                    );
+                }
+            }
             SampleKind::Delete if key == self.keys.host_alive() && !st.closed => {
-                st.gone = Some(
-                    "the host's zenoh liveliness token vanished (its process ended, or the link \
-                     was lost for longer than the lease)"
-                        .into(),
-                );
+                // A host that beat less than half a lease ago ended (its connection
+                // closed at once); one silent for the lease is behind a lost link.
+                let silent = st.heard.is_none_or(|t| t.elapsed() >= self.lease / 2);
+                if self.resume_window.is_zero() {
+                    st.gone = Some(
+                        "the host's zenoh liveliness token vanished (its process ended, or the \
+                         link was lost for longer than the lease)"
+                            .into(),
+                    );
+                } else if !silent {
+                    st.gone = Some(
+                        "the host's zenoh liveliness token vanished while it was heard from \
+                         (its process ended)"
+                            .into(),
+                    );
+                } else if st.lost_since.is_none() && st.gone.is_none() {
+                    warn!(
+                        "the host's zenoh liveliness token vanished (the link was lost for \
+                         longer than the lease, or the host's process ended): waiting for it \
+                         for up to {} (sync.resume_window)",
+                        Rounded(self.resume_window)
+                    );
+                    st.lost_since = Some(Instant::now());
+                }
             }
             _ => return,
         }
@@ -179,7 +272,10 @@ pub struct ZenohAgent {
     publisher: Publisher<'static>,
     _frames: Subscriber<()>,
     _host: Subscriber<()>,
+    _host_beats: Subscriber<()>,
     _token: LivelinessToken,
+    /// Dropped to end the beat thread.
+    beat_stop: Option<std::sync::mpsc::Sender<()>>,
     session: ::zenoh::Session,
     closing: Closing,
 }
@@ -260,6 +356,8 @@ impl ZenohAgent {
             state: Mutex::new(AgentState::default()),
             wake: WakeFd::new().map_err(|e| fail(format!("eventfd: {e}")))?,
             keys: keys.clone(),
+            resume_window: config.sync.resume_window,
+            lease: z.lease,
         });
         let declare = |what: &'static str| {
             move |e: ::zenoh::Error| fail(format!("cannot declare {what}: {e}"))
@@ -272,6 +370,12 @@ impl ZenohAgent {
             .callback(move |s| sh.on_host_token(&s))
             .wait()
             .map_err(declare("the host's liveliness subscriber"))?;
+        let sh = shared.clone();
+        let host_beats = session
+            .declare_subscriber(keys.host_beat())
+            .callback(move |_| sh.on_host_beat())
+            .wait()
+            .map_err(declare("the host's beat subscriber"))?;
         let channels = config.channel_layout_of(id);
         let hello = encode_hello(&Hello {
             protocol_version: PROTOCOL_VERSION,
@@ -359,6 +463,7 @@ impl ZenohAgent {
             .wait()
             .map_err(declare("the agent's liveliness token"))?;
         debug!(agent = id, nonce, "zenoh agent welcomed");
+        let beat_stop = start_beats(&session, keys.beat(id), z.lease / 4);
         Ok(Self {
             id,
             shared,
@@ -372,7 +477,9 @@ impl ZenohAgent {
             publisher,
             _frames: frames,
             _host: host,
+            _host_beats: host_beats,
             _token: token,
+            beat_stop,
             session,
             closing: Closing::Open,
         })
@@ -386,6 +493,23 @@ impl ZenohAgent {
     /// Frames dropped on receipt (too short or too long).
     pub fn frames_dropped(&self) -> u64 {
         lock(&self.shared.state).dropped
+    }
+
+    /// Sends the latest stop batch again if the host, back after a lost link, asked for
+    /// its cycle again.
+    fn resend_stop_if_asked(&mut self) {
+        let mut st = lock(&self.shared.state);
+        if !std::mem::take(&mut st.resend_stop) {
+            return;
+        }
+        self.out.clear();
+        self.out.extend_from_slice(&st.stop);
+        let cycle = st.stop_cycle;
+        drop(st);
+        debug!(agent = self.id, ?cycle, "stop sent again after a lost link");
+        if let Err(e) = self.publisher.put(self.out.as_slice()).wait() {
+            warn!(agent = self.id, ?cycle, "zenoh stop not sent again: {e}");
+        }
     }
 }
 
@@ -449,6 +573,7 @@ impl ZenohAgent {
         if !matches!(self.closing, Closing::Open) {
             return;
         }
+        self.beat_stop = None;
         let session = self.session.clone();
         let (done_tx, done_rx) = std::sync::mpsc::channel();
         let spawned = std::thread::Builder::new()
@@ -498,6 +623,7 @@ impl AgentTransport for ZenohAgent {
     }
 
     fn try_receive_newest(&mut self) -> Result<Option<ZenohFrame>, AgentReceiveError> {
+        self.resend_stop_if_asked();
         if Rc::strong_count(&self.held) > AGENT_MAX_HELD_FRAMES {
             return Err(AgentReceiveError::TooManyFramesHeld {
                 max: AGENT_MAX_HELD_FRAMES,
@@ -522,7 +648,7 @@ impl AgentTransport for ZenohAgent {
     fn wait_readable(&mut self, timeout: Duration) {
         {
             let st = lock(&self.shared.state);
-            if st.newest.is_some() || st.closed || st.gone.is_some() {
+            if st.newest.is_some() || st.closed || st.gone.is_some() || st.resend_stop {
                 return;
             }
         }
@@ -534,7 +660,19 @@ impl AgentTransport for ZenohAgent {
     }
 
     fn host_liveness(&mut self, _check_process: bool) -> HostLiveness {
-        let st = lock(&self.shared.state);
+        let mut st = lock(&self.shared.state);
+        let window = self.shared.resume_window;
+        if let Some(since) = st.lost_since
+            && since.elapsed() >= window
+        {
+            st.lost_since = None;
+            st.gone = Some(format!(
+                "the host's zenoh liveliness token vanished (the link was lost for longer than \
+                 the lease, or the host's process ended) and did not come back within {} \
+                 (sync.resume_window)",
+                Rounded(window)
+            ));
+        }
         if st.closed {
             HostLiveness::Closed
         } else if let Some(reason) = &st.gone {
@@ -558,6 +696,14 @@ impl AgentTransport for ZenohAgent {
         self.out.clear();
         self.out.extend_from_slice(header.as_bytes());
         self.out.extend_from_slice(commands.as_bytes());
+        if header.is_stop() {
+            let mut st = lock(&self.shared.state);
+            st.stop.clear();
+            st.stop.extend_from_slice(&self.out);
+            st.stop_cycle = Some(header.cycle);
+        }
+        // While the link is lost zenoh has no route for it: the put drops it, and the
+        // stop goes again when the host, back, asks for its cycle again.
         let sent = self.publisher.put(self.out.as_slice()).wait();
         match sent {
             Ok(()) => Ok(()),

@@ -1,7 +1,6 @@
 //! The zenoh transport's host side: the hello queryable, presence from liveliness tokens
 //! and matching, one publisher per agent, one subscriber for every agent's batches.
 
-use std::collections::VecDeque;
 use std::time::Instant;
 
 use ::zenoh::Wait;
@@ -10,7 +9,7 @@ use ::zenoh::matching::MatchingListener;
 use ::zenoh::pubsub::{Publisher, Subscriber};
 use ::zenoh::qos::CongestionControl;
 use ::zenoh::query::Queryable;
-use tracing::info;
+use tracing::{debug, info, warn};
 use zerocopy::IntoBytes;
 
 use super::super::{
@@ -73,6 +72,8 @@ pub struct ZenohHostStats {
     pub ignored_tokens: u64,
     /// Frames sent, for the log at close.
     pub frames_sent: u64,
+    /// Agents held after a lost link and back within the resume window.
+    pub resumes: u64,
 }
 
 /// Why the zenoh host could not be created.
@@ -101,6 +102,9 @@ pub enum ZenohHostCreateError {
 
 struct SlotPort {
     publisher: Publisher<'static>,
+    /// The frame published last (zenoh's reference to its pooled buffer): sent again to
+    /// an agent back after a lost link.
+    last: Option<::zenoh::bytes::ZBytes>,
     _matching: MatchingListener<()>,
     header: Option<Box<SensorHeader>>,
     body_len: usize,
@@ -116,6 +120,9 @@ pub struct ZenohHost {
     _queryable: Queryable<()>,
     _motor: Subscriber<()>,
     _tokens: Subscriber<()>,
+    _beats: Subscriber<()>,
+    /// Dropped to end the host's beat thread.
+    beat_stop: Option<std::sync::mpsc::Sender<()>>,
     alive: Option<LivelinessToken>,
     session: ::zenoh::Session,
 }
@@ -192,26 +199,14 @@ impl ZenohHost {
             .collect();
         let shared = Arc::new(Shared {
             state: Mutex::new(HostState {
-                slots: config
-                    .agents
-                    .iter()
-                    .map(|a| SlotState {
-                        id: a.id,
-                        admitted: None,
-                        alive: false,
-                        matched: false,
-                        queue: VecDeque::with_capacity(MAX_QUEUED_BATCHES),
-                        leave_queued: false,
-                        gone_at: None,
-                        lost_at: None,
-                    })
-                    .collect(),
+                slots: config.agents.iter().map(|a| SlotState::new(a.id)).collect(),
                 next_nonce: 1,
                 free: (0..config.agents.len() * 4)
                     .map(|_| AlignedBuf::with_capacity(max_motor_body))
                     .collect(),
                 stats: ZenohHostStats::default(),
                 refusals: Refusals::default(),
+                resumed: 0,
             }),
             wake,
             keys: keys.clone(),
@@ -224,6 +219,8 @@ impl ZenohHost {
                 .iter()
                 .map(crate::config::AgentConfig::channel_layout)
                 .collect(),
+            resume_window: config.sync.resume_window,
+            lease: z.lease,
         });
         let congestion = if config.sync.sync_mode {
             CongestionControl::Block
@@ -241,19 +238,23 @@ impl ZenohHost {
             let matching = publisher
                 .matching_listener()
                 .callback(move |status| {
-                    if let Some(s) = lock(&sh.state).slots.get_mut(slot) {
+                    let mut st = lock(&sh.state);
+                    if let Some(s) = st.slots.get_mut(slot) {
                         let was_connected = s.connected();
                         s.matched = status.matching();
                         if !s.matched {
-                            s.lose(was_connected);
+                            s.lose(was_connected, sh.resume_window, sh.lease);
                         }
                     }
+                    st.note_back(slot);
+                    drop(st);
                     sh.wake.wake();
                 })
                 .wait()
                 .map_err(declare("a matching listener"))?;
             ports.push(SlotPort {
                 publisher,
+                last: None,
                 _matching: matching,
                 header: Some(Box::default()),
                 body_len: frame_bodies[slot],
@@ -273,6 +274,12 @@ impl ZenohHost {
             .callback(move |sample| sh.on_token(&sample))
             .wait()
             .map_err(declare("the agents' liveliness subscriber"))?;
+        let sh = shared.clone();
+        let beats = session
+            .declare_subscriber(keys.beat_any())
+            .callback(move |sample| sh.on_beat(&sample))
+            .wait()
+            .map_err(declare("the agents' beat subscriber"))?;
         let sh = shared.clone();
         let queryable = session
             .declare_queryable(keys.hello())
@@ -298,6 +305,8 @@ impl ZenohHost {
             _queryable: queryable,
             _motor: motor,
             _tokens: tokens,
+            _beats: beats,
+            beat_stop: start_beats(&session, keys.host_beat(), z.lease / 4),
             alive: Some(alive),
             session,
         })
@@ -312,10 +321,40 @@ impl ZenohHost {
     pub fn keys(&self) -> &Keys {
         &self.shared.keys
     }
+
+    /// Sends the frame published last again to each agent back within the resume window,
+    /// unless its stop of that cycle arrived (it then has nothing to answer).
+    fn resend_to_the_returned(&mut self) {
+        let mut due = Vec::new();
+        {
+            let mut st = lock(&self.shared.state);
+            for (slot, s) in st.slots.iter_mut().enumerate() {
+                if std::mem::take(&mut s.resend_due)
+                    && let Some(cycle) = s.published
+                    && s.stopped.is_none_or(|stopped| stopped < cycle)
+                {
+                    due.push((slot, s.id, cycle));
+                }
+            }
+        }
+        for (slot, id, cycle) in due {
+            let Some(frame) = self.ports.get(slot).and_then(|p| p.last.clone()) else {
+                continue;
+            };
+            debug!(
+                agent = id,
+                cycle, "zenoh frame sent again to an agent back after a lost link"
+            );
+            if let Err(e) = self.ports[slot].publisher.put(frame).wait() {
+                warn!(agent = id, cycle, "zenoh frame not sent again: {e}");
+            }
+        }
+    }
 }
 
 impl Drop for ZenohHost {
     fn drop(&mut self) {
+        self.beat_stop = None;
         // A clean close: agents see `host/closed` before `host/alive` vanishes (both are
         // declarations, sent in order ahead of data).
         let closed = self
@@ -359,12 +398,23 @@ impl HostTransport for ZenohHost {
     fn publish(&mut self, slot: usize, frame: ZenohFrameLoan) -> Result<bool, HostTransportError> {
         let ZenohFrameLoan { header, mut buf } = frame;
         buf.bytes_mut()[..HEADER].copy_from_slice(header.as_bytes());
-        let connected = self.is_connected(slot);
+        let cycle = header.cycle;
+        let (connected, held) = {
+            let mut st = lock(&self.shared.state);
+            match st.slots.get_mut(slot) {
+                Some(s) => {
+                    s.published = Some(cycle);
+                    (s.connected_for_host(), s.held.is_some())
+                }
+                None => (false, false),
+            }
+        };
         let Some(p) = self.ports.get_mut(slot) else {
             return Err(HostTransportError::NoSuchSlot { slot });
         };
         p.header = Some(header);
         if !connected {
+            p.last = None;
             lock(&self.pool).push(buf);
             return Ok(false);
         }
@@ -373,6 +423,11 @@ impl HostTransport for ZenohHost {
             pool: self.pool.clone(),
         };
         let payload = ::zenoh::bytes::ZBytes::from(bytes::Bytes::from_owner(out));
+        p.last = Some(payload.clone());
+        if held {
+            // Held for its agent's return: the frame goes out when it is back.
+            return Ok(true);
+        }
         p.publisher
             .put(payload)
             .wait()
@@ -390,6 +445,7 @@ impl HostTransport for ZenohHost {
     }
 
     fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError> {
+        self.resend_to_the_returned();
         {
             let mut st = lock(&self.shared.state);
             for (slot, s) in st.slots.iter_mut().enumerate() {
@@ -433,18 +489,32 @@ impl HostTransport for ZenohHost {
         self.shared.wake.raw()
     }
 
-    /// The end of a loss grace (`LOSS_GRACE`): the host then sees that connection lost.
+    /// The end of a loss grace (`LOSS_GRACE`) or of a resume window: the host then sees
+    /// that connection lost.
     fn next_deadline(&self) -> Option<Instant> {
         lock(&self.shared.state)
             .slots
             .iter()
-            .filter_map(|s| s.lost_at.map(|t| t + LOSS_GRACE))
+            .flat_map(|s| [s.lost_at.map(|t| t + LOSS_GRACE), s.held.map(|h| h.until)])
+            .flatten()
             .filter(|&end| end > Instant::now())
             .min()
     }
 
     fn after_wait(&mut self) {
         self.shared.wake.clear();
+        self.resend_to_the_returned();
+    }
+
+    fn forget_connection(&mut self, slot: usize) {
+        // Evicted (its resume window passed) or left: a connection of the id starts afresh.
+        if let Some(s) = lock(&self.shared.state).slots.get_mut(slot) {
+            s.held = None;
+        }
+    }
+
+    fn take_resumes(&mut self) -> u64 {
+        std::mem::take(&mut lock(&self.shared.state).resumed)
     }
 }
 
@@ -452,16 +522,16 @@ impl HostTransport for ZenohHost {
 mod tests {
     use super::*;
 
+    use std::time::Duration;
+
+    const LEASE: Duration = Duration::from_secs(10);
+
     fn connected_slot() -> SlotState {
         SlotState {
-            id: 0,
             admitted: Some((1, Instant::now())),
             alive: true,
             matched: true,
-            queue: VecDeque::new(),
-            leave_queued: false,
-            gone_at: None,
-            lost_at: None,
+            ..SlotState::new(0)
         }
     }
 
@@ -470,7 +540,7 @@ mod tests {
         // The token vanished before any leave batch: lost for the transport, not yet for
         // the host (the batch may follow).
         let mut s = connected_slot();
-        s.lose(s.connected());
+        s.lose(s.connected(), Duration::ZERO, LEASE);
         s.admitted = None;
         s.alive = false;
         assert!(!s.connected());
@@ -483,7 +553,7 @@ mod tests {
         // host until it drained the batch.
         let mut s = connected_slot();
         s.leave_queued = true;
-        s.lose(s.connected());
+        s.lose(s.connected(), Duration::ZERO, LEASE);
         s.matched = false;
         assert!(s.lost_at.is_none());
         assert!(s.connected_for_host());
@@ -493,7 +563,7 @@ mod tests {
         // Never connected (welcomed, no subscriber yet): nothing to wait for.
         let mut s = connected_slot();
         s.matched = false;
-        s.lose(s.connected());
+        s.lose(s.connected(), Duration::ZERO, LEASE);
         assert!(s.lost_at.is_none());
         assert!(!s.connected_for_host());
     }

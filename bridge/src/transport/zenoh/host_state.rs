@@ -7,12 +7,13 @@ use std::time::{Duration, Instant};
 use ::zenoh::Wait;
 use ::zenoh::query::Query;
 use ::zenoh::sample::{Sample, SampleKind};
-use tracing::{info, warn};
+use tracing::{debug, info, warn};
 
 use super::super::record::{Hello, Reject, admit, decode_hello, reject};
 use super::super::{PeerRefusal, RefusalKind, Refusals};
 use super::host::{HEADER, MOTOR_HEADER};
 use super::*;
+use crate::rounded::Rounded;
 use crate::wire::{LAYOUT_HASH, PROTOCOL_VERSION};
 use vrsync_protocol::channel_layout::ChannelLayout;
 
@@ -28,6 +29,15 @@ pub(super) const LEAVE_AFTER_TOKEN: Duration = Duration::from_secs(2);
 /// with nobody attached stops cycling before the batch is read); within this grace the
 /// batch is taken as the leave it is. A crashed agent is seen lost this much later.
 pub(super) const LOSS_GRACE: Duration = Duration::from_secs(1);
+
+/// A slot held for its agent's return after its link was lost (`[sync] resume_window`).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Held {
+    /// When the host saw the link go.
+    pub(super) since: Instant,
+    /// When the slot is let go (the host then evicts the agent).
+    pub(super) until: Instant,
+}
 
 #[derive(Debug)]
 pub(super) struct SlotState {
@@ -47,6 +57,20 @@ pub(super) struct SlotState {
     /// When the connection stopped being connected without a leave batch (token deleted,
     /// subscriber gone); cleared by a leave batch or a new admission. See [`LOSS_GRACE`].
     pub(super) lost_at: Option<Instant>,
+    /// Its link was lost (nothing heard from the agent for at least half the lease when its
+    /// token vanished: zenoh's lease ran out, the process did not end): the slot is held
+    /// for its return and counts as connected meanwhile.
+    pub(super) held: Option<Held>,
+    /// When the host last heard from the admitted connection: its welcome, a batch, a
+    /// beat (`agent/<id>/beat`, every lease / 4).
+    pub(super) heard: Instant,
+    /// The cycle of the frame the host published last to this slot.
+    pub(super) published: Option<u64>,
+    /// The newest cycle whose stop batch arrived from this agent.
+    pub(super) stopped: Option<u64>,
+    /// Back within the resume window: the frame published last goes out again (by the
+    /// host's thread) unless its stop arrived.
+    pub(super) resend_due: bool,
 }
 
 impl SlotState {
@@ -62,13 +86,73 @@ impl SlotState {
         self.connected()
             || self.leave_queued
             || self.lost_at.is_some_and(|t| t.elapsed() < LOSS_GRACE)
+            || self.held.is_some_and(|h| Instant::now() < h.until)
     }
 
-    /// Records that a connection ends now without a leave batch (if it was connected).
-    pub(super) fn lose(&mut self, was_connected: bool) {
-        if was_connected && !self.leave_queued {
-            self.lost_at = Some(Instant::now());
+    /// A slot just created for agent `id`: nobody connected.
+    pub(super) fn new(id: u32) -> Self {
+        Self {
+            id,
+            admitted: None,
+            alive: false,
+            matched: false,
+            queue: VecDeque::with_capacity(MAX_QUEUED_BATCHES),
+            leave_queued: false,
+            gone_at: None,
+            lost_at: None,
+            held: None,
+            heard: Instant::now(),
+            published: None,
+            stopped: None,
+            resend_due: false,
         }
+    }
+
+    /// Records that a connection ends now without a leave batch (if it was connected):
+    /// with a resume window (`window`, non-zero) and nothing heard from the agent for at
+    /// least half its `lease` (zenoh's lease ran out: its link was lost, its process may
+    /// well live), the slot is held for the agent's return; otherwise (its process ended
+    /// and its connection closed: the agent beats every lease / 4 until then) it is lost
+    /// after [`LOSS_GRACE`].
+    pub(super) fn lose(&mut self, was_connected: bool, window: Duration, lease: Duration) {
+        if !was_connected || self.leave_queued || self.held.is_some() {
+            return;
+        }
+        let now = Instant::now();
+        let silent = now.duration_since(self.heard);
+        if !window.is_zero() && silent >= lease / 2 {
+            warn!(
+                agent = self.id,
+                "zenoh agent's link lost (nothing heard for {}); its place is held for {} \
+                 (sync.resume_window)",
+                Rounded(silent),
+                Rounded(window)
+            );
+            self.held = Some(Held {
+                since: now,
+                until: now + window,
+            });
+        } else {
+            self.lost_at = Some(now);
+        }
+    }
+
+    /// Back within the resume window (its token and subscriber are there again): the
+    /// frame published last is due again. `true` when the agent resumed just now.
+    pub(super) fn try_resume(&mut self) -> bool {
+        if !self.connected() {
+            return false;
+        }
+        let Some(held) = self.held.take() else {
+            return false;
+        };
+        info!(
+            agent = self.id,
+            down_s = held.since.elapsed().as_secs_f64(),
+            "zenoh agent back within the resume window: resumed"
+        );
+        self.resend_due = true;
+        true
     }
 }
 
@@ -79,6 +163,20 @@ pub(super) struct HostState {
     pub(super) free: Vec<AlignedBuf>,
     pub(super) stats: ZenohHostStats,
     pub(super) refusals: Refusals,
+    /// Agents back within the resume window since the host last took the count.
+    pub(super) resumed: u64,
+}
+
+impl HostState {
+    /// Slot `slot`'s agent may be back (a token or a subscriber appeared): counts it.
+    pub(super) fn note_back(&mut self, slot: usize) {
+        if let Some(s) = self.slots.get_mut(slot)
+            && s.try_resume()
+        {
+            self.resumed += 1;
+            self.stats.resumes += 1;
+        }
+    }
 }
 
 #[derive(Debug)]
@@ -92,6 +190,10 @@ pub(super) struct Shared {
     pub(super) frame_bodies: Vec<usize>,
     /// Each slot's channels, as the hellos must declare them.
     pub(super) layouts: Vec<ChannelLayout>,
+    /// `[sync] resume_window` (zero: a lost link ends the connection after its lease).
+    pub(super) resume_window: Duration,
+    /// `[transport.zenoh] lease`.
+    pub(super) lease: Duration,
 }
 
 impl super::tls_refusals::TlsRefusalSink for Shared {
@@ -172,7 +274,12 @@ impl Shared {
         let nonce = st.next_nonce;
         st.next_nonce += 1;
         let s = &mut st.slots[slot];
-        s.admitted = Some((nonce, Instant::now()));
+        // A slot held for its agent's return stays held: this hello may be that agent
+        // (restarted, or its session opened again), and until its token and subscriber
+        // are there the host waits for it as before.
+        let now = Instant::now();
+        s.admitted = Some((nonce, now));
+        s.heard = now;
         s.alive = false;
         s.gone_at = None;
         s.lost_at = None;
@@ -221,6 +328,8 @@ impl Shared {
         match sample.kind() {
             SampleKind::Put if current == Some(nonce) => {
                 st.slots[slot].alive = true;
+                st.slots[slot].heard = Instant::now();
+                st.note_back(slot);
                 drop(st);
                 info!(agent = id, "zenoh agent's token is there");
             }
@@ -240,9 +349,17 @@ impl Shared {
             SampleKind::Delete if current == Some(nonce) => {
                 let s = &mut st.slots[slot];
                 let was_connected = s.connected();
-                s.lose(was_connected);
-                s.admitted = None;
+                s.lose(was_connected, self.resume_window, self.lease);
                 s.alive = false;
+                if s.held.is_some() {
+                    // Its session may come back with this very token (zenoh declares it
+                    // again on the new link): the nonce stays admitted, and the batches
+                    // that arrived before the link went stay for the host.
+                    drop(st);
+                    self.wake.wake();
+                    return;
+                }
+                s.admitted = None;
                 s.gone_at = Some(Instant::now());
                 // A leave batch in the queue is for the host still (the agent left
                 // gracefully); anything else of a vanished agent is not.
@@ -304,9 +421,9 @@ impl Shared {
             .pop()
             .unwrap_or_else(|| AlignedBuf::with_capacity(self.max_motor_body));
         buf.fill_from(payload);
-        let (stop, leave) = match super::super::record::decode_motor(buf.bytes()) {
+        let (stop, leave, cycle) = match super::super::record::decode_motor(buf.bytes()) {
             Ok((h, _)) if h.agent_id == id && (h.is_leave() || st.slots[slot].connected()) => {
-                (h.is_stop(), h.is_leave())
+                (h.is_stop(), h.is_leave(), h.cycle)
             }
             Ok((h, _)) if h.agent_id == id => {
                 st.free.push(buf);
@@ -343,7 +460,23 @@ impl Shared {
             }
             return;
         }
-        st.slots[slot].queue.push_back(buf);
+        let s = &mut st.slots[slot];
+        s.heard = Instant::now();
+        if stop && !leave {
+            if s.stopped.is_some_and(|c| c >= cycle) {
+                // Its stop of this cycle arrived already (an agent back after a lost link
+                // sends the stop the host asks for again): applied once.
+                st.free.push(buf);
+                drop(st);
+                debug!(
+                    agent = id,
+                    cycle, "zenoh stop batch dropped: it arrived already"
+                );
+                return;
+            }
+            s.stopped = Some(cycle);
+        }
+        s.queue.push_back(buf);
         if leave {
             // A graceful leave: the id is free for a new connection at once (its token's
             // deletion may come later); the host reads the batch at its next drain.
@@ -359,6 +492,20 @@ impl Shared {
         }
         drop(st);
         self.wake.wake();
+    }
+
+    /// An agent's beat arrived on `…/agent/<id>/beat` (every lease / 4, from a live
+    /// agent process): it tells a link that went silent from a process that ended.
+    pub(super) fn on_beat(&self, sample: &Sample) {
+        let Some((id, _)) = self.keys.parse_agent(sample.key_expr().as_str()) else {
+            return;
+        };
+        let mut st = lock(&self.state);
+        if let Some(slot) = Self::slot_of(&st, id)
+            && st.slots[slot].connected()
+        {
+            st.slots[slot].heard = Instant::now();
+        }
     }
 
     pub(super) fn malformed(&self, mut st: MutexGuard<'_, HostState>, id: u32, why: String) {

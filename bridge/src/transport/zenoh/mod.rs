@@ -8,9 +8,11 @@
 //! | `hello` | queryable: the hello ([`super::record::encode_hello`]) as the query's payload; the reply is a welcome or a refusal | agent → host → agent |
 //! | `host/alive` | liveliness token: the host is there | host |
 //! | `host/closed` | liveliness token declared when the host closes the session cleanly | host |
+//! | `host/beat` | empty, every lease / 4: the host's process lives (tells a lost link from an ended process) | host → agents |
 //! | `agent/<id>/alive/<nonce>` | liveliness token of an admitted agent (`nonce` from its welcome) | agent |
 //! | `agent/<id>/sensors` | the sensor frame: `SensorHeader` bytes then the images; the frame of cycle *f* is its start | host → agent |
 //! | `agent/<id>/motor` | a motor batch: `MotorHeader` then the commands; the stop flag ends the agent's cycle | agent → host |
+//! | `agent/<id>/beat` | empty, every lease / 4: the agent's process lives (tells a lost link from an ended process) | agent → host |
 //!
 //! # Presence
 //! The host treats an agent as connected only once it answered its hello with a welcome,
@@ -19,6 +21,25 @@
 //! died: at once; its link was lost: after the `lease`) evicts it; a new hello and token
 //! rejoin it at the next cycle. Agents see the host's `host/alive` token vanish as "host
 //! gone", and `host/closed` as a clean close.
+//!
+//! # A lost link (`[sync] resume_window`)
+//! With a resume window (30 s by default), an agent whose token vanishes although the host
+//! heard nothing from it for at least half the lease (zenoh's lease ran out: a partition,
+//! heavy loss; a live agent beats every lease / 4, so a process that ended and closed its
+//! connection is told apart) is not lost: the host holds its place for the window. It
+//! counts as connected meanwhile (in sync mode the cycle waits for it), frames published to
+//! it are kept (the newest), and the batches that arrived before the link went stay. The
+//! agent's zenoh session connects again by itself (its `connect` endpoints are retried
+//! every 0.5 s at most, each attempt bounded by zenoh's open timeout, 10 s) and declares
+//! its token (the same nonce) and subscriber again on the new link; once both are there the
+//! agent is back: the frame published last goes out again unless its stop arrived, and a
+//! stop that arrives twice is applied once. A hello of the same id within the window (a
+//! restarted agent) takes the place back the same way. Past the window the host evicts it
+//! (`on_agent_lost`) and the world goes on; when it is back it rejoins at the next cycle.
+//! The agent, seeing the host's token vanish without `host/closed`, waits for it to come
+//! back for the window (its waits see a live host), and gives up (host gone) once the
+//! window passed. A graceful leave (a leave batch) or an ended process frees the place at
+//! once, as without a window.
 //!
 //! # What is validated
 //! Everything received is checked as over TCP: a hello is decoded by the TCP decoder
@@ -104,6 +125,11 @@ impl Keys {
         format!("{}/host/closed", self.prefix)
     }
 
+    /// `vrsync/<session>/host/beat`.
+    pub fn host_beat(&self) -> String {
+        format!("{}/host/beat", self.prefix)
+    }
+
     /// `vrsync/<session>/host/*`.
     pub fn host_any(&self) -> String {
         format!("{}/host/*", self.prefix)
@@ -122,6 +148,16 @@ impl Keys {
     /// `vrsync/<session>/agent/*/motor`.
     pub fn motor_any(&self) -> String {
         format!("{}/agent/*/motor", self.prefix)
+    }
+
+    /// `vrsync/<session>/agent/<id>/beat`.
+    pub fn beat(&self, id: u32) -> String {
+        format!("{}/agent/{id}/beat", self.prefix)
+    }
+
+    /// `vrsync/<session>/agent/*/beat`.
+    pub fn beat_any(&self) -> String {
+        format!("{}/agent/*/beat", self.prefix)
     }
 
     /// `vrsync/<session>/agent/<id>/alive/<nonce>`.
@@ -239,6 +275,41 @@ pub(crate) fn session_config(
     }
     set("transport/link/tls/enable_mtls", t.mtls.to_string())?;
     Ok(c)
+}
+
+/// Starts the thread that puts an empty sample on `key` every `period` (at least 25 ms)
+/// until the returned sender is dropped: the other side tells from it a live process whose
+/// link is lost (silent for the lease before its token vanished) from one that ended (its
+/// token vanished at once). `None` when no thread could be started (the other side then
+/// takes a lost link for an ended process: no resume).
+pub(crate) fn start_beats(
+    session: &::zenoh::Session,
+    key: String,
+    period: Duration,
+) -> Option<std::sync::mpsc::Sender<()>> {
+    let period = period.max(Duration::from_millis(25));
+    let session = session.clone();
+    let (stop_tx, stop_rx) = std::sync::mpsc::channel::<()>();
+    let spawned = std::thread::Builder::new()
+        .name("vrsync-zenoh-beat".into())
+        .spawn(move || {
+            // The timer is the wait for the end: it ends as soon as the owner drops the
+            // sender.
+            while let Err(std::sync::mpsc::RecvTimeoutError::Timeout) = stop_rx.recv_timeout(period)
+            {
+                let put = session
+                    .put(&key, Vec::<u8>::new())
+                    .congestion_control(::zenoh::qos::CongestionControl::Drop);
+                let _ = ::zenoh::Wait::wait(put);
+            }
+        });
+    match spawned {
+        Ok(_) => Some(stop_tx),
+        Err(e) => {
+            tracing::warn!("no thread for the zenoh beats: {e}");
+            None
+        }
+    }
 }
 
 /// Locks a mutex, taking the data of a poisoned one (a panicking zenoh callback must not
