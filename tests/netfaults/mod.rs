@@ -537,30 +537,31 @@ fn loss_and_a_short_partition_leave_the_run_intact(remote: Remote) {
 /// CI: the heavy faults, short ([`SHORT_FRAMES`] cycles): 20 % loss each way, and a 30 s
 /// partition (past TCP's 10 s link timeout and zenoh's 10 s lease, back within the 30 s
 /// resume window): the clean run's trajectory, every command once, no eviction, the
-/// agents back by themselves. On demand the same faults run 200 cycles
+/// agents back by themselves. The two faulty runs go at once, each on a namespace pair of
+/// its own (the partition's run mostly waits). On demand the same faults run 200 cycles
 /// ([`heavy_faults_are_recorded`]).
 fn heavy_faults_in_short_leave_the_run_intact(remote: Remote) {
-    let Some(bench) = Bench::new(remote) else {
+    let (Some(bench), Some(lossy)) = (Bench::new(remote), Bench::new(remote)) else {
         return;
     };
     let clean = bench.run(Fault::Clean, SHORT_FRAMES, LEASE_S);
     clean.report(None);
     clean.assert_intact(&clean);
-    for fault in [
-        Fault::Loss { percent: 20 },
-        Fault::Partition {
-            at_cycle: 5,
-            secs: 30,
-        },
-    ] {
-        let out = bench.run(fault, SHORT_FRAMES, LEASE_S);
+    let partition = Fault::Partition {
+        at_cycle: 5,
+        secs: 30,
+    };
+    let (loss, cut) = std::thread::scope(|s| {
+        let loss = s.spawn(|| lossy.run(Fault::Loss { percent: 20 }, SHORT_FRAMES, LEASE_S));
+        let cut = bench.run(partition, SHORT_FRAMES, LEASE_S);
+        (loss.join().unwrap(), cut)
+    });
+    for out in [&loss, &cut] {
         out.report(Some(&clean));
         out.assert_intact(&clean);
-        if let Fault::Partition { .. } = fault {
-            assert!(out.resumed_after_s.is_some(), "{out:#?}");
-            assert_eq!(out.resumes, REMOTE_IDS.len() as u64, "{out:#?}");
-        }
     }
+    assert!(cut.resumed_after_s.is_some(), "{cut:#?}");
+    assert_eq!(cut.resumes, REMOTE_IDS.len() as u64, "{cut:#?}");
 }
 
 /// On demand: delay with jitter and duplication must leave the run intact too.
