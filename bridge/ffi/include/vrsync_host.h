@@ -586,6 +586,9 @@ typedef struct vrs_host_stats_t {
   // bounds or not finite, a choice out of range): none of it was applied. Per agent and
   // cycle: `vrs_host_actions_rejected`.
   uint64_t actions_rejected;
+  // Times an agent whose link was lost came back within `[sync] resume_window` and went
+  // on where it was (TCP and zenoh agents): not evictions, not rejoins.
+  uint64_t resumes;
 } vrs_host_stats_t;
 
 // One vector (`[[agent.vector]]`) of an agent, from the config.

@@ -539,6 +539,9 @@ pub struct vrs_host_stats_t {
     /// bounds or not finite, a choice out of range): none of it was applied. Per agent and
     /// cycle: `vrs_host_actions_rejected`.
     pub actions_rejected: u64,
+    /// Times an agent whose link was lost came back within `[sync] resume_window` and went
+    /// on where it was (TCP and zenoh agents): not evictions, not rejoins.
+    pub resumes: u64,
 }
 
 impl From<&HostStats> for vrs_host_stats_t {
@@ -562,6 +565,7 @@ impl From<&HostStats> for vrs_host_stats_t {
             leaves: s.leaves,
             peers_refused: s.peers_refused,
             actions_rejected: s.actions_rejected,
+            resumes: s.resumes,
         }
     }
 }
@@ -579,13 +583,14 @@ const _: () = {
     assert!(size_of::<vrs_host_sensors_t>() == 328);
     assert!(size_of::<vrs_host_command_t>() == 32);
     assert!(size_of::<vrs_host_cycle_t>() == 48);
-    assert!(size_of::<vrs_host_stats_t>() == 144);
+    assert!(size_of::<vrs_host_stats_t>() == 152);
     // Fields are only ever appended: the offsets of the first ABI's fields stay put.
     assert!(offset_of!(vrs_host_cycle_t, rejoined_agents) == 36);
     assert!(offset_of!(vrs_host_cycle_t, left_agents) == 40);
     assert!(offset_of!(vrs_host_stats_t, collisions_dropped) == 104);
     assert!(offset_of!(vrs_host_stats_t, slow_stops) == 112);
     assert!(offset_of!(vrs_host_stats_t, actions_rejected) == 136);
+    assert!(offset_of!(vrs_host_stats_t, resumes) == 144);
 };
 
 // The report holds a pointer: these hold on 64-bit targets, which the C# binding mirrors.

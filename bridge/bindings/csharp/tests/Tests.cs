@@ -99,7 +99,7 @@ static class Tests
         "vrs_host_agent_report_t", typeof(NativeStructs.AgentReport),
             "agent_id=AgentId outcome=Outcome command_count=CommandCount reserved=Reserved commands=Commands read_cycle=ReadCycle evicted=Evicted rejoined=Rejoined left=Left slow=Slow",
         "vrs_host_stats_t", typeof(HostStats),
-            "cycles=Cycles stop_timeouts=StopTimeouts agent_timeouts=AgentTimeouts late_batches=LateBatches future_batches=FutureBatches commands_received=CommandsReceived commands_overflowed=CommandsOverflowed frames_undelivered=FramesUndelivered evictions=Evictions rejoins=Rejoins frames_delivered=FramesDelivered frames_read=FramesRead statuses_dropped=StatusesDropped collisions_dropped=CollisionsDropped slow_stops=SlowStops leaves=Leaves peers_refused=PeersRefused actions_rejected=ActionsRejected",
+            "cycles=Cycles stop_timeouts=StopTimeouts agent_timeouts=AgentTimeouts late_batches=LateBatches future_batches=FutureBatches commands_received=CommandsReceived commands_overflowed=CommandsOverflowed frames_undelivered=FramesUndelivered evictions=Evictions rejoins=Rejoins frames_delivered=FramesDelivered frames_read=FramesRead statuses_dropped=StatusesDropped collisions_dropped=CollisionsDropped slow_stops=SlowStops leaves=Leaves peers_refused=PeersRefused actions_rejected=ActionsRejected resumes=Resumes",
         "vrs_host_vector_t", typeof(NativeStructs.Vector), "data=Data len=Length index=Index name=Name",
         "vrs_host_vector_spec_t", typeof(NativeStructs.VectorSpec), "low=Low high=High len=Length index=Index name=Name",
         "vrs_host_action_spec_t", typeof(NativeStructs.ActionSpec), "low=Low high=High len=Length n=N kind=Kind index=Index name=Name",

@@ -131,6 +131,7 @@ int main(void) {
     F(vrs_host_stats_t, leaves);
     F(vrs_host_stats_t, peers_refused);
     F(vrs_host_stats_t, actions_rejected);
+    F(vrs_host_stats_t, resumes);
     S(vrs_host_vector_t);
     F(vrs_host_vector_t, data);
     F(vrs_host_vector_t, len);

@@ -551,6 +551,10 @@ namespace Vrsync
         /// finite, a choice out of range): none was applied. Per agent and cycle:
         /// <see cref="AgentReport.ActionsRejected"/>.</summary>
         public ulong ActionsRejected;
+        /// <summary>Times an agent whose link was lost came back within
+        /// <c>[sync] resume_window</c> and went on where it was (TCP and zenoh agents): not
+        /// evictions, not rejoins.</summary>
+        public ulong Resumes;
     }
 
     /// <summary>The raw C structs the public types are built from.</summary>
