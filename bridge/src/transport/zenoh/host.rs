@@ -567,4 +567,42 @@ mod tests {
         assert!(s.lost_at.is_none());
         assert!(!s.connected_for_host());
     }
+
+    #[test]
+    fn with_a_resume_window_a_lost_link_is_held_and_the_same_connection_resumes() {
+        let window = Duration::from_secs(30);
+        // Silent for the lease (zenoh's lease ran out): held for the window.
+        let mut s = connected_slot();
+        s.heard = Instant::now().checked_sub(LEASE).unwrap();
+        s.lose(s.connected(), window, LEASE);
+        s.alive = false;
+        s.matched = false;
+        let held = s.held.expect("held");
+        assert!(held.until - held.since == window);
+        assert!(s.connected_for_host());
+        assert!(!s.try_resume(), "not back yet");
+        // Its token and subscriber back: resumed, the frame published last is due again.
+        s.alive = true;
+        s.matched = true;
+        assert!(s.try_resume());
+        assert!(s.held.is_none() && s.resend_due);
+        // Past the window: lost.
+        let mut s = connected_slot();
+        s.heard = Instant::now().checked_sub(LEASE).unwrap();
+        s.lose(true, window, LEASE);
+        s.alive = false;
+        s.held = s.held.map(|h| Held {
+            until: Instant::now(),
+            ..h
+        });
+        assert!(!s.connected_for_host());
+
+        // Closed while it beat (its process ended, or its side gave up first): held for
+        // the lease only, and a leave batch that the close overtook is still taken.
+        let mut s = connected_slot();
+        s.lose(true, window, LEASE);
+        let held = s.held.expect("held");
+        assert!(held.until - held.since == LEASE);
+        assert!(s.lost_at.is_some());
+    }
 }

@@ -30,6 +30,13 @@ pub(super) const LEAVE_AFTER_TOKEN: Duration = Duration::from_secs(2);
 /// batch is taken as the leave it is. A crashed agent is seen lost this much later.
 pub(super) const LOSS_GRACE: Duration = Duration::from_secs(1);
 
+/// With a resume window, how long the host holds the place of an agent whose connection
+/// closed while it was heard from (at least; the lease if longer, at most the window): its
+/// process may have ended, or its side declared the link lost first (a link that stalls
+/// one way: the agent then connects again at once). A leave batch racing the close still
+/// frees the place at once.
+pub(super) const CLOSED_GRACE: Duration = Duration::from_secs(2);
+
 /// A slot held for its agent's return after its link was lost (`[sync] resume_window`).
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Held {
@@ -108,19 +115,25 @@ impl SlotState {
         }
     }
 
-    /// Records that a connection ends now without a leave batch (if it was connected):
-    /// with a resume window (`window`, non-zero) and nothing heard from the agent for at
-    /// least half its `lease` (zenoh's lease ran out: its link was lost, its process may
-    /// well live), the slot is held for the agent's return; otherwise (its process ended
-    /// and its connection closed: the agent beats every lease / 4 until then) it is lost
-    /// after [`LOSS_GRACE`].
+    /// Records that a connection ends now without a leave batch (if it was connected).
+    /// Without a resume window it is lost after [`LOSS_GRACE`] (its leave batch may still
+    /// come). With one (`window`), the slot is held for the agent's return: for the window
+    /// when nothing was heard from the agent for at least half its `lease` (zenoh's lease
+    /// ran out: its link was lost, its process may well live); otherwise (its connection
+    /// closed while it beat: its process ended, or its side declared the link lost first)
+    /// for [`CLOSED_GRACE`] or the lease, whichever is longer, and its leave batch is
+    /// still taken meanwhile.
     pub(super) fn lose(&mut self, was_connected: bool, window: Duration, lease: Duration) {
         if !was_connected || self.leave_queued || self.held.is_some() {
             return;
         }
         let now = Instant::now();
+        if window.is_zero() {
+            self.lost_at = Some(now);
+            return;
+        }
         let silent = now.duration_since(self.heard);
-        if !window.is_zero() && silent >= lease / 2 {
+        let hold = if silent >= lease / 2 {
             warn!(
                 agent = self.id,
                 "zenoh agent's link lost (nothing heard for {}); its place is held for {} \
@@ -128,13 +141,23 @@ impl SlotState {
                 Rounded(silent),
                 Rounded(window)
             );
-            self.held = Some(Held {
-                since: now,
-                until: now + window,
-            });
+            window
         } else {
+            let hold = window.min(lease.max(CLOSED_GRACE));
+            warn!(
+                agent = self.id,
+                "zenoh agent's connection closed (its process ended, or its side declared \
+                 the link lost); its place is held for {} in case it is back",
+                Rounded(hold)
+            );
+            // A leave batch that the close overtook is still taken (see `on_batch`).
             self.lost_at = Some(now);
-        }
+            hold
+        };
+        self.held = Some(Held {
+            since: now,
+            until: now + hold,
+        });
     }
 
     /// Back within the resume window (its token and subscriber are there again): the
@@ -462,7 +485,9 @@ impl Shared {
         }
         let s = &mut st.slots[slot];
         s.heard = Instant::now();
-        if stop && !leave {
+        // A stop for a cycle not published yet is the host's to drop (a future batch): not
+        // this agent's stop of any cycle.
+        if stop && !leave && s.published.is_some_and(|p| cycle <= p) {
             if s.stopped.is_some_and(|c| c >= cycle) {
                 // Its stop of this cycle arrived already (an agent back after a lost link
                 // sends the stop the host asks for again): applied once.
@@ -485,6 +510,7 @@ impl Shared {
             s.alive = false;
             s.leave_queued = true;
             s.lost_at = None;
+            s.held = None;
             drop(st);
             info!(agent = id, "zenoh agent left");
             self.wake.wake();
