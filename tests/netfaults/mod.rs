@@ -29,12 +29,13 @@
 //! comes from these lines).
 //!
 //! CI runs, per remote transport: the clean link, 1 % and 5 % loss, a 3 s partition
-//! (shorter than the zenoh lease of these runs, 10 s), 5 % reordering; over TCP also a
-//! partition past the link timeout, back within the resume window ([`resume`]). The heavier
-//! cases (20 % loss, a 30 s partition, a 3 s partition with the default 2 s lease, delay,
-//! duplication, 25 % reordering) are
-//! `#[ignore]`d: `cargo test --workspace --features vrsync-sim/rerun --test tests --
-//! --ignored --nocapture netfaults`.
+//! (shorter than the zenoh lease of these runs, 10 s); a partition past the link timeout
+//! (TCP's 10 s, zenoh's lease), back within the resume window, and one past the window
+//! ([`resume`]); and the heavy faults in short ([`SHORT_FRAMES`] cycles): 20 % loss and a
+//! 30 s partition, at once on two namespace pairs; 5 % reordering. The heavy cases over 200
+//! cycles (20 % loss, a 30 s partition, a 3 s partition with the default 2 s lease), delay,
+//! duplication and 25 % reordering are `#[ignore]`d: `cargo test --workspace --features
+//! vrsync-sim/rerun --test tests -- --ignored --nocapture netfaults`.
 //!
 //! Both veth ends carry one TCP segment per packet (`gso_max_segs 1`), as a wire does:
 //! otherwise a veth passes 64 KiB offload packets and one dropped "packet" is a whole
