@@ -133,7 +133,7 @@ fn version_status_names_and_sizes() {
         vrs_host_sizeof_agent_report(),
         std::mem::size_of::<vrs_host_agent_report_t>()
     );
-    assert_eq!(vrs_host_sizeof_stats(), 144);
+    assert_eq!(vrs_host_sizeof_stats(), 152);
     assert_eq!(
         vrs_host_sizeof_image(),
         std::mem::size_of::<vrs_host_image_t>()
