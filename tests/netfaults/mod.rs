@@ -32,7 +32,10 @@
 //! (shorter than the zenoh lease of these runs, 10 s); a partition past the link timeout
 //! (TCP's 10 s, zenoh's lease), back within the resume window, and one past the window
 //! ([`resume`]); and the heavy faults in short ([`SHORT_FRAMES`] cycles): 20 % loss and a
-//! 30 s partition, at once on two namespace pairs; 5 % reordering. The heavy cases over 200
+//! 30 s partition, at once on two namespace pairs; 5 % reordering; and what stays bounded
+//! ([`bounded`]): async mode under 5 % loss and a 3 s partition with a TCP and a zenoh
+//! agent (the frame interval, the newest frame, the host's memory), and the host's memory
+//! across 10 partitions in a row (TCP, sync mode). The heavy cases over 200
 //! cycles (20 % loss, a 30 s partition, a 3 s partition with the default 2 s lease), delay,
 //! duplication and 25 % reordering are `#[ignore]`d: `cargo test --workspace --features
 //! vrsync-sim/rerun --test tests -- --ignored --nocapture netfaults`.
@@ -46,6 +49,7 @@
 //! every rule), nftables tables, relays and processes are removed by drop guards, also
 //! when a test fails.
 
+mod bounded;
 mod nft;
 mod outcome;
 mod relay;
@@ -126,6 +130,14 @@ enum Fault {
         at_cycle: u64,
         secs: u64,
     },
+    /// `count` partitions of `secs` in a row: the first from when the remote agents logged
+    /// `at_cycle`, each next one `every` cycles after the cycle the last one ended in.
+    Partitions {
+        at_cycle: u64,
+        every: u64,
+        secs: u64,
+        count: u64,
+    },
     /// `percent` % of the packets sent twice, each direction.
     Duplicate {
         percent: u32,
@@ -147,6 +159,14 @@ impl Fault {
             Self::Clean => "clean".into(),
             Self::Loss { percent } => format!("loss {percent}%"),
             Self::Partition { at_cycle, secs } => format!("partition {secs}s at cycle {at_cycle}"),
+            Self::Partitions {
+                at_cycle,
+                every,
+                secs,
+                count,
+            } => {
+                format!("{count} partitions of {secs}s from cycle {at_cycle}, {every} cycles apart")
+            }
             Self::Duplicate { percent } => format!("duplicate {percent}%"),
             Self::Delay { ms, jitter_ms } => format!("delay {ms}±{jitter_ms}ms"),
             Self::Reorder { percent } => format!("reorder {percent}%"),
@@ -155,9 +175,17 @@ impl Fault {
 }
 
 /// The world of every case: agent 0 over shared memory (in the host's namespace), agents
-/// 1 and 2 over `remote`, one 160×120 camera each. `side` is `host` or `agent` (with
-/// TLS, each side its own certificate); `via_relay` points the agents at [`Relay`].
-fn config_text(session: &str, remote: Remote, lease_s: f64, side: &str, via_relay: bool) -> String {
+/// 1 and 2 over `remote`, one 160×120 camera each, in sync mode or not. `side` is `host`
+/// or `agent` (with TLS, each side its own certificate); `via_relay` points the agents at
+/// [`Relay`].
+fn config_text(
+    session: &str,
+    remote: Remote,
+    lease_s: f64,
+    side: &str,
+    via_relay: bool,
+    sync_mode: bool,
+) -> String {
     let (tcp_port, zenoh_port) = if via_relay && side == "agent" {
         (RELAY_PORT, RELAY_PORT)
     } else {
@@ -169,7 +197,7 @@ fn config_text(session: &str, remote: Remote, lease_s: f64, side: &str, via_rela
         "tcp"
     };
     let mut s = format!(
-        "session = {session:?}\nseed = 11\n[sync]\nsync_mode = true\n\
+        "session = {session:?}\nseed = 11\n[sync]\nsync_mode = {sync_mode}\n\
          simulation_time_per_frame = 0.1\nstop_timeout = {STOP_TIMEOUT_S}\n\
          connect_timeout = 60.0\n[transport]\nkind = \"shm\"\n\
          tcp_listen = \"{HOST_IP}:{tcp_port}\"\n\
@@ -246,12 +274,12 @@ fn run_case(
     let agent_cfg = case_dir.join("agent.toml");
     std::fs::write(
         &host_cfg,
-        config_text(&session, remote, lease_s, "host", false),
+        config_text(&session, remote, lease_s, "host", false, true),
     )
     .unwrap();
     std::fs::write(
         &agent_cfg,
-        config_text(&session, remote, lease_s, "agent", via_relay),
+        config_text(&session, remote, lease_s, "agent", via_relay, true),
     )
     .unwrap();
 
@@ -280,7 +308,7 @@ fn run_case(
             ));
         }
         Fault::Reorder { percent } => reorder = Some(Reorder::install(ns, percent)),
-        Fault::Clean | Fault::Partition { .. } => {}
+        Fault::Clean | Fault::Partition { .. } | Fault::Partitions { .. } => {}
     }
 
     let events = Events::in_dir(&case_dir);
@@ -318,20 +346,40 @@ fn run_case(
         .collect();
 
     let mut resumed_after_s = None;
-    let mut partition_counters = BTreeMap::new();
-    if let Fault::Partition { at_cycle, secs } = fault {
-        for &id in &REMOTE_IDS {
-            util::wait_for_cycle_line(&log(id), at_cycle, EVENT_DEADLINE);
+    let mut partition_counters = BTreeMap::<String, u64>::new();
+    let mut rss_kib = Vec::new();
+    let partitions = match fault {
+        Fault::Partition { at_cycle, secs } => Some((at_cycle, 0, secs, 1)),
+        Fault::Partitions {
+            at_cycle,
+            every,
+            secs,
+            count,
+        } => Some((at_cycle, every, secs, count)),
+        _ => None,
+    };
+    if let Some((mut at_cycle, every, secs, count)) = partitions {
+        for _ in 0..count {
+            for &id in &REMOTE_IDS {
+                util::wait_for_cycle_line(&log(id), at_cycle, EVENT_DEADLINE);
+            }
+            let table = partition_table(ns);
+            // The fault itself: the link stays cut this long.
+            std::thread::sleep(Duration::from_secs(secs));
+            let cut_at = last_cycle(&log(REMOTE_IDS[0]));
+            for (k, v) in table.counters() {
+                *partition_counters.entry(k).or_default() += v;
+            }
+            drop(table);
+            let healed = Instant::now();
+            resumed_after_s = answered_again(&log(REMOTE_IDS[0]), cut_at, &mut remotes)
+                .then(|| healed.elapsed().as_secs_f64());
+            if resumed_after_s.is_none() {
+                break;
+            }
+            rss_kib.push(vm_rss_kib(host.pid()));
+            at_cycle = cut_at + every;
         }
-        let table = partition_table(ns);
-        // The fault itself: the link stays cut this long.
-        std::thread::sleep(Duration::from_secs(secs));
-        let cut_at = last_cycle(&log(REMOTE_IDS[0]));
-        partition_counters = table.counters();
-        drop(table);
-        let healed = Instant::now();
-        resumed_after_s = answered_again(&log(REMOTE_IDS[0]), cut_at, &mut remotes)
-            .then(|| healed.elapsed().as_secs_f64());
     }
 
     let host_out = host.wait(HOST_DEADLINE);
@@ -421,7 +469,19 @@ fn run_case(
         counters,
         resumed_after_s,
         resumes: sum["resumes"].as_u64().unwrap(),
+        rss_kib,
     }
+}
+
+/// The resident set (`VmRSS`, KiB) of process `pid`.
+fn vm_rss_kib(pid: u32) -> u64 {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status"))
+        .unwrap_or_else(|e| panic!("/proc/{pid}/status: {e}"));
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+        .unwrap_or_else(|| panic!("no VmRSS in /proc/{pid}/status"))
 }
 
 /// With TLS, the certificates of `dir` into `case_dir` (where the configs name them).

@@ -39,6 +39,9 @@ pub(super) struct Outcome {
     pub(super) resumed_after_s: Option<f64>,
     /// The host's `resumes`: agents back within the resume window after a lost link.
     pub(super) resumes: u64,
+    /// Partitions: the host's VmRSS (KiB) once the remote agents answered again after
+    /// each one.
+    pub(super) rss_kib: Vec<u64>,
 }
 
 impl Outcome {
@@ -113,11 +116,16 @@ impl Outcome {
             })
             .collect::<Vec<_>>()
             .join(", ");
-        let resumed = match (self.fault, self.resumed_after_s) {
-            (Fault::Partition { .. }, Some(s)) => {
-                format!("; remote agents answered again {s:.1} s after the link returned")
-            }
-            (Fault::Partition { .. }, None) => "; remote agents never answered again".into(),
+        let partitioned = matches!(
+            self.fault,
+            Fault::Partition { .. } | Fault::Partitions { .. }
+        );
+        let resumed = match (partitioned, self.resumed_after_s) {
+            (true, Some(s)) => format!(
+                "; remote agents answered again {s:.1} s after the link returned (the last); host VmRSS after each partition {:?} KiB",
+                self.rss_kib
+            ),
+            (true, None) => "; remote agents never answered again".into(),
             _ => String::new(),
         };
         eprintln!(

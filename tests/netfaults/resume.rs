@@ -68,7 +68,7 @@ pub(super) fn not_back_within_the_window_is_evicted_in_bound_and_rejoins_when_ba
     let window = Duration::from_secs(2);
     let (timeout, lease) = link_timeout(remote);
     let config = |side: &str| {
-        let text = super::config_text(&session, remote, lease, side, false);
+        let text = super::config_text(&session, remote, lease, side, false, true);
         let with_window = format!("[sync]\nresume_window = {:?}\n", window.as_secs_f64());
         let path = dir.join(format!("{side}.toml"));
         std::fs::write(&path, text.replacen("[sync]\n", &with_window, 1)).unwrap();
