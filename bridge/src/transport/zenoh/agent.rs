@@ -1,18 +1,33 @@
 //! The zenoh transport's agent side: hello, the newest frame, batches, the host's token,
 //! and the wait for the host after a lost link (`[sync] resume_window`).
 //!
+//! # Ended or lost
+//! A host that ends cleanly says so: it declares `host/closed` before its `host/alive`
+//! token goes (both declarations, in order on one link), and waits (at most its lease)
+//! until each connected agent confirmed it (a `closed` beat, sent once from a thread of its
+//! own) or is gone. The agent that saw `host/closed` is told the host closed (its waits end
+//! at once, as a close). Whatever else makes the host's token vanish is taken for a lost
+//! link, however recently the host was heard from: the lease ran out on either side (a
+//! partition, heavy loss, a link that stalls one way and is closed by the side that stops
+//! hearing first), or the host's process ended without closing (killed): zenoh shows them
+//! all the same way.
+//!
 //! # A lost link
-//! When the host's `host/alive` token vanishes without `host/closed` (zenoh's lease ran
-//! out: a partition, heavy loss; or the host's process ended), the agent does not give up
-//! at once: with a resume window its waits see a live host for that long after it saw the
-//! token go, while its zenoh session connects again by itself (the `connect` endpoints are
-//! retried every 0.5 s at most) and declares the agent's token and subscriber again on the
-//! new link. The token back, the agent goes on. The host, back, sends the frame of the
-//! cycle it waits for again if this agent's stop for it did not arrive: if the agent had
-//! sent that stop (the latest stop batch is kept), it sends the batch again instead of
+//! With a resume window, the agent's waits see a live host for that long after it saw the
+//! token go, while its zenoh session connects again by itself (the `connect` endpoints
+//! are retried every 0.5 s at most) and declares the agent's token and subscriber again
+//! on the new link. The token back, the agent goes on. The host, back, sends the frame of
+//! the cycle it waits for again if this agent's stop for it did not arrive: if the agent
+//! had sent that stop (the latest stop batch is kept), it sends the batch again instead of
 //! handing the frame to the caller once more. Past the window the agent gives up: its
-//! waits say the host is gone. Meanwhile it beats (`agent/<id>/beat`, every lease / 4), so
-//! that the host tells its lost link from its process's end.
+//! waits say the host is gone. Meanwhile, as the TCP agent does, it tries the host's
+//! address every [`PROBE_PERIOD`] (a plain TCP connect to each `tcp/` or `tls/` connect
+//! endpoint, bounded by [`PROBE_TIMEOUT`]): when every one refuses (the host's machine
+//! answers and nothing listens) the host's process is gone, and the agent gives up at
+//! once. A host whose machine does not answer (a partition, a machine down) is gone once
+//! the window passed (30 s by default; without a window, at once). Meanwhile the agent beats
+//! (`agent/<id>/beat`, every lease / 4), so that the host tells its silent link from a
+//! closed connection.
 
 use std::rc::Rc;
 use std::time::{Duration, Instant};
@@ -38,6 +53,50 @@ use crate::wire::{LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, Sens
 use vrsync_protocol::channel_layout::ChannelLayout;
 
 const HEADER: usize = core::mem::size_of::<SensorHeader>();
+
+/// How often an agent whose host's token vanished without its close tries the host's
+/// address (see the module docs).
+pub const PROBE_PERIOD: Duration = Duration::from_millis(500);
+/// How long one try of the host's address may take: a link that drops packets does not
+/// answer at all, a machine whose port nothing listens on answers at once.
+pub const PROBE_TIMEOUT: Duration = Duration::from_millis(200);
+
+/// The socket addresses (`host:port`) of the `tcp/` and `tls/` endpoints in `connect`
+/// (zenoh's metadata after `?` or `#` dropped); other protocols are skipped.
+pub(super) fn probe_addresses(connect: &[String]) -> Vec<String> {
+    connect
+        .iter()
+        .filter_map(|e| e.strip_prefix("tcp/").or_else(|| e.strip_prefix("tls/")))
+        .map(|a| a.split(['?', '#']).next().unwrap_or(a).to_string())
+        .collect()
+}
+
+/// Whether every address in `addresses` refuses a TCP connection (at least one address,
+/// each resolved, each of its socket addresses refusing): the host's machine answers and
+/// nothing listens there, so the host's process is gone. A timeout or any other error
+/// (a lost link) is not a refusal.
+fn every_address_refuses(addresses: &[String]) -> Option<String> {
+    use std::net::ToSocketAddrs;
+    if addresses.is_empty() {
+        return None;
+    }
+    let mut refused = Vec::new();
+    for a in addresses {
+        let resolved: Vec<_> = a.to_socket_addrs().ok()?.collect();
+        if resolved.is_empty() {
+            return None;
+        }
+        for addr in resolved {
+            match std::net::TcpStream::connect_timeout(&addr, PROBE_TIMEOUT) {
+                Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => {
+                    refused.push(addr.to_string());
+                }
+                _ => return None,
+            }
+        }
+    }
+    Some(refused.join(", "))
+}
 
 /// A received frame's bytes: zenoh's own buffer when it arrived in one piece (no copy),
 /// else an aligned copy.
@@ -69,8 +128,6 @@ struct AgentState {
     dropped: u64,
     /// When the host's token vanished without `host/closed` (with a resume window).
     lost_since: Option<Instant>,
-    /// When the agent last heard from the host: its token, a frame, a beat.
-    heard: Option<Instant>,
     /// The latest stop batch sent and its cycle.
     stop: Vec<u8>,
     stop_cycle: Option<u64>,
@@ -86,8 +143,10 @@ struct AgentShared {
     keys: Keys,
     /// `[sync] resume_window`.
     resume_window: Duration,
-    /// `[transport.zenoh] lease`.
-    lease: Duration,
+    /// The agent's session and its beat key: the confirmation of the host's close goes
+    /// there (see [`AgentShared::confirm_close`]).
+    session: ::zenoh::Session,
+    beat_key: String,
 }
 
 /// The cycle in the header of the frame `payload` (wherever its bytes lie).
@@ -140,7 +199,6 @@ impl AgentShared {
             }
             return;
         }
-        st.heard = Some(Instant::now());
         if st.stop_cycle.is_some() && cycle_of(payload) == st.stop_cycle {
             // The host, back after a lost link, asks for this cycle's stop again.
             st.resend_stop = true;
@@ -178,19 +236,40 @@ impl AgentShared {
         self.wake.wake();
     }
 
-    /// The host's beat (every lease / 4).
-    fn on_host_beat(&self) {
-        lock(&self.state).heard = Some(Instant::now());
+    /// Tells the host that this agent saw its `host/closed` (a `closed` beat): the host's
+    /// close waits for it, so that the close is known to have arrived before the host's
+    /// session goes. Sent from a thread of its own: a zenoh callback must not block on a
+    /// full queue.
+    fn confirm_close(&self) {
+        let session = self.session.clone();
+        let key = self.beat_key.clone();
+        let spawned = std::thread::Builder::new()
+            .name("vrsync-zenoh-closed".into())
+            .spawn(move || {
+                let put = session
+                    .put(&key, CLOSED_BEAT.to_vec())
+                    .congestion_control(CongestionControl::Block);
+                if let Err(e) = put.wait() {
+                    debug!("the host's close not confirmed: {e}");
+                }
+            });
+        if let Err(e) = spawned {
+            // The host then waits for this agent's token to go (or its lease).
+            warn!("no thread to confirm the host's close: {e}");
+        }
     }
 
     fn on_host_token(&self, sample: &Sample) {
         let key = sample.key_expr().as_str();
         let mut st = lock(&self.state);
         match sample.kind() {
-            SampleKind::Put if key == self.keys.host_closed() => st.closed = true,
+            SampleKind::Put if key == self.keys.host_closed() => {
+                if !std::mem::replace(&mut st.closed, true) {
+                    self.confirm_close();
+                }
+            }
             SampleKind::Put if key == self.keys.host_alive() => {
                 st.host_seen = true;
-                st.heard = Some(Instant::now());
                 if let Some(since) = st.lost_since.take() {
                     info!(
                         down_s = since.elapsed().as_secs_f64(),
@@ -199,26 +278,21 @@ impl AgentShared {
                 }
             }
             SampleKind::Delete if key == self.keys.host_alive() && !st.closed => {
-                // A host that beat less than half a lease ago ended (its connection
-                // closed at once); one silent for the lease is behind a lost link.
-                let silent = st.heard.is_none_or(|t| t.elapsed() >= self.lease / 2);
+                // Without `host/closed` first: not a clean end. A lost link and a killed
+                // host look the same here (however recently the host was heard from: a
+                // link that stalls one way is closed by the side that stops hearing first,
+                // while the other still hears it), so both are waited for.
                 if self.resume_window.is_zero() {
                     st.gone = Some(
-                        "the host's zenoh liveliness token vanished (its process ended, or the \
-                         link was lost for longer than the lease)"
-                            .into(),
-                    );
-                } else if !silent {
-                    st.gone = Some(
-                        "the host's zenoh liveliness token vanished while it was heard from \
-                         (its process ended)"
+                        "the host's zenoh liveliness token vanished without its close (its \
+                         process ended, or the link was lost for longer than the lease)"
                             .into(),
                     );
                 } else if st.lost_since.is_none() && st.gone.is_none() {
                     warn!(
-                        "the host's zenoh liveliness token vanished (the link was lost for \
-                         longer than the lease, or the host's process ended): waiting for it \
-                         for up to {} (sync.resume_window)",
+                        "the host's zenoh liveliness token vanished without its close (the \
+                         link was lost, or the host's process ended without closing): waiting \
+                         for it for up to {} (sync.resume_window)",
                         Rounded(self.resume_window)
                     );
                     st.lost_since = Some(Instant::now());
@@ -272,12 +346,15 @@ pub struct ZenohAgent {
     publisher: Publisher<'static>,
     _frames: Subscriber<()>,
     _host: Subscriber<()>,
-    _host_beats: Subscriber<()>,
     _token: LivelinessToken,
     /// Dropped to end the beat thread.
     beat_stop: Option<std::sync::mpsc::Sender<()>>,
     session: ::zenoh::Session,
     closing: Closing,
+    /// The host's addresses, tried after its token vanished without its close.
+    probe: Vec<String>,
+    /// When the host's addresses may be tried next.
+    next_probe: Instant,
 }
 
 /// Where closing the agent's zenoh session is.
@@ -357,7 +434,8 @@ impl ZenohAgent {
             wake: WakeFd::new().map_err(|e| fail(format!("eventfd: {e}")))?,
             keys: keys.clone(),
             resume_window: config.sync.resume_window,
-            lease: z.lease,
+            session: session.clone(),
+            beat_key: keys.beat(id),
         });
         let declare = |what: &'static str| {
             move |e: ::zenoh::Error| fail(format!("cannot declare {what}: {e}"))
@@ -370,12 +448,6 @@ impl ZenohAgent {
             .callback(move |s| sh.on_host_token(&s))
             .wait()
             .map_err(declare("the host's liveliness subscriber"))?;
-        let sh = shared.clone();
-        let host_beats = session
-            .declare_subscriber(keys.host_beat())
-            .callback(move |_| sh.on_host_beat())
-            .wait()
-            .map_err(declare("the host's beat subscriber"))?;
         let channels = config.channel_layout_of(id);
         let hello = encode_hello(&Hello {
             protocol_version: PROTOCOL_VERSION,
@@ -477,11 +549,12 @@ impl ZenohAgent {
             publisher,
             _frames: frames,
             _host: host,
-            _host_beats: host_beats,
             _token: token,
             beat_stop,
             session,
             closing: Closing::Open,
+            probe: probe_addresses(&z.connect),
+            next_probe: Instant::now(),
         })
     }
 
@@ -659,7 +732,22 @@ impl AgentTransport for ZenohAgent {
         self.shared.wake.clear();
     }
 
-    fn host_liveness(&mut self, _check_process: bool) -> HostLiveness {
+    fn host_liveness(&mut self, check_process: bool) -> HostLiveness {
+        let lost = lock(&self.shared.state).lost_since.is_some();
+        if lost && check_process && Instant::now() >= self.next_probe {
+            // Outside the lock: a try takes up to PROBE_TIMEOUT.
+            let refused = every_address_refuses(&self.probe);
+            self.next_probe = Instant::now() + PROBE_PERIOD;
+            let mut st = lock(&self.shared.state);
+            if let Some(addresses) = refused
+                && st.lost_since.take().is_some()
+            {
+                st.gone = Some(format!(
+                    "the host's zenoh liveliness token vanished without its close and its \
+                     address refuses connections ({addresses}): its process ended"
+                ));
+            }
+        }
         let mut st = lock(&self.shared.state);
         let window = self.shared.resume_window;
         if let Some(since) = st.lost_since
@@ -667,9 +755,9 @@ impl AgentTransport for ZenohAgent {
         {
             st.lost_since = None;
             st.gone = Some(format!(
-                "the host's zenoh liveliness token vanished (the link was lost for longer than \
-                 the lease, or the host's process ended) and did not come back within {} \
-                 (sync.resume_window)",
+                "the host's zenoh liveliness token vanished without its close (the link was \
+                 lost, or the host's process ended without closing) and did not come back \
+                 within {} (sync.resume_window)",
                 Rounded(window)
             ));
         }

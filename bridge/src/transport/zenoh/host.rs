@@ -18,6 +18,7 @@ use super::super::{
 use super::host_state::*;
 use super::*;
 use crate::config::Config;
+use crate::rounded::Rounded;
 use crate::signal::SignalHandling;
 use crate::wire::{MotorCommand, MotorHeader, SensorHeader};
 
@@ -121,8 +122,6 @@ pub struct ZenohHost {
     _motor: Subscriber<()>,
     _tokens: Subscriber<()>,
     _beats: Subscriber<()>,
-    /// Dropped to end the host's beat thread.
-    beat_stop: Option<std::sync::mpsc::Sender<()>>,
     alive: Option<LivelinessToken>,
     session: ::zenoh::Session,
 }
@@ -306,7 +305,6 @@ impl ZenohHost {
             _motor: motor,
             _tokens: tokens,
             _beats: beats,
-            beat_stop: start_beats(&session, keys.host_beat(), z.lease / 4),
             alive: Some(alive),
             session,
         })
@@ -352,16 +350,67 @@ impl ZenohHost {
     }
 }
 
+impl ZenohHost {
+    /// Waits until every connected agent confirmed the host's `host/closed` or its token
+    /// went, at most the lease (an agent behind a link that does not deliver would be
+    /// lost by then anyway). `host/closed` is then known to have arrived: the rest of
+    /// the close may be cut short by zenoh's bounded flush without an agent taking the
+    /// close for a lost link.
+    fn wait_for_the_close_to_arrive(&self) {
+        let began = Instant::now();
+        let deadline = began + self.shared.lease;
+        loop {
+            let waiting: Vec<u32> = lock(&self.shared.state)
+                .slots
+                .iter()
+                .filter(|s| s.connected() && !s.saw_close)
+                .map(|s| s.id)
+                .collect();
+            let now = Instant::now();
+            if waiting.is_empty() {
+                debug!(
+                    waited_s = began.elapsed().as_secs_f64(),
+                    "every zenoh agent saw the host's close"
+                );
+                return;
+            }
+            if now >= deadline {
+                warn!(
+                    agents = ?waiting,
+                    "zenoh agents did not confirm the host's close within the lease ({}): \
+                     closing anyway",
+                    Rounded(self.shared.lease)
+                );
+                return;
+            }
+            self.shared.wake.wait(deadline - now);
+            self.shared.wake.clear();
+        }
+    }
+}
+
+#[cfg(test)]
+impl ZenohHost {
+    /// Ends the host's session without `host/closed`, as a killed process's ends: its
+    /// links close and its listener with them.
+    pub(super) fn end_without_closing(mut self) {
+        self.alive = None;
+        let _ = self.session.close().wait();
+    }
+}
+
 impl Drop for ZenohHost {
     fn drop(&mut self) {
-        self.beat_stop = None;
         // A clean close: agents see `host/closed` before `host/alive` vanishes (both are
-        // declarations, sent in order ahead of data).
+        // declarations, sent in order on a link), and the host waits until they did.
         let closed = self
             .session
             .liveliness()
             .declare_token(self.shared.keys.host_closed())
             .wait();
+        if closed.is_ok() {
+            self.wait_for_the_close_to_arrive();
+        }
         if let Some(t) = self.alive.take() {
             let _ = t.undeclare().wait();
         }

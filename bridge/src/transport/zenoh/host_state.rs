@@ -78,6 +78,8 @@ pub(super) struct SlotState {
     /// Back within the resume window: the frame published last goes out again (by the
     /// host's thread) unless its stop arrived.
     pub(super) resend_due: bool,
+    /// The admitted connection confirmed the host's `host/closed` ([`CLOSED_BEAT`]).
+    pub(super) saw_close: bool,
 }
 
 impl SlotState {
@@ -112,6 +114,7 @@ impl SlotState {
             published: None,
             stopped: None,
             resend_due: false,
+            saw_close: false,
         }
     }
 
@@ -306,6 +309,7 @@ impl Shared {
         s.alive = false;
         s.gone_at = None;
         s.lost_at = None;
+        s.saw_close = false;
         let body_len = self.frame_bodies.get(slot).copied().unwrap_or(HEADER);
         Ok((nonce, body_len))
     }
@@ -521,16 +525,26 @@ impl Shared {
     }
 
     /// An agent's beat arrived on `…/agent/<id>/beat` (every lease / 4, from a live
-    /// agent process): it tells a link that went silent from a process that ended.
+    /// agent process): it tells a link that went silent from a connection that closed
+    /// while the agent was heard from. [`CLOSED_BEAT`]: the agent saw the host's
+    /// `host/closed` (the host's close waits for it).
     pub(super) fn on_beat(&self, sample: &Sample) {
         let Some((id, _)) = self.keys.parse_agent(sample.key_expr().as_str()) else {
             return;
         };
+        let closed = sample.payload().len() == CLOSED_BEAT.len()
+            && sample.payload().to_bytes().as_ref() == CLOSED_BEAT;
         let mut st = lock(&self.state);
         if let Some(slot) = Self::slot_of(&st, id)
             && st.slots[slot].connected()
         {
-            st.slots[slot].heard = Instant::now();
+            let s = &mut st.slots[slot];
+            s.heard = Instant::now();
+            if closed {
+                s.saw_close = true;
+                drop(st);
+                self.wake.wake();
+            }
         }
     }
 

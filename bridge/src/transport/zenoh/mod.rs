@@ -7,27 +7,38 @@
 //! |---|---|---|
 //! | `hello` | queryable: the hello ([`super::record::encode_hello`]) as the query's payload; the reply is a welcome or a refusal | agent → host → agent |
 //! | `host/alive` | liveliness token: the host is there | host |
-//! | `host/closed` | liveliness token declared when the host closes the session cleanly | host |
-//! | `host/beat` | empty, every lease / 4: the host's process lives (tells a lost link from an ended process) | host → agents |
+//! | `host/closed` | liveliness token declared when the host closes the session cleanly, before `host/alive` goes | host |
 //! | `agent/<id>/alive/<nonce>` | liveliness token of an admitted agent (`nonce` from its welcome) | agent |
 //! | `agent/<id>/sensors` | the sensor frame: `SensorHeader` bytes then the images; the frame of cycle *f* is its start | host → agent |
 //! | `agent/<id>/motor` | a motor batch: `MotorHeader` then the commands; the stop flag ends the agent's cycle | agent → host |
-//! | `agent/<id>/beat` | empty, every lease / 4: the agent's process lives (tells a lost link from an ended process) | agent → host |
+//! | `agent/<id>/beat` | empty, every lease / 4: the agent's process lives (tells a silent link from a closed connection); [`CLOSED_BEAT`] once: the agent saw `host/closed` | agent → host |
 //!
 //! # Presence
 //! The host treats an agent as connected only once it answered its hello with a welcome,
 //! the agent's liveliness token with that welcome's nonce exists, and the host's sensor
 //! publisher of that agent matches a subscriber. A vanished token (the agent's process
 //! died: at once; its link was lost: after the `lease`) evicts it; a new hello and token
-//! rejoin it at the next cycle. Agents see the host's `host/alive` token vanish as "host
-//! gone", and `host/closed` as a clean close.
+//! rejoin it at the next cycle. Agents see `host/closed` as a clean close; the host's
+//! `host/alive` token vanishing without it as a lost link (see below), "host gone" once
+//! the resume window passed (at once without a window).
+//!
+//! # A clean close
+//! The host declares `host/closed`, then waits until every connected agent confirmed it
+//! ([`CLOSED_BEAT`]) or its token went, at most the lease, and only then lets `host/alive`
+//! go and closes its session. zenoh sends declarations in order on a link, but a session's
+//! close flushes its queue for at most a keep-alive period (lease / 4) per batch: on a
+//! link that just came back from a partition (TCP still backing off) the close could
+//! otherwise end the link before `host/closed` is through, and the agent would take the
+//! close for a lost link and wait for its window.
 //!
 //! # A lost link (`[sync] resume_window`)
-//! With a resume window (30 s by default), an agent whose token vanishes although the host
-//! heard nothing from it for at least half the lease (zenoh's lease ran out: a partition,
-//! heavy loss; a live agent beats every lease / 4, so a process that ended and closed its
-//! connection is told apart) is not lost: the host holds its place for the window. It
-//! counts as connected meanwhile (in sync mode the cycle waits for it), frames published to
+//! With a resume window (30 s by default), an agent whose token vanishes without a leave
+//! batch is not let go at once. If the host heard nothing from it for at least half the
+//! lease (a live agent beats every lease / 4: zenoh's lease ran out on the host's side, a
+//! partition, heavy loss) the host holds its place for the window. If it was heard from
+//! until then (its process was killed, or its link stalled one way and its own side
+//! closed it first: its session connects again at once), the place is held for the lease
+//! (at least 2 s), then the agent is evicted. A held agent counts as connected meanwhile (in sync mode the cycle waits for it), frames published to
 //! it are kept (the newest), and the batches that arrived before the link went stay. The
 //! agent's zenoh session connects again by itself (its `connect` endpoints are retried
 //! every 0.5 s at most, each attempt bounded by zenoh's open timeout, 10 s) and declares
@@ -38,8 +49,8 @@
 //! (`on_agent_lost`) and the world goes on; when it is back it rejoins at the next cycle.
 //! The agent, seeing the host's token vanish without `host/closed`, waits for it to come
 //! back for the window (its waits see a live host), and gives up (host gone) once the
-//! window passed. A graceful leave (a leave batch) or an ended process frees the place at
-//! once, as without a window.
+//! window passed: a killed host is thus gone for its agents after the window. A graceful
+//! leave (a leave batch) frees the place at once, as without a window.
 //!
 //! # What is validated
 //! Everything received is checked as over TCP: a hello is decoded by the TCP decoder
@@ -85,6 +96,9 @@ pub use tls_refusals::tls_refusal_layer;
 pub const MAX_QUEUED_BATCHES: usize = 256;
 /// Most batches handed to the sink per agent in one drain.
 pub const MAX_BATCHES_PER_DRAIN: usize = 256;
+/// The payload of the beat an agent sends once it saw `host/closed`: the host's clean
+/// close waits for it (an ordinary beat is empty).
+pub const CLOSED_BEAT: &[u8] = b"closed";
 /// Bytes of a welcome reply body: protocol version, layout hash, largest frame, nonce.
 pub const WELCOME_LEN: usize = 4 + 8 + 4 + 8;
 
@@ -123,11 +137,6 @@ impl Keys {
     /// `vrsync/<session>/host/closed`.
     pub fn host_closed(&self) -> String {
         format!("{}/host/closed", self.prefix)
-    }
-
-    /// `vrsync/<session>/host/beat`.
-    pub fn host_beat(&self) -> String {
-        format!("{}/host/beat", self.prefix)
     }
 
     /// `vrsync/<session>/host/*`.
@@ -277,11 +286,12 @@ pub(crate) fn session_config(
     Ok(c)
 }
 
-/// Starts the thread that puts an empty sample on `key` every `period` (at least 25 ms)
-/// until the returned sender is dropped: the other side tells from it a live process whose
-/// link is lost (silent for the lease before its token vanished) from one that ended (its
-/// token vanished at once). `None` when no thread could be started (the other side then
-/// takes a lost link for an ended process: no resume).
+/// Starts the thread that puts an empty sample on `key` (an agent's beat) every `period`
+/// (at least 25 ms) until the returned sender is dropped: the host tells from it a link
+/// that went silent (nothing for half the lease before the agent's token vanished: held
+/// for the resume window) from a connection closed while the agent was heard from (held
+/// for the lease). `None` when no thread could be started (the host then holds a lost
+/// link for the lease only).
 pub(crate) fn start_beats(
     session: &::zenoh::Session,
     key: String,

@@ -37,7 +37,7 @@ use ::zenoh::Wait;
 use zerocopy::IntoBytes;
 
 use super::super::record::{Hello, Reject, encode_hello, reject};
-use super::super::{AgentConnectError, AgentTransport, HostTransport};
+use super::super::{AgentConnectError, AgentTransport, HostLiveness, HostTransport};
 use crate::signal::SignalHandling;
 use crate::wire::{LAYOUT_HASH, MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION};
 
@@ -304,6 +304,83 @@ fn an_id_in_use_is_refused_and_free_again_once_its_agent_left() {
     pump(&mut host, "agent 0 gone", |h| !h.is_connected(0));
     let _again = agent(&config, 0, None).unwrap();
     pump(&mut host, "agent 0 back", |h| h.is_connected(0));
+}
+
+/// The agent's view of its host once it is not alive any more (checked as its waits do,
+/// the process check included); panics after 20 s.
+fn until_not_alive(a: &mut ZenohAgent) -> HostLiveness {
+    let deadline = Instant::now() + WAIT;
+    loop {
+        let seen = a.host_liveness(true);
+        if !matches!(seen, HostLiveness::Alive) {
+            return seen;
+        }
+        assert!(Instant::now() < deadline, "the host still looks alive");
+        a.wait_readable(Duration::from_millis(50));
+    }
+}
+
+/// One host and agent 0 connected, with a resume window of `window`.
+fn connected_pair(window: Duration) -> (Config, ZenohHost, ZenohAgent) {
+    let mut config = config(None);
+    config.sync.resume_window = window;
+    let mut host = ZenohHost::create(&config, SignalHandling::Leave).unwrap();
+    let a0 = agent(&config, 0, None).unwrap();
+    pump(&mut host, "agent 0", |h| h.is_connected(0));
+    (config, host, a0)
+}
+
+#[test]
+fn a_clean_close_is_confirmed_by_the_agent_and_seen_as_a_close() {
+    let (_config, host, mut a0) = connected_pair(Duration::from_secs(30));
+    // The host's drop waits (at most the lease) until the agent confirmed `host/closed`.
+    drop(host);
+    assert!(
+        matches!(until_not_alive(&mut a0), HostLiveness::Closed),
+        "a clean close is a close, not a lost link"
+    );
+}
+
+#[test]
+fn a_host_gone_without_its_close_is_gone_once_its_address_refuses() {
+    // A window far longer than the test's deadline: the refusal, not the window, ends it.
+    let (_config, host, mut a0) = connected_pair(Duration::from_secs(600));
+    host.end_without_closing();
+    let seen = until_not_alive(&mut a0);
+    assert!(matches!(seen, HostLiveness::Gone { .. }), "{seen:?}");
+}
+
+#[test]
+fn a_host_gone_without_its_close_whose_address_answers_is_waited_for_the_window() {
+    let window = Duration::from_secs(2);
+    let (config, host, mut a0) = connected_pair(window);
+    let addr = config.transport.zenoh.listen[0]
+        .strip_prefix("tcp/")
+        .unwrap()
+        .to_string();
+    host.end_without_closing();
+    // Something answers on the host's address (as a machine whose link is back before
+    // its host is): not a refusal, so the agent waits for the window.
+    let listener = std::net::TcpListener::bind(&addr).unwrap();
+    let went = Instant::now();
+    let seen = until_not_alive(&mut a0);
+    assert!(matches!(seen, HostLiveness::Gone { .. }), "{seen:?}");
+    assert!(went.elapsed() >= window / 2, "gone before the window");
+    drop(listener);
+}
+
+#[test]
+fn probe_addresses_are_the_tcp_and_tls_endpoints() {
+    let connect = [
+        "tcp/127.0.0.1:7447".to_string(),
+        "tls/host.example:7448?x=1".into(),
+        "udp/10.0.0.1:7449".into(),
+        "tcp/[::1]:7450#iface=lo".into(),
+    ];
+    assert_eq!(
+        super::agent::probe_addresses(&connect),
+        ["127.0.0.1:7447", "host.example:7448", "[::1]:7450"]
+    );
 }
 
 #[test]
