@@ -5,7 +5,9 @@
 //! - **loss**: nftables rules in the agents' namespace drop P % of the TCP packets in
 //!   each direction (`numgen random mod 100 < P drop`, on input and on output);
 //! - **partition**: a drop-everything table in the agents' namespace, added when the
-//!   remote agents reached a cycle and deleted D seconds later;
+//!   remote agents reached a cycle and deleted D seconds later; a **one-way** partition
+//!   drops only the data packets towards the host or only those towards the agents, so that
+//!   one side's lease runs out and the other's does not;
 //! - **duplication**: nftables `dup` in the output hook of both namespaces sends a second
 //!   copy of P % of the packets;
 //! - **delay with jitter**: this kernel has no netem qdisc and nothing else that delays
@@ -50,6 +52,8 @@
 //! when a test fails.
 
 mod bounded;
+mod ending;
+mod fault;
 mod nft;
 mod outcome;
 mod relay;
@@ -64,7 +68,8 @@ use std::time::{Duration, Instant};
 
 use crate::netns::{AGENT_IP, HOST_IP, Netns};
 use crate::util::{self, EVENT_DEADLINE, Events, Proc, bin, record, summary};
-use nft::{duplicate_table, loss_table, partition_table};
+use fault::{Fault, Towards};
+use nft::{duplicate_table, loss_table, one_way_table, partition_table};
 use outcome::{Outcome, commands_applied_once};
 use relay::Relay;
 use reorder::Reorder;
@@ -113,63 +118,6 @@ impl Remote {
         match self {
             Self::Tcp => "tcp",
             Self::Zenoh | Self::ZenohTls => "zenoh",
-        }
-    }
-}
-
-/// A fault on the agents' side of the link.
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Fault {
-    Clean,
-    /// `percent` % of the TCP packets dropped, each direction.
-    Loss {
-        percent: u32,
-    },
-    /// Everything dropped from when the remote agents logged `at_cycle`, for `secs`.
-    Partition {
-        at_cycle: u64,
-        secs: u64,
-    },
-    /// `count` partitions of `secs` in a row: the first from when the remote agents logged
-    /// `at_cycle`, each next one `every` cycles after the cycle the last one ended in.
-    Partitions {
-        at_cycle: u64,
-        every: u64,
-        secs: u64,
-        count: u64,
-    },
-    /// `percent` % of the packets sent twice, each direction.
-    Duplicate {
-        percent: u32,
-    },
-    /// Each direction of the byte stream held `ms ± jitter_ms` ([`Relay`]).
-    Delay {
-        ms: u64,
-        jitter_ms: u64,
-    },
-    /// `percent` % of the packets each way sent through a slower path ([`Reorder`]).
-    Reorder {
-        percent: u32,
-    },
-}
-
-impl Fault {
-    fn label(self) -> String {
-        match self {
-            Self::Clean => "clean".into(),
-            Self::Loss { percent } => format!("loss {percent}%"),
-            Self::Partition { at_cycle, secs } => format!("partition {secs}s at cycle {at_cycle}"),
-            Self::Partitions {
-                at_cycle,
-                every,
-                secs,
-                count,
-            } => {
-                format!("{count} partitions of {secs}s from cycle {at_cycle}, {every} cycles apart")
-            }
-            Self::Duplicate { percent } => format!("duplicate {percent}%"),
-            Self::Delay { ms, jitter_ms } => format!("delay {ms}±{jitter_ms}ms"),
-            Self::Reorder { percent } => format!("reorder {percent}%"),
         }
     }
 }
@@ -308,7 +256,11 @@ fn run_case(
             ));
         }
         Fault::Reorder { percent } => reorder = Some(Reorder::install(ns, percent)),
-        Fault::Clean | Fault::Partition { .. } | Fault::Partitions { .. } => {}
+        Fault::Clean
+        | Fault::Partition { .. }
+        | Fault::Partitions { .. }
+        | Fault::OneWay { .. }
+        | Fault::LossFrom { .. } => {}
     }
 
     let events = Events::in_dir(&case_dir);
@@ -345,11 +297,19 @@ fn run_case(
         .map(|&id| (id, agent(id, &ns.agents, &agent_cfg)))
         .collect();
 
+    if let Fault::LossFrom { at_cycle, percent } = fault {
+        for &id in &REMOTE_IDS {
+            util::wait_for_cycle_line(&log(id), at_cycle, EVENT_DEADLINE);
+        }
+        tables.push(loss_table(ns, percent));
+    }
     let mut resumed_after_s = None;
     let mut partition_counters = BTreeMap::<String, u64>::new();
     let mut rss_kib = Vec::new();
     let partitions = match fault {
-        Fault::Partition { at_cycle, secs } => Some((at_cycle, 0, secs, 1)),
+        Fault::Partition { at_cycle, secs } | Fault::OneWay { at_cycle, secs, .. } => {
+            Some((at_cycle, 0, secs, 1))
+        }
         Fault::Partitions {
             at_cycle,
             every,
@@ -363,7 +323,10 @@ fn run_case(
             for &id in &REMOTE_IDS {
                 util::wait_for_cycle_line(&log(id), at_cycle, EVENT_DEADLINE);
             }
-            let table = partition_table(ns);
+            let table = match fault {
+                Fault::OneWay { towards, .. } => one_way_table(ns, towards),
+                _ => partition_table(ns),
+            };
             // The fault itself: the link stays cut this long.
             std::thread::sleep(Duration::from_secs(secs));
             let cut_at = last_cycle(&log(REMOTE_IDS[0]));
@@ -742,6 +705,20 @@ macro_rules! remotes {
             #[test]
             fn not_back_within_the_window_is_evicted_in_bound_and_rejoins_when_back() {
                 super::resume::not_back_within_the_window_is_evicted_in_bound_and_rejoins_when_back(
+                    Remote::$remote,
+                );
+            }
+            #[test]
+            fn one_way_stalls_past_the_lease_are_resumed() {
+                super::ending::one_way_stalls_past_the_lease_are_resumed(Remote::$remote);
+            }
+            #[test]
+            fn the_hosts_end_under_heavy_loss_is_a_close() {
+                super::ending::the_hosts_end_under_heavy_loss_is_a_close(Remote::$remote);
+            }
+            #[test]
+            fn the_hosts_end_during_a_partition_is_a_close_once_it_heals() {
+                super::ending::the_hosts_end_during_a_partition_is_a_close_once_it_heals(
                     Remote::$remote,
                 );
             }

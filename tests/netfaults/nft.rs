@@ -100,6 +100,30 @@ pub(super) fn partition_table(ns: &Netns) -> NftTable {
     )
 }
 
+/// Drops the packets that carry data towards one side only, on the agents' veth end,
+/// while it exists: towards the host, the agents' output; towards the agents, their
+/// input. Bare acknowledgements (52 bytes: IPv4, TCP with timestamps) pass, so the other
+/// direction keeps flowing: the side that receives nothing sees its lease run out and
+/// closes the link while the other side still hears it. Connection attempts (a SYN
+/// carries options: 60 bytes) are dropped too.
+pub(super) fn one_way_table(ns: &Netns, towards: super::Towards) -> NftTable {
+    let dev = &ns.agents;
+    let (hook, dir) = match towards {
+        super::Towards::Host => ("output", "oifname"),
+        super::Towards::Agents => ("input", "iifname"),
+    };
+    NftTable::add(
+        &ns.agents,
+        "inet",
+        "vroneway",
+        &format!(
+            "counter dropped {{}}\n\
+             chain c {{\ntype filter hook {hook} priority -10; policy accept;\n\
+             {dir} {dev:?} meta l4proto tcp ip length > 52 counter name \"dropped\" drop\n}}"
+        ),
+    )
+}
+
 /// Sends a second copy of `percent` % of the packets leaving `ns_name` through `dev`
 /// towards `peer` (nftables `dup` in the output hook).
 pub(super) fn duplicate_table(ns_name: &str, dev: &str, peer: &str, percent: u32) -> NftTable {

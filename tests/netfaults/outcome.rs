@@ -118,7 +118,7 @@ impl Outcome {
             .join(", ");
         let partitioned = matches!(
             self.fault,
-            Fault::Partition { .. } | Fault::Partitions { .. }
+            Fault::Partition { .. } | Fault::Partitions { .. } | Fault::OneWay { .. }
         );
         let resumed = match (partitioned, self.resumed_after_s) {
             (true, Some(s)) => format!(
