@@ -128,6 +128,8 @@ struct AgentState {
     dropped: u64,
     /// When the host's token vanished without `host/closed` (with a resume window).
     lost_since: Option<Instant>,
+    /// The host's `host/alive` token vanished (after a close too).
+    host_left: bool,
     /// The latest stop batch sent and its cycle.
     stop: Vec<u8>,
     stop_cycle: Option<u64>,
@@ -277,7 +279,12 @@ impl AgentShared {
                     );
                 }
             }
-            SampleKind::Delete if key == self.keys.host_alive() && !st.closed => {
+            SampleKind::Delete if key == self.keys.host_alive() && st.closed => {
+                // The end of a clean close: the agent's own close may go on.
+                st.host_left = true;
+            }
+            SampleKind::Delete if key == self.keys.host_alive() => {
+                st.host_left = true;
                 // Without `host/closed` first: not a clean end. A lost link and a killed
                 // host look the same here (however recently the host was heard from: a
                 // link that stalls one way is closed by the side that stops hearing first,
@@ -634,6 +641,35 @@ fn parse_answer(
     }
 }
 
+/// How long an agent that saw its host's `host/closed` lets the host close first before
+/// it closes its own session: the host closes once its agents confirmed, and both sides
+/// tearing one TLS link down at once crashed the host's process in a test run (a segfault
+/// in zenoh's TX thread, in rustls' error handling: the link's reading and writing halves
+/// share one TLS state).
+const HOST_CLOSES_FIRST: Duration = Duration::from_millis(500);
+
+impl AgentShared {
+    /// After `host/closed`: waits (at most [`HOST_CLOSES_FIRST`]) until the host's token
+    /// went, i.e. the host closed its side.
+    fn let_a_closing_host_go_first(&self) {
+        let deadline = Instant::now() + HOST_CLOSES_FIRST;
+        loop {
+            {
+                let st = lock(&self.state);
+                if !st.closed || st.host_left {
+                    return;
+                }
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return;
+            }
+            self.wake.wait(deadline - now);
+            self.wake.clear();
+        }
+    }
+}
+
 /// How long dropping an agent waits for its zenoh session to close, from the moment the
 /// close began. zenoh's close waits up to its own 10 s for a host that does not answer (a
 /// frozen process, a lost link); past this bound the close goes on in a thread of its
@@ -648,10 +684,12 @@ impl ZenohAgent {
         }
         self.beat_stop = None;
         let session = self.session.clone();
+        let shared = self.shared.clone();
         let (done_tx, done_rx) = std::sync::mpsc::channel();
         let spawned = std::thread::Builder::new()
             .name("vrsync-zenoh-close".into())
             .spawn(move || {
+                shared.let_a_closing_host_go_first();
                 let _ = session.close().wait();
                 let _ = done_tx.send(());
             });
