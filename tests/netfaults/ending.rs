@@ -140,7 +140,7 @@ pub(super) fn the_hosts_end_during_a_partition_is_a_close_once_it_heals(remote: 
         let out = p.wait(EVENT_DEADLINE);
         // Over TCP the host's close is a record its socket may not deliver: closed with
         // unread data it is reset, and the agent, seeing a reset and then a refusal, says
-        // the host is gone (1 of 5 runs). Recorded, not asserted: that close is not the
+        // the host is gone (2 of 7 runs). Recorded, not asserted: that close is not the
         // subject of this case (zenoh's is).
         let tcp_reset =
             remote == Remote::Tcp && out.code() == Some(1) && out.stderr.contains("host is gone");

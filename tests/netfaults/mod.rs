@@ -34,7 +34,9 @@
 //! (shorter than the zenoh lease of these runs, 10 s); a partition past the link timeout
 //! (TCP's 10 s, zenoh's lease), back within the resume window, and one past the window
 //! ([`resume`]); and the heavy faults in short ([`SHORT_FRAMES`] cycles): 20 % loss and a
-//! 30 s partition, at once on two namespace pairs; 5 % reordering; and what stays bounded
+//! 30 s partition, at once on two namespace pairs; 5 % reordering; ended or lost
+//! ([`ending`]): one-way stalls past the lease, the host ended during a partition and its
+//! last cycles under 30 % loss; and what stays bounded
 //! ([`bounded`]): async mode under 5 % loss and a 3 s partition with a TCP and a zenoh
 //! agent (the frame interval, the newest frame, the host's memory), and the host's memory
 //! across 10 partitions in a row (TCP, sync mode). The heavy cases over 200
