@@ -433,6 +433,11 @@ pub fn wait_for_cycle_line(path: &Path, cycle: u64, timeout: Duration) {
 
 /// Starts `vr-sim run --config CONFIG --events EVENTS --quiet ARGS...`.
 pub fn spawn_host(config: &Path, events: &Events, args: &[&str]) -> Proc {
+    Proc::spawn(&bin("vr-sim"), &host_args(config, events, args))
+}
+
+/// The arguments of [`spawn_host`]'s `vr-sim`.
+pub fn host_args<'a>(config: &'a Path, events: &'a Events, args: &[&'a str]) -> Vec<&'a str> {
     let mut all = vec![
         "run",
         "--config",
@@ -442,7 +447,7 @@ pub fn spawn_host(config: &Path, events: &Events, args: &[&str]) -> Proc {
         "--quiet",
     ];
     all.extend_from_slice(args);
-    Proc::spawn(&bin("vr-sim"), &all)
+    all
 }
 
 /// A `vr-sim run` host of a test config, in a temp dir of its own that also holds its

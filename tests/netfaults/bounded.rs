@@ -11,7 +11,7 @@ use super::{
     last_cycle, vm_rss_kib,
 };
 use crate::netns::Netns;
-use crate::util::{self, EVENT_DEADLINE, Events, bin, cycle_log, summary};
+use crate::util::{self, EVENT_DEADLINE, Events, cycle_log, summary};
 
 /// Cycles of an async run: 10 s of frames at [`PERIOD_S`].
 const ASYNC_FRAMES: u64 = 100;
@@ -94,20 +94,15 @@ fn run_async(ns: &Netns, dir: &Path, label: &'static str, fault: Fault) -> Async
     let events = Events::in_dir(&case_dir);
     let sum_path = case_dir.join("summary.json");
     let frames_arg = ASYNC_FRAMES.to_string();
-    let host = ns.spawn(
-        &ns.host,
-        &bin("vr-sim"),
+    let host = super::spawn_host(
+        ns,
+        &host_cfg,
+        &events,
         &[
-            "run",
-            "--config",
-            host_cfg.to_str().unwrap(),
             "--frames",
             &frames_arg,
-            "--events",
-            events.arg(),
             "--summary-json",
             sum_path.to_str().unwrap(),
-            "--quiet",
         ],
     );
     let log = |id: u32| case_dir.join(format!("a{id}.log"));

@@ -13,7 +13,7 @@ use std::time::Duration;
 
 use super::nft::partition_table;
 use super::{Bench, Fault, LEASE_S, REMOTE_IDS, Remote, Towards};
-use crate::util::{self, EVENT_DEADLINE, Events, bin};
+use crate::util::{self, EVENT_DEADLINE, Events};
 
 /// Cycles of these cases.
 const ENDING_FRAMES: u64 = 60;
@@ -87,11 +87,7 @@ pub(super) fn the_hosts_end_during_a_partition_is_a_close_once_it_heals(remote: 
         return;
     };
     let ns = &bench.ns;
-    let session = util::session(&format!("nfend{}", remote.name()));
-    let dir = bench.dir.path().join(&session);
-    std::fs::create_dir_all(&dir).unwrap();
-    super::copy_certificates(bench.dir.path(), &dir, remote);
-    super::wire_sized_packets(ns);
+    let (session, dir) = bench.case("nfend");
     let config = |side: &str| {
         let path = dir.join(format!("{side}.toml"));
         let text = super::config_text(&session, remote, LEASE_S, side, false, true);
@@ -101,18 +97,7 @@ pub(super) fn the_hosts_end_during_a_partition_is_a_close_once_it_heals(remote: 
     let (host_cfg, agent_cfg) = (config("host"), config("agent"));
     let events = Events::in_dir(&dir);
     // No --frames: the run goes on until SIGTERM.
-    let host = ns.spawn(
-        &ns.host,
-        &bin("vr-sim"),
-        &[
-            "run",
-            "--config",
-            host_cfg.to_str().unwrap(),
-            "--events",
-            events.arg(),
-            "--quiet",
-        ],
-    );
+    let host = super::spawn_host(ns, &host_cfg, &events, &[]);
     events.wait_for("listening", EVENT_DEADLINE);
     let shm_agent = super::circle_agent(ns, &ns.host, &host_cfg, 0, &dir.join("a0.log"));
     let remotes: Vec<_> = REMOTE_IDS

@@ -269,22 +269,17 @@ fn run_case(
     let sum_path = case_dir.join("summary.json");
     let rec_path = case_dir.join("record.jsonl");
     let frames_arg = frames.to_string();
-    let host = ns.spawn(
-        &ns.host,
-        &bin("vr-sim"),
+    let host = spawn_host(
+        ns,
+        &host_cfg,
+        &events,
         &[
-            "run",
-            "--config",
-            host_cfg.to_str().unwrap(),
             "--frames",
             &frames_arg,
-            "--events",
-            events.arg(),
             "--summary-json",
             sum_path.to_str().unwrap(),
             "--record",
             rec_path.to_str().unwrap(),
-            "--quiet",
         ],
     );
     let log = |id: u32| case_dir.join(format!("a{id}.log"));
@@ -449,6 +444,16 @@ fn vm_rss_kib(pid: u32) -> u64 {
         .unwrap_or_else(|| panic!("no VmRSS in /proc/{pid}/status"))
 }
 
+/// Starts the host, `vr-sim run --config CONFIG --events EVENTS --quiet ARGS...` (the
+/// arguments of [`util::spawn_host`]), in the host's namespace.
+fn spawn_host(ns: &Netns, config: &Path, events: &Events, args: &[&str]) -> Proc {
+    ns.spawn(
+        &ns.host,
+        &bin("vr-sim"),
+        &util::host_args(config, events, args),
+    )
+}
+
 /// With TLS, the certificates of `dir` into `case_dir` (where the configs name them).
 fn copy_certificates(dir: &Path, case_dir: &Path, remote: Remote) {
     if remote == Remote::ZenohTls {
@@ -513,6 +518,17 @@ impl Bench {
         let dir = tempfile::tempdir().unwrap();
         util::make_certificates(dir.path(), HOST_IP);
         Some(Self { ns, dir, remote })
+    }
+
+    /// A case of its own: a session named `prefix` + the transport, its folder (with the
+    /// certificates over TLS), and the link's packet sizes set as on the wire.
+    fn case(&self, prefix: &str) -> (String, std::path::PathBuf) {
+        let session = util::session(&format!("{prefix}{}", self.remote.name()));
+        let dir = self.dir.path().join(&session);
+        std::fs::create_dir_all(&dir).unwrap();
+        copy_certificates(self.dir.path(), &dir, self.remote);
+        wire_sized_packets(&self.ns);
+        (session, dir)
     }
 
     fn run(&self, fault: Fault, frames: u64, lease_s: f64) -> Outcome {

@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 
 use super::nft::partition_table;
 use super::{Bench, FRAMES, Fault, LEASE_S, REMOTE_IDS, Remote};
-use crate::util::{self, EVENT_DEADLINE, Events, bin};
+use crate::util::{self, EVENT_DEADLINE, Events};
 use vrsync_bridge::tcp::LINK_TIMEOUT;
 
 /// The zenoh lease of the resume cases: short, so that a partition outlasts it quickly.
@@ -60,11 +60,7 @@ pub(super) fn not_back_within_the_window_is_evicted_in_bound_and_rejoins_when_ba
         return;
     };
     let ns = &bench.ns;
-    let session = util::session(&format!("nfwindow{}", remote.name()));
-    let dir = bench.dir.path().join(&session);
-    std::fs::create_dir_all(&dir).unwrap();
-    super::copy_certificates(bench.dir.path(), &dir, remote);
-    super::wire_sized_packets(ns);
+    let (session, dir) = bench.case("nfwindow");
     let window = Duration::from_secs(2);
     let (timeout, lease) = link_timeout(remote);
     let config = |side: &str| {
@@ -78,19 +74,11 @@ pub(super) fn not_back_within_the_window_is_evicted_in_bound_and_rejoins_when_ba
     let events = Events::in_dir(&dir);
     let sum_path = dir.join("summary.json");
     // No --frames: the run goes on until SIGTERM.
-    let host = ns.spawn(
-        &ns.host,
-        &bin("vr-sim"),
-        &[
-            "run",
-            "--config",
-            host_cfg.to_str().unwrap(),
-            "--events",
-            events.arg(),
-            "--summary-json",
-            sum_path.to_str().unwrap(),
-            "--quiet",
-        ],
+    let host = super::spawn_host(
+        ns,
+        &host_cfg,
+        &events,
+        &["--summary-json", sum_path.to_str().unwrap()],
     );
     events.wait_for("listening", EVENT_DEADLINE);
     let agent = |id: u32, namespace: &str, cfg: &Path, log: &str| {
