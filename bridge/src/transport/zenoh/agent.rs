@@ -54,49 +54,13 @@ use vrsync_protocol::channel_layout::ChannelLayout;
 
 const HEADER: usize = core::mem::size_of::<SensorHeader>();
 
-/// How often an agent whose host's token vanished without its close tries the host's
-/// address (see the module docs).
-pub const PROBE_PERIOD: Duration = Duration::from_millis(500);
-/// How long one try of the host's address may take: a link that drops packets does not
-/// answer at all, a machine whose port nothing listens on answers at once.
-pub const PROBE_TIMEOUT: Duration = Duration::from_millis(200);
+mod close;
+mod probe;
 
-/// The socket addresses (`host:port`) of the `tcp/` and `tls/` endpoints in `connect`
-/// (zenoh's metadata after `?` or `#` dropped); other protocols are skipped.
-pub(super) fn probe_addresses(connect: &[String]) -> Vec<String> {
-    connect
-        .iter()
-        .filter_map(|e| e.strip_prefix("tcp/").or_else(|| e.strip_prefix("tls/")))
-        .map(|a| a.split(['?', '#']).next().unwrap_or(a).to_string())
-        .collect()
-}
-
-/// Whether every address in `addresses` refuses a TCP connection (at least one address,
-/// each resolved, each of its socket addresses refusing): the host's machine answers and
-/// nothing listens there, so the host's process is gone. A timeout or any other error
-/// (a lost link) is not a refusal.
-fn every_address_refuses(addresses: &[String]) -> Option<String> {
-    use std::net::ToSocketAddrs;
-    if addresses.is_empty() {
-        return None;
-    }
-    let mut refused = Vec::new();
-    for a in addresses {
-        let resolved: Vec<_> = a.to_socket_addrs().ok()?.collect();
-        if resolved.is_empty() {
-            return None;
-        }
-        for addr in resolved {
-            match std::net::TcpStream::connect_timeout(&addr, PROBE_TIMEOUT) {
-                Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => {
-                    refused.push(addr.to_string());
-                }
-                _ => return None,
-            }
-        }
-    }
-    Some(refused.join(", "))
-}
+use close::Closing;
+use probe::every_address_refuses;
+pub(super) use probe::probe_addresses;
+pub use probe::{PROBE_PERIOD, PROBE_TIMEOUT};
 
 /// A received frame's bytes: zenoh's own buffer when it arrived in one piece (no copy),
 /// else an aligned copy.
@@ -364,17 +328,6 @@ pub struct ZenohAgent {
     next_probe: Instant,
 }
 
-/// Where closing the agent's zenoh session is.
-#[derive(Debug)]
-enum Closing {
-    /// Not begun.
-    Open,
-    /// In a thread of its own, which says when it is done; begun at the instant.
-    InThread(std::sync::mpsc::Receiver<()>, Instant),
-    /// Done (in place: no thread could be started).
-    Closed,
-}
-
 impl core::fmt::Debug for ZenohAgent {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.debug_struct("ZenohAgent")
@@ -638,85 +591,6 @@ fn parse_answer(
             )))
         }
         _ => Err("the hello's answer is neither a welcome nor a refusal".into()),
-    }
-}
-
-/// How long an agent that saw its host's `host/closed` lets the host close first before
-/// it closes its own session: the host closes once its agents confirmed, and both sides
-/// tearing one TLS link down at once crashed the host's process in a test run (a segfault
-/// in zenoh's TX thread, in rustls' error handling: the link's reading and writing halves
-/// share one TLS state).
-const HOST_CLOSES_FIRST: Duration = Duration::from_millis(500);
-
-impl AgentShared {
-    /// After `host/closed`: waits (at most [`HOST_CLOSES_FIRST`]) until the host's token
-    /// went, i.e. the host closed its side.
-    fn let_a_closing_host_go_first(&self) {
-        let deadline = Instant::now() + HOST_CLOSES_FIRST;
-        loop {
-            {
-                let st = lock(&self.state);
-                if !st.closed || st.host_left {
-                    return;
-                }
-            }
-            let now = Instant::now();
-            if now >= deadline {
-                return;
-            }
-            self.wake.wait(deadline - now);
-            self.wake.clear();
-        }
-    }
-}
-
-/// How long dropping an agent waits for its zenoh session to close, from the moment the
-/// close began. zenoh's close waits up to its own 10 s for a host that does not answer (a
-/// frozen process, a lost link); past this bound the close goes on in a thread of its
-/// own and the drop returns.
-const CLOSE_BOUND: Duration = Duration::from_secs(1);
-
-impl ZenohAgent {
-    /// Starts closing the session in a thread of its own (once).
-    fn start_close(&mut self) {
-        if !matches!(self.closing, Closing::Open) {
-            return;
-        }
-        self.beat_stop = None;
-        let session = self.session.clone();
-        let shared = self.shared.clone();
-        let (done_tx, done_rx) = std::sync::mpsc::channel();
-        let spawned = std::thread::Builder::new()
-            .name("vrsync-zenoh-close".into())
-            .spawn(move || {
-                shared.let_a_closing_host_go_first();
-                let _ = session.close().wait();
-                let _ = done_tx.send(());
-            });
-        self.closing = match spawned {
-            Ok(_) => Closing::InThread(done_rx, Instant::now()),
-            Err(_) => {
-                // No thread to spare: closed here, within zenoh's own timeout.
-                let _ = self.session.close().wait();
-                Closing::Closed
-            }
-        };
-    }
-}
-
-impl Drop for ZenohAgent {
-    fn drop(&mut self) {
-        self.start_close();
-        if let Closing::InThread(done, began) = &self.closing {
-            let left = CLOSE_BOUND.saturating_sub(began.elapsed());
-            if done.recv_timeout(left).is_err() {
-                debug!(
-                    agent = self.id,
-                    "the zenoh session did not close within {CLOSE_BOUND:?}: the host does \
-                     not answer; closing in the background"
-                );
-            }
-        }
     }
 }
 
