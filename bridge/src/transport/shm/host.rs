@@ -310,8 +310,8 @@ impl Drop for ShmHost {
 
 fn is_dyn_connected(p: &HostAgentPorts) -> bool {
     use iceoryx2::service::port_factory::PortFactory as _;
-    let attached = p.sensor_service.dynamic_config().number_of_subscribers() > 0
-        && p.motor_service.dynamic_config().number_of_publishers() > 0;
+    let attached =
+        number_of_subscribers(p) > 0 && p.motor_service.dynamic_config().number_of_publishers() > 0;
     let Some(served) = p.served else {
         // Not known by identity: connected when a subscriber other than a departed
         // connection's is attached (listing allocates; only until that one is gone).
