@@ -2,18 +2,18 @@
 
 use std::time::{Duration, Instant};
 
-pub use vrsync_bridge::HOST_LIVENESS_PERIOD;
-use vrsync_bridge::{
+pub use vrsync_transport::HOST_LIVENESS_PERIOD;
+use vrsync_transport::{
     ActionState, ActionStatus, Collision, Command, ImageDesc, MOTOR_FLAG_ACK, MOTOR_FLAG_LEAVE,
     MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION, PixelFormat, Pose, SensorHeader,
 };
-pub use vrsync_bridge::{AgentConnectError, SignalHandling};
-use vrsync_bridge::{
+pub use vrsync_transport::{AgentConnectError, SignalHandling};
+use vrsync_transport::{
     AgentFrame, AgentReceiveError, AgentSendError, AgentTransport, AgentWaitError, HostLiveness,
     wait_for_newer_frame,
 };
-use vrsync_bridge::{AnyAgent, AnyFrame};
-use vrsync_bridge::{Config, WaitForStop};
+use vrsync_transport::{AnyAgent, AnyFrame};
+use vrsync_transport::{Config, WaitForStop};
 
 /// Why [`Agent::wait_start`] returned without a frame.
 #[derive(Debug, thiserror::Error)]

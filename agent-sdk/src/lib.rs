@@ -48,8 +48,8 @@ pub use agent::{
 /// The [glam](https://docs.rs/glam) this SDK uses for poses and targets ([`Pose::position`],
 /// [`Command::MoveTo`]): use `vrsync_agent::glam` instead of pinning the same version.
 pub use glam;
-pub use vrsync_bridge::{
+pub use vrsync_transport::{
     ActionConfig, ActionSpace, ActionState, ActionStatus, Collision, Command, PixelFormat, Pose,
     SensorHeader, VectorConfig, VectorDesc,
 };
-pub use vrsync_bridge::{Config, WaitForStop};
+pub use vrsync_transport::{Config, WaitForStop};

@@ -18,12 +18,13 @@
 //! - The **host API** ([`Host`]) is what a simulator calls; agents use the `vrsync-agent`
 //!   crate.
 //!
-//! The modules are private; everything public is re-exported here. The wire types (the
-//! `#[repr(C)]` types, the image layout, the command catalogue) and the record codec come
-//! from the `vrsync-protocol` crate, below this one, and keep their paths here
-//! ([`record`], the wire items at the root). Inside the crate, modules import one way:
-//! `config` ← `transport` (with `signal`) ← `barrier` ← `host`; no module imports one that
-//! imports it back.
+//! The crate is the host: the barrier, the routing of one host over several transports,
+//! the host API. What it builds on comes from the crates below it and keeps its paths here
+//! (everything public is re-exported at the root): the wire types (the `#[repr(C)]` types,
+//! the image layout, the command catalogue) and the record codec from `vrsync-protocol`;
+//! the config, the transport contract and the transports from `vrsync-transport`; the
+//! original protocol's host from `vrsync-legacy` (with the `legacy` feature). Inside the
+//! crate, modules import one way: `transport` (the routing) ← `barrier` ← `host`.
 //!
 //! ```no_run
 //! use std::time::Duration;
@@ -55,13 +56,8 @@
 //! ```
 
 mod barrier;
-mod colour;
-mod config;
 mod events;
 mod host;
-mod logging;
-mod rounded;
-mod signal;
 mod transport;
 // The wire types live in the protocol crate; `crate::wire` keeps their old path.
 use vrsync_protocol::wire;
@@ -69,29 +65,23 @@ use vrsync_protocol::wire;
 pub use vrsync_protocol::channel_layout::{Channel, ChannelDifference, ChannelLayout};
 
 pub use barrier::AgentOutcome;
-pub use colour::ansi_on_stderr;
-pub use config::{
-    ActionConfig, ActionSpace, AgentConfig, AgentLostPolicy, CameraConfig, Config, ConfigLoadError,
-    DEFAULT_CONFIG_TOML, DEFAULT_RESUME_WINDOW_S, DEFAULT_SPIN_BEFORE_BLOCK_US,
-    DEFAULT_ZENOH_ENDPOINT, LegacyConfig, LegacyDialect, MAX_AGENT_ID, MAX_CONFIG_BYTES,
-    MAX_IMAGE_SIDE_PX, PngCompression, SyncConfig, TransportConfig, TransportKind, VectorConfig,
-    WaitForStop, WaitMode, ZenohConfig, ZenohTls, derived_height,
-};
 pub use host::{
     ActionValue, AgentReport, CycleReport, Host, HostBuilder, HostCreateError, HostCycleError,
     HostStats, HostWaitError, INTERRUPT_PERIOD, ImageMut, ImagesMut, REAP_PERIOD, SensorFrameMut,
 };
-pub use logging::{QUIET_ZENOH, default_log_filter};
-pub use rounded::Rounded;
 pub use shm::{ShmBudgetError, check_shm_budget};
-pub use signal::SignalHandling;
-pub use transport::any_agent::{AnyAgent, AnyFrame};
 pub use transport::mixed::{AnyLoan, Transports, TransportsCreateError};
-pub use transport::{
-    AGENT_MAX_HELD_FRAMES, AgentConnectError, AgentFrame, AgentReceiveError, AgentSendError,
-    AgentTransport, AgentWaitError, Attempt, BatchSink, FrameLoanMut, HOST_LIVENESS_PERIOD,
-    HostLiveness, HostTransport, HostTransportError, MAX_KEPT_REFUSALS, PeerRefusal, RefusalKind,
-    Refusals, retry_until, wait_for_newer_frame,
+pub use vrsync_transport::{
+    AGENT_MAX_HELD_FRAMES, ActionConfig, ActionSpace, AgentConfig, AgentConnectError, AgentFrame,
+    AgentLostPolicy, AgentReceiveError, AgentSendError, AgentTransport, AgentWaitError, AnyAgent,
+    AnyFrame, Attempt, BatchSink, CameraConfig, Config, ConfigLoadError, DEFAULT_CONFIG_TOML,
+    DEFAULT_RESUME_WINDOW_S, DEFAULT_SPIN_BEFORE_BLOCK_US, DEFAULT_ZENOH_ENDPOINT, FrameLoanMut,
+    HOST_LIVENESS_PERIOD, HostLiveness, HostTransport, HostTransportError, LegacyConfig,
+    LegacyDialect, MAX_AGENT_ID, MAX_CONFIG_BYTES, MAX_IMAGE_SIDE_PX, MAX_KEPT_REFUSALS,
+    PeerRefusal, PngCompression, QUIET_ZENOH, RefusalKind, Refusals, Rounded, SignalHandling,
+    SyncConfig, TransportConfig, TransportKind, VectorConfig, WaitForStop, WaitMode, ZenohConfig,
+    ZenohTls, ansi_on_stderr, default_log_filter, derived_height, record, retry_until, shm, tcp,
+    wait_for_newer_frame, zenoh,
 };
 pub use wire::{
     ACTION_CHUNK, ACTION_KIND, ActionDesc, ActionState, ActionStatus, CAMERA_NAME_LEN,
@@ -104,35 +94,13 @@ pub use wire::{
     kind_name, vector_layout,
 };
 
-/// The shared-memory transport (iceoryx2): agents on this machine, zero copy.
-pub mod shm {
-    pub use crate::transport::shm::*;
-}
-
-/// The record codec both network transports speak (hello, welcome, reject, motor batch,
-/// TCP's record framing): what the fuzz target and the hostile-peer tests drive.
-pub mod record {
-    pub use crate::transport::record::*;
-}
-
-/// The TCP transport (the measured baseline). Re-exports the [`record`] codec it frames.
-pub mod tcp {
-    pub use crate::transport::tcp::*;
-}
-
 /// The original system's protobuf/TCP protocol, served to agents written for it, with its
-/// codec (what the fuzz target and the legacy bench client use).
+/// codec (what the fuzz target and the legacy bench client use): the `vrsync-legacy`
+/// crate.
 ///
 /// Only with the `legacy` cargo feature; without it, this module holds uninhabited
 /// stand-ins whose `LegacyHost::create` fails with an error naming the feature.
 pub mod legacy {
     pub use crate::transport::legacy::*;
-}
-
-/// The zenoh transport: agents on other machines (keys, hello, liveliness, validation).
-///
-/// Only with the `zenoh` cargo feature; without it, this module holds uninhabited stand-ins
-/// whose `ZenohHost::create` and agent `connect` fail with an error that names the feature.
-pub mod zenoh {
-    pub use crate::transport::zenoh::*;
+    pub use vrsync_transport::legacy::{LegacyAgent, LegacyFrame};
 }

@@ -9,7 +9,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as ps_factory};
-use vrsync_bridge::shm::WakeWord;
+use vrsync_transport::shm::WakeWord;
 
 type Svc = ipc::Service;
 
@@ -95,9 +95,9 @@ impl ShmFloorHost {
         spin: bool,
         spin_before_block: Duration,
     ) -> Result<Self, FloorError> {
-        vrsync_bridge::shm::init_iceoryx2_logging();
+        vrsync_transport::shm::init_iceoryx2_logging();
         let node = NodeBuilder::new()
-            .config(vrsync_bridge::shm::iceoryx2_config())
+            .config(vrsync_transport::shm::iceoryx2_config())
             .create::<Svc>()
             .map_err(|e| ice("node", e))?;
         let n = agents as usize;
@@ -275,9 +275,9 @@ pub fn shm_floor_agent(
         spin_before_block,
         timeout,
     } = *options;
-    vrsync_bridge::shm::init_iceoryx2_logging();
+    vrsync_transport::shm::init_iceoryx2_logging();
     let node = NodeBuilder::new()
-        .config(vrsync_bridge::shm::iceoryx2_config())
+        .config(vrsync_transport::shm::iceoryx2_config())
         .create::<Svc>()
         .map_err(|e| ice("node", e))?;
     let deadline = Instant::now() + timeout;

@@ -9,7 +9,7 @@
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use vrsync_bridge::{ActionState, ActionStatus, Collision, Command, PixelFormat, SensorHeader};
+use vrsync_transport::{ActionState, ActionStatus, Collision, Command, PixelFormat, SensorHeader};
 
 use vrsync_agent::{Frame, Image};
 
@@ -122,7 +122,7 @@ struct Events<'a> {
 pub type Decision = heapless_pair::Pair;
 
 mod heapless_pair {
-    use vrsync_bridge::Command;
+    use vrsync_transport::Command;
 
     /// Up to two commands, without allocating.
     #[derive(Debug, Clone, Copy, Default, PartialEq)]

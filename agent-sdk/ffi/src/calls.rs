@@ -4,8 +4,8 @@
 use std::ffi::c_char;
 use std::time::Duration;
 
-use vrsync_bridge::{Command, Config};
 use vrsync_cabi::{ArgError, c_name, log_filter, str_arg, write_opt, write_required};
+use vrsync_transport::{Command, Config};
 
 use super::state::{AGENTS, AgentState, FfiError, with_agent};
 use super::types::*;
@@ -71,7 +71,7 @@ pub(super) fn current_frame(state: &AgentState) -> Result<&Frame, FfiError> {
 }
 
 pub(super) fn command_from(c: &vrs_command_t) -> Result<Command, FfiError> {
-    let wire = vrsync_bridge::MotorCommand {
+    let wire = vrsync_transport::MotorCommand {
         kind: c.kind,
         object_id: c.object_id,
         args: c.args,
@@ -295,7 +295,7 @@ pub(super) fn init_logging_impl(filter: *const c_char) -> Result<(), FfiError> {
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
-        .with_ansi(vrsync_bridge::ansi_on_stderr())
+        .with_ansi(vrsync_transport::ansi_on_stderr())
         .try_init()
         .map_err(|_| FfiError::LoggingAlreadySet)
 }

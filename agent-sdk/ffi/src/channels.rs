@@ -5,8 +5,8 @@
 
 use std::ffi::c_char;
 
-use vrsync_bridge::{ActionSpace, VectorDesc};
 use vrsync_cabi::{ArgError, c_name, str_arg, write_opt, write_required};
+use vrsync_transport::{ActionSpace, VectorDesc};
 
 use super::calls::current_frame;
 use super::state::{FfiError, boundary, with_agent};

@@ -32,7 +32,7 @@ pub extern "C" fn vrs_version() -> *const c_char {
 /// Always safe to call.
 #[unsafe(no_mangle)]
 pub extern "C" fn vrs_protocol_version() -> u32 {
-    vrsync_bridge::PROTOCOL_VERSION
+    vrsync_transport::PROTOCOL_VERSION
 }
 
 /// The message of the last call made on this thread: why it failed or timed out, or an

@@ -1,6 +1,6 @@
 //! The exported functions that queue motor commands, and the stop that sends them.
 
-use vrsync_bridge::Command;
+use vrsync_transport::Command;
 
 use super::calls::{command_from, send_impl, send_with_id_impl, stop_impl};
 use vrsync_cabi::ArgError;

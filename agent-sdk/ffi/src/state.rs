@@ -7,9 +7,9 @@ use std::collections::HashMap;
 use std::ffi::c_char;
 use std::thread::LocalKey;
 
-use vrsync_bridge::{ConfigLoadError, VectorConfig};
 use vrsync_cabi::handles::LocalMap;
 use vrsync_cabi::{AbiError, ArgError, HandleError, HandleKind, LastError, Registry};
+use vrsync_transport::{ConfigLoadError, VectorConfig};
 
 use super::types::{vrs_agent_t, vrs_status_t};
 use sdk::{ActError, Agent, AgentConnectError, Frame, SendError, StopError, WaitStartError};

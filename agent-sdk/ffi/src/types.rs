@@ -3,12 +3,12 @@
 
 use std::ffi::c_char;
 
-use vrsync_bridge::PixelFormat;
 /// The sensor structs both C ABIs share (`vrsync_cabi::sensors`).
 pub use vrsync_cabi::{
     vrs_action_status_t, vrs_collision_t, vrs_eye_position_t, vrs_grid_position_t,
     vrs_head_motion_t, vrs_pose_t,
 };
+use vrsync_transport::PixelFormat;
 
 // For the doc links only (the header keeps the `[`name`]` text).
 #[cfg(doc)]
@@ -33,12 +33,12 @@ pub const VRS_MAX_ACTIONS: usize = 8;
 pub const VRS_CHANNEL_NAME_SIZE: usize = 17;
 
 const _: () = {
-    assert!(VRS_MAX_IMAGES == vrsync_bridge::MAX_CAMERAS);
-    assert!(VRS_MAX_STATUSES == vrsync_bridge::MAX_STATUSES);
-    assert!(VRS_MAX_COLLISIONS == vrsync_bridge::MAX_COLLISIONS);
+    assert!(VRS_MAX_IMAGES == vrsync_transport::MAX_CAMERAS);
+    assert!(VRS_MAX_STATUSES == vrsync_transport::MAX_STATUSES);
+    assert!(VRS_MAX_COLLISIONS == vrsync_transport::MAX_COLLISIONS);
     assert!(VRS_CAMERA_NAME_SIZE == vrsync_cabi::CAMERA_NAME_SIZE);
-    assert!(VRS_MAX_VECTORS == vrsync_bridge::MAX_VECTORS);
-    assert!(VRS_MAX_ACTIONS == vrsync_bridge::MAX_ACTIONS);
+    assert!(VRS_MAX_VECTORS == vrsync_transport::MAX_VECTORS);
+    assert!(VRS_MAX_ACTIONS == vrsync_transport::MAX_ACTIONS);
     assert!(VRS_CHANNEL_NAME_SIZE == vrsync_cabi::CHANNEL_NAME_SIZE);
 };
 

@@ -5,7 +5,7 @@
 //! finished or aborted actions', the others'), which give the one to forget when full
 //! without a search. Nothing is allocated after [`ActionStates::with_capacity`].
 
-use vrsync_bridge::{ActionState, ActionStatus};
+use vrsync_transport::{ActionState, ActionStatus};
 
 /// No slot (end of a queue, an empty bucket of the index).
 const NIL: u32 = u32::MAX;

@@ -1,7 +1,7 @@
 //! The agent's channels (`[[agent.vector]]`, `[[agent.action]]`): reading vectors from a
 //! frame, sending actions, and the check that host and agent agree on them.
 
-use vrsync_bridge::{
+use vrsync_transport::{
     ActionConfig, ActionDesc, ActionSpace, AgentConfig, AgentFrame, ChannelLayout, MAX_ACTIONS,
     MAX_VECTORS, SensorHeader, VectorDesc, action_chunks, discrete_action_chunk,
 };
@@ -217,7 +217,7 @@ impl Agent {
                 high: high[i],
             });
         }
-        let chunks = value.len().div_ceil(vrsync_bridge::ACTION_CHUNK);
+        let chunks = value.len().div_ceil(vrsync_transport::ACTION_CHUNK);
         self.reserve(chunks)?;
         self.queue.extend(action_chunks(index, value));
         Ok(())

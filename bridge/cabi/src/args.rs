@@ -91,7 +91,7 @@ pub unsafe fn str_arg<'a>(s: *const c_char, what: &'static str) -> Result<&'a st
 pub unsafe fn log_filter(filter: *const c_char) -> Result<EnvFilter, ArgError> {
     if filter.is_null() {
         return Ok(EnvFilter::try_from_default_env()
-            .unwrap_or_else(|_| EnvFilter::new(vrsync_bridge::default_log_filter("warn"))));
+            .unwrap_or_else(|_| EnvFilter::new(vrsync_transport::default_log_filter("warn"))));
     }
     // SAFETY: a C string by the caller's contract.
     let text = unsafe { str_arg(filter, "filter") }?;
@@ -102,14 +102,15 @@ pub unsafe fn log_filter(filter: *const c_char) -> Result<EnvFilter, ArgError> {
 }
 
 /// A camera or channel name as a NUL-terminated C array (cut at the wire format's
-/// [`CAMERA_NAME_LEN`](vrsync_bridge::CAMERA_NAME_LEN) bytes, which is also
-/// [`CHANNEL_NAME_LEN`](vrsync_bridge::CHANNEL_NAME_LEN)).
+/// [`CAMERA_NAME_LEN`](vrsync_transport::CAMERA_NAME_LEN) bytes, which is also
+/// [`CHANNEL_NAME_LEN`](vrsync_transport::CHANNEL_NAME_LEN)).
 pub fn c_name(name: &str) -> [c_char; CAMERA_NAME_SIZE] {
     let mut out = [0 as c_char; CAMERA_NAME_SIZE];
-    for (dst, &src) in out
-        .iter_mut()
-        .zip(name.as_bytes().iter().take(vrsync_bridge::CAMERA_NAME_LEN))
-    {
+    for (dst, &src) in out.iter_mut().zip(
+        name.as_bytes()
+            .iter()
+            .take(vrsync_transport::CAMERA_NAME_LEN),
+    ) {
         *dst = src as c_char;
     }
     out

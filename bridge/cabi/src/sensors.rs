@@ -8,19 +8,19 @@
 
 #![allow(non_camel_case_types)]
 
-use vrsync_bridge::{ActionStatus, Collision, EyePosition, GridPosition, HeadMotion, Pose};
+use vrsync_transport::{ActionStatus, Collision, EyePosition, GridPosition, HeadMotion, Pose};
 
 /// Size of a camera name field: up to 16 bytes of UTF-8 and a terminating NUL. (Each
 /// header declares its own constant of this value.)
 ///
 /// cbindgen:ignore
-pub const CAMERA_NAME_SIZE: usize = vrsync_bridge::CAMERA_NAME_LEN + 1;
+pub const CAMERA_NAME_SIZE: usize = vrsync_transport::CAMERA_NAME_LEN + 1;
 
 /// Size of a channel (`[[agent.vector]]`, `[[agent.action]]`) name field: up to 16 bytes of
 /// UTF-8 and a terminating NUL, as a camera name ([`c_name`](crate::c_name) writes both).
 ///
 /// cbindgen:ignore
-pub const CHANNEL_NAME_SIZE: usize = vrsync_bridge::CHANNEL_NAME_LEN + 1;
+pub const CHANNEL_NAME_SIZE: usize = vrsync_transport::CHANNEL_NAME_LEN + 1;
 
 const _: () = assert!(CHANNEL_NAME_SIZE == CAMERA_NAME_SIZE);
 

@@ -1,8 +1,8 @@
 //! The actions an agent sent in one cycle (`[[agent.action]]`), assembled from the chunks
 //! its batches carry (see `crate::wire`'s channels), checked against the config.
 
-use crate::config::{ActionConfig, ActionSpace};
 use crate::wire::{ACTION_CHUNK, MotorCommand};
+use vrsync_transport::{ActionConfig, ActionSpace};
 
 /// The value of one action in one cycle.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -15,16 +15,16 @@ use std::time::{Duration, Instant};
 use tracing::{debug, info, warn};
 
 use crate::barrier::{AgentOutcome, BatchVerdict, CycleBarrier};
-use crate::config::{AgentLostPolicy, Config, WaitForStop};
 use crate::events::PendingEvents;
-use crate::rounded::Rounded;
-use crate::signal::SignalHandling;
 use crate::transport::mixed::{AnyLoan, Transports};
 use crate::transport::{FrameLoanMut, HostTransport, HostTransportError, PeerRefusal};
 use crate::wire::{
     ActionDesc, ActionState, ImageDesc, MAX_ACTIONS, MAX_CAMERAS, MAX_VECTORS, MotorCommand,
     PROTOCOL_VERSION, SENSOR_FLAG_SYNC_MODE, SensorHeader, VectorDesc, WireOutcome,
 };
+use vrsync_transport::Rounded;
+use vrsync_transport::SignalHandling;
+use vrsync_transport::{AgentLostPolicy, Config, WaitForStop};
 
 mod actions;
 mod collect;

@@ -23,11 +23,11 @@ use std::net::SocketAddr;
 use std::os::fd::RawFd;
 use std::time::{Duration, Instant};
 
-use super::wait::EpollSet;
 use super::{BatchSink, FrameLoanMut, HostTransport, HostTransportError, PeerRefusal};
-use crate::config::{Config, TransportKind};
-use crate::signal::SignalHandling;
 use crate::wire::SensorHeader;
+use vrsync_transport::SignalHandling;
+use vrsync_transport::internal::EpollSet;
+use vrsync_transport::{Config, TransportKind};
 
 #[derive(Debug, Clone, Copy)]
 struct Route {
@@ -148,7 +148,7 @@ macro_rules! mixed_types {
     };
 }
 
-super::registry::transports!(mixed_types);
+vrsync_transport::transports!(mixed_types);
 
 /// [`Parts`]: one optional part per transport, created for its agents.
 macro_rules! mixed_parts {
@@ -183,7 +183,7 @@ macro_rules! mixed_parts {
     };
 }
 
-super::registry::transports!(mixed_parts);
+vrsync_transport::transports!(mixed_parts);
 
 /// The [`Parts`] methods for one agent: a `match` on the transport of its [`Route`].
 macro_rules! mixed_routed {
@@ -239,7 +239,7 @@ macro_rules! mixed_routed {
     };
 }
 
-super::registry::transports!(mixed_routed);
+vrsync_transport::transports!(mixed_routed);
 
 /// The [`Parts`] methods that act on every transport: one `if let Some` per transport.
 macro_rules! mixed_each {
@@ -301,7 +301,7 @@ macro_rules! mixed_each {
     };
 }
 
-super::registry::transports!(mixed_each);
+vrsync_transport::transports!(mixed_each);
 
 /// The [`Parts`] methods that ask the transports in turn: the first that has an answer,
 /// or all of them.
@@ -353,7 +353,7 @@ macro_rules! mixed_first {
     };
 }
 
-super::registry::transports!(mixed_first);
+vrsync_transport::transports!(mixed_first);
 
 /// Every transport a host's agents use, routed per agent.
 pub struct Transports {

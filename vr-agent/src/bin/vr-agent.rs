@@ -11,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use tracing::{info, warn};
 use vrsync_agent::{Agent, AgentBuilder, SignalHandling, StopError, WaitStartError};
 use vrsync_agent_bin::policy::{Policy, PolicyKind};
-use vrsync_bridge::Config;
+use vrsync_transport::Config;
 
 /// Example vrsync agent: waits for each cycle's start, reads its sensor frame from shared
 /// memory, sends motor commands chosen by a policy, and stops.
@@ -141,7 +141,7 @@ fn log_events(
 /// `--bad-commands`: one command the host must reject of each sort (a NaN argument, a
 /// distance out of range, an object that does not exist, an unknown kind).
 fn send_bad_commands(agent: &mut Agent) -> anyhow::Result<()> {
-    use vrsync_bridge::{Command, MotorCommand};
+    use vrsync_transport::{Command, MotorCommand};
     let bad_id = u32::MAX;
     let mut nan = Command::Move {
         heading_deg: 0.0,

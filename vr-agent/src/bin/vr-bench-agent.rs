@@ -12,10 +12,10 @@ use anyhow::{Context, bail};
 use clap::{Parser, ValueEnum};
 use vrsync_agent::{AgentBuilder, Command, SignalHandling, StopError, WaitStartError};
 use vrsync_alloc_count::{CountingAlloc, allocations};
-use vrsync_bridge::Config;
 use vrsync_floor::{
     ShmFloorAgentOptions, shm_floor_agent, tcp_floor_agent, touch_rows, zenoh_floor_agent,
 };
+use vrsync_transport::Config;
 
 #[global_allocator]
 static ALLOC: CountingAlloc = CountingAlloc;

@@ -34,7 +34,7 @@ __all__ = [
     "load_config",
 ]
 
-# The bridge's defaults (bridge/src/config): camera FOVs, the cycle length, the format.
+# The defaults of the config (transport/src/config): camera FOVs, the cycle length, the format.
 _DEFAULT_FOV_H_DEG = 120.0
 _DEFAULT_FOV_V_DEG = 90.0
 _DEFAULT_FRAME_S = 0.1

@@ -1,0 +1,536 @@
+//! The shared-memory transport over iceoryx2.
+//!
+//! Services (all under `vrsync/<session>/`, see DESIGN §4):
+//!
+//! | service              | pattern                                 | writer → reader |
+//! |----------------------|-----------------------------------------|-----------------|
+//! | `agent/<id>/sensors` | pub-sub `[u8]` + [`SensorHeader`]       | host → agent    |
+//! | `agent/<id>/motor`   | pub-sub `[MotorCommand]` + [`MotorHeader`] | agent → host |
+//! | `start`              | event, no ports: its attributes         | host → agents   |
+//! | `stop`               | event, id = agent id                    | agents → host   |
+//!
+//! *Start* (a frame is there) and *closed* reach every agent at once through the session's
+//! [`WakeWord`], a futex word in shared memory: one system call wakes all the agents
+//! (an iceoryx2 event would send a datagram to each). The same page says whether the host
+//! polls the motor queues; while it does, an agent's *stop* is not notified on `stop`.
+//!
+//! The host `create`s every service; agents `open` them. Buffers are sized explicitly: the
+//! sensor publisher of an agent holds at most [`SENSOR_POOL_SAMPLES`] frames (one loaned by
+//! the host, one queued, two borrowed by the agent), so a 3×1080p rgb8 stream reserves
+//! ~75 MB instead of the ~280 MB iceoryx2's defaults would.
+
+use std::mem::MaybeUninit;
+use std::time::{Duration, Instant};
+
+use tracing::debug;
+
+use iceoryx2::config::Config as Config2;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::prelude::*;
+use iceoryx2::sample::Sample;
+use iceoryx2::sample_mut::SampleMut;
+use iceoryx2::service::attribute::{AttributeKey, AttributeSet, AttributeValue};
+use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as ps_factory};
+
+use super::{
+    AGENT_MAX_HELD_FRAMES, AgentConnectError, AgentFrame, AgentReceiveError, AgentSendError,
+    AgentTransport, Attempt, BatchSink, FrameLoanMut, HostLiveness, HostTransport,
+    HostTransportError, retry_until,
+};
+use crate::config::{Config, MAX_AGENT_ID};
+use crate::signal::SignalHandling;
+use crate::wire::{LAYOUT_HASH, MotorCommand, MotorHeader, PROTOCOL_VERSION, SensorHeader};
+use vrsync_protocol::channel_layout::ChannelLayout;
+
+type Svc = ipc::Service;
+
+/// Frames an agent may hold at once (the current one and the one being received).
+pub const AGENT_BORROWED_FRAMES: usize = AGENT_MAX_HELD_FRAMES;
+/// Sensor frames queued per agent: only the newest is kept (safe overflow).
+pub const SENSOR_QUEUE: usize = 1;
+/// Size of each agent's sensor sample pool: queued + borrowed + one loaned by the host.
+pub const SENSOR_POOL_SAMPLES: usize = SENSOR_QUEUE + AGENT_BORROWED_FRAMES + 1;
+/// Motor batches queued per agent at the host.
+pub const MOTOR_QUEUE: usize = 16;
+
+/// Service attribute key holding [`PROTOCOL_VERSION`].
+pub const ATTR_PROTOCOL: &str = "vrsync.protocol_version";
+/// Service attribute key holding [`LAYOUT_HASH`] (hex).
+pub const ATTR_LAYOUT: &str = "vrsync.layout_hash";
+/// Prefix of the service attribute keys of an agent's sensor service that hold its channel
+/// layout's canonical text ([`ChannelLayout::to_text`]): `vrsync.channels.0`, `.1`, … each
+/// a piece of at most [`ATTR_VALUE_MAX`] bytes, in order (none without channels). One key
+/// per piece, not one key with several values: iceoryx2 keeps a service's attributes sorted
+/// by key and value, which would reorder the pieces.
+pub const ATTR_CHANNELS: &str = "vrsync.channels";
+/// Longest attribute value iceoryx2 stores (`MAX_ATTRIBUTE_VALUE_LENGTH`).
+pub const ATTR_VALUE_MAX: usize = 256;
+
+/// Name of service `suffix` of a session.
+pub fn service_name(session: &str, suffix: &str) -> String {
+    format!("vrsync/{session}/{suffix}")
+}
+
+/// iceoryx2 node name of the host of a session.
+pub fn host_node_name(session: &str) -> String {
+    format!("vrsync-host.{session}")
+}
+
+/// iceoryx2 node name of agent `id` of a session.
+pub fn agent_node_name(session: &str, id: u32) -> String {
+    format!("vrsync-agent.{session}.{id}")
+}
+
+/// Bytes of shared memory the host's services of `config` reserve for its agents on shared
+/// memory (sensor pools dominate).
+pub fn reserved_bytes(config: &Config) -> u64 {
+    let header = core::mem::size_of::<SensorHeader>() as u64 + 64;
+    config
+        .agents
+        .iter()
+        .filter(|a| a.transport == crate::config::TransportKind::Shm)
+        .map(|a| {
+            let frame = a.frame_bytes().max(1) as u64 + header;
+            let motor = (u64::from(config.transport.max_commands_per_cycle)
+                * core::mem::size_of::<MotorCommand>() as u64
+                + 64)
+                * (MOTOR_QUEUE as u64 + 2);
+            frame * SENSOR_POOL_SAMPLES as u64 + motor
+        })
+        .sum()
+}
+
+/// Free bytes of the tmpfs behind `/dev/shm` (where iceoryx2 keeps its segments), if known.
+pub fn shm_free_bytes() -> Option<u64> {
+    let path = c"/dev/shm";
+    let mut st = core::mem::MaybeUninit::<libc::statvfs>::uninit();
+    // SAFETY: `path` is NUL-terminated and `st` is valid for writes of one statvfs.
+    let rc = unsafe { libc::statvfs(path.as_ptr(), st.as_mut_ptr()) };
+    if rc != 0 {
+        return None;
+    }
+    // SAFETY: statvfs returned 0, so it initialised `st`.
+    let st = unsafe { st.assume_init() };
+    // The field types differ between platforms (u32 on some); the casts are for those.
+    #[allow(clippy::unnecessary_cast)]
+    Some(st.f_bavail as u64 * st.f_frsize as u64)
+}
+
+/// The shared memory a session needs does not fit into `/dev/shm`.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+#[error(
+    "{config}: agent.camera: the cameras of all agents need {needed_mb} MB of shared memory but \
+     /dev/shm has {available_mb} MB free: {fix}",
+    config = config.display(),
+    needed_mb = needed / 1_000_000,
+    available_mb = available / 1_000_000,
+    fix = SHM_BUDGET_FIX
+)]
+pub struct ShmBudgetError {
+    /// The config file whose cameras do not fit.
+    pub config: std::path::PathBuf,
+    /// Bytes the session's services reserve.
+    pub needed: u64,
+    /// Bytes free in `/dev/shm`.
+    pub available: u64,
+}
+
+/// Checks that the shared memory of `config`'s session fits into `/dev/shm`. tmpfs is
+/// filled lazily: an undersized one gives SIGBUS at write time, long after start, so the
+/// host refuses up front ([`ShmHost::create`] runs this check); a program can run it
+/// earlier as a pre-flight, e.g. to report it as a configuration error. A config is never
+/// checked when it is merely parsed (an agent or a tool may parse it on another machine).
+///
+/// # Errors
+/// [`ShmBudgetError`] with the bytes needed and free.
+pub fn check_shm_budget(config: &Config) -> Result<(), ShmBudgetError> {
+    let needed = reserved_bytes(config);
+    match shm_free_bytes() {
+        Some(available) if needed > available => Err(ShmBudgetError {
+            config: config.source.clone(),
+            needed,
+            available,
+        }),
+        _ => Ok(()),
+    }
+}
+
+/// The advice printed with a budget error.
+pub const SHM_BUDGET_FIX: &str = "use fewer or smaller cameras or fewer agents, or give /dev/shm more room (`mount -o remount,size=16G /dev/shm`; in Docker `--shm-size=16g` or `--ipc=host`)";
+
+fn svc_name(session: &str, suffix: &str) -> Result<ServiceName, String> {
+    let name = service_name(session, suffix);
+    ServiceName::new(&name).map_err(|e| format!("invalid service name {name:?}: {e:?}"))
+}
+
+fn attributes() -> Result<AttributeSpecifier, String> {
+    with_channels(&ChannelLayout::default())
+}
+
+/// The attributes of a service: protocol and layout, and the channel layout `channels`
+/// (an agent's sensor service carries its agent's; the others none).
+fn with_channels(channels: &ChannelLayout) -> Result<AttributeSpecifier, String> {
+    let key = |k: &str| AttributeKey::try_from(k).map_err(|e| format!("{e:?}"));
+    let val = |v: &str| AttributeValue::try_from(v).map_err(|e| format!("{e:?}"));
+    let (pk, pv) = (key(ATTR_PROTOCOL)?, val(&PROTOCOL_VERSION.to_string())?);
+    let (lk, lv) = (key(ATTR_LAYOUT)?, val(&format!("{LAYOUT_HASH:016x}"))?);
+    let mut attrs = AttributeSpecifier::new()
+        .define(&pk, &pv)
+        .and_then(|s| s.define(&lk, &lv))
+        .map_err(|e| format!("{e:?}"))?;
+    // The text is ASCII (`;`, `:`, names of `[A-Za-z0-9_.-]`, digits): any cut is a char
+    // boundary. At most 3 pieces (`channel_layout::MAX_TEXT`), with the 2 above within
+    // iceoryx2's 8 attributes.
+    for (i, piece) in channels
+        .to_text()
+        .as_bytes()
+        .chunks(ATTR_VALUE_MAX)
+        .enumerate()
+    {
+        let piece = core::str::from_utf8(piece).map_err(|e| e.to_string())?;
+        attrs = attrs
+            .define(&key(&format!("{ATTR_CHANNELS}.{i}"))?, &val(piece)?)
+            .map_err(|e| format!("{e:?}"))?;
+    }
+    Ok(attrs)
+}
+
+/// The channel layout an agent's sensor service carries (see [`ATTR_CHANNELS`]); `None`
+/// if the pieces do not make one.
+fn channels_of(attrs: &AttributeSet) -> Option<ChannelLayout> {
+    let mut text = String::new();
+    for i in 0.. {
+        let key = AttributeKey::try_from(format!("{ATTR_CHANNELS}.{i}").as_str()).ok()?;
+        match attrs.key_value(&key, 0) {
+            Some(piece) => text.push_str(&piece.to_string()),
+            None => break,
+        }
+    }
+    ChannelLayout::parse(&text)
+}
+
+/// Quiets iceoryx2's own logging unless `IOX2_LOG_LEVEL` asks for more. iceoryx2 logs
+/// through `tracing` (feature `tracing`), so what remains shows up in our logs.
+pub fn init_iceoryx2_logging() {
+    set_log_level_from_env_or(LogLevel::Error);
+}
+
+/// iceoryx2 creates a process-wide signal handler (`iceoryx2_bb_posix::signal::
+/// SignalHandler`) lazily, the first time it needs one — e.g. when it zeroes a new
+/// shared-memory segment, which can happen in the middle of a wait once a peer's
+/// connection appears — and that handler installs its own functions for SIGINT, SIGTERM
+/// and ten other signals, whatever `SignalHandlingMode` the nodes have. A Python agent's
+/// Ctrl-C then never reached Python. So before the first node, create that handler once
+/// and put every signal's previous action back: iceoryx2 never installs anything later.
+fn keep_process_signal_handlers() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        const SIGNALS: core::ops::RangeInclusive<libc::c_int> = 1..=31;
+        let mut saved: Vec<(libc::c_int, libc::sigaction)> = Vec::new();
+        for sig in SIGNALS {
+            if sig == libc::SIGKILL || sig == libc::SIGSTOP {
+                continue;
+            }
+            // SAFETY: querying (act = null) the current action of a valid signal number
+            // into a zeroed, properly aligned sigaction.
+            unsafe {
+                let mut old: libc::sigaction = core::mem::zeroed();
+                if libc::sigaction(sig, core::ptr::null(), &mut old) == 0 {
+                    saved.push((sig, old));
+                }
+            }
+        }
+        // Creates the handler (and its registrations) now; reports no signal.
+        let _ = iceoryx2_bb_posix::signal::SignalHandler::last_signal();
+        for (sig, old) in &saved {
+            // SAFETY: restoring an action sigaction(2) itself returned for this signal.
+            unsafe {
+                libc::sigaction(*sig, old, core::ptr::null_mut());
+            }
+        }
+    });
+}
+
+/// The iceoryx2 config of every vrsync node: iceoryx2's own (`iceoryx2.toml` or its
+/// defaults), except that creating or dropping a node does not clean up every dead node
+/// of the machine. iceoryx2 does that by default (`cleanup-dead-nodes-on-creation` /
+/// `-on-destruction`): it removed other sessions' (and other programs') leftovers, and
+/// with a few hundred dead nodes in the registry each connect attempt and each `close()`
+/// took a second or more, during which Ctrl-C was not seen. vrsync cleans the dead nodes
+/// of its own session only ([`cleanup_dead_nodes`] when a host starts, and the host's
+/// reaping of its agents); iceoryx2 still cleans a dead node's ports from a service when
+/// the service is opened (`cleanup-dead-nodes-on-open`), i.e. within the session.
+///
+/// Public so that the benchmark's raw iceoryx2 floor (`vrsync-floor`) creates its nodes the
+/// same way.
+pub fn iceoryx2_config() -> &'static Config2 {
+    static CONFIG: std::sync::OnceLock<Config2> = std::sync::OnceLock::new();
+    CONFIG.get_or_init(|| {
+        let mut config = Config2::global_config().clone();
+        config.global.node.cleanup_dead_nodes_on_creation = false;
+        config.global.node.cleanup_dead_nodes_on_destruction = false;
+        config
+    })
+}
+
+fn node(name: &str) -> Result<Node<Svc>, String> {
+    keep_process_signal_handlers();
+    let node_name =
+        NodeName::new(name).map_err(|e| format!("invalid node name {name:?}: {e:?}"))?;
+    NodeBuilder::new()
+        .name(&node_name)
+        .config(iceoryx2_config())
+        // Signals are handled by `crate::signal` (or left to the embedding process).
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<Svc>()
+        .map_err(|e| format!("cannot create iceoryx2 node {name:?}: {e:?}"))
+}
+
+/// Testing aid: creates `n` iceoryx2 nodes named `<prefix>.<k>` and never removes them,
+/// so that they are dead nodes once this process exits (tests of Ctrl-C, connect and
+/// close with a registry full of other programs' leftovers).
+///
+/// # Errors
+/// The iceoryx2 failure, as text.
+#[doc(hidden)]
+pub fn leak_nodes_for_tests(prefix: &str, n: usize) -> Result<(), String> {
+    for k in 0..n {
+        std::mem::forget(node(&format!("{prefix}.{k}"))?);
+    }
+    Ok(())
+}
+
+/// Testing aid: counts the dead iceoryx2 nodes whose name starts with `prefix` (those of
+/// [`leak_nodes_for_tests`]) and, with `remove`, removes them.
+#[doc(hidden)]
+pub fn dead_nodes_for_tests(prefix: &str, remove: bool) -> u64 {
+    let mut n = 0;
+    for_each_dead_node(|view, name| {
+        if name.starts_with(prefix) {
+            n += 1;
+            if remove {
+                let _ = view.try_remove_stale_resources();
+            }
+        }
+    });
+    n
+}
+
+/// What became of a session's host process, as iceoryx2's node registry tells.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HostState {
+    /// The host's node exists and its process is alive.
+    Alive,
+    /// The host's process died without removing its node (crash, SIGKILL).
+    Dead,
+    /// No host node: it never existed or it closed the session cleanly.
+    Absent,
+}
+
+/// What iceoryx2's node registry says of `session`'s host: its state, and its process id
+/// while it is alive. Lists every node of the machine.
+fn find_host(session: &str) -> (HostState, Option<i32>) {
+    use iceoryx2::node::NodeView;
+    let wanted = host_node_name(session);
+    let mut found = (HostState::Absent, None);
+    let _ = Node::<Svc>::list(iceoryx2_config(), |node| {
+        let (state, details) = match &node {
+            NodeState::Alive(view) => (HostState::Alive, view.details()),
+            NodeState::Dead(view) => (HostState::Dead, view.details()),
+            _ => return CallbackProgression::Continue,
+        };
+        let Some(d) = details.as_ref().filter(|d| d.name().as_str() == wanted) else {
+            return CallbackProgression::Continue;
+        };
+        if state == HostState::Alive {
+            found = (state, Some(d.process_id().value()));
+            return CallbackProgression::Stop;
+        }
+        found = (state, None);
+        CallbackProgression::Continue
+    });
+    found
+}
+
+/// The state of `session`'s host node.
+pub fn host_state(session: &str) -> HostState {
+    find_host(session).0
+}
+
+/// The process id of `session`'s live host, if there is one.
+pub fn host_pid(session: &str) -> Option<i32> {
+    find_host(session).1
+}
+
+/// Whether a live host node exists for `session`.
+pub fn host_alive(session: &str) -> bool {
+    host_state(session) == HostState::Alive
+}
+
+/// Whether iceoryx2 node `name` is the host or an agent of `session` (a session name may
+/// contain dots: an agent's node name is `vrsync-agent.<session>.<id>`, digits only after).
+fn node_of_session(name: &str, session: &str) -> bool {
+    name == host_node_name(session)
+        || name
+            .strip_prefix("vrsync-agent.")
+            .and_then(|rest| rest.strip_prefix(session))
+            .and_then(|rest| rest.strip_prefix('.'))
+            .is_some_and(|id| !id.is_empty() && id.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// Removes the stale resources of the dead iceoryx2 nodes of `session` (its crashed host
+/// or agents); other sessions' nodes, dead or alive, are left to their owners. Returns how
+/// many nodes were cleaned.
+pub fn cleanup_dead_nodes(session: &str) -> u64 {
+    let mut cleaned = 0;
+    let host = host_node_name(session);
+    for_each_dead_node(|view, name| {
+        if node_of_session(name, session) && view.try_remove_stale_resources().is_ok() {
+            if name == host {
+                remove_wake_word(session);
+            }
+            cleaned += 1;
+        }
+    });
+    cleaned
+}
+
+/// Calls `f` with every dead iceoryx2 node of the machine that has a name (its view, to
+/// clean it, and its name): the one registry walk behind session clean-up and the host's
+/// reaping of dead agents.
+fn for_each_dead_node(mut f: impl FnMut(iceoryx2::node::DeadNodeView<Svc>, &str)) {
+    use iceoryx2::node::NodeView;
+    let _ = Node::<Svc>::list(iceoryx2_config(), |state| {
+        if let NodeState::Dead(view) = state
+            && let Some(name) = view
+                .details()
+                .as_ref()
+                .map(|d| d.name().as_str().to_owned())
+        {
+            // Owned name: cleaning consumes the view.
+            f(view, &name);
+        }
+        CallbackProgression::Continue
+    });
+}
+
+mod agent;
+mod host;
+mod ice_errors;
+mod wake;
+
+use wake::remove_wake_word;
+pub use wake::{WakeWord, WakeWordError, wake_word_name};
+
+use ice_errors::IceError;
+
+pub use agent::*;
+pub use host::*;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_the_sessions_own_nodes_belong_to_it() {
+        assert!(node_of_session("vrsync-host.a", "a"));
+        assert!(node_of_session("vrsync-agent.a.3", "a"));
+        assert!(node_of_session("vrsync-agent.a.b.3", "a.b"));
+        assert!(!node_of_session("vrsync-agent.a.b.3", "a"));
+        assert!(!node_of_session("vrsync-host.ab", "a"));
+        assert!(!node_of_session("vrsync-agent.ab.3", "a"));
+        assert!(!node_of_session("vrsync-agent.a.", "a"));
+        assert!(!node_of_session("floor-node", "a"));
+    }
+
+    const CHILD_ENV: &str = "VRSYNC_TEST_DEAD_NODE_SESSION";
+
+    fn dead_nodes_of(session: &str) -> usize {
+        let mut n = 0;
+        for_each_dead_node(|_, name| {
+            if node_of_session(name, session) {
+                n += 1;
+            }
+        });
+        n
+    }
+
+    /// A host process of one session is SIGKILLed; cleaning up for another session leaves
+    /// its dead node alone, cleaning up for its own session removes it.
+    #[test]
+    fn cleanup_touches_only_the_dead_nodes_of_its_own_session() {
+        if let Ok(session) = std::env::var(CHILD_ENV) {
+            // The child: be a host of `session`, then die without cleaning up.
+            let _node = node(&host_node_name(&session)).unwrap();
+            // SAFETY: kills this (child) process on purpose.
+            unsafe { libc::raise(libc::SIGKILL) };
+            return;
+        }
+        let pid = std::process::id();
+        let (dead, other) = (format!("deadnode{pid}"), format!("othernode{pid}"));
+        let status = std::process::Command::new(std::env::current_exe().unwrap())
+            .args([
+                "--exact",
+                "shm::tests::cleanup_touches_only_the_dead_nodes_of_its_own_session",
+                "--test-threads=1",
+            ])
+            .env(CHILD_ENV, &dead)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .status()
+            .unwrap();
+        assert_eq!(
+            std::os::unix::process::ExitStatusExt::signal(&status),
+            Some(libc::SIGKILL)
+        );
+        assert_eq!(dead_nodes_of(&dead), 1);
+        assert_eq!(cleanup_dead_nodes(&other), 0);
+        assert_eq!(
+            dead_nodes_of(&dead),
+            1,
+            "another session's dead node was removed"
+        );
+        assert_eq!(cleanup_dead_nodes(&dead), 1);
+        assert_eq!(dead_nodes_of(&dead), 0);
+    }
+}
+
+#[cfg(test)]
+mod signal_tests {
+    extern "C" fn mine(_: libc::c_int) {}
+
+    fn action(sig: libc::c_int) -> libc::sighandler_t {
+        // SAFETY: querying the current action into a zeroed sigaction.
+        unsafe {
+            let mut old: libc::sigaction = core::mem::zeroed();
+            assert_eq!(libc::sigaction(sig, core::ptr::null(), &mut old), 0);
+            old.sa_sigaction
+        }
+    }
+
+    /// The process's own handler survives a node and iceoryx2's lazy signal handler (which
+    /// iceoryx2 creates e.g. when it zeroes a new segment during a wait).
+    #[test]
+    fn iceoryx2_never_replaces_the_process_signal_handlers() {
+        // SAFETY: installing a handler that does nothing for SIGURG (ignored by default).
+        unsafe {
+            let mut act: libc::sigaction = core::mem::zeroed();
+            act.sa_sigaction = mine as *const () as libc::sighandler_t;
+            assert_eq!(
+                libc::sigaction(libc::SIGURG, &act, core::ptr::null_mut()),
+                0
+            );
+        }
+        let _node = super::node(&format!("sigtest{}", std::process::id())).unwrap();
+        let _ = iceoryx2_bb_posix::signal::SignalHandler::last_signal();
+        assert_eq!(
+            action(libc::SIGURG),
+            mine as *const () as libc::sighandler_t
+        );
+    }
+}
