@@ -185,8 +185,8 @@ typedef uint32_t vrs_host_outcome_t;
 #endif // __STDC_VERSION__ >= 202311L
 #endif // __cplusplus
 
-// What an action holds ([`vrs_host_action_spec_t::kind`]), or what an agent sent for it
-// in a cycle ([`vrs_host_action_value_t::kind`]). The same numbers as the agent SDK's
+// What an action holds (`vrs_host_action_spec_t::kind`), or what an agent sent for it
+// in a cycle (`vrs_host_action_value_t::kind`). The same numbers as the agent SDK's
 // `vrs_action_kind_t`.
 enum vrs_host_action_kind_t
 #if defined(__cplusplus) || __STDC_VERSION__ >= 202311L

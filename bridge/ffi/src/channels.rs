@@ -8,7 +8,7 @@
 
 use std::ffi::c_char;
 
-use vrsync_bridge::{ActionConfig, ActionSpace, ActionValue, AgentReport};
+use vrsync_bridge::ActionSpace;
 use vrsync_cabi::{c_name, str_arg, write_opt, write_required};
 
 use crate::state::{FfiError, HostState, Phase, ReportCopy, boundary, with_host};
@@ -21,32 +21,6 @@ use crate::vrs_host_end_cycle;
 // ---------------------------------------------------------------------------------------
 // Types
 // ---------------------------------------------------------------------------------------
-
-/// What an action holds ([`vrs_host_action_spec_t::kind`]), or what an agent sent for it
-/// in a cycle ([`vrs_host_action_value_t::kind`]). The same numbers as the agent SDK's
-/// `vrs_action_kind_t`.
-#[repr(u32)]
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum vrs_host_action_kind_t {
-    /// Nothing: the agent sent no (valid, complete) value for the action this cycle.
-    VRS_HOST_ACTION_KIND_NONE = 0,
-    /// A continuous action: `len` floats, each within its bounds.
-    VRS_HOST_ACTION_KIND_BOX = 1,
-    /// A discrete action: a choice in `0..n`.
-    VRS_HOST_ACTION_KIND_DISCRETE = 2,
-}
-
-impl vrs_host_action_kind_t {
-    /// The kind of an action of `space`. The `match` covers the bridge's action spaces: a
-    /// space added there does not compile here until it has its constant (and
-    /// `tests/channel_constants.rs` then checks the headers and the C# binding for it).
-    pub fn of(space: &ActionSpace) -> Self {
-        match space {
-            ActionSpace::Box { .. } => Self::VRS_HOST_ACTION_KIND_BOX,
-            ActionSpace::Discrete { .. } => Self::VRS_HOST_ACTION_KIND_DISCRETE,
-        }
-    }
-}
 
 /// One writable vector of a loaned frame: on shared memory, the memory the agent will
 /// read. The floats hold an older frame's values until written: write all of them.
@@ -122,47 +96,6 @@ pub struct vrs_host_action_value_t {
     pub index: u32,
     /// Action name, NUL-terminated.
     pub name: [c_char; VRS_HOST_CHANNEL_NAME_SIZE],
-}
-
-/// One action of one agent in the last collected cycle, copied out of the host's report
-/// into buffers sized once from the config (no allocation per cycle).
-#[derive(Debug)]
-pub(crate) struct ActionCopy {
-    name: [c_char; VRS_HOST_CHANNEL_NAME_SIZE],
-    kind: vrs_host_action_kind_t,
-    values: Vec<f32>,
-    choice: u32,
-}
-
-impl ActionCopy {
-    pub(crate) fn new(spec: &ActionConfig) -> Self {
-        Self {
-            name: c_name(&spec.name),
-            kind: vrs_host_action_kind_t::VRS_HOST_ACTION_KIND_NONE,
-            values: Vec::with_capacity(spec.len()),
-            choice: 0,
-        }
-    }
-}
-
-/// Copies `agent`'s actions of the cycle (config order) into `copies`.
-pub(crate) fn copy_actions(copies: &mut [ActionCopy], agent: &AgentReport) {
-    use vrs_host_action_kind_t::*;
-    for (copy, (_, value)) in copies.iter_mut().zip(agent.actions()) {
-        copy.values.clear();
-        copy.choice = 0;
-        copy.kind = match value {
-            None => VRS_HOST_ACTION_KIND_NONE,
-            Some(ActionValue::Box(v)) => {
-                copy.values.extend_from_slice(v);
-                VRS_HOST_ACTION_KIND_BOX
-            }
-            Some(ActionValue::Discrete(c)) => {
-                copy.choice = c;
-                VRS_HOST_ACTION_KIND_DISCRETE
-            }
-        };
-    }
 }
 
 // ---------------------------------------------------------------------------------------

@@ -7,15 +7,19 @@ use std::ffi::c_char;
 use std::thread::LocalKey;
 
 use vrsync_bridge::ConfigLoadError;
+use vrsync_bridge::{ActionConfig, ActionValue, AgentReport, ImageDesc, MAX_CAMERAS, MotorCommand};
 use vrsync_bridge::{
     AgentOutcome, Host, HostCreateError, HostCycleError, HostWaitError, SensorFrameMut,
 };
-use vrsync_bridge::{ImageDesc, MAX_CAMERAS, MotorCommand};
 use vrsync_cabi::handles::LocalMap;
-use vrsync_cabi::{AbiError, ArgError, HandleError, HandleKind, LastError, Registry, Removal};
+use vrsync_cabi::{
+    AbiError, ArgError, HandleError, HandleKind, LastError, Registry, Removal, c_name,
+};
 
-use crate::channels::{ActionCopy, copy_actions};
-use crate::types::{vrs_host_cycle_t, vrs_host_outcome_t, vrs_host_status_t, vrs_host_t};
+use crate::types::{
+    VRS_HOST_CHANNEL_NAME_SIZE, vrs_host_action_kind_t, vrs_host_cycle_t, vrs_host_outcome_t,
+    vrs_host_status_t, vrs_host_t,
+};
 
 // ---------------------------------------------------------------------------------------
 // Errors and the boundary
@@ -398,4 +402,45 @@ pub(crate) fn destroy(handle: *mut vrs_host_t) -> Result<(vrs_host_status_t, Str
             ),
         ),
     })
+}
+
+/// One action of one agent in the last collected cycle, copied out of the host's report
+/// into buffers sized once from the config (no allocation per cycle).
+#[derive(Debug)]
+pub(crate) struct ActionCopy {
+    pub(crate) name: [c_char; VRS_HOST_CHANNEL_NAME_SIZE],
+    pub(crate) kind: vrs_host_action_kind_t,
+    pub(crate) values: Vec<f32>,
+    pub(crate) choice: u32,
+}
+
+impl ActionCopy {
+    pub(crate) fn new(spec: &ActionConfig) -> Self {
+        Self {
+            name: c_name(&spec.name),
+            kind: vrs_host_action_kind_t::VRS_HOST_ACTION_KIND_NONE,
+            values: Vec::with_capacity(spec.len()),
+            choice: 0,
+        }
+    }
+}
+
+/// Copies `agent`'s actions of the cycle (config order) into `copies`.
+pub(crate) fn copy_actions(copies: &mut [ActionCopy], agent: &AgentReport) {
+    use vrs_host_action_kind_t::*;
+    for (copy, (_, value)) in copies.iter_mut().zip(agent.actions()) {
+        copy.values.clear();
+        copy.choice = 0;
+        copy.kind = match value {
+            None => VRS_HOST_ACTION_KIND_NONE,
+            Some(ActionValue::Box(v)) => {
+                copy.values.extend_from_slice(v);
+                VRS_HOST_ACTION_KIND_BOX
+            }
+            Some(ActionValue::Discrete(c)) => {
+                copy.choice = c;
+                VRS_HOST_ACTION_KIND_DISCRETE
+            }
+        };
+    }
 }

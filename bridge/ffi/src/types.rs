@@ -12,7 +12,7 @@
 use core::mem::{align_of, offset_of, size_of};
 use std::ffi::c_char;
 
-use vrsync_bridge::{HostStats, MotorCommand, PixelFormat};
+use vrsync_bridge::{ActionSpace, HostStats, MotorCommand, PixelFormat};
 use vrsync_cabi::{
     vrs_action_status_t, vrs_collision_t, vrs_eye_position_t, vrs_grid_position_t,
     vrs_head_motion_t, vrs_pose_t,
@@ -600,3 +600,29 @@ const _: () = {
     assert!(offset_of!(vrs_host_agent_report_t, rejoined) == 36);
     assert!(offset_of!(vrs_host_agent_report_t, left) == 40);
 };
+
+/// What an action holds (`vrs_host_action_spec_t::kind`), or what an agent sent for it
+/// in a cycle (`vrs_host_action_value_t::kind`). The same numbers as the agent SDK's
+/// `vrs_action_kind_t`.
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum vrs_host_action_kind_t {
+    /// Nothing: the agent sent no (valid, complete) value for the action this cycle.
+    VRS_HOST_ACTION_KIND_NONE = 0,
+    /// A continuous action: `len` floats, each within its bounds.
+    VRS_HOST_ACTION_KIND_BOX = 1,
+    /// A discrete action: a choice in `0..n`.
+    VRS_HOST_ACTION_KIND_DISCRETE = 2,
+}
+
+impl vrs_host_action_kind_t {
+    /// The kind of an action of `space`. The `match` covers the bridge's action spaces: a
+    /// space added there does not compile here until it has its constant (and
+    /// `tests/channel_constants.rs` then checks the headers and the C# binding for it).
+    pub fn of(space: &ActionSpace) -> Self {
+        match space {
+            ActionSpace::Box { .. } => Self::VRS_HOST_ACTION_KIND_BOX,
+            ActionSpace::Discrete { .. } => Self::VRS_HOST_ACTION_KIND_DISCRETE,
+        }
+    }
+}

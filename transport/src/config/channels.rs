@@ -3,11 +3,11 @@
 
 use std::collections::BTreeSet;
 
-use serde::Deserialize;
 use toml::Spanned;
 
 use super::ConfigLoadError;
 use super::checks::Ctx;
+use super::raw::{RawAction, RawBound, RawVector};
 use crate::wire::{
     ActionDesc, CHANNEL_NAME_LEN, MAX_ACTION_LEN, MAX_ACTIONS, MAX_VECTOR_LEN, MAX_VECTORS,
     bounds_hash,
@@ -102,33 +102,6 @@ impl ActionConfig {
             ActionSpace::Discrete { n } => format!("a choice in 0..{n}"),
         }
     }
-}
-
-/// `low` / `high`: one number for every value, or one per value.
-#[derive(Deserialize, Clone)]
-#[serde(untagged)]
-pub(super) enum RawBound {
-    One(f64),
-    Each(Vec<f64>),
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(super) struct RawVector {
-    name: Spanned<String>,
-    len: Spanned<i64>,
-    low: Option<Spanned<RawBound>>,
-    high: Option<Spanned<RawBound>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(super) struct RawAction {
-    name: Spanned<String>,
-    len: Option<Spanned<i64>>,
-    low: Option<Spanned<RawBound>>,
-    high: Option<Spanned<RawBound>>,
-    n: Option<Spanned<i64>>,
 }
 
 impl Ctx<'_> {

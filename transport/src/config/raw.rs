@@ -4,7 +4,6 @@
 use serde::Deserialize;
 use toml::Spanned;
 
-use super::channels::{RawAction, RawVector};
 use super::{AgentLostPolicy, LegacyDialect, PngCompression, TransportKind, WaitForStop, WaitMode};
 
 #[derive(Deserialize)]
@@ -110,4 +109,31 @@ fn default_fov_h() -> Spanned<f64> {
 }
 fn default_fov_v() -> Spanned<f64> {
     Spanned::new(0..0, 90.0)
+}
+
+/// `low` / `high`: one number for every value, or one per value.
+#[derive(Deserialize, Clone)]
+#[serde(untagged)]
+pub(super) enum RawBound {
+    One(f64),
+    Each(Vec<f64>),
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawVector {
+    pub(super) name: Spanned<String>,
+    pub(super) len: Spanned<i64>,
+    pub(super) low: Option<Spanned<RawBound>>,
+    pub(super) high: Option<Spanned<RawBound>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawAction {
+    pub(super) name: Spanned<String>,
+    pub(super) len: Option<Spanned<i64>>,
+    pub(super) low: Option<Spanned<RawBound>>,
+    pub(super) high: Option<Spanned<RawBound>>,
+    pub(super) n: Option<Spanned<i64>>,
 }

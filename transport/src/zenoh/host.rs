@@ -20,10 +20,7 @@ use super::*;
 use crate::config::Config;
 use crate::rounded::Rounded;
 use crate::signal::SignalHandling;
-use crate::wire::{MotorCommand, MotorHeader, SensorHeader};
-
-pub(super) const HEADER: usize = core::mem::size_of::<SensorHeader>();
-pub(super) const MOTOR_HEADER: usize = core::mem::size_of::<MotorHeader>();
+use crate::wire::{MotorCommand, SensorHeader};
 
 /// A loaned zenoh frame: a pooled buffer the images are written into, sent from in place.
 #[derive(Debug)]
@@ -42,39 +39,6 @@ impl FrameLoanMut for ZenohFrameLoan {
     fn header(&self) -> &SensorHeader {
         &self.header
     }
-}
-
-/// What the zenoh host dropped or refused, by reason (each is also logged).
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
-#[non_exhaustive]
-pub struct ZenohHostStats {
-    /// Hellos refused: wrong version or layout.
-    pub refused_version: u64,
-    /// Hellos refused: missing or wrong token.
-    pub refused_token: u64,
-    /// Hellos refused: the agent id is not part of the session.
-    pub refused_unknown_agent: u64,
-    /// Hellos refused: the agent id is connected already.
-    pub refused_id_in_use: u64,
-    /// Hellos refused: the agent's channels differ from the host's config.
-    pub refused_channels: u64,
-    /// Hellos refused: not a hello (garbage, too long, truncated).
-    pub refused_malformed: u64,
-    /// Peers dropped in the TLS handshake (counted when the process's `tracing`
-    /// subscriber has [`super::tls_refusal_layer`]).
-    pub refused_tls: u64,
-    /// Batches dropped: too long, or not a header plus its commands, or naming another agent.
-    pub dropped_malformed: u64,
-    /// Batches dropped: from an agent id that is not connected.
-    pub dropped_not_connected: u64,
-    /// Batches dropped: more than [`MAX_QUEUED_BATCHES`] waiting (a flood).
-    pub dropped_flood: u64,
-    /// Liveliness tokens ignored: no welcome with that nonce.
-    pub ignored_tokens: u64,
-    /// Frames sent, for the log at close.
-    pub frames_sent: u64,
-    /// Agents held after a lost link and back within the resume window.
-    pub resumes: u64,
 }
 
 /// Why the zenoh host could not be created.

@@ -89,6 +89,7 @@ mod tls_refusals;
 
 pub use agent::*;
 pub use host::*;
+pub use host_state::ZenohHostStats;
 pub use tls_refusals::tls_refusal_layer;
 
 /// Most batches that may wait per agent between two drains; more are dropped (a flood),
