@@ -38,7 +38,7 @@
 //!   a client that blocks on a final status never hangs.
 //!
 //! Everything is read without blocking, from one `epoll` set whose descriptor is the
-//! transport's [`vrsync_transport::HostTransport::activity_fd`]: a host serving agents over several
+//! transport's [`vrsync_transport::HostReadiness::activity_fd`]: a host serving agents over several
 //! transports waits for all of them at once.
 
 //!

@@ -165,10 +165,6 @@ macro_rules! absent_host_transport {
         impl $crate::HostTransport for $host {
             type Loan = $loan;
 
-            fn is_connected(&self, _slot: usize) -> bool {
-                match *self {}
-            }
-
             fn loan(&mut self, _slot: usize) -> Result<$loan, $crate::HostTransportError> {
                 match *self {}
             }
@@ -191,16 +187,20 @@ macro_rules! absent_host_transport {
             ) -> Result<(), $crate::HostTransportError> {
                 match *self {}
             }
+        }
+
+        impl $crate::HostReadiness for $host {
+            fn activity_fd(&self) -> ::std::os::fd::RawFd {
+                match *self {}
+            }
+        }
+
+        impl $crate::HostConnections for $host {
+            fn is_connected(&self, _slot: usize) -> bool {
+                match *self {}
+            }
 
             fn update_connections(&mut self) -> Result<(), $crate::HostTransportError> {
-                match *self {}
-            }
-
-            fn termination_requested(&self) -> bool {
-                match *self {}
-            }
-
-            fn activity_fd(&self) -> ::std::os::fd::RawFd {
                 match *self {}
             }
         }

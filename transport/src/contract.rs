@@ -234,8 +234,12 @@ impl AgentConnectError {
 /// A sink for received motor batches: `(slot, header, commands)`.
 pub type BatchSink<'a> = dyn FnMut(usize, &MotorHeader, &[MotorCommand]) + 'a;
 
-/// Host side of a transport. Agents are addressed by *slot*: their index in the config's
-/// agent list.
+/// Host side of a transport: its data path. Agents are addressed by *slot*: their index in
+/// the config's agent list. The contract is three traits, each a concern of its own: the
+/// data path (this one), the readiness the host waits on ([`HostReadiness`]) and the
+/// connections ([`HostConnections`]); a transport implements all three. Termination is not
+/// the transport's business: the host reads the process's termination flag
+/// ([`SignalHandling`](crate::SignalHandling)) itself.
 ///
 /// The contract:
 /// - [`HostTransport::loan`] hands out writable memory for one agent's sensor frame
@@ -247,29 +251,26 @@ pub type BatchSink<'a> = dyn FnMut(usize, &MotorHeader, &[MotorCommand]) + 'a;
 ///   (On TCP the frame record itself is the start.)
 /// - [`HostTransport::drain`] hands every motor batch that arrived since the last call to
 ///   the sink, per agent in the order the agent sent them, without blocking.
-/// - [`HostTransport::wait_activity`] blocks until a batch may have arrived or the timeout
+/// - [`HostReadiness::wait_activity`] blocks until a batch may have arrived or the timeout
 ///   passed. It may wake spuriously; it never spins (unless the transport is asked to) and
 ///   never loses a wake-up: a batch published before or during the call ends the wait.
 ///   Notifications merge, so callers never count wake-ups — they read cycle numbers from
 ///   the batches.
-/// - [`HostTransport::is_connected`] tells whether an agent's receiving side is attached, so
-///   the host can refuse to start cycle 0 before every agent can see it. A new connection
-///   that replaced the one the last frame went to is not the same agent: until the host
-///   [forgets](HostTransport::forget_connection) the old one it is not connected.
+/// - [`HostConnections::is_connected`] tells whether an agent's receiving side is
+///   attached, so the host can refuse to start cycle 0 before every agent can see it. A new
+///   connection that replaced the one the last frame went to is not the same agent: until
+///   the host [forgets](HostConnections::forget_connection) the old one it is not
+///   connected.
 /// - A batch with [`crate::wire::MOTOR_FLAG_LEAVE`] is handed to the sink like any other;
 ///   a network transport then drops that connection at once, so the id is free for a new
 ///   one.
 /// - Each transport has its own loan type ([`HostTransport::Loan`]); a host serving agents
 ///   over several transports routes each agent's slot to its transport and waits for all
-///   of them at once ([`HostTransport::activity_fd`]): one wait, whoever answers.
-pub trait HostTransport {
+///   of them at once ([`HostReadiness::activity_fd`]): one wait, whoever answers.
+pub trait HostTransport: HostReadiness + HostConnections {
     /// A loaned sensor frame of this transport: only this transport's own loans come back
     /// to [`HostTransport::publish`], so no backend checks at run time what it got.
     type Loan: FrameLoanMut;
-    /// Whether agent `slot` has attached its receiving side. A slot a network transport
-    /// holds for its agent's return after a lost link (TCP's `[sync] resume_window`) counts
-    /// as connected: a frame published to it is delivered when the agent is back.
-    fn is_connected(&self, slot: usize) -> bool;
     /// Loans writable memory for agent `slot`'s next sensor frame.
     ///
     /// # Errors
@@ -292,39 +293,82 @@ pub trait HostTransport {
     /// # Errors
     /// [`HostTransportError::Receive`].
     fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError>;
+}
+
+/// How the host waits for a transport: one descriptor, a deadline, work already read, and
+/// what a wake-up means (part of the transport contract, see [`HostTransport`]).
+pub trait HostReadiness {
     /// Blocks until a batch may have arrived, or `timeout` passed. The default is the one
     /// wait every transport shares: its [`activity_fd`] until readable, bounded by its
     /// [`next_deadline`], then [`after_wait`].
     ///
     /// # Errors
-    /// [`HostTransportError::Terminated`] on SIGINT/SIGTERM.
+    /// [`HostTransportError::Wait`] when waiting fails; [`HostTransportError::Terminated`]
+    /// when a transport that watches the termination flag in its own wait (shared memory,
+    /// spinning) saw it.
     ///
-    /// [`activity_fd`]: HostTransport::activity_fd
-    /// [`next_deadline`]: HostTransport::next_deadline
-    /// [`after_wait`]: HostTransport::after_wait
+    /// [`activity_fd`]: HostReadiness::activity_fd
+    /// [`next_deadline`]: HostReadiness::next_deadline
+    /// [`after_wait`]: HostReadiness::after_wait
     fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
         wait_for_activity(self, timeout)
     }
+
+    /// The transport's readiness: a descriptor that is readable whenever something may
+    /// have arrived (a batch, a connection, a hello) — an epoll set of its sockets, an
+    /// iceoryx2 listener, an eventfd its callbacks write. Level-triggered: it stays
+    /// readable until [`HostReadiness::after_wait`] or a drain consumed what it stands
+    /// for. A host serving agents over several transports waits once on all of theirs.
+    fn activity_fd(&self) -> std::os::fd::RawFd;
+
+    /// When the transport next needs [`HostReadiness::after_wait`] although its descriptor
+    /// stays quiet (a hello or a record that must complete by then, a keep-alive due):
+    /// every wait ends by then.
+    fn next_deadline(&self) -> Option<std::time::Instant> {
+        None
+    }
+
+    /// Whether there is work a wait must not sleep over although the descriptor is quiet
+    /// (batches already read from the sockets, a connection ready to admit).
+    fn has_work(&self) -> bool {
+        false
+    }
+
+    /// Called after every wait (whether the descriptor was readable or the time passed):
+    /// services what the wake-up means without blocking (accepts, hellos, timers) and
+    /// forgets wake-ups already seen. Batches are left for the next drain.
+    fn after_wait(&mut self) {}
+}
+
+/// A transport's connections as the host sees them: who is attached, who joined, left,
+/// died, was refused or came back (part of the transport contract, see [`HostTransport`]).
+pub trait HostConnections {
+    /// Whether agent `slot` has attached its receiving side. A slot a network transport
+    /// holds for its agent's return after a lost link (TCP's `[sync] resume_window`) counts
+    /// as connected: a frame published to it is delivered when the agent is back.
+    fn is_connected(&self, slot: usize) -> bool;
+
     /// Re-establishes connections after agents joined.
     ///
     /// # Errors
     /// [`HostTransportError::Connect`] naming the agent.
     fn update_connections(&mut self) -> Result<(), HostTransportError>;
-    /// Whether SIGINT/SIGTERM was received.
-    fn termination_requested(&self) -> bool;
+
     /// Hands the peers refused since the last call to `sink`; returns how many more were
-    /// refused without details (see [`Refusals`](crate::Refusals)). Transports without strangers (shared
-    /// memory) keep the default: none.
+    /// refused without details (see [`Refusals`](crate::Refusals)). Transports without
+    /// strangers (shared memory) keep the default: none.
     fn take_refusals(&mut self, sink: &mut dyn FnMut(&PeerRefusal)) -> u64 {
         let _ = sink;
         0
     }
+
     /// How many agents held after a lost link came back within the resume window
     /// (`[sync] resume_window`) since the last call. Transports without a resume window
     /// keep the default: none.
     fn take_resumes(&mut self) -> u64 {
         0
     }
+
     /// Finds agents whose process died (iceoryx2 reports their node dead), removes their
     /// stale resources, and appends their slots to `dead`. Called a few times per second
     /// while the host waits; transports that see disconnects directly (TCP) need nothing.
@@ -347,41 +391,17 @@ pub trait HostTransport {
     fn local_addr(&self) -> Option<std::net::SocketAddr> {
         None
     }
-
-    /// The transport's readiness: a descriptor that is readable whenever something may
-    /// have arrived (a batch, a connection, a hello) — an epoll set of its sockets, an
-    /// iceoryx2 listener, an eventfd its callbacks write. Level-triggered: it stays
-    /// readable until [`HostTransport::after_wait`] or a drain consumed what it stands
-    /// for. A host serving agents over several transports waits once on all of theirs.
-    fn activity_fd(&self) -> std::os::fd::RawFd;
-
-    /// When the transport next needs [`HostTransport::after_wait`] although its descriptor
-    /// stays quiet (a hello or a record that must complete by then, a keep-alive due):
-    /// every wait ends by then.
-    fn next_deadline(&self) -> Option<std::time::Instant> {
-        None
-    }
-
-    /// Whether there is work a wait must not sleep over although the descriptor is quiet
-    /// (batches already read from the sockets, a connection ready to admit).
-    fn has_work(&self) -> bool {
-        false
-    }
-
-    /// Called after every wait (whether the descriptor was readable or the time passed):
-    /// services what the wake-up means without blocking (accepts, hellos, timers) and
-    /// forgets wake-ups already seen. Batches are left for the next drain.
-    fn after_wait(&mut self) {}
 }
 
-/// The wait of one transport: its [`HostTransport::activity_fd`] until readable or
-/// `timeout` (shortened to its [`HostTransport::next_deadline`], zero when it
-/// [has work](HostTransport::has_work)), then [`HostTransport::after_wait`].
+/// The wait of one transport: its [`HostReadiness::activity_fd`] until readable or
+/// `timeout` (shortened to its [`HostReadiness::next_deadline`], zero when it
+/// [has work](HostReadiness::has_work)), then [`HostReadiness::after_wait`]. A signal ends
+/// the wait early (the handlers are installed without `SA_RESTART`); the caller reads the
+/// termination flag.
 ///
 /// # Errors
-/// [`HostTransportError::Wait`] when waiting fails; [`HostTransportError::Terminated`] on
-/// SIGINT/SIGTERM.
-pub fn wait_for_activity<T: HostTransport + ?Sized>(
+/// [`HostTransportError::Wait`] when waiting fails.
+pub fn wait_for_activity<T: HostReadiness + ?Sized>(
     t: &mut T,
     timeout: Duration,
 ) -> Result<(), HostTransportError> {
@@ -392,9 +412,6 @@ pub fn wait_for_activity<T: HostTransport + ?Sized>(
         }
     })?;
     t.after_wait();
-    if t.termination_requested() {
-        return Err(HostTransportError::Terminated);
-    }
     Ok(())
 }
 

@@ -86,7 +86,7 @@ impl PeerRefusal {
     }
 }
 
-/// Refusals a transport keeps between two [`HostTransport::take_refusals`](super::HostTransport::take_refusals) calls with
+/// Refusals a transport keeps between two [`HostConnections::take_refusals`](super::HostConnections::take_refusals) calls with
 /// their details; beyond that only their number.
 pub const MAX_KEPT_REFUSALS: usize = 256;
 

@@ -71,13 +71,14 @@ impl<'c> HostBuilder<'c> {
     /// [`HostCreateError`].
     pub fn create(self) -> Result<Host, HostCreateError> {
         let backend = Transports::create(self.config, self.signals)?;
-        Ok(Host::over(self.config, backend))
+        Ok(Host::over(self.config, backend, self.signals))
     }
 }
 
 impl<T: HostTransport> Host<T> {
-    /// A host of `config` over `backend` (the builder's transports, or a test's fake).
-    pub(crate) fn over(config: &Config, backend: T) -> Self {
+    /// A host of `config` over `backend` (the builder's transports, or a test's fake);
+    /// `signals` says whether a termination request ends its waits.
+    pub(crate) fn over(config: &Config, backend: T, signals: SignalHandling) -> Self {
         let config = config.clone();
         let n = config.agents.len();
         let cap = config.transport.max_commands_per_cycle as usize * 2;
@@ -134,6 +135,7 @@ impl<T: HostTransport> Host<T> {
         );
         Host {
             backend,
+            signals,
             slots,
             barrier: CycleBarrier::new(n),
             cycle: 0,
@@ -207,6 +209,8 @@ pub const REAP_PERIOD: Duration = Duration::from_millis(100);
 pub struct Host<T: HostTransport = Transports> {
     config: Config,
     backend: T,
+    /// Whether SIGINT/SIGTERM end the waits (read here, not by the transports).
+    signals: SignalHandling,
     slots: Vec<SlotState>,
     barrier: CycleBarrier,
     cycle: u64,
@@ -341,7 +345,8 @@ impl<T: HostTransport> Host<T> {
     /// [`INTERRUPT_PERIOD`] when an interrupt hook is set (see [`Host::set_interrupt`]).
     fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
         let Some(hook) = &mut self.interrupt else {
-            return self.backend.wait_activity(timeout);
+            self.backend.wait_activity(timeout)?;
+            return self.check_termination();
         };
         if hook() {
             return Err(HostTransportError::Terminated);
@@ -349,6 +354,15 @@ impl<T: HostTransport> Host<T> {
         self.backend.wait_activity(timeout.min(INTERRUPT_PERIOD))?;
         let interrupted = self.interrupt.as_mut().is_some_and(|hook| hook());
         if interrupted {
+            return Err(HostTransportError::Terminated);
+        }
+        self.check_termination()
+    }
+
+    /// `Terminated` once SIGINT/SIGTERM arrived (with [`SignalHandling::Install`]): a
+    /// signal ends the transport's wait early, and the host reads the flag after it.
+    fn check_termination(&self) -> Result<(), HostTransportError> {
+        if self.signals.termination_requested() {
             return Err(HostTransportError::Terminated);
         }
         Ok(())
@@ -376,7 +390,7 @@ impl<T: HostTransport> Host<T> {
 
     /// Whether SIGINT/SIGTERM was received.
     pub fn termination_requested(&self) -> bool {
-        self.backend.termination_requested()
+        self.signals.termination_requested()
     }
 
     /// Records how many of agent `id`'s commands the simulator rejected this cycle; the

@@ -8,7 +8,7 @@ use std::path::Path;
 use std::rc::Rc;
 
 use super::*;
-use crate::transport::BatchSink;
+use crate::transport::{BatchSink, HostConnections, HostReadiness};
 use crate::wire::{ActionState, Command, MOTOR_FLAG_ACK, MOTOR_FLAG_STOP, MotorHeader};
 
 /// What the fake's agents do; shared between the test and the host's transport.
@@ -65,20 +65,13 @@ struct Fake(Rc<RefCell<Agents>>);
 impl HostTransport for Fake {
     type Loan = FakeLoan;
 
-    fn is_connected(&self, slot: usize) -> bool {
-        self.0
-            .borrow()
-            .connected
-            .get(slot)
-            .copied()
-            .unwrap_or(false)
-    }
     fn loan(&mut self, _slot: usize) -> Result<FakeLoan, HostTransportError> {
         Ok(FakeLoan {
             header: SensorHeader::default(),
             payload: vec![0; 64],
         })
     }
+
     fn publish(&mut self, slot: usize, frame: FakeLoan) -> Result<bool, HostTransportError> {
         let mut a = self.0.borrow_mut();
         if !a.connected[slot] {
@@ -88,9 +81,11 @@ impl HostTransport for Fake {
         a.published.push((slot, frame.header));
         Ok(true)
     }
+
     fn signal_start(&mut self) -> Result<(), HostTransportError> {
         Ok(())
     }
+
     fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError> {
         let inbox = std::mem::take(&mut self.0.borrow_mut().inbox);
         for (slot, header, commands) in &inbox {
@@ -98,6 +93,9 @@ impl HostTransport for Fake {
         }
         Ok(())
     }
+}
+
+impl HostReadiness for Fake {
     fn activity_fd(&self) -> std::os::fd::RawFd {
         // Never polled: the fake's wait is its own (below).
         -1
@@ -137,12 +135,22 @@ impl HostTransport for Fake {
         }
         Ok(())
     }
+}
+
+impl HostConnections for Fake {
+    fn is_connected(&self, slot: usize) -> bool {
+        self.0
+            .borrow()
+            .connected
+            .get(slot)
+            .copied()
+            .unwrap_or(false)
+    }
+
     fn update_connections(&mut self) -> Result<(), HostTransportError> {
         Ok(())
     }
-    fn termination_requested(&self) -> bool {
-        false
-    }
+
     fn reap_dead_agents(&mut self, dead: &mut Vec<usize>) {
         dead.extend(std::mem::take(&mut self.0.borrow_mut().dead));
     }
@@ -171,7 +179,7 @@ fn host_waiting(
         answers: vec![true, true],
         ..Agents::default()
     }));
-    let mut host = Host::over(&config, Fake(agents.clone()));
+    let mut host = Host::over(&config, Fake(agents.clone()), SignalHandling::Leave);
     host.wait_for_agents(Duration::from_secs(1)).unwrap();
     (host, agents)
 }
@@ -319,7 +327,7 @@ fn per_agent_policies_a_timeout_agent_times_out_while_the_cycle_waits_for_a_live
         busy_until: vec![None, Some(Instant::now() + Duration::from_millis(200))],
         ..Agents::default()
     }));
-    let mut host = Host::over(&config, Fake(agents.clone()));
+    let mut host = Host::over(&config, Fake(agents.clone()), SignalHandling::Leave);
     host.wait_for_agents(Duration::from_secs(1)).unwrap();
     publish_all(&mut host);
     // Agent 3's stop comes after its timeout, while the cycle still waits for 7.
@@ -625,7 +633,7 @@ fn waiting_for_agents_names_the_missing_ones_and_the_session() {
         answers: vec![true, true],
         ..Agents::default()
     }));
-    let mut host = Host::over(&config, Fake(agents));
+    let mut host = Host::over(&config, Fake(agents), SignalHandling::Leave);
     let err = host.wait_for_agents(Duration::from_millis(20)).unwrap_err();
     match &err {
         HostWaitError::AgentsMissing {
@@ -648,7 +656,7 @@ fn an_agent_that_connected_and_left_is_named_as_such() {
         answers: vec![true, true],
         ..Agents::default()
     }));
-    let mut host = Host::over(&config, Fake(agents.clone()));
+    let mut host = Host::over(&config, Fake(agents.clone()), SignalHandling::Leave);
     assert!(host.wait_for_agents(Duration::from_millis(5)).is_err());
     agents.borrow_mut().connected[1] = false;
     let err = host.wait_for_agents(Duration::from_millis(5)).unwrap_err();

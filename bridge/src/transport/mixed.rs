@@ -3,10 +3,10 @@
 //!
 //! Each transport is created for its own agents only (a sub-config with those agents);
 //! slots inside a transport are its own, this module maps them to the host's. Every
-//! transport's readiness is one descriptor ([`HostTransport::activity_fd`]); with more
+//! transport's readiness is one descriptor ([`HostReadiness::activity_fd`]); with more
 //! than one transport they join one epoll set, and the host waits on it like on a single
 //! transport's ([`super::wait_for_activity`]): bounded by the earliest of their deadlines,
-//! then each transport's [`HostTransport::after_wait`]. Whatever the mix, there is no case
+//! then each transport's [`HostReadiness::after_wait`]. Whatever the mix, there is no case
 //! per combination. A host with one transport uses that transport's own wait (shared
 //! memory may spin before it blocks).
 //!
@@ -23,7 +23,10 @@ use std::net::SocketAddr;
 use std::os::fd::RawFd;
 use std::time::{Duration, Instant};
 
-use super::{BatchSink, FrameLoanMut, HostTransport, HostTransportError, PeerRefusal};
+use super::{
+    BatchSink, FrameLoanMut, HostConnections, HostReadiness, HostTransport, HostTransportError,
+    PeerRefusal,
+};
 use crate::wire::SensorHeader;
 use vrsync_transport::SignalHandling;
 use vrsync_transport::internal::EpollSet;
@@ -314,7 +317,7 @@ macro_rules! mixed_first {
         impl Parts {
             /// Each transport's activity descriptor, `None` for a transport no agent uses.
             fn activity_fds(&self) -> [Option<RawFd>; TransportKind::ALL.len()] {
-                [$(self.$module.as_ref().map(|p| HostTransport::activity_fd(&p.host)),)*]
+                [$(self.$module.as_ref().map(|p| HostReadiness::activity_fd(&p.host)),)*]
             }
 
             /// The first transport's own wait (for a host with one transport).
@@ -328,25 +331,25 @@ macro_rules! mixed_first {
             /// The first transport's activity descriptor, -1 without any.
             fn activity_fd(&self) -> RawFd {
                 $(if let Some(p) = &self.$module {
-                    return HostTransport::activity_fd(&p.host);
+                    return HostReadiness::activity_fd(&p.host);
                 })*
                 -1
             }
 
             fn next_deadline(&self) -> Option<Instant> {
-                [$(self.$module.as_ref().and_then(|p| HostTransport::next_deadline(&p.host)),)*]
+                [$(self.$module.as_ref().and_then(|p| HostReadiness::next_deadline(&p.host)),)*]
                     .into_iter()
                     .flatten()
                     .min()
             }
 
             fn has_work(&self) -> bool {
-                false $(|| self.$module.as_ref().is_some_and(|p| HostTransport::has_work(&p.host)))*
+                false $(|| self.$module.as_ref().is_some_and(|p| HostReadiness::has_work(&p.host)))*
             }
 
             fn local_addr(&self) -> Option<SocketAddr> {
                 None $(.or_else(|| {
-                    self.$module.as_ref().and_then(|p| HostTransport::local_addr(&p.host))
+                    self.$module.as_ref().and_then(|p| HostConnections::local_addr(&p.host))
                 }))*
             }
         }
@@ -362,7 +365,6 @@ pub struct Transports {
     epoll: Option<EpollSet>,
     routes: Vec<Route>,
     scratch: Vec<usize>,
-    signals: SignalHandling,
 }
 
 impl core::fmt::Debug for Transports {
@@ -404,7 +406,6 @@ impl Transports {
             epoll,
             routes,
             scratch: Vec::with_capacity(config.agents.len()),
-            signals,
         })
     }
 
@@ -418,13 +419,6 @@ impl Transports {
 
 impl HostTransport for Transports {
     type Loan = AnyLoan;
-
-    fn is_connected(&self, slot: usize) -> bool {
-        let Some(&r) = self.routes.get(slot) else {
-            return false;
-        };
-        self.parts.is_connected(r)
-    }
 
     fn loan(&mut self, slot: usize) -> Result<AnyLoan, HostTransportError> {
         let r = self.route(slot)?;
@@ -443,7 +437,9 @@ impl HostTransport for Transports {
     fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError> {
         self.parts.drain(sink)
     }
+}
 
+impl HostReadiness for Transports {
     fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
         if self.epoll.is_some() {
             return super::wait_for_activity(self, timeout);
@@ -470,13 +466,18 @@ impl HostTransport for Transports {
     fn after_wait(&mut self) {
         self.parts.after_wait();
     }
+}
+
+impl HostConnections for Transports {
+    fn is_connected(&self, slot: usize) -> bool {
+        let Some(&r) = self.routes.get(slot) else {
+            return false;
+        };
+        self.parts.is_connected(r)
+    }
 
     fn update_connections(&mut self) -> Result<(), HostTransportError> {
         self.parts.update_connections()
-    }
-
-    fn termination_requested(&self) -> bool {
-        self.signals.termination_requested()
     }
 
     fn take_refusals(&mut self, sink: &mut dyn FnMut(&PeerRefusal)) -> u64 {

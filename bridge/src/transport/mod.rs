@@ -6,8 +6,8 @@
 pub(crate) mod mixed;
 
 pub(crate) use vrsync_transport::{
-    BatchSink, FrameLoanMut, HostTransport, HostTransportError, PeerRefusal, shm, tcp,
-    wait_for_activity, zenoh,
+    BatchSink, FrameLoanMut, HostConnections, HostReadiness, HostTransport, HostTransportError,
+    PeerRefusal, shm, tcp, wait_for_activity, zenoh,
 };
 
 /// The original protocol's entry of the registry: its host (the `vrsync-legacy` crate, with

@@ -21,7 +21,8 @@ use vrsync_transport::Rounded;
 use vrsync_transport::SignalHandling;
 use vrsync_transport::internal::{EpollSet, write_all_until};
 use vrsync_transport::{
-    BatchSink, FrameLoanMut, HostTransport, HostTransportError, PeerRefusal, RefusalKind, Refusals,
+    BatchSink, FrameLoanMut, HostConnections, HostReadiness, HostTransport, HostTransportError,
+    PeerRefusal, RefusalKind, Refusals,
 };
 use vrsync_transport::{Config, LegacyDialect, PngCompression, TransportKind};
 
@@ -220,7 +221,6 @@ pub struct LegacyHost {
     max_commands: usize,
     write_timeout: Duration,
     stats: LegacyStats,
-    signals: SignalHandling,
     /// The next accept's order number (environment and agent sockets alike).
     next_seq: u64,
     /// How long a new connection may take to send its version check.
@@ -315,7 +315,6 @@ impl LegacyHost {
             max_commands: config.transport.max_commands_per_cycle as usize,
             write_timeout: config.sync.stop_timeout.max(Duration::from_secs(1)),
             stats: LegacyStats::default(),
-            signals,
             next_seq: 0,
             hello_timeout: HELLO_TIMEOUT,
             stall_timeout: STALL_TIMEOUT,
@@ -562,10 +561,6 @@ fn send_all(stream: &mut TcpStream, data: &[u8], deadline: Instant) -> io::Resul
 impl HostTransport for LegacyHost {
     type Loan = LegacyFrameLoan;
 
-    fn is_connected(&self, slot: usize) -> bool {
-        self.slots.get(slot).is_some_and(|s| s.conn.is_some())
-    }
-
     fn loan(&mut self, slot: usize) -> Result<LegacyFrameLoan, HostTransportError> {
         let s = self
             .slots
@@ -673,7 +668,9 @@ impl HostTransport for LegacyHost {
         }
         Ok(())
     }
+}
 
+impl HostReadiness for LegacyHost {
     fn has_work(&self) -> bool {
         // Batches already read (at publish, or by a service of another transport's wait)
         // are activity too.
@@ -686,25 +683,27 @@ impl HostTransport for LegacyHost {
         LegacyHost::next_deadline(self)
     }
 
-    fn update_connections(&mut self) -> Result<(), HostTransportError> {
-        Ok(())
-    }
-
-    fn termination_requested(&self) -> bool {
-        self.signals.termination_requested()
-    }
-
     fn activity_fd(&self) -> RawFd {
         self.epoll.raw()
-    }
-
-    fn take_refusals(&mut self, sink: &mut dyn FnMut(&PeerRefusal)) -> u64 {
-        self.refusals.take(sink)
     }
 
     fn after_wait(&mut self) {
         // Level-triggered: the set is readable while a socket has unread input. Reading
         // it is the clearing.
         self.service();
+    }
+}
+
+impl HostConnections for LegacyHost {
+    fn is_connected(&self, slot: usize) -> bool {
+        self.slots.get(slot).is_some_and(|s| s.conn.is_some())
+    }
+
+    fn update_connections(&mut self) -> Result<(), HostTransportError> {
+        Ok(())
+    }
+
+    fn take_refusals(&mut self, sink: &mut dyn FnMut(&PeerRefusal)) -> u64 {
+        self.refusals.take(sink)
     }
 }

@@ -409,10 +409,6 @@ fn sole_subscriber(p: &HostAgentPorts) -> Option<UniqueSubscriberId> {
 impl HostTransport for ShmHost {
     type Loan = ShmFrameLoan;
 
-    fn is_connected(&self, slot: usize) -> bool {
-        self.agents.get(slot).is_some_and(is_dyn_connected)
-    }
-
     fn loan(&mut self, slot: usize) -> Result<ShmFrameLoan, HostTransportError> {
         let id = self.agent(slot)?.id;
         let Some(p) = self.agents.get_mut(slot) else {
@@ -481,14 +477,6 @@ impl HostTransport for ShmHost {
         Ok(delivered)
     }
 
-    fn forget_connection(&mut self, slot: usize) {
-        if let Some(p) = self.agents.get_mut(slot) {
-            p.departed = p.served.take().or_else(|| sole_subscriber(p));
-            p.verified.set(None);
-            p.sole.set(false);
-        }
-    }
-
     fn signal_start(&mut self) -> Result<(), HostTransportError> {
         self.wake.bump();
         Ok(())
@@ -520,7 +508,9 @@ impl HostTransport for ShmHost {
         }
         Ok(())
     }
+}
 
+impl HostReadiness for ShmHost {
     fn wait_activity(&mut self, timeout: Duration) -> Result<(), HostTransportError> {
         if self.spin {
             // Busy-poll: the caller drains the subscribers again right away. Check for a
@@ -532,7 +522,7 @@ impl HostTransport for ShmHost {
             }
             std::hint::spin_loop();
             self.spins = self.spins.wrapping_add(1);
-            if self.spins.is_multiple_of(4096) && self.termination_requested() {
+            if self.spins.is_multiple_of(4096) && self.signals.termination_requested() {
                 return Err(HostTransportError::Terminated);
             }
             return Ok(());
@@ -578,10 +568,33 @@ impl HostTransport for ShmHost {
         // Drain every id that is already pending: counts merge and carry no information
         // we rely on, and a pending id would make the next wait return at once.
         let _ = self.stop.try_wait(|_| {});
-        if self.termination_requested() {
+        if self.signals.termination_requested() {
             return Err(HostTransportError::Terminated);
         }
         Ok(())
+    }
+
+    fn activity_fd(&self) -> std::os::fd::RawFd {
+        // SAFETY: the descriptor stays owned by the listener; it is only polled.
+        unsafe { self.stop.file_descriptor().native_handle() }
+    }
+
+    fn after_wait(&mut self) {
+        let _ = self.stop.try_wait(|_| {});
+    }
+}
+
+impl HostConnections for ShmHost {
+    fn is_connected(&self, slot: usize) -> bool {
+        self.agents.get(slot).is_some_and(is_dyn_connected)
+    }
+
+    fn forget_connection(&mut self, slot: usize) {
+        if let Some(p) = self.agents.get_mut(slot) {
+            p.departed = p.served.take().or_else(|| sole_subscriber(p));
+            p.verified.set(None);
+            p.sole.set(false);
+        }
     }
 
     fn reap_dead_agents(&mut self, dead: &mut Vec<usize>) {
@@ -611,18 +624,5 @@ impl HostTransport for ShmHost {
                 .map_err(|e| connect("motor subscriber", &e))?;
         }
         Ok(())
-    }
-
-    fn termination_requested(&self) -> bool {
-        self.signals.termination_requested()
-    }
-
-    fn activity_fd(&self) -> std::os::fd::RawFd {
-        // SAFETY: the descriptor stays owned by the listener; it is only polled.
-        unsafe { self.stop.file_descriptor().native_handle() }
-    }
-
-    fn after_wait(&mut self) {
-        let _ = self.stop.try_wait(|_| {});
     }
 }

@@ -38,8 +38,8 @@ use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe 
 
 use super::{
     AGENT_MAX_HELD_FRAMES, AgentConnectError, AgentFrame, AgentReceiveError, AgentSendError,
-    AgentTransport, Attempt, BatchSink, FrameLoanMut, HostLiveness, HostTransport,
-    HostTransportError, retry_until,
+    AgentTransport, Attempt, BatchSink, FrameLoanMut, HostConnections, HostLiveness, HostReadiness,
+    HostTransport, HostTransportError, retry_until,
 };
 use crate::config::{Config, MAX_AGENT_ID};
 use crate::signal::SignalHandling;

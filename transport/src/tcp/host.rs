@@ -104,7 +104,6 @@ pub struct TcpHost {
     pub(super) poll: EpollSet,
     /// Tokens of the last wait's ready sockets (reused).
     pub(super) ready: Vec<u64>,
-    pub(super) signals: SignalHandling,
     /// Peers refused since the host last took them.
     pub(super) refusals: Refusals,
     /// Each slot's channels, as the hellos must declare them.
@@ -189,7 +188,6 @@ impl TcpHost {
             muted: false,
             poll,
             ready: Vec::with_capacity(64),
-            signals,
             refusals: Refusals::default(),
             layouts: config
                 .agents
@@ -201,7 +199,7 @@ impl TcpHost {
         })
     }
 
-    /// Services the sockets the last wait found ready (see [`HostTransport::after_wait`]).
+    /// Services the sockets the last wait found ready (see [`HostReadiness::after_wait`]).
     fn service(&mut self) {
         self.ready.clear();
         // A failed look finds nothing ready: the next wait looks again.
@@ -447,18 +445,6 @@ impl Drop for TcpHost {
 impl HostTransport for TcpHost {
     type Loan = TcpFrameLoan;
 
-    fn take_refusals(&mut self, sink: &mut dyn FnMut(&PeerRefusal)) -> u64 {
-        self.refusals.take(sink)
-    }
-
-    fn is_connected(&self, slot: usize) -> bool {
-        // A slot held for its agent's return counts as connected: its frames go out when
-        // the agent is back.
-        self.slots
-            .get(slot)
-            .is_some_and(|s| s.conn.is_some() || s.resuming.is_some())
-    }
-
     fn loan(&mut self, slot: usize) -> Result<TcpFrameLoan, HostTransportError> {
         let s = self
             .slots
@@ -543,7 +529,9 @@ impl HostTransport for TcpHost {
         }
         Ok(())
     }
+}
 
+impl HostReadiness for TcpHost {
     fn activity_fd(&self) -> RawFd {
         self.poll.raw()
     }
@@ -568,6 +556,20 @@ impl HostTransport for TcpHost {
     fn after_wait(&mut self) {
         self.service();
     }
+}
+
+impl HostConnections for TcpHost {
+    fn take_refusals(&mut self, sink: &mut dyn FnMut(&PeerRefusal)) -> u64 {
+        self.refusals.take(sink)
+    }
+
+    fn is_connected(&self, slot: usize) -> bool {
+        // A slot held for its agent's return counts as connected: its frames go out when
+        // the agent is back.
+        self.slots
+            .get(slot)
+            .is_some_and(|s| s.conn.is_some() || s.resuming.is_some())
+    }
 
     fn update_connections(&mut self) -> Result<(), HostTransportError> {
         Ok(())
@@ -582,10 +584,6 @@ impl HostTransport for TcpHost {
 
     fn take_resumes(&mut self) -> u64 {
         std::mem::take(&mut self.resumed)
-    }
-
-    fn termination_requested(&self) -> bool {
-        self.signals.termination_requested()
     }
 
     fn local_addr(&self) -> Option<SocketAddr> {

@@ -62,8 +62,8 @@ use zerocopy::{FromBytes, IntoBytes};
 pub use super::record::*;
 use super::{
     AGENT_MAX_HELD_FRAMES, AgentConnectError, AgentFrame, AgentReceiveError, AgentSendError,
-    AgentTransport, Attempt, BatchSink, FrameLoanMut, HostLiveness, HostTransport,
-    HostTransportError, retry_until,
+    AgentTransport, Attempt, BatchSink, FrameLoanMut, HostConnections, HostLiveness, HostReadiness,
+    HostTransport, HostTransportError, retry_until,
 };
 use crate::config::Config;
 use crate::signal::SignalHandling;

@@ -13,7 +13,8 @@ use tracing::{debug, info, warn};
 use zerocopy::IntoBytes;
 
 use super::super::{
-    BatchSink, FrameLoanMut, HostTransport, HostTransportError, PeerRefusal, Refusals,
+    BatchSink, FrameLoanMut, HostConnections, HostReadiness, HostTransport, HostTransportError,
+    PeerRefusal, Refusals,
 };
 use super::host_state::*;
 use super::*;
@@ -81,7 +82,6 @@ pub struct ZenohHost {
     ports: Vec<SlotPort>,
     pool: Arc<Mutex<Vec<AlignedBuf>>>,
     scratch: Vec<(usize, AlignedBuf)>,
-    signals: SignalHandling,
     _queryable: Queryable<()>,
     _motor: Subscriber<()>,
     _tokens: Subscriber<()>,
@@ -264,7 +264,6 @@ impl ZenohHost {
             ports,
             pool: Arc::default(),
             scratch: Vec::with_capacity(MAX_BATCHES_PER_DRAIN),
-            signals,
             _queryable: queryable,
             _motor: motor,
             _tokens: tokens,
@@ -386,13 +385,6 @@ impl Drop for ZenohHost {
 impl HostTransport for ZenohHost {
     type Loan = ZenohFrameLoan;
 
-    fn is_connected(&self, slot: usize) -> bool {
-        lock(&self.shared.state)
-            .slots
-            .get(slot)
-            .is_some_and(SlotState::connected_for_host)
-    }
-
     fn loan(&mut self, slot: usize) -> Result<ZenohFrameLoan, HostTransportError> {
         let p = self
             .ports
@@ -485,19 +477,9 @@ impl HostTransport for ZenohHost {
         }
         Ok(())
     }
+}
 
-    fn update_connections(&mut self) -> Result<(), HostTransportError> {
-        Ok(())
-    }
-
-    fn termination_requested(&self) -> bool {
-        self.signals.termination_requested()
-    }
-
-    fn take_refusals(&mut self, sink: &mut dyn FnMut(&PeerRefusal)) -> u64 {
-        lock(&self.shared.state).refusals.take(sink)
-    }
-
+impl HostReadiness for ZenohHost {
     fn activity_fd(&self) -> RawFd {
         self.shared.wake.raw()
     }
@@ -517,6 +499,23 @@ impl HostTransport for ZenohHost {
     fn after_wait(&mut self) {
         self.shared.wake.clear();
         self.resend_to_the_returned();
+    }
+}
+
+impl HostConnections for ZenohHost {
+    fn is_connected(&self, slot: usize) -> bool {
+        lock(&self.shared.state)
+            .slots
+            .get(slot)
+            .is_some_and(SlotState::connected_for_host)
+    }
+
+    fn update_connections(&mut self) -> Result<(), HostTransportError> {
+        Ok(())
+    }
+
+    fn take_refusals(&mut self, sink: &mut dyn FnMut(&PeerRefusal)) -> u64 {
+        lock(&self.shared.state).refusals.take(sink)
     }
 
     fn forget_connection(&mut self, slot: usize) {

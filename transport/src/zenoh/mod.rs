@@ -60,7 +60,7 @@
 //! 1st, 2nd, 4th, … of each kind); at most [`MAX_QUEUED_BATCHES`] batches wait per agent
 //! (a flood beyond is dropped the same way; stops have as much room again, so an agent's
 //! own flood does not lose its stop). Refused hellos reach the host's
-//! [`super::HostTransport::take_refusals`]. Received bytes are copied into buffers
+//! [`super::HostConnections::take_refusals`]. Received bytes are copied into buffers
 //! allocated up front; no allocation follows a length read from the network. zenoh's own
 //! reassembly buffer on the host is bounded by `transport/link/rx/max_message_size`.
 //!
@@ -74,7 +74,7 @@
 //! Every callback (a batch, a token, a match) writes an `eventfd` that the host's (and
 //! agent's) wait polls: no polling loop, and a host serving agents over several
 //! transports waits for all of them at once (the eventfd is zenoh's
-//! [`super::HostTransport::activity_fd`]).
+//! [`super::HostReadiness::activity_fd`]).
 
 use std::os::fd::RawFd;
 use std::sync::{Arc, Mutex, MutexGuard};

@@ -37,7 +37,9 @@ use ::zenoh::Wait;
 use zerocopy::IntoBytes;
 
 use super::super::record::{Hello, Reject, encode_hello, reject};
-use super::super::{AgentConnectError, AgentTransport, HostLiveness, HostTransport};
+use super::super::{
+    AgentConnectError, AgentTransport, HostConnections, HostLiveness, HostReadiness, HostTransport,
+};
 use crate::signal::SignalHandling;
 use crate::wire::{LAYOUT_HASH, MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION};
 
