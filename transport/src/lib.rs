@@ -55,12 +55,12 @@ pub use any_agent::{AnyAgent, AnyFrame};
 pub use colour::ansi_on_stderr;
 pub use config::{
     ActionConfig, ActionSpace, AgentConfig, AgentLostPolicy, CameraConfig, Config, ConfigLoadError,
-    DEFAULT_CONFIG_TOML, DEFAULT_RESUME_WINDOW_S, DEFAULT_SPIN_BEFORE_BLOCK_US,
-    DEFAULT_ZENOH_ENDPOINT, LegacyConfig, LegacyDialect, MAX_AGENT_ID, MAX_CONFIG_BYTES,
-    MAX_IMAGE_SIDE_PX, PngCompression, SyncConfig, TransportConfig, TransportKind, VectorConfig,
-    WaitForStop, WaitMode, ZenohConfig, ZenohTls, derived_height,
+    DEFAULT_CONFIG_TOML, DEFAULT_RESUME_WINDOW_S, DEFAULT_SPIN_BEFORE_BLOCK_US, MAX_AGENT_ID,
+    MAX_CONFIG_BYTES, MAX_IMAGE_SIDE_PX, SyncConfig, TransportConfig, TransportKind, VectorConfig,
+    WaitForStop, WaitMode, derived_height,
 };
 pub use contract::*;
+pub use legacy::{LegacyConfig, LegacyDialect, PngCompression};
 pub use logging::{QUIET_ZENOH, default_log_filter};
 pub use refusal::{MAX_KEPT_REFUSALS, PeerRefusal, RefusalKind, Refusals};
 pub use rounded::Rounded;
@@ -75,6 +75,7 @@ pub use wire::{
     action_chunks, bounds_hash, discrete_action_chunk, image_layout, kind as command_kind,
     kind_name, vector_layout,
 };
+pub use zenoh::{DEFAULT_ZENOH_ENDPOINT, ZenohConfig, ZenohTls};
 
 /// For the routing of a host over several transports (`vrsync-bridge`) and for the
 /// original protocol's host (`vrsync-legacy`): the pieces of this crate they build on,

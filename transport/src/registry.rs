@@ -25,8 +25,9 @@
 //!
 //! Adding a transport: its folder in this crate (host and agent side; a transport without
 //! an agent side, like legacy, gives an uninhabited agent whose `connect` says why:
-//! `absent.rs`'s `absent_agent!`), one entry here, its config section if it has keys,
-//! and its line in the conformance suite. A transport behind a cargo feature (zenoh,
+//! `absent.rs`'s `absent_agent!`), one entry here, its config section if it has keys
+//! (`section.rs` in its folder: the typed and raw forms, the checks, the text; and its
+//! field in `config/transport.rs`), and its line in the conformance suite. A transport behind a cargo feature (zenoh,
 //! legacy) keeps its entry in every build: without the feature its types are stand-ins
 //! (`absent_host!`, `absent_agent!`) whose constructors fail naming the feature.
 //!

@@ -6,7 +6,7 @@ use std::collections::BTreeSet;
 use toml::Spanned;
 
 use super::ConfigLoadError;
-use super::checks::Ctx;
+use super::ctx::Ctx;
 use super::raw::{RawAction, RawBound, RawVector};
 use crate::wire::{
     ActionDesc, CHANNEL_NAME_LEN, MAX_ACTION_LEN, MAX_ACTIONS, MAX_VECTOR_LEN, MAX_VECTORS,

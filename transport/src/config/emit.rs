@@ -3,9 +3,9 @@
 
 use std::fmt::Write;
 
-use super::{
-    ActionSpace, AgentConfig, AgentLostPolicy, Config, SyncConfig, TransportConfig, WaitMode,
-};
+use super::ctx::toml_string;
+use super::transport::write_transport;
+use super::{ActionSpace, AgentConfig, AgentLostPolicy, Config, SyncConfig, WaitMode};
 
 impl Config {
     /// The config as TOML again (for handing the effective config to spawned agents).
@@ -57,59 +57,6 @@ fn write_sync(s: &mut String, sync: &SyncConfig) {
     if let Some(w) = sync.wait_for_stop {
         let _ = writeln!(s, "wait_for_stop = {:?}", w.as_str());
     }
-}
-
-/// `[transport]`, `[transport.legacy]` and `[transport.zenoh]`.
-fn write_transport(s: &mut String, transport: &TransportConfig) {
-    let _ = writeln!(
-        s,
-        "\n[transport]\nkind = {:?}\ntcp_listen = \"{}\"\nmax_commands_per_cycle = {}",
-        transport.kind.as_str(),
-        transport.tcp_listen,
-        transport.max_commands_per_cycle
-    );
-    if let Some(token) = &transport.tcp_token {
-        let _ = writeln!(s, "tcp_token = {}", toml_string(token));
-    }
-    let l = &transport.legacy;
-    let _ = writeln!(
-        s,
-        "\n[transport.legacy]\nlocal_port = {}\nbind = \"{}\"\ndialect = {:?}\npng_compression = {:?}\nsend_eye_position = {}\nsend_head_motion = {}",
-        l.local_port,
-        l.bind,
-        l.dialect.as_str(),
-        l.png_compression.as_str(),
-        l.send_eye_position,
-        l.send_head_motion
-    );
-    let z = &transport.zenoh;
-    let list = |l: &[String]| {
-        l.iter()
-            .map(|e| toml_string(e))
-            .collect::<Vec<_>>()
-            .join(", ")
-    };
-    let _ = writeln!(
-        s,
-        "\n[transport.zenoh]\nlisten = [{}]\nconnect = [{}]\nlease = {:?}\nscouting = {}",
-        list(&z.listen),
-        list(&z.connect),
-        z.lease.as_secs_f64(),
-        z.scouting
-    );
-    if let Some(token) = &z.token {
-        let _ = writeln!(s, "token = {}", toml_string(token));
-    }
-    for (name, path) in [
-        ("tls_ca", &z.tls.ca),
-        ("tls_cert", &z.tls.cert),
-        ("tls_key", &z.tls.key),
-    ] {
-        if let Some(p) = path {
-            let _ = writeln!(s, "{name} = {}", toml_string(&p.to_string_lossy()));
-        }
-    }
-    let _ = writeln!(s, "mtls = {}", z.tls.mtls);
 }
 
 /// One `[[agent]]` with its `[[agent.camera]]` entries.
@@ -171,9 +118,4 @@ fn toml_floats(v: &[f32]) -> String {
             .collect(),
     )
     .to_string()
-}
-
-/// `s` as a TOML string value. (Rust's `{:?}` is not TOML: it writes `\u{7f}`.)
-fn toml_string(s: &str) -> String {
-    toml::Value::String(s.to_string()).to_string()
 }

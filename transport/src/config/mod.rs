@@ -6,10 +6,12 @@
 //! accepted as aliases.
 //!
 //! The file is read into `raw` (serde structs, every key optional), checked section by
-//! section in `checks` (defaults, ranges, file:line:key errors), and written back by
-//! `emit` ([`Config::to_toml_string`]).
+//! section in `checks` (defaults, ranges, file:line:key errors, with the context of
+//! `ctx`), and written back by `emit` ([`Config::to_toml_string`]). The `[transport]`
+//! section (`transport`) is composed of the sections the transports define themselves
+//! (`[transport.legacy]`, `[transport.zenoh]`: their `section.rs`), each with its raw form,
+//! its checks and its text.
 
-use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -25,13 +27,20 @@ use crate::wire::{
 mod channel_tests;
 mod channels;
 mod checks;
+pub(crate) mod ctx;
 mod emit;
+pub(crate) mod error;
 mod raw;
 #[cfg(test)]
 mod tests;
+mod transport;
 
 pub use channels::{ActionConfig, ActionSpace, VectorConfig};
-use checks::{Ctx, valid_session};
+use checks::valid_session;
+use ctx::Ctx;
+pub use ctx::MAX_AGENT_ID;
+pub use error::ConfigLoadError;
+pub use transport::TransportConfig;
 
 /// Default of `[sync] spin_before_block_us`.
 pub const DEFAULT_SPIN_BEFORE_BLOCK_US: u64 = 50;
@@ -40,8 +49,6 @@ pub const DEFAULT_SPIN_BEFORE_BLOCK_US: u64 = 50;
 /// is held for its return (and tries to come back) before it is evicted (gives up).
 pub const DEFAULT_RESUME_WINDOW_S: f64 = 30.0;
 
-/// Highest agent id accepted (ids are also iceoryx2 event ids).
-pub const MAX_AGENT_ID: u32 = 250;
 /// Largest accepted image side in pixels.
 pub const MAX_IMAGE_SIDE_PX: u32 = 8192;
 /// Largest config file [`Config::load`] reads, bytes.
@@ -285,158 +292,6 @@ impl SyncConfig {
     }
 }
 
-/// `[transport]` section.
-#[derive(Debug, Clone, PartialEq)]
-pub struct TransportConfig {
-    /// Which transport.
-    pub kind: TransportKind,
-    /// TCP listen address of the host (and the address agents connect to).
-    pub tcp_listen: SocketAddr,
-    /// Most commands an agent may send in one cycle.
-    pub max_commands_per_cycle: u32,
-    /// Shared secret TCP agents must present in their hello (`tcp_token`); `None`: none.
-    pub tcp_token: Option<String>,
-    /// `[transport.zenoh]`.
-    pub zenoh: ZenohConfig,
-    /// `[transport.legacy]`: the original system's protocol.
-    pub legacy: LegacyConfig,
-}
-
-/// Which generation of the original protocol a legacy agent speaks
-/// (`[transport.legacy] dialect`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "lowercase")]
-pub enum LegacyDialect {
-    /// Told from each connection's version check (default).
-    #[default]
-    Auto,
-    /// The older (Python 2) clients: version check in field 28.
-    Vrnew,
-    /// The later (Python 3) client: version check in field 29, a third "main" image.
-    Burkhardt,
-}
-
-impl LegacyDialect {
-    /// The config spelling.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Auto => "auto",
-            Self::Vrnew => "vrnew",
-            Self::Burkhardt => "burkhardt",
-        }
-    }
-}
-
-/// PNG compression of the legacy transport's images (`[transport.legacy] png_compression`),
-/// the `png` crate's levels.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "lowercase")]
-pub enum PngCompression {
-    /// The fastest (default): the images are encoded every cycle.
-    #[default]
-    Fastest,
-    /// Fast, a better ratio.
-    Fast,
-    /// Balanced.
-    Balanced,
-    /// Smallest, slowest.
-    High,
-}
-
-impl PngCompression {
-    /// The config spelling.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Fastest => "fastest",
-            Self::Fast => "fast",
-            Self::Balanced => "balanced",
-            Self::High => "high",
-        }
-    }
-}
-
-/// `[transport.legacy]` section: the original system's protobuf/TCP protocol.
-#[derive(Debug, Clone, PartialEq)]
-pub struct LegacyConfig {
-    /// The environment socket's port (`local_port`, alias `LocalPort`); agent `id` listens
-    /// on `local_port + 1 + id`. Default 1337.
-    pub local_port: u16,
-    /// The address the sockets bind to (`bind`). Default loopback.
-    pub bind: std::net::IpAddr,
-    /// The dialect (`dialect`). Default auto.
-    pub dialect: LegacyDialect,
-    /// PNG compression (`png_compression`). Default fastest.
-    pub png_compression: PngCompression,
-    /// Send EyePosition every cycle (`send_eye_position`). Default false, as the original.
-    pub send_eye_position: bool,
-    /// Send HeadMotion every cycle (`send_head_motion`). Default false, as the original.
-    pub send_head_motion: bool,
-}
-
-impl Default for LegacyConfig {
-    fn default() -> Self {
-        Self {
-            local_port: 1337,
-            bind: std::net::IpAddr::from([127, 0, 0, 1]),
-            dialect: LegacyDialect::Auto,
-            png_compression: PngCompression::Fastest,
-            send_eye_position: false,
-            send_head_motion: false,
-        }
-    }
-}
-
-/// Default of `[transport.zenoh] listen` and `connect`.
-pub const DEFAULT_ZENOH_ENDPOINT: &str = "tcp/127.0.0.1:7447";
-
-/// `[transport.zenoh]` section: how the host and its zenoh agents find each other.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ZenohConfig {
-    /// Endpoints the host listens on (`listen`), e.g. `tcp/0.0.0.0:7447`.
-    pub listen: Vec<String>,
-    /// Endpoints agents connect to (`connect`; default: `listen`).
-    pub connect: Vec<String>,
-    /// How long a silent link lives before zenoh closes it (`lease`): bounds how fast a
-    /// pulled cable evicts an agent, and how fast an agent notices its host is gone.
-    pub lease: Duration,
-    /// Multicast and gossip scouting (`scouting`; default off: only explicit endpoints).
-    pub scouting: bool,
-    /// Shared secret zenoh agents present in their hello (`token`); `None`: none.
-    pub token: Option<String>,
-    /// TLS of `tls/` endpoints (`tls_ca`, `tls_cert`, `tls_key`, `mtls`); all unset and
-    /// false by default.
-    pub tls: ZenohTls,
-}
-
-/// Certificates of the zenoh transport's `tls/` endpoints. Paths are resolved against
-/// the config file's folder at load and checked to exist.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct ZenohTls {
-    /// PEM certificate of the CA that signed the host's certificate (and, with `mtls`,
-    /// the agents'): agents check the host against it, the host checks agents (`tls_ca`).
-    pub ca: Option<PathBuf>,
-    /// PEM certificate of this side (`tls_cert`): the host's, served to agents; an
-    /// agent's, shown to the host with `mtls`.
-    pub cert: Option<PathBuf>,
-    /// PEM private key of `cert` (`tls_key`).
-    pub key: Option<PathBuf>,
-    /// Mutual TLS (`mtls`): the host admits only peers with a certificate signed by `ca`.
-    pub mtls: bool,
-}
-
-impl Default for ZenohConfig {
-    fn default() -> Self {
-        Self {
-            listen: vec![DEFAULT_ZENOH_ENDPOINT.into()],
-            connect: vec![DEFAULT_ZENOH_ENDPOINT.into()],
-            lease: Duration::from_secs(2),
-            scouting: false,
-            token: None,
-            tls: ZenohTls::default(),
-        }
-    }
-}
-
 /// The validated configuration.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Config {
@@ -454,46 +309,6 @@ pub struct Config {
     pub agents: Vec<AgentConfig>,
     /// The `[world]` table, left to the simulator to interpret.
     pub world: Option<toml::Table>,
-}
-
-/// Why a configuration could not be loaded.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum ConfigLoadError {
-    /// The file could not be read.
-    #[error("cannot read config file {path}: {error}")]
-    Read {
-        /// The file.
-        path: PathBuf,
-        /// The I/O error (in the message, so not also a `source()`: printed once).
-        error: std::io::Error,
-    },
-    /// TOML syntax error, unknown key or wrong type.
-    #[error("{path}:{line}:{column}: {message} (at key `{key}`)")]
-    Parse {
-        /// The file.
-        path: PathBuf,
-        /// 1-based line.
-        line: usize,
-        /// 1-based column.
-        column: usize,
-        /// Dotted key at that line (table header + key), `?` if none.
-        key: String,
-        /// What the TOML parser said (names the key).
-        message: String,
-    },
-    /// A value is out of range or inconsistent.
-    #[error("{path}:{line}: invalid `{key}`: {reason}")]
-    Invalid {
-        /// The file.
-        path: PathBuf,
-        /// 1-based line of the value.
-        line: usize,
-        /// Dotted key, e.g. `sync.stop_timeout`.
-        key: String,
-        /// Why it is invalid.
-        reason: String,
-    },
 }
 
 /// The built-in default configuration (`config/default.toml`).

@@ -4,7 +4,8 @@
 use serde::Deserialize;
 use toml::Spanned;
 
-use super::{AgentLostPolicy, LegacyDialect, PngCompression, TransportKind, WaitForStop, WaitMode};
+use super::transport::RawTransport;
+use super::{AgentLostPolicy, TransportKind, WaitForStop, WaitMode};
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -37,43 +38,6 @@ pub(super) struct RawSync {
     pub(super) on_agent_lost: Option<AgentLostPolicy>,
     pub(super) wait_for_stop: Option<WaitForStop>,
     pub(super) resume_window: Option<Spanned<f64>>,
-}
-
-#[derive(Deserialize, Default)]
-#[serde(deny_unknown_fields)]
-pub(super) struct RawTransport {
-    pub(super) kind: Option<TransportKind>,
-    pub(super) tcp_listen: Option<Spanned<String>>,
-    pub(super) max_commands_per_cycle: Option<Spanned<i64>>,
-    pub(super) tcp_token: Option<Spanned<String>>,
-    pub(super) legacy: Option<RawLegacy>,
-    pub(super) zenoh: Option<RawZenoh>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(super) struct RawLegacy {
-    #[serde(alias = "LocalPort")]
-    pub(super) local_port: Option<Spanned<i64>>,
-    pub(super) bind: Option<Spanned<String>>,
-    pub(super) dialect: Option<LegacyDialect>,
-    pub(super) png_compression: Option<PngCompression>,
-    pub(super) send_eye_position: Option<bool>,
-    pub(super) send_head_motion: Option<bool>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(super) struct RawZenoh {
-    pub(super) listen: Option<Spanned<Vec<String>>>,
-    pub(super) connect: Option<Spanned<Vec<String>>>,
-    pub(super) lease: Option<Spanned<f64>>,
-    pub(super) scouting: Option<bool>,
-    pub(super) token: Option<Spanned<String>>,
-    pub(super) tls_ca: Option<Spanned<String>>,
-    pub(super) tls_cert: Option<Spanned<String>>,
-    pub(super) tls_key: Option<Spanned<String>>,
-    pub(super) mtls: Option<Spanned<bool>>,
 }
 
 #[derive(Deserialize)]

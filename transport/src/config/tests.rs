@@ -1,6 +1,7 @@
 //! Unit tests of loading, checking and writing configs.
 
 use super::*;
+use crate::{LegacyConfig, LegacyDialect, PngCompression, ZenohTls};
 
 fn parse(text: &str) -> Result<Config, ConfigLoadError> {
     Config::from_toml_str(text, Path::new("test.toml"))

@@ -85,11 +85,13 @@ use crate::config::Config;
 mod agent;
 mod host;
 mod host_state;
+pub(crate) mod section;
 mod tls_refusals;
 
 pub use agent::*;
 pub use host::*;
 pub use host_state::ZenohHostStats;
+pub use section::{DEFAULT_ZENOH_ENDPOINT, ZenohConfig, ZenohTls};
 pub use tls_refusals::tls_refusal_layer;
 
 /// Most batches that may wait per agent between two drains; more are dropped (a flood),

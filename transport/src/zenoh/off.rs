@@ -14,6 +14,10 @@
 
 use crate::{absent_agent, absent_host};
 
+#[path = "section.rs"]
+pub(crate) mod section;
+pub use section::{DEFAULT_ZENOH_ENDPOINT, ZenohConfig, ZenohTls};
+
 absent_host!(
     ZenohHost,
     ZenohFrameLoan,

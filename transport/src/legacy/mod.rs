@@ -6,6 +6,9 @@
 
 use crate::absent_agent;
 
+pub(crate) mod section;
+pub use section::{LegacyConfig, LegacyDialect, PngCompression};
+
 absent_agent!(
     /// No vrsync agent connects over the original protocol: [`AgentTransport::connect`]
     /// says why. Uninhabited.
