@@ -69,30 +69,10 @@ pub use host::{
     ActionValue, AgentReport, CycleReport, Host, HostBuilder, HostCreateError, HostCycleError,
     HostStats, HostWaitError, INTERRUPT_PERIOD, ImageMut, ImagesMut, REAP_PERIOD, SensorFrameMut,
 };
-pub use shm::{ShmBudgetError, check_shm_budget};
 pub use transport::mixed::{AnyLoan, Transports, TransportsCreateError};
-pub use vrsync_transport::{
-    AGENT_MAX_HELD_FRAMES, ActionConfig, ActionSpace, AgentConfig, AgentConnectError, AgentFrame,
-    AgentLostPolicy, AgentReceiveError, AgentSendError, AgentTransport, AgentWaitError, AnyAgent,
-    AnyFrame, Attempt, BatchSink, CameraConfig, Config, ConfigLoadError, DEFAULT_CONFIG_TOML,
-    DEFAULT_RESUME_WINDOW_S, DEFAULT_SPIN_BEFORE_BLOCK_US, DEFAULT_ZENOH_ENDPOINT, FrameLoanMut,
-    HOST_LIVENESS_PERIOD, HostLiveness, HostTransport, HostTransportError, LegacyConfig,
-    LegacyDialect, MAX_AGENT_ID, MAX_CONFIG_BYTES, MAX_IMAGE_SIDE_PX, MAX_KEPT_REFUSALS,
-    PeerRefusal, PngCompression, QUIET_ZENOH, RefusalKind, Refusals, Rounded, SignalHandling,
-    SyncConfig, TransportConfig, TransportKind, VectorConfig, WaitForStop, WaitMode, ZenohConfig,
-    ZenohTls, ansi_on_stderr, default_log_filter, derived_height, record, retry_until, shm, tcp,
-    wait_for_newer_frame, zenoh,
-};
-pub use wire::{
-    ACTION_CHUNK, ACTION_KIND, ActionDesc, ActionState, ActionStatus, CAMERA_NAME_LEN,
-    CHANNEL_NAME_LEN, Collision, Command, CommandDecodeError, CommandKind, CommandParam,
-    EyePosition, GridPosition, HeadMotion, IMAGE_ALIGN, ImageDesc, LAYOUT_HASH, MAX_ACTION_LEN,
-    MAX_ACTIONS, MAX_CAMERAS, MAX_COLLISIONS, MAX_STATUSES, MAX_TOKEN, MAX_VECTOR_LEN, MAX_VECTORS,
-    MOTOR_FLAG_ACK, MOTOR_FLAG_LEAVE, MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION,
-    ParamType, PixelFormat, Pose, SENSOR_FLAG_SYNC_MODE, SensorHeader, VectorDesc, WireOutcome,
-    action_chunks, bounds_hash, discrete_action_chunk, image_layout, kind as command_kind,
-    kind_name, vector_layout,
-};
+// The config, the transport contract, the transports and the wire types, at their old
+// paths (the `legacy` module below is the host's: the `vrsync-legacy` crate).
+pub use vrsync_transport::*;
 
 /// The original system's protobuf/TCP protocol, served to agents written for it, with its
 /// codec (what the fuzz target and the legacy bench client use): the `vrsync-legacy`

@@ -206,17 +206,3 @@ macro_rules! absent_host_transport {
         }
     };
 }
-
-/// The embedded default config with every agent on `kind`, in a session of this test
-/// process: what the stand-ins' tests create hosts and connect agents with (in a build
-/// without some transport feature).
-#[cfg(all(test, not(feature = "zenoh")))]
-pub(crate) fn config_all_on(kind: crate::config::TransportKind) -> crate::config::Config {
-    #[allow(clippy::unwrap_used)]
-    let mut config = crate::config::Config::embedded_default().unwrap();
-    config.session = format!("absent-{}-{}", kind.as_str(), std::process::id());
-    for a in &mut config.agents {
-        a.transport = kind;
-    }
-    config
-}

@@ -61,9 +61,12 @@ pub use config::{
 };
 pub use contract::*;
 pub use legacy::{LegacyConfig, LegacyDialect, PngCompression};
+#[cfg(feature = "zenoh")]
+pub use logging::refusal_layer;
 pub use logging::{QUIET_ZENOH, default_log_filter};
 pub use refusal::{MAX_KEPT_REFUSALS, PeerRefusal, RefusalKind, Refusals};
 pub use rounded::Rounded;
+pub use shm::{ShmBudgetError, check_shm_budget};
 pub use signal::SignalHandling;
 pub use wire::{
     ACTION_CHUNK, ACTION_KIND, ActionDesc, ActionState, ActionStatus, CAMERA_NAME_LEN,

@@ -63,8 +63,8 @@ fn main() -> ExitCode {
                     .with_ansi(vrsync_bridge::ansi_on_stderr())
                     .with_filter(filter),
             )
-            // Peers dropped in a zenoh TLS handshake count as refused (whatever RUST_LOG).
-            .with(vrsync_bridge::zenoh::tls_refusal_layer())
+            // Peers dropped in a TLS handshake count as refused (whatever RUST_LOG).
+            .with(vrsync_bridge::refusal_layer())
             .init();
     }
     match run(cli) {

@@ -53,8 +53,7 @@ impl Header {
     /// are left out: a record is meant to be passed around, and a replay connects nothing.
     pub fn of(config: &Config) -> Self {
         let mut shared = config.clone();
-        shared.transport.tcp_token = None;
-        shared.transport.zenoh.token = None;
+        shared.transport.forget_secrets();
         Self {
             record: "header".into(),
             format: FORMAT.into(),

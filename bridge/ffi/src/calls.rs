@@ -576,8 +576,8 @@ pub(crate) fn init_logging_impl(filter: *const c_char) -> Result<(), FfiError> {
                 .with_ansi(vrsync_bridge::ansi_on_stderr())
                 .with_filter(filter),
         )
-        // Peers dropped in a zenoh TLS handshake count as refused (whatever the filter).
-        .with(vrsync_bridge::zenoh::tls_refusal_layer())
+        // Peers dropped in a TLS handshake count as refused (whatever the filter).
+        .with(vrsync_bridge::refusal_layer())
         .try_init()
         .map_err(|_| FfiError::LoggingAlreadySet)
 }

@@ -5,10 +5,9 @@
 
 pub(crate) mod mixed;
 
-pub(crate) use vrsync_transport::{
-    BatchSink, FrameLoanMut, HostConnections, HostReadiness, HostTransport, HostTransportError,
-    PeerRefusal, shm, tcp, wait_for_activity, zenoh,
-};
+// Every module of the registry (`shm`, `tcp`, `zenoh`; `legacy` is below) and the
+// contract, as the routing names them.
+pub(crate) use vrsync_transport::*;
 
 /// The original protocol's entry of the registry: its host (the `vrsync-legacy` crate, with
 /// the `legacy` feature; a stand-in whose `create` names the feature without it).

@@ -43,6 +43,15 @@ pub(super) struct RawTransport {
     pub(super) zenoh: Option<RawZenoh>,
 }
 
+impl TransportConfig {
+    /// Forgets the shared secrets (`tcp_token`, `[transport.zenoh] token`): for a config
+    /// that is written where others read it (a run's record).
+    pub fn forget_secrets(&mut self) {
+        self.tcp_token = None;
+        self.zenoh.token = None;
+    }
+}
+
 impl Ctx<'_> {
     /// The `[transport]` section with `[transport.legacy]` and `[transport.zenoh]`, with
     /// their defaults.

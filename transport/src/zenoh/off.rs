@@ -45,10 +45,20 @@ mod tests {
 
     use super::ZenohHost;
     use crate::AgentTransport;
-    use crate::absent::config_all_on;
     use crate::any_agent::AnyAgent;
     use crate::config::TransportKind;
     use crate::signal::SignalHandling;
+
+    /// The embedded default config with every agent on `kind`, in a session of this test
+    /// process.
+    fn config_all_on(kind: TransportKind) -> crate::config::Config {
+        let mut config = crate::config::Config::embedded_default().unwrap();
+        config.session = format!("absent-{}-{}", kind.as_str(), std::process::id());
+        for a in &mut config.agents {
+            a.transport = kind;
+        }
+        config
+    }
 
     #[test]
     fn an_agent_on_zenoh_is_told_the_build_has_no_zenoh() {
