@@ -8,13 +8,13 @@ use std::time::{Duration, Instant};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use vrsync_agent::{
-    Agent, AgentBuilder, AgentConnectError, SendError, SignalHandling, StopError, WaitStartError,
+    Agent, AgentBuilder, AgentConnectError, SignalHandling, StopError, WaitStartError,
 };
 use vrsync_bridge::{Config, WaitForStop};
 
 use crate::channels::{PyAction, PyVector, channels_of};
 use crate::commands::PyCommand;
-use crate::errors::{error, obj};
+use crate::errors::{error, obj, send_error};
 use crate::frame::{Graveyard, PyFrame};
 
 /// The longest the GIL is released in one go while waiting: Ctrl-C is seen within this.
@@ -666,15 +666,6 @@ pub(crate) fn stop_error(py: Python<'_>, e: StopError, session: &str, id: u32) -
         }
         _ => error(py, "TransportError", msg, &base),
     }
-}
-
-pub(crate) fn send_error(py: Python<'_>, e: SendError, id: u32) -> PyErr {
-    error(
-        py,
-        "QueueFullError",
-        e.to_string(),
-        &[("agent_id", obj(py, id))],
-    )
 }
 
 /// Iterator returned by `Agent.frames()`: yields frames until the host closes the session.

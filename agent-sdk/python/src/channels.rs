@@ -160,7 +160,7 @@ pub(crate) fn act(
         }
     };
     result.map_err(|e| match e {
-        ActError::Queue(e) => crate::agent::send_error(py, e, id),
+        ActError::Queue(e) => crate::errors::send_error(py, e, id),
         other => act_error(py, id, name, other.to_string()),
     })
 }

@@ -7,6 +7,7 @@
 use pyo3::IntoPyObjectExt;
 use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
+use vrsync_agent::SendError;
 
 /// Builds an instance of `vrsync.errors.<class>` with `message`, and sets `attrs` on it.
 pub(crate) fn error(
@@ -39,4 +40,14 @@ pub(crate) fn obj<'py, T: IntoPyObject<'py>>(py: Python<'py>, value: T) -> Py<Py
         .into_bound_py_any(py)
         .map(Bound::unbind)
         .unwrap_or_else(|_| py.None())
+}
+
+/// `QueueFullError` for agent `id`: its motor queue had no room for a command.
+pub(crate) fn send_error(py: Python<'_>, e: SendError, id: u32) -> PyErr {
+    error(
+        py,
+        "QueueFullError",
+        e.to_string(),
+        &[("agent_id", obj(py, id))],
+    )
 }

@@ -21,13 +21,15 @@ use crate::errors::{error, obj};
 
 mod args;
 mod channels;
+mod out;
 mod sink;
 mod step;
 mod wait;
 
 use args::{Planned, indices, mask, planned, reset_command};
 use channels::{GroupChannels, act_row};
-use sink::{Out, Sink, image_outputs};
+use out::Out;
+use sink::{Sink, image_outputs};
 
 /// Room for this many commands per agent and step from the start (a table entry with
 /// more grows the buffer once).

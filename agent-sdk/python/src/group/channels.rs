@@ -8,7 +8,7 @@ use pyo3::types::PyDict;
 use vrsync_agent::{ActError, Agent, Frame};
 use vrsync_bridge::AgentConfig;
 
-use super::sink::Out;
+use super::out::Out;
 use crate::channels::{PyAction, PyVector, channels_of};
 use crate::errors::{error, obj};
 
@@ -226,7 +226,7 @@ pub(super) fn act_row(
             }
         };
         result.map_err(|e| match e {
-            ActError::Queue(e) => crate::agent::send_error(py, e, id),
+            ActError::Queue(e) => crate::errors::send_error(py, e, id),
             other => error(
                 py,
                 "ActionError",

@@ -7,10 +7,11 @@ use pyo3::prelude::*;
 use vrsync_agent::{Agent, WaitStartError};
 use vrsync_bridge::Command;
 
-use super::sink::Out;
+use super::out::Out;
 use super::wait::{Waited, wait_all};
 use super::{AgentGroup, Agents, WAIT_SLICE, closed};
-use crate::agent::{SameThread, send_error, stop_error, wait_error};
+use crate::agent::{SameThread, stop_error, wait_error};
+use crate::errors::send_error;
 
 impl AgentGroup {
     /// Sends the commands `commands(k, rotation, buffer)` puts into `buffer` and the stop
