@@ -32,8 +32,9 @@ pub enum Command {
     /// render each cycle's images and the bridge's share of the cycle),
     /// plus the original protocol, the Python agent and the batched Python vector env
     /// (`python-vec`: one process for 4 and 16 agents of one 84x84 camera, against as many
-    /// Rust agent processes and the raw floor). Build with --release: it spawns
-    /// `vr-bench-agent` from the same folder.
+    /// Rust agent processes and the raw floor; `python-loop`: the same process served by
+    /// `vr-sim run`'s loop with rendering, 16 and 64 agents, against the rendering alone).
+    /// Build with --release: it spawns `vr-bench-agent` from the same folder.
     Bench(BenchArgs),
     /// Replay a `run --record` file without agents: apply its commands to the world cycle
     /// by cycle as the run did, compare every agent's state after every cycle with the
@@ -121,9 +122,12 @@ pub struct BenchArgs {
     #[arg(long, value_name = "FILE.svg")]
     pub plot: Option<PathBuf>,
     /// Python interpreter for the `python` rows (`python -m vrsync.bench_agent`, the
-    /// Python SDK doing the Rust bench agent's work), the vector-env rows (`python -m
-    /// vrsync.bench_vector`: one process steps every agent through one `AgentGroup`; the
-    /// row also reports the SDK's time per agent-step) and the `python-host` rows
+    /// Python SDK doing the Rust bench agent's work; beside them `floor-numpy`, `python -m
+    /// vrsync.bench_numpy`: the same row reads by numpy alone on shared memory, no SDK),
+    /// the vector-env rows (`python -m vrsync.bench_vector`: one process steps every
+    /// agent through one `AgentGroup`; the row also reports the SDK's time per
+    /// agent-step; `python-loop`: that process served by `vr-sim run`'s loop, rendering)
+    /// and the `python-host` rows
     /// (`python -m vrsync.bench_host`: `vrsync.Host` serving the Rust bench agents; the
     /// row reports the host's own time per agent-cycle); rows are left out, saying why,
     /// when it cannot import vrsync (`pip install ./agent-sdk/python`).
@@ -134,13 +138,14 @@ pub struct BenchArgs {
         default_value = "python3"
     )]
     pub python: PathBuf,
-    /// Leave out the Python rows (`python`, and the vector-env section: `python-vec` with
-    /// its `shm` and `floor-shm` rows at 1x84x84).
+    /// Leave out the Python rows (`python`, `floor-numpy`, and the vector-env section:
+    /// `python-vec` with its `shm` and `floor-shm` rows at 1x84x84, `python-host`,
+    /// `python-loop`).
     #[arg(long)]
     pub no_python: bool,
     /// Run only these sections (repeatable; default all): `images` (every transport at 1
-    /// and 4 agents), `many` (16 and 64 agents over shm), `vector` (the vector env and
-    /// the Python host), `original` (the original protocol).
+    /// and 4 agents), `many` (16 and 64 agents over shm), `vector` (the vector env, the
+    /// Python host, the whole loop with rendering), `original` (the original protocol).
     #[arg(long, value_name = "SECTION")]
     pub only: Vec<crate::bench::Section>,
 }

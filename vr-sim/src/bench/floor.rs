@@ -108,3 +108,62 @@ pub(super) fn bench_floor_tcp(case: &Case) -> anyhow::Result<Measured> {
     let agent_allocs = agents.finish()?.allocs_per_cycle;
     Ok(Measured::new(hist, host_allocs, agent_allocs))
 }
+
+/// What `python -m vrsync.bench_numpy` writes to its `--out` file.
+#[derive(Debug, serde::Deserialize)]
+pub(super) struct NumpyFloorReport {
+    /// Measured cycles.
+    pub cycles: u64,
+    /// Each measured cycle's row reads, ns.
+    pub read_ns: Vec<u64>,
+}
+
+/// numpy's row reads alone (`floor-numpy`): `python -m vrsync.bench_numpy` times the
+/// `python` agent's reads of `case`'s images (rgb8) on shared memory, no SDK, no host; the
+/// row's "cycle" is one frame's reads.
+pub(super) fn bench_floor_numpy(
+    case: &Case,
+    session: &str,
+    dir: &Path,
+    python: &Path,
+) -> anyhow::Result<Measured> {
+    let out = dir.join(format!("{session}-numpy.json"));
+    let status = Command::new(python)
+        .args(["-m", "vrsync.bench_numpy"])
+        .args(["--width", &case.width.to_string()])
+        .args(["--height", &case.height.to_string()])
+        .args(["--cameras", &case.cameras.to_string()])
+        .args(["--warmup", &case.warmup.to_string()])
+        .args(["--cycles", &case.cycles.to_string()])
+        .arg("--out")
+        .arg(&out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::inherit())
+        .status()
+        .with_context(|| format!("start {} -m vrsync.bench_numpy", python.display()))?;
+    if !status.success() {
+        bail!(
+            "floor-numpy: {} -m vrsync.bench_numpy failed ({status})",
+            python.display()
+        );
+    }
+    let text = std::fs::read_to_string(&out)
+        .with_context(|| format!("read the numpy floor's report {}", out.display()))?;
+    let _ = std::fs::remove_file(&out);
+    let report: NumpyFloorReport =
+        serde_json::from_str(&text).context("parse the numpy floor's report")?;
+    if report.cycles != case.cycles || report.read_ns.len() as u64 != case.cycles {
+        bail!(
+            "floor-numpy: {} reads of {} cycles reported, {} asked for",
+            report.read_ns.len(),
+            report.cycles,
+            case.cycles
+        );
+    }
+    let mut hist = histogram()?;
+    for &ns in &report.read_ns {
+        hist.record(ns.max(1)).context("record")?;
+    }
+    // No host and no SDK: no allocations of ours to count.
+    Ok(Measured::new(hist, f64::NAN, f64::NAN))
+}

@@ -23,10 +23,12 @@ mod floor;
 mod legacy;
 mod report;
 mod vrsync;
+mod world_loop;
 
-use floor::{bench_floor_shm, bench_floor_tcp, bench_floor_zenoh};
+use floor::{bench_floor_numpy, bench_floor_shm, bench_floor_tcp, bench_floor_zenoh};
 use report::{plot, print_header, print_ratios, print_row, write_csv};
 use vrsync::{bench_python_host, bench_vrsync, make_certificates, python_agent};
+use world_loop::bench_python_loop;
 
 /// What to run and where to write.
 #[derive(Debug)]
@@ -42,7 +44,8 @@ pub struct BenchOptions {
     pub plot: Option<PathBuf>,
     /// Python interpreter for the `python` rows (the agent is `python -m
     /// vrsync.bench_agent`), the vector-env rows (`python -m vrsync.bench_vector`) and the
-    /// Python host rows (`python -m vrsync.bench_host`); `None`: no Python rows.
+    /// Python host rows (`python -m vrsync.bench_host`), the numpy floor (`python -m
+    /// vrsync.bench_numpy`); `None`: no Python rows.
     pub python: Option<PathBuf>,
     /// The sections to run (empty: all).
     pub only: Vec<Section>,
@@ -55,7 +58,8 @@ pub enum Section {
     Images,
     /// 16 and 64 agents over shm against the floor.
     Many,
-    /// The Python vector env and the Python host (with `--python`).
+    /// The Python vector env, the Python host and the whole loop with rendering (with
+    /// `--python`).
     Vector,
     /// The original protocol.
     Original,
@@ -67,7 +71,9 @@ pub struct Row {
     /// `shm`, `shm-spin`, `tcp`, `zenoh`, `zenoh-tls` (mutual TLS), `mixed` (agents over
     /// shm, shm, tcp, zenoh), `floor-shm`, `floor-shm-spin`, `floor-tcp`, `floor-zenoh`,
     /// `legacy`, `python`, `python-vec`, `python-host` (the host is a Python process,
-    /// `vrsync.Host`; the agents are the `shm` rows' Rust bench agents).
+    /// `vrsync.Host`; the agents are the `shm` rows' Rust bench agents), `python-loop`
+    /// (`vr-sim run`'s loop, rendering, serving one `python-vec` process), `floor-numpy`
+    /// (numpy's row reads of the `python` agent alone, on shared memory, no SDK).
     pub transport: String,
     /// Agents.
     pub agents: u32,
@@ -112,6 +118,14 @@ pub struct Row {
     /// wall time, so with more agents than cores it also holds the agents that `start`
     /// woke and that took the cores before it returned.
     pub sdk_us_per_agent_step: f64,
+    /// `python-loop` rows: the loop's time per cycle writing sensors and rendering
+    /// (mean, median of the rounds; beside `render_us`, the same images rendered with no
+    /// agent process running). `null` elsewhere.
+    pub loop_render_us: f64,
+    /// `python-loop` rows: the loop's time per cycle waiting for every agent's stop
+    /// (`Host::collect`: the Python process's step, its wake-up and the host's; mean,
+    /// median of the rounds). `null` elsewhere.
+    pub loop_wait_us: f64,
     /// `python-host` rows: the Python host thread's CPU time per agent-cycle in the same
     /// parts of the cycle, µs (median of the rounds; `vrsync.bench_host`'s
     /// `host_cpu_us_per_agent_cycle`): the host's own cost, DESIGN §9's target. `null`
@@ -124,6 +138,9 @@ const CAMERAS: u32 = 3;
 /// agent counts.
 const VEC_SIZE: u32 = 84;
 const VEC_AGENTS: [u32; 2] = [4, 16];
+/// The whole-loop rows (`python-loop`, one 84x84 rgb8 camera per agent): these agent
+/// counts.
+const LOOP_AGENTS: [u32; 2] = [16, 64];
 /// The many-agent rows (3 rgb8 images per agent, against the raw floor at the same
 /// fan-out): these agent counts at these image sizes.
 const MANY_AGENTS: [u32; 2] = [16, 64];
@@ -270,6 +287,12 @@ struct Measured {
     round_sdk_us: Vec<f64>,
     /// The Python host's CPU time per agent-cycle of each round that reports it, µs.
     round_host_cpu_us: Vec<f64>,
+    /// Each round's render time alone (rows that measure it every round), µs.
+    round_render_us: Vec<f64>,
+    /// `python-loop`: each round's mean time per cycle rendering in the loop, µs.
+    round_loop_render_us: Vec<f64>,
+    /// `python-loop`: each round's mean wait per cycle for the agents, µs.
+    round_loop_wait_us: Vec<f64>,
     allocs: f64,
     agent_allocs: f64,
     render_us: f64,
@@ -282,6 +305,9 @@ impl Measured {
             round_p50s_us: vec![hist.value_at_quantile(0.5) as f64 / 1000.0],
             round_sdk_us: Vec::new(),
             round_host_cpu_us: Vec::new(),
+            round_render_us: Vec::new(),
+            round_loop_render_us: Vec::new(),
+            round_loop_wait_us: Vec::new(),
             hist,
             allocs,
             agent_allocs,
@@ -296,6 +322,9 @@ impl Measured {
         self.round_p50s_us.extend(other.round_p50s_us);
         self.round_sdk_us.extend(other.round_sdk_us);
         self.round_host_cpu_us.extend(other.round_host_cpu_us);
+        self.round_render_us.extend(other.round_render_us);
+        self.round_loop_render_us.extend(other.round_loop_render_us);
+        self.round_loop_wait_us.extend(other.round_loop_wait_us);
         self.allocs = self.allocs.max(other.allocs);
         self.agent_allocs = self.agent_allocs.max(other.agent_allocs);
         if self.render_us.is_nan() {
@@ -336,9 +365,16 @@ fn row(case: &Case, m: &Measured) -> Row {
         frames_per_s: if mean_us > 0.0 { 1e6 / mean_us } else { 0.0 },
         allocs_per_cycle: m.allocs,
         agent_allocs_per_cycle: m.agent_allocs,
-        render_us: m.render_us,
+        // Measured every round (`python-loop`): the median; else the one measurement.
+        render_us: if m.round_render_us.is_empty() {
+            m.render_us
+        } else {
+            median(&m.round_render_us)
+        },
         png_us: m.png_us,
         sdk_us_per_agent_step: median(&m.round_sdk_us),
+        loop_render_us: median(&m.round_loop_render_us),
+        loop_wait_us: median(&m.round_loop_wait_us),
         host_cpu_us_per_agent_cycle: median(&m.round_host_cpu_us),
     }
 }
@@ -474,15 +510,21 @@ impl Bench<'_> {
                 if agents == 4 {
                     cases.push(mk("mixed", tcp_cycles));
                 }
-                // The Python agent (1 agent, the smallest and the largest image set).
+                // The Python agent (1 agent, the smallest and the largest image set), and
+                // numpy's share of it: its row reads alone, on shared memory, no SDK.
                 if self.python.is_some() && agents == 1 && (w == 320 || w == 1920) {
                     cases.push(mk("python", shm_cycles));
+                    cases.push(mk("floor-numpy", shm_cycles));
                 }
                 measure_interleaved(&cases, rows, |case, round| match case.transport {
                     "floor-shm" => bench_floor_shm(case, &self.session(), false),
                     "floor-shm-spin" => bench_floor_shm(case, &self.session(), true),
                     "floor-tcp" => bench_floor_tcp(case),
                     "floor-zenoh" => bench_floor_zenoh(case, &self.session()),
+                    "floor-numpy" => match self.python {
+                        Some(python) => bench_floor_numpy(case, &self.session(), self.dir, python),
+                        None => bail!("floor-numpy needs --python"),
+                    },
                     _ => {
                         let session = self.session();
                         bench_vrsync(case, &session, self.dir, round == 0, self.python)
@@ -532,7 +574,9 @@ impl Bench<'_> {
     /// fan-out of Rust bench agents and of the raw iceoryx2 floor: one 84x84 rgb8 camera
     /// per agent (an RL observation), 4 and 16 agents. In the same rounds the Python host
     /// (`python-host`: `vrsync.Host` in a Python process) serves the `shm` row's Rust
-    /// bench agents: the Python host against the Rust host.
+    /// bench agents: the Python host against the Rust host. Then the whole loop
+    /// (`python-loop`, 16 and 64 agents): `vr-sim run`'s loop rendering the images for
+    /// the vector env, against the rendering alone.
     fn vector_env(&mut self, rows: &mut Vec<Row>) -> anyhow::Result<()> {
         let Some(python) = self.python else {
             return Ok(());
@@ -546,6 +590,15 @@ impl Bench<'_> {
                     let session = self.session();
                     bench_vrsync(case, &session, self.dir, false, Some(python))
                 }
+            })?;
+        }
+        // The whole loop with rendering: `vr-sim run`'s loop serving the vector env,
+        // against the same renderer alone in the same round.
+        for agents in LOOP_AGENTS {
+            let case = python_loop_case(agents, self.quick);
+            measure_interleaved(&[case], rows, |case, _round| {
+                let session = self.session();
+                bench_python_loop(case, &session, self.dir, python)
             })?;
         }
         Ok(())
@@ -604,6 +657,21 @@ fn vector_env_cases(agents: u32, quick: bool) -> Vec<Case> {
             cycles: (cycles / ROUNDS).max(10),
         })
         .collect()
+}
+
+/// The `python-loop` case at `agents` agents: one 84x84 rgb8 camera each, as the
+/// vector-env rows.
+fn python_loop_case(agents: u32, quick: bool) -> Case {
+    let cycles = if quick { 600 } else { 3000 };
+    Case {
+        transport: "python-loop",
+        agents,
+        cameras: 1,
+        width: VEC_SIZE,
+        height: VEC_SIZE,
+        warmup: (cycles / ROUNDS / 10).max(20),
+        cycles: (cycles / ROUNDS).max(10),
+    }
 }
 
 /// The one measurement loop of every row (vrsync and floors): runs `cycle` for the warm-up and measured

@@ -21,8 +21,12 @@ pub(super) fn print_header() {
 }
 
 /// The bridge's share of a simulated cycle: its cycle time (p50) against that plus the
-/// time to render the cycle's images, %; NaN without a render time.
+/// time to render the cycle's images, %; NaN without a render time, and for a
+/// `python-loop` row (its cycle holds the rendering).
 pub(super) fn bridge_share(r: &Row) -> f64 {
+    if r.transport == "python-loop" {
+        return f64::NAN;
+    }
     100.0 * r.p50_us / (r.p50_us + r.render_us)
 }
 
@@ -44,7 +48,7 @@ pub(super) fn print_row(r: &Row) {
         } else {
             format!("{:.0}", r.render_us)
         },
-        if r.render_us.is_nan() {
+        if bridge_share(r).is_nan() {
             "-".to_string()
         } else {
             format!("{:.1}", bridge_share(r))
@@ -175,6 +179,22 @@ pub(super) fn ratio_lines(rows: &[Row]) -> Vec<(String, Option<f64>, &'static st
         let what = "python 1080p/320x240 growth / Rust agent's growth";
         v.push((what.into(), Some(py / rust), "<= 1.2"));
     }
+    // numpy's own share (DESIGN §9's alternative to the two targets above): the Python
+    // agent's extra time per cycle over the Rust agent against numpy's row reads alone
+    // (`floor-numpy`: the same reads of the same images on shared memory, no SDK); at
+    // most 1 when numpy's reads account for all of it.
+    for w in [320, 1920] {
+        let extra = find(rows, "python", 1, w)
+            .zip(find(rows, "shm", 1, w))
+            .map(|(py, rust)| py.p50_us - rust.p50_us);
+        let numpy = find(rows, "floor-numpy", 1, w).map(|r| r.p50_us);
+        let what = format!("(python - shm) / floor-numpy, 1 agent, {}", size_name(w));
+        let target = if w == 1920 { "<= 1" } else { "report" };
+        v.push((what, extra.zip(numpy).map(|(e, n)| e / n), target));
+    }
+    let what = "floor-numpy 1080p/320x240 growth / Rust agent's growth";
+    let numpy = growth("floor-numpy");
+    v.push((what.into(), numpy.zip(shm).map(|(n, r)| n / r), "report"));
     for (t, target) in [("shm", "report; compare floors"), ("floor-shm", "report")] {
         let what = format!("{t} 4 agents / {t} 1 agent, 3x1920x1080");
         v.push((what, p((t, 4, 1920), (t, 1, 1920)), target));
@@ -223,6 +243,26 @@ pub(super) fn ratio_lines(rows: &[Row]) -> Vec<(String, Option<f64>, &'static st
         let floor_ratio = ratio(find_vec(rows, "shm", a), find_vec(rows, "floor-shm", a));
         v.push((what, floor_ratio, "report"));
     }
+    // The whole loop with rendering (`vr-sim run`'s loop serving the vector env) against
+    // the same images rendered alone in the same round, and where the rest of its cycle
+    // goes (means per cycle: rendering in the loop, the wait for the agents, the host's
+    // own remainder: publish, start, apply, the world's step, the hash).
+    for a in LOOP_AGENTS {
+        let Some(r) = find_vec(rows, "python-loop", a) else {
+            continue;
+        };
+        let what = format!("python-loop / render alone, {a} agents, 1x84x84");
+        v.push((what, Some(r.p50_us / r.render_us), "<= 1.2"));
+        let what = format!("python-loop render in the loop / alone, {a} agents");
+        v.push((what, Some(r.loop_render_us / r.render_us), "report"));
+        let what = format!("python-loop wait for the agents µs/cycle, {a} agents");
+        v.push((what, Some(r.loop_wait_us), "report"));
+        let what = format!("python-loop host's own µs/cycle, {a} agents");
+        let own = r.mean_us - r.loop_render_us - r.loop_wait_us;
+        v.push((what, Some(own), "report"));
+        let what = format!("python-loop SDK µs per agent-step, {a} agents");
+        v.push((what, Some(r.sdk_us_per_agent_step), "report"));
+    }
     // Many agents on one host: the bridge against its floor, and its share of a simulated
     // cycle (the rest is rendering).
     for (w, _) in MANY_SIZES {
@@ -249,11 +289,11 @@ pub(super) fn ratio_lines(rows: &[Row]) -> Vec<(String, Option<f64>, &'static st
 
 pub(super) fn write_csv(path: &Path, rows: &[Row]) -> anyhow::Result<()> {
     let mut s = String::from(
-        "transport,agents,cameras,width,height,format,frames,p50_us,p99_us,mean_us,frames_per_s,allocs_per_cycle,agent_allocs_per_cycle,render_us,sdk_us_per_agent_step,host_cpu_us_per_agent_cycle\n",
+        "transport,agents,cameras,width,height,format,frames,p50_us,p99_us,mean_us,frames_per_s,allocs_per_cycle,agent_allocs_per_cycle,render_us,sdk_us_per_agent_step,host_cpu_us_per_agent_cycle,loop_render_us,loop_wait_us\n",
     );
     for r in rows {
         s += &format!(
-            "{},{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.1},{:.3},{:.3}\n",
+            "{},{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.1},{:.3},{:.3},{:.1},{:.1}\n",
             r.transport,
             r.agents,
             r.cameras,
@@ -269,7 +309,9 @@ pub(super) fn write_csv(path: &Path, rows: &[Row]) -> anyhow::Result<()> {
             r.agent_allocs_per_cycle,
             r.render_us,
             r.sdk_us_per_agent_step,
-            r.host_cpu_us_per_agent_cycle
+            r.host_cpu_us_per_agent_cycle,
+            r.loop_render_us,
+            r.loop_wait_us
         );
     }
     std::fs::write(path, s).with_context(|| format!("write {}", path.display()))

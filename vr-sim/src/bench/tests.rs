@@ -411,3 +411,101 @@ fn the_ratio_table_sets_the_python_host_against_the_rust_host() {
         None
     );
 }
+
+#[test]
+fn a_python_loop_row_sets_its_cycle_against_the_render_alone_and_splits_the_rest() {
+    let mut h = histogram().unwrap();
+    h.record_n(600_000, 10).unwrap();
+    let case = python_loop_case(16, true);
+    assert_eq!(
+        (case.cameras, case.width, case.height),
+        (1, VEC_SIZE, VEC_SIZE)
+    );
+    // Three rounds: the row takes the median of each figure.
+    let mut m = Measured::new(h.clone(), 17.0, 1.0);
+    for (alone, in_loop, wait) in [
+        (500.0, 520.0, 50.0),
+        (480.0, 510.0, 60.0),
+        (900.0, 530.0, 55.0),
+    ] {
+        let mut round = Measured::new(h.clone(), 17.0, 1.0);
+        round.round_render_us.push(alone);
+        round.round_loop_render_us.push(in_loop);
+        round.round_loop_wait_us.push(wait);
+        m.merge(round).unwrap();
+    }
+    let r = row(&case, &m);
+    assert_eq!(r.render_us, 500.0);
+    assert_eq!(r.loop_render_us, 520.0);
+    assert_eq!(r.loop_wait_us, 55.0);
+    // Its cycle holds the rendering: no bridge share.
+    assert!(report::bridge_share(&r).is_nan());
+    let lines = report::ratio_lines(std::slice::from_ref(&r));
+    let value = |what: &str| {
+        lines
+            .iter()
+            .find(|(w, _, _)| w == what)
+            .unwrap_or_else(|| panic!("no line {what:?}"))
+            .1
+            .unwrap()
+    };
+    let ratio = value("python-loop / render alone, 16 agents, 1x84x84");
+    assert!((ratio - r.p50_us / 500.0).abs() < 1e-9, "{ratio}");
+    let own = value("python-loop host's own µs/cycle, 16 agents");
+    assert!((own - (r.mean_us - 520.0 - 55.0)).abs() < 1e-9, "{own}");
+    assert!(
+        !lines
+            .iter()
+            .any(|(w, _, _)| w.starts_with("python-loop") && w.contains("64 agents"))
+    );
+}
+
+#[test]
+fn the_numpy_floor_explains_the_python_agents_extra_time_over_the_rust_agent() {
+    let mut h = histogram().unwrap();
+    h.record(1000).unwrap();
+    let row_of = |transport: &'static str, width: u32, p50_us: f64| {
+        let case = one_cycle_case(transport, 1, width, 240);
+        let mut r = row(&case, &Measured::new(h.clone(), f64::NAN, f64::NAN));
+        r.p50_us = p50_us;
+        r
+    };
+    let rows = [
+        row_of("shm", 320, 10.0),
+        row_of("python", 320, 30.0),
+        row_of("floor-numpy", 320, 10.0),
+        row_of("shm", 1920, 20.0),
+        row_of("python", 1920, 80.0),
+        row_of("floor-numpy", 1920, 40.0),
+    ];
+    let lines = report::ratio_lines(&rows);
+    let value = |what: &str| {
+        lines
+            .iter()
+            .find(|(w, _, _)| w == what)
+            .unwrap_or_else(|| panic!("no line {what:?}"))
+            .1
+    };
+    // (80 - 20) / 40 and (30 - 10) / 10.
+    assert_eq!(
+        value("(python - shm) / floor-numpy, 1 agent, 3x1920x1080"),
+        Some(1.5)
+    );
+    assert_eq!(
+        value("(python - shm) / floor-numpy, 1 agent, 3x320x240"),
+        Some(2.0)
+    );
+    // (40 / 10) / (20 / 10)
+    assert_eq!(
+        value("floor-numpy 1080p/320x240 growth / Rust agent's growth"),
+        Some(2.0)
+    );
+}
+
+#[test]
+fn the_numpy_floors_report_is_read_as_the_python_hosts_is() {
+    let report: floor::NumpyFloorReport =
+        serde_json::from_str(r#"{"cycles": 2, "read_ns": [30000, 31000]}"#).unwrap();
+    assert_eq!(report.cycles, 2);
+    assert_eq!(report.read_ns, [30_000, 31_000]);
+}

@@ -6,11 +6,15 @@ use super::floor::loopback_endpoint;
 use super::*;
 
 /// Render work per measurement of [`measure_render`]: about this many rays (at least one
-/// cycle, at most five).
+/// timed render, at most [`MAX_RENDERS`]).
 const RENDER_RAYS: u64 = 40_000_000;
+/// The most timed renders of one [`measure_render`].
+const MAX_RENDERS: u64 = 15;
 
 /// Renders every agent's frame into loaned (never published) samples, a few times: what
-/// the simulator would add to each cycle, µs per cycle.
+/// the simulator would add to each cycle, µs per cycle. One render first, not timed (the
+/// pool's threads start, the samples' pages are touched the first time), then the
+/// median of the timed ones (one render preempted by another process cannot move it).
 pub(super) fn measure_render(config: &Config, host: &mut Host) -> anyhow::Result<f64> {
     let world = crate::world::World::from_config(config)?;
     let mut renderer = crate::render::Renderer::new(0)?;
@@ -20,10 +24,11 @@ pub(super) fn measure_render(config: &Config, host: &mut Host) -> anyhow::Result
         .flat_map(|b| b.cameras())
         .map(|c| u64::from(c.width_px) * u64::from(c.height_px))
         .sum();
-    let n = (RENDER_RAYS / rays.max(1)).clamp(1, 5) as u32;
+    let n = (RENDER_RAYS / rays.max(1)).clamp(1, MAX_RENDERS);
     let ids: Vec<u32> = host.agent_ids().collect();
-    let mut total = Duration::ZERO;
-    for _ in 0..n {
+    let mut times_us = Vec::new();
+    for i in 0..=n {
+        let mut total = Duration::ZERO;
         // In batches, as `vr-sim run` renders.
         for batch in ids.chunks(renderer.agents_per_batch()) {
             let mut frames = Vec::with_capacity(batch.len());
@@ -37,8 +42,11 @@ pub(super) fn measure_render(config: &Config, host: &mut Host) -> anyhow::Result
             );
             total += t0.elapsed();
         }
+        if i > 0 {
+            times_us.push(total.as_secs_f64() * 1e6);
+        }
     }
-    Ok(total.as_secs_f64() * 1e6 / f64::from(n))
+    Ok(median(&times_us))
 }
 
 /// A CA and one certificate (naming 127.0.0.1, for server and client use) for the
@@ -139,7 +147,8 @@ pub(super) fn python_agent(python: Option<&Path>) -> Option<PathBuf> {
     let ok = Command::new(python)
         .args([
             "-c",
-            "import vrsync.bench_agent, vrsync.bench_vector, vrsync.bench_host",
+            "import vrsync.bench_agent, vrsync.bench_numpy, vrsync.bench_vector, \
+             vrsync.bench_host",
         ])
         .stdout(Stdio::null())
         .stderr(Stdio::null())
@@ -320,8 +329,13 @@ pub(super) fn bench_python_host(
 }
 
 /// The bench agents of `case` on the config at `config`: `vr-bench-agent` processes, or
-/// the Python agent (`python`), or one Python vector-env process (`python-vec`).
-fn spawn_agents(case: &Case, config: &Path, python: Option<&Path>) -> anyhow::Result<Agents> {
+/// the Python agent (`python`), or one Python vector-env process (`python-vec`,
+/// `python-loop`).
+pub(super) fn spawn_agents(
+    case: &Case,
+    config: &Path,
+    python: Option<&Path>,
+) -> anyhow::Result<Agents> {
     let config_arg = config.display().to_string();
     let args = |words: &[&str]| -> Vec<String> {
         let mut a: Vec<String> = words.iter().map(|w| (*w).to_string()).collect();
@@ -331,12 +345,14 @@ fn spawn_agents(case: &Case, config: &Path, python: Option<&Path>) -> anyhow::Re
     let warmup = case.warmup.to_string();
     match python {
         // One Python process drives every agent through the batched vector env, doing
-        // the same work per agent.
-        Some(python) if case.transport == "python-vec" => Agents::spawn_program(
-            python,
-            |_| args(&["-m", "vrsync.bench_vector", "--warmup", &warmup]),
-            1,
-        ),
+        // the same work per agent (`python-loop`: served by `vr-sim run`'s loop).
+        Some(python) if matches!(case.transport, "python-vec" | "python-loop") => {
+            Agents::spawn_program(
+                python,
+                |_| args(&["-m", "vrsync.bench_vector", "--warmup", &warmup]),
+                1,
+            )
+        }
         // The Python agent does the Rust agent's work (first and last byte of every row,
         // one command, stop) through the Python SDK.
         Some(python) if case.transport == "python" => Agents::spawn_program(

@@ -64,15 +64,49 @@ pub struct RunOptions {
 /// # Errors
 /// Host creation, agents missing, transport failures, a spawned agent failing.
 pub fn run(opts: RunOptions, events: &mut Events) -> anyhow::Result<Summary> {
+    run_observed(opts, events, |_| {})
+}
+
+/// The wall time of one cycle of the loop and of two of its parts (for `vr-sim bench`'s
+/// whole-loop rows).
+#[derive(Debug, Clone, Copy)]
+pub struct CycleTimes {
+    /// Frame 1 and frame 2: sensors, rendering, publishing, start, the wait for the
+    /// agents, applying, the world's step, the trajectory hash.
+    pub total: Duration,
+    /// Writing the sensors and rendering the images (part of frame 1).
+    pub render: Duration,
+    /// The wait for every agent's stop (`Host::collect`, part of frame 2): the agents'
+    /// own time between the start and their stops, and their wake-ups.
+    pub collect: Duration,
+}
+
+/// [`run`], calling `observe` after every completed cycle with that cycle's times (not for
+/// a cycle that SIGINT/SIGTERM ended).
+///
+/// # Errors
+/// As [`run`].
+pub fn run_observed(
+    opts: RunOptions,
+    events: &mut Events,
+    mut observe: impl FnMut(&CycleTimes),
+) -> anyhow::Result<Summary> {
     let mut run = Run::new(opts, events)?;
     while run.wants_another_cycle() {
         if run.nobody_connected() && run.wait_for_return()?.is_break() {
             break;
         }
+        let started = Instant::now();
+        let rendered_before = run.render_time;
         let notable = run.frame1()?;
         if run.frame2(notable)?.is_break() {
             break;
         }
+        observe(&CycleTimes {
+            total: started.elapsed(),
+            render: run.render_time - rendered_before,
+            collect: run.last_collect,
+        });
     }
     run.finish()
 }
@@ -108,6 +142,8 @@ struct Run {
     render_time: Duration,
     /// `render_time` at the start of the current cycle.
     render_time_at_cycle_start: Duration,
+    /// The last cycle's wait in `Host::collect`.
+    last_collect: Duration,
     loop_started: Instant,
     /// Cycles completed.
     done: u64,
@@ -226,6 +262,7 @@ impl Run {
             hasher: blake3::Hasher::new(),
             render_time: Duration::ZERO,
             render_time_at_cycle_start: Duration::ZERO,
+            last_collect: Duration::ZERO,
             loop_started: Instant::now(),
             done: 0,
             interrupted: false,
@@ -418,6 +455,7 @@ impl Run {
         let wait_started = Instant::now();
         let collected = self.host.collect();
         let wait = wait_started.elapsed();
+        self.last_collect = wait;
         let report = match collected {
             Ok(r) => r,
             Err(HostCycleError::Terminated) => {
@@ -552,6 +590,7 @@ impl Run {
             hasher,
             render_time,
             render_time_at_cycle_start: _,
+            last_collect: _,
             loop_started,
             done,
             interrupted,
