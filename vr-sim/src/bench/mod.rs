@@ -122,10 +122,16 @@ pub struct Row {
     /// (mean, median of the rounds; beside `render_us`, the same images rendered with no
     /// agent process running). `null` elsewhere.
     pub loop_render_us: f64,
+    /// `python-loop` rows: the rest of frame 1 per cycle (the agents' connections, the
+    /// loans, publishing, start; mean, median of the rounds). `null` elsewhere.
+    pub loop_publish_us: f64,
     /// `python-loop` rows: the loop's time per cycle waiting for every agent's stop
     /// (`Host::collect`: the Python process's step, its wake-up and the host's; mean,
     /// median of the rounds). `null` elsewhere.
     pub loop_wait_us: f64,
+    /// `python-loop` rows: the rest of frame 2 per cycle (applying the commands, the
+    /// world's step, the trajectory hash; mean, median of the rounds). `null` elsewhere.
+    pub loop_rest_us: f64,
     /// `python-host` rows: the Python host thread's CPU time per agent-cycle in the same
     /// parts of the cycle, µs (median of the rounds; `vrsync.bench_host`'s
     /// `host_cpu_us_per_agent_cycle`): the host's own cost, DESIGN §9's target. `null`
@@ -291,8 +297,12 @@ struct Measured {
     round_render_us: Vec<f64>,
     /// `python-loop`: each round's mean time per cycle rendering in the loop, µs.
     round_loop_render_us: Vec<f64>,
+    /// `python-loop`: each round's mean time per cycle in the rest of frame 1, µs.
+    round_loop_publish_us: Vec<f64>,
     /// `python-loop`: each round's mean wait per cycle for the agents, µs.
     round_loop_wait_us: Vec<f64>,
+    /// `python-loop`: each round's mean time per cycle in the rest of frame 2, µs.
+    round_loop_rest_us: Vec<f64>,
     allocs: f64,
     agent_allocs: f64,
     render_us: f64,
@@ -307,7 +317,9 @@ impl Measured {
             round_host_cpu_us: Vec::new(),
             round_render_us: Vec::new(),
             round_loop_render_us: Vec::new(),
+            round_loop_publish_us: Vec::new(),
             round_loop_wait_us: Vec::new(),
+            round_loop_rest_us: Vec::new(),
             hist,
             allocs,
             agent_allocs,
@@ -324,7 +336,10 @@ impl Measured {
         self.round_host_cpu_us.extend(other.round_host_cpu_us);
         self.round_render_us.extend(other.round_render_us);
         self.round_loop_render_us.extend(other.round_loop_render_us);
+        self.round_loop_publish_us
+            .extend(other.round_loop_publish_us);
         self.round_loop_wait_us.extend(other.round_loop_wait_us);
+        self.round_loop_rest_us.extend(other.round_loop_rest_us);
         self.allocs = self.allocs.max(other.allocs);
         self.agent_allocs = self.agent_allocs.max(other.agent_allocs);
         if self.render_us.is_nan() {
@@ -374,7 +389,9 @@ fn row(case: &Case, m: &Measured) -> Row {
         png_us: m.png_us,
         sdk_us_per_agent_step: median(&m.round_sdk_us),
         loop_render_us: median(&m.round_loop_render_us),
+        loop_publish_us: median(&m.round_loop_publish_us),
         loop_wait_us: median(&m.round_loop_wait_us),
+        loop_rest_us: median(&m.round_loop_rest_us),
         host_cpu_us_per_agent_cycle: median(&m.round_host_cpu_us),
     }
 }

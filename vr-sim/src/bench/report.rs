@@ -245,8 +245,9 @@ pub(super) fn ratio_lines(rows: &[Row]) -> Vec<(String, Option<f64>, &'static st
     }
     // The whole loop with rendering (`vr-sim run`'s loop serving the vector env) against
     // the same images rendered alone in the same round, and where the rest of its cycle
-    // goes (means per cycle: rendering in the loop, the wait for the agents, the host's
-    // own remainder: publish, start, apply, the world's step, the hash).
+    // goes (means per cycle: rendering in the loop; the rest of frame 1: connections,
+    // loans, publishing, start; the wait for the agents; the remainder of frame 2:
+    // applying, the world's step, the hash).
     for a in LOOP_AGENTS {
         let Some(r) = find_vec(rows, "python-loop", a) else {
             continue;
@@ -255,11 +256,12 @@ pub(super) fn ratio_lines(rows: &[Row]) -> Vec<(String, Option<f64>, &'static st
         v.push((what, Some(r.p50_us / r.render_us), "<= 1.2"));
         let what = format!("python-loop render in the loop / alone, {a} agents");
         v.push((what, Some(r.loop_render_us / r.render_us), "report"));
+        let what = format!("python-loop loans, publish, start µs/cycle, {a} agents");
+        v.push((what, Some(r.loop_publish_us), "report"));
         let what = format!("python-loop wait for the agents µs/cycle, {a} agents");
         v.push((what, Some(r.loop_wait_us), "report"));
-        let what = format!("python-loop host's own µs/cycle, {a} agents");
-        let own = r.mean_us - r.loop_render_us - r.loop_wait_us;
-        v.push((what, Some(own), "report"));
+        let what = format!("python-loop apply, step, hash µs/cycle, {a} agents");
+        v.push((what, Some(r.loop_rest_us), "report"));
         let what = format!("python-loop SDK µs per agent-step, {a} agents");
         v.push((what, Some(r.sdk_us_per_agent_step), "report"));
     }
@@ -289,11 +291,11 @@ pub(super) fn ratio_lines(rows: &[Row]) -> Vec<(String, Option<f64>, &'static st
 
 pub(super) fn write_csv(path: &Path, rows: &[Row]) -> anyhow::Result<()> {
     let mut s = String::from(
-        "transport,agents,cameras,width,height,format,frames,p50_us,p99_us,mean_us,frames_per_s,allocs_per_cycle,agent_allocs_per_cycle,render_us,sdk_us_per_agent_step,host_cpu_us_per_agent_cycle,loop_render_us,loop_wait_us\n",
+        "transport,agents,cameras,width,height,format,frames,p50_us,p99_us,mean_us,frames_per_s,allocs_per_cycle,agent_allocs_per_cycle,render_us,sdk_us_per_agent_step,host_cpu_us_per_agent_cycle,loop_render_us,loop_publish_us,loop_wait_us,loop_rest_us\n",
     );
     for r in rows {
         s += &format!(
-            "{},{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.1},{:.3},{:.3},{:.1},{:.1}\n",
+            "{},{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.1},{:.3},{:.3},{:.1},{:.1},{:.1},{:.1}\n",
             r.transport,
             r.agents,
             r.cameras,
@@ -311,7 +313,9 @@ pub(super) fn write_csv(path: &Path, rows: &[Row]) -> anyhow::Result<()> {
             r.sdk_us_per_agent_step,
             r.host_cpu_us_per_agent_cycle,
             r.loop_render_us,
-            r.loop_wait_us
+            r.loop_publish_us,
+            r.loop_wait_us,
+            r.loop_rest_us
         );
     }
     std::fs::write(path, s).with_context(|| format!("write {}", path.display()))

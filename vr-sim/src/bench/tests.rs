@@ -431,7 +431,9 @@ fn a_python_loop_row_sets_its_cycle_against_the_render_alone_and_splits_the_rest
         let mut round = Measured::new(h.clone(), 17.0, 1.0);
         round.round_render_us.push(alone);
         round.round_loop_render_us.push(in_loop);
+        round.round_loop_publish_us.push(20.0);
         round.round_loop_wait_us.push(wait);
+        round.round_loop_rest_us.push(30.0);
         m.merge(round).unwrap();
     }
     let r = row(&case, &m);
@@ -451,8 +453,14 @@ fn a_python_loop_row_sets_its_cycle_against_the_render_alone_and_splits_the_rest
     };
     let ratio = value("python-loop / render alone, 16 agents, 1x84x84");
     assert!((ratio - r.p50_us / 500.0).abs() < 1e-9, "{ratio}");
-    let own = value("python-loop host's own µs/cycle, 16 agents");
-    assert!((own - (r.mean_us - 520.0 - 55.0)).abs() < 1e-9, "{own}");
+    assert_eq!(
+        value("python-loop loans, publish, start µs/cycle, 16 agents"),
+        20.0
+    );
+    assert_eq!(
+        value("python-loop apply, step, hash µs/cycle, 16 agents"),
+        30.0
+    );
     assert!(
         !lines
             .iter()

@@ -65,6 +65,8 @@ struct LoopCycles {
     warmup: u64,
     seen: u64,
     hist: Histogram<u64>,
+    total: Duration,
+    frame1: Duration,
     render: Duration,
     collect: Duration,
     /// The host's allocation count when the warm-up ended.
@@ -78,6 +80,8 @@ impl LoopCycles {
             warmup: case.warmup,
             seen: 0,
             hist: histogram()?,
+            total: Duration::ZERO,
+            frame1: Duration::ZERO,
             render: Duration::ZERO,
             collect: Duration::ZERO,
             allocs_at_warmup: 0,
@@ -95,6 +99,8 @@ impl LoopCycles {
         }
         // A value beyond the histogram's range is left out (10 minutes per cycle).
         let _ = self.hist.record(t.total.as_nanos().max(1) as u64);
+        self.total += t.total;
+        self.frame1 += t.frame1;
         self.render += t.render;
         self.collect += t.collect;
         self.allocs_at_end = allocations();
@@ -111,6 +117,13 @@ impl LoopCycles {
         m.render_us = render_alone_us;
         m.round_render_us.push(render_alone_us);
         m.round_loop_render_us.push(per_cycle_us(self.render));
+        m.round_loop_publish_us
+            .push(per_cycle_us(self.frame1.saturating_sub(self.render)));
+        let frame2_rest = self
+            .total
+            .saturating_sub(self.frame1)
+            .saturating_sub(self.collect);
+        m.round_loop_rest_us.push(per_cycle_us(frame2_rest));
         m.round_loop_wait_us.push(per_cycle_us(self.collect));
         if !reported.sdk_us_per_agent_step.is_nan() {
             m.round_sdk_us.push(reported.sdk_us_per_agent_step);

@@ -74,6 +74,8 @@ pub struct CycleTimes {
     /// Frame 1 and frame 2: sensors, rendering, publishing, start, the wait for the
     /// agents, applying, the world's step, the trajectory hash.
     pub total: Duration,
+    /// Frame 1: the connections, the loans, the sensors, rendering, publishing, start.
+    pub frame1: Duration,
     /// Writing the sensors and rendering the images (part of frame 1).
     pub render: Duration,
     /// The wait for every agent's stop (`Host::collect`, part of frame 2): the agents'
@@ -99,11 +101,13 @@ pub fn run_observed(
         let started = Instant::now();
         let rendered_before = run.render_time;
         let notable = run.frame1()?;
+        let frame1 = started.elapsed();
         if run.frame2(notable)?.is_break() {
             break;
         }
         observe(&CycleTimes {
             total: started.elapsed(),
+            frame1,
             render: run.render_time - rendered_before,
             collect: run.last_collect,
         });
