@@ -1,7 +1,7 @@
 """Where the time of the single Python agent's cycle goes: the `python` case of `vr-sim bench`, longer.
 
     python bench/python_agent_budget.py [--python PY] [--size 320x240 --size 1920x1080]
-        [--cycles 3000] [--warmup 300] [--rounds 3]
+        [--cycles 3000] [--warmup 300] [--rounds 3] [--spin-us 50 --spin-us 200]
 
 Runs the `python` case (1 agent, 3 rgb8 cameras of each `--size`, sync mode over shared
 memory, the bench config's `wait = "block"`) served by `python -m vrsync.bench_host` (the
@@ -11,6 +11,9 @@ sizes take turns within each round. Per size and round it prints, µs: the host'
 trip (p50 and mean), and the agent's parts (medians): the wait for the frame (`next` of
 `Agent.frames`: the SDK's receive, and polling or sleeping until the host's start), the
 three numpy views (`frame.images`), the row reads (`touch_rows`), `send` + `stop`.
+Each `--spin-us` runs every size once more per round with that `[sync]
+spin_before_block_us` (how long host and agent poll before they sleep; default 50): the
+cycle's sensitivity to the agent's time crossing the host's polling window.
 """
 
 from __future__ import annotations
@@ -25,11 +28,14 @@ import tempfile
 import time
 from pathlib import Path
 
+from vector_budget import host_result, start_host
 
-def config_text(session: str, width: int, height: int) -> str:
+
+def config_text(session: str, width: int, height: int, spin_us: int | None) -> str:
+    spin = "" if spin_us is None else f"spin_before_block_us = {spin_us}\n"
     head = (
         f'session = "{session}"\n[sync]\nsync_mode = true\nsimulation_time_per_frame = 0.01\n'
-        'stop_timeout = 10.0\nconnect_timeout = 60.0\nwait = "block"\n[transport]\n'
+        f'stop_timeout = 10.0\nconnect_timeout = 60.0\nwait = "block"\n{spin}[transport]\n'
         'kind = "shm"\nmax_commands_per_cycle = 8\n[[agent]]\nid = 0\n'
     )
     cam = '[[agent.camera]]\nname = "c{}"\nwidth = {}\nheight = {}\nformat = "rgb8"\n'
@@ -70,27 +76,22 @@ def agent_main(config: str, warmup: int) -> None:
     print(json.dumps(result), flush=True)
 
 
-def one(python: str, width: int, height: int, warmup: int, cycles: int, tag: str) -> dict:
+def one(
+    python: str, width: int, height: int, spin_us: int | None, warmup: int, cycles: int, tag: str
+) -> dict:
     with tempfile.TemporaryDirectory() as d:
         config = Path(d) / "c.toml"
-        config.write_text(config_text(f"agent-budget-{os.getpid()}-{tag}", width, height))
+        session = f"agent-budget-{os.getpid()}-{tag}"
+        config.write_text(config_text(session, width, height, spin_us))
         out = Path(d) / "host.json"
-        host = subprocess.Popen(
-            [python, "-m", "vrsync.bench_host", "--config", str(config), "--warmup",
-             str(warmup), "--cycles", str(cycles), "--out", str(out)],
-        )
+        host = start_host(python, config, warmup, cycles, out)
         agent = subprocess.run(
             [python, __file__, "--agent", str(config), "--warmup", str(warmup)],
             stdout=subprocess.PIPE, text=True, timeout=600,
         )
         host.wait(timeout=600)
-        if host.returncode != 0 or agent.returncode != 0:
-            sys.exit(f"{tag}: host {host.returncode}, agent {agent.returncode}")
-        result = json.loads(agent.stdout.strip().splitlines()[-1])
-        rt = json.loads(out.read_text())["round_trip_ns"]
-        result["cycle_p50_us"] = statistics.median(rt) / 1e3
-        result["cycle_mean_us"] = statistics.fmean(rt) / 1e3
-        return result
+        result = host_result(tag, host, agent, out)
+        return json.loads(agent.stdout.strip().splitlines()[-1]) | result
 
 
 def main() -> None:
@@ -100,6 +101,7 @@ def main() -> None:
     parser.add_argument("--cycles", type=int, default=3000)
     parser.add_argument("--warmup", type=int, default=300)
     parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--spin-us", type=int, action="append", default=[])
     parser.add_argument("--agent", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.agent:
@@ -107,12 +109,15 @@ def main() -> None:
         return
     sizes = [tuple(int(x) for x in s.split("x")) for s in args.size or ["320x240", "1920x1080"]]
     keys = ["cycle_p50_us", "cycle_mean_us", "wait", "views", "reads", "send_stop"]
-    print("size round " + " ".join(keys))
+    spins: list[int | None] = args.spin_us or [None]
+    print("size spin_us round " + " ".join(keys))
     for r in range(args.rounds):
-        for w, h in sizes:
-            res = one(args.python, w, h, args.warmup, args.cycles, f"{w}-{r}")
-            vals = " ".join("-" if res.get(k) is None else f"{res[k]:.1f}" for k in keys)
-            print(f"3x{w}x{h} {r} {vals}", flush=True)
+        for spin in spins:
+            for w, h in sizes:
+                res = one(args.python, w, h, spin, args.warmup, args.cycles, f"{w}-{spin}-{r}")
+                vals = " ".join("-" if res.get(k) is None else f"{res[k]:.1f}" for k in keys)
+                label = "default" if spin is None else spin
+                print(f"3x{w}x{h} {label} {r} {vals}", flush=True)
 
 
 if __name__ == "__main__":

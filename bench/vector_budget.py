@@ -120,6 +120,23 @@ def perf_top(data: Path, steps: int, limit: int = 25) -> str:
     return "\n".join(text)
 
 
+def start_host(python: str, config: Path, warmup: int, cycles: int, out: Path) -> subprocess.Popen:
+    """`python -m vrsync.bench_host` serving `config`, its report to `out`."""
+    return subprocess.Popen(
+        [python, "-m", "vrsync.bench_host", "--config", str(config), "--warmup",
+         str(warmup), "--cycles", str(cycles), "--out", str(out)],
+    )
+
+
+def host_result(tag: str, host: subprocess.Popen, agent: subprocess.Popen | subprocess.CompletedProcess,
+                out: Path) -> dict:
+    """Exits if the host or the agent failed; else the host's round trip, p50 and mean, µs."""
+    if host.returncode != 0 or agent.returncode != 0:
+        sys.exit(f"{tag}: host {host.returncode}, agent {agent.returncode}")
+    rt = json.loads(out.read_text())["round_trip_ns"]
+    return {"cycle_p50_us": statistics.median(rt) / 1e3, "cycle_mean_us": statistics.fmean(rt) / 1e3}
+
+
 def one(python: str, host_python: str, agents: int, warmup: int, cycles: int,
         perf: Path | None, tag: str) -> dict:
     with tempfile.TemporaryDirectory() as d:
@@ -127,10 +144,7 @@ def one(python: str, host_python: str, agents: int, warmup: int, cycles: int,
         config = Path(d) / "c.toml"
         config.write_text(config_text(session, agents))
         out = Path(d) / "host.json"
-        host = subprocess.Popen(
-            [host_python, "-m", "vrsync.bench_host", "--config", str(config), "--warmup",
-             str(warmup), "--cycles", str(cycles), "--out", str(out)],
-        )
+        host = start_host(host_python, config, warmup, cycles, out)
         agent = subprocess.Popen(
             [python, __file__, "--agent", str(config), "--warmup", str(warmup)],
             stdout=subprocess.PIPE, text=True,
@@ -153,12 +167,7 @@ def one(python: str, host_python: str, agents: int, warmup: int, cycles: int,
                 result = json.loads(line)
         agent.wait()
         host.wait()
-        if host.returncode != 0 or agent.returncode != 0:
-            sys.exit(f"{tag}: host {host.returncode}, agent {agent.returncode}")
-        rt = json.loads(out.read_text())["round_trip_ns"]
-        result["cycle_p50_us"] = statistics.median(rt) / 1e3
-        result["cycle_mean_us"] = statistics.fmean(rt) / 1e3
-        return result
+        return result | host_result(tag, host, agent, out)
 
 
 def main() -> None:

@@ -1,6 +1,7 @@
 //! The floor rows: the raw iceoryx2, TCP and zenoh round trips the vrsync rows are
-//! compared with.
+//! compared with, and numpy's row reads alone (`floor-numpy`) beside the Python agent.
 
+use super::vrsync::{histogram_of, python_bench};
 use super::*;
 
 /// The raw iceoryx2 round trip.
@@ -128,17 +129,10 @@ pub(super) fn bench_floor_numpy(
     python: &Path,
 ) -> anyhow::Result<Measured> {
     let out = dir.join(format!("{session}-numpy.json"));
-    let status = Command::new(python)
-        .args(["-m", "vrsync.bench_numpy"])
+    let status = python_bench(python, "vrsync.bench_numpy", case, &out)
         .args(["--width", &case.width.to_string()])
         .args(["--height", &case.height.to_string()])
         .args(["--cameras", &case.cameras.to_string()])
-        .args(["--warmup", &case.warmup.to_string()])
-        .args(["--cycles", &case.cycles.to_string()])
-        .arg("--out")
-        .arg(&out)
-        .stdout(Stdio::null())
-        .stderr(Stdio::inherit())
         .status()
         .with_context(|| format!("start {} -m vrsync.bench_numpy", python.display()))?;
     if !status.success() {
@@ -160,10 +154,10 @@ pub(super) fn bench_floor_numpy(
             case.cycles
         );
     }
-    let mut hist = histogram()?;
-    for &ns in &report.read_ns {
-        hist.record(ns.max(1)).context("record")?;
-    }
     // No host and no SDK: no allocations of ours to count.
-    Ok(Measured::new(hist, f64::NAN, f64::NAN))
+    Ok(Measured::new(
+        histogram_of(&report.read_ns)?,
+        f64::NAN,
+        f64::NAN,
+    ))
 }

@@ -612,7 +612,7 @@ impl Bench<'_> {
         // The whole loop with rendering: `vr-sim run`'s loop serving the vector env,
         // against the same renderer alone in the same round.
         for agents in LOOP_AGENTS {
-            let case = python_loop_case(agents, self.quick);
+            let case = vec_case("python-loop", agents, self.quick);
             measure_interleaved(&[case], rows, |case, _round| {
                 let session = self.session();
                 bench_python_loop(case, &session, self.dir, python)
@@ -659,33 +659,24 @@ impl Bench<'_> {
 /// the order of each round: the vector env, the Python host, the Rust host (`shm`, the
 /// reference of both) and the raw floor.
 fn vector_env_cases(agents: u32, quick: bool) -> Vec<Case> {
-    let cycles = if quick { 600 } else { 3000 };
     ["python-vec", "python-host", "shm", "floor-shm"]
         .into_iter()
-        .map(|transport| Case {
-            transport,
-            agents,
-            cameras: 1,
-            width: VEC_SIZE,
-            height: VEC_SIZE,
-            // Enough for the Python process to reach its steady state (first-touch
-            // page faults, numpy's caches) before the host measures.
-            warmup: (cycles / ROUNDS / 10).max(20),
-            cycles: (cycles / ROUNDS).max(10),
-        })
+        .map(|transport| vec_case(transport, agents, quick))
         .collect()
 }
 
-/// The `python-loop` case at `agents` agents: one 84x84 rgb8 camera each, as the
-/// vector-env rows.
-fn python_loop_case(agents: u32, quick: bool) -> Case {
+/// A case of the vector-env section (`python-loop` too): `agents` agents of one 84x84
+/// rgb8 camera each.
+fn vec_case(transport: &'static str, agents: u32, quick: bool) -> Case {
     let cycles = if quick { 600 } else { 3000 };
     Case {
-        transport: "python-loop",
+        transport,
         agents,
         cameras: 1,
         width: VEC_SIZE,
         height: VEC_SIZE,
+        // Enough for the Python process to reach its steady state (first-touch page
+        // faults, numpy's caches) before the host measures.
         warmup: (cycles / ROUNDS / 10).max(20),
         cycles: (cycles / ROUNDS).max(10),
     }

@@ -416,7 +416,7 @@ fn the_ratio_table_sets_the_python_host_against_the_rust_host() {
 fn a_python_loop_row_sets_its_cycle_against_the_render_alone_and_splits_the_rest() {
     let mut h = histogram().unwrap();
     h.record_n(600_000, 10).unwrap();
-    let case = python_loop_case(16, true);
+    let case = vec_case("python-loop", 16, true);
     assert_eq!(
         (case.cameras, case.width, case.height),
         (1, VEC_SIZE, VEC_SIZE)
@@ -443,14 +443,7 @@ fn a_python_loop_row_sets_its_cycle_against_the_render_alone_and_splits_the_rest
     // Its cycle holds the rendering: no bridge share.
     assert!(report::bridge_share(&r).is_nan());
     let lines = report::ratio_lines(std::slice::from_ref(&r));
-    let value = |what: &str| {
-        lines
-            .iter()
-            .find(|(w, _, _)| w == what)
-            .unwrap_or_else(|| panic!("no line {what:?}"))
-            .1
-            .unwrap()
-    };
+    let value = |what: &str| line_value(&lines, what).unwrap();
     let ratio = value("python-loop / render alone, 16 agents, 1x84x84");
     assert!((ratio - r.p50_us / 500.0).abs() < 1e-9, "{ratio}");
     assert_eq!(
@@ -487,13 +480,7 @@ fn the_numpy_floor_explains_the_python_agents_extra_time_over_the_rust_agent() {
         row_of("floor-numpy", 1920, 40.0),
     ];
     let lines = report::ratio_lines(&rows);
-    let value = |what: &str| {
-        lines
-            .iter()
-            .find(|(w, _, _)| w == what)
-            .unwrap_or_else(|| panic!("no line {what:?}"))
-            .1
-    };
+    let value = |what: &str| line_value(&lines, what);
     // (80 - 20) / 40 and (30 - 10) / 10.
     assert_eq!(
         value("(python - shm) / floor-numpy, 1 agent, 3x1920x1080"),
@@ -516,4 +503,13 @@ fn the_numpy_floors_report_is_read_as_the_python_hosts_is() {
         serde_json::from_str(r#"{"cycles": 2, "read_ns": [30000, 31000]}"#).unwrap();
     assert_eq!(report.cycles, 2);
     assert_eq!(report.read_ns, [30_000, 31_000]);
+}
+
+/// The figure of the ratio table's line `what` (panics if there is no such line).
+fn line_value(lines: &[(String, Option<f64>, &str)], what: &str) -> Option<f64> {
+    lines
+        .iter()
+        .find(|(w, _, _)| w == what)
+        .unwrap_or_else(|| panic!("no line {what:?}"))
+        .1
 }

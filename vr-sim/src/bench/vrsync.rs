@@ -256,11 +256,7 @@ impl PythonHostReport {
     /// its CPU time as the row's host CPU time (host allocations: not counted in a Python
     /// process, NaN).
     pub(super) fn measured(&self, agent_allocs: f64) -> anyhow::Result<Measured> {
-        let mut hist = histogram()?;
-        for &ns in &self.round_trip_ns {
-            hist.record(ns.max(1)).context("record")?;
-        }
-        let mut m = Measured::new(hist, f64::NAN, agent_allocs);
+        let mut m = Measured::new(histogram_of(&self.round_trip_ns)?, f64::NAN, agent_allocs);
         if let Some(us) = self.host_us_per_agent_cycle.filter(|us| us.is_finite()) {
             m.round_sdk_us.push(us);
         }
@@ -269,6 +265,31 @@ impl PythonHostReport {
         }
         Ok(m)
     }
+}
+
+/// A histogram of the times a Python bench module reported, ns.
+pub(super) fn histogram_of(ns: &[u64]) -> anyhow::Result<Histogram<u64>> {
+    let mut hist = histogram()?;
+    for &t in ns {
+        hist.record(t.max(1)).context("record")?;
+    }
+    Ok(hist)
+}
+
+/// `python -m <module> --warmup W --cycles C --out <out>` for `case` (a Python bench
+/// module that writes its measurements to `out`), its output to nowhere, its errors to
+/// ours.
+pub(super) fn python_bench(python: &Path, module: &str, case: &Case, out: &Path) -> Command {
+    let mut command = Command::new(python);
+    command
+        .args(["-m", module])
+        .args(["--warmup", &case.warmup.to_string()])
+        .args(["--cycles", &case.cycles.to_string()])
+        .arg("--out")
+        .arg(out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::inherit());
+    command
 }
 
 /// A child process killed (and reaped) on drop unless it was waited for.
@@ -297,15 +318,9 @@ pub(super) fn bench_python_host(
     let path = dir.join(format!("{session}.toml"));
     std::fs::write(&path, config_text(case, session, dir)).context("write the bench config")?;
     let out = dir.join(format!("{session}.json"));
-    let host = Command::new(python)
-        .args(["-m", "vrsync.bench_host", "--config"])
+    let host = python_bench(python, "vrsync.bench_host", case, &out)
+        .arg("--config")
         .arg(&path)
-        .args(["--warmup", &case.warmup.to_string()])
-        .args(["--cycles", &case.cycles.to_string()])
-        .arg("--out")
-        .arg(&out)
-        .stdout(Stdio::null())
-        .stderr(Stdio::inherit())
         .spawn()
         .with_context(|| format!("start {} -m vrsync.bench_host", python.display()))?;
     let mut host = KillOnDrop(host);
