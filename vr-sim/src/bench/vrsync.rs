@@ -16,6 +16,11 @@ const MAX_RENDERS: u64 = 15;
 /// pool's threads start, the samples' pages are touched the first time), then the
 /// median of the timed ones (one render preempted by another process cannot move it).
 pub(super) fn measure_render(config: &Config, host: &mut Host) -> anyhow::Result<f64> {
+    Ok(median(&render_times(config, host)?))
+}
+
+/// The timed renders of [`measure_render`], µs each.
+pub(super) fn render_times(config: &Config, host: &mut Host) -> anyhow::Result<Vec<f64>> {
     let world = crate::world::World::from_config(config)?;
     let mut renderer = crate::render::Renderer::new(0)?;
     let rays: u64 = world
@@ -46,7 +51,7 @@ pub(super) fn measure_render(config: &Config, host: &mut Host) -> anyhow::Result
             times_us.push(total.as_secs_f64() * 1e6);
         }
     }
-    Ok(median(&times_us))
+    Ok(times_us)
 }
 
 /// A CA and one certificate (naming 127.0.0.1, for server and client use) for the

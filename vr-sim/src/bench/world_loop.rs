@@ -2,16 +2,18 @@
 //! agent's images, publish, start, collect, apply, the world's step) serving one Python
 //! process that steps every agent through the vector env (`vrsync.bench_vector`), against
 //! the time the same renderer needs for the same images alone, measured in the same
-//! round just before.
+//! round just before and just after.
 
-use super::vrsync::{config_text, measure_render, spawn_agents};
+use super::vrsync::{config_text, render_times, spawn_agents};
 use super::*;
 use crate::events::Events;
 use crate::run::{CycleTimes, RunOptions, run_observed};
 
 /// One round of a `python-loop` case: renders the cycle's images alone (a host of its
-/// own, before any agent process exists), then runs `vr-sim run`'s loop for the case's
-/// warm-up and measured cycles with `python -m vrsync.bench_vector` as the agents.
+/// own, before any agent process exists), runs `vr-sim run`'s loop for the case's
+/// warm-up and measured cycles with `python -m vrsync.bench_vector` as the agents, and
+/// renders alone again once they left: the render alone is the median of both sets
+/// (another process that takes a core for a while hits one of them, not the row).
 pub(super) fn bench_python_loop(
     case: &Case,
     session: &str,
@@ -20,19 +22,20 @@ pub(super) fn bench_python_loop(
 ) -> anyhow::Result<Measured> {
     let text = config_text(case, session, dir);
     let config = Config::from_toml_str(&text, Path::new("<bench>"))?;
-    let render_alone_us = {
-        let mut host = Host::builder(&config)
+    let render_alone = |config: &Config| -> anyhow::Result<Vec<f64>> {
+        let mut host = Host::builder(config)
             .signal_handling(SignalHandling::Install)
             .create()
             .context("create the host of the render-alone measurement")?;
-        measure_render(&config, &mut host)?
+        render_times(config, &mut host)
     };
+    let mut render_alone_us = render_alone(&config)?;
     let path = dir.join(format!("{session}.toml"));
     std::fs::write(&path, config.to_toml_string()).context("write the bench config")?;
     let agents = spawn_agents(case, &path, Some(python))?;
     let mut cycles = LoopCycles::new(case)?;
     let opts = RunOptions {
-        config,
+        config: config.clone(),
         agent_config_path: path.clone(),
         frames: Some(case.warmup + case.cycles),
         spawn: false,
@@ -57,7 +60,8 @@ pub(super) fn bench_python_loop(
     }
     let reported = agents.finish()?;
     let _ = std::fs::remove_file(&path);
-    cycles.measured(render_alone_us, reported)
+    render_alone_us.extend(render_alone(&config)?);
+    cycles.measured(median(&render_alone_us), reported)
 }
 
 /// The measured cycles of a `python-loop` round, as `run_observed` reports them.
