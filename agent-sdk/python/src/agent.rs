@@ -14,27 +14,15 @@ use vrsync_bridge::{Config, WaitForStop};
 
 use crate::channels::{PyAction, PyVector, channels_of};
 use crate::commands::PyCommand;
+pub(crate) use crate::detach::SameThread;
 use crate::errors::{error, obj, send_error};
 use crate::frame::{Graveyard, PyFrame};
 
 /// The longest the GIL is released in one go while waiting: Ctrl-C is seen within this.
 const WAIT_SLICE: Duration = Duration::from_millis(50);
 
-/// Moves a value that is not `Send` through [`Python::detach`], which runs its closure on
-/// the *calling* thread: nothing crosses a thread.
-pub(crate) struct SameThread<T>(pub(crate) T);
-// SAFETY: only used to pass values into and out of `Python::detach`, whose closure runs
-// synchronously on the current thread.
-unsafe impl<T> Send for SameThread<T> {}
-
 /// The Rust agent, used only on its owner thread (see [`PyAgent::enter`]).
-struct AgentCell(Agent);
-// SAFETY: every use goes through `PyAgent::enter`, which admits only the owner thread (or
-// moves ownership when no frame of the agent is alive anywhere); PyO3's borrow flag
-// makes those uses exclusive.
-unsafe impl Send for AgentCell {}
-// SAFETY: as above; there is no shared (`&`) use of the agent.
-unsafe impl Sync for AgentCell {}
+pub(crate) struct AgentCell(Agent);
 
 /// One camera of this agent, as configured: what `Frame.image(name)` returns for it.
 #[pyclass(module = "vrsync._vrsync", name = "Camera", frozen, get_all)]

@@ -26,11 +26,7 @@ use crate::sensors::{
 };
 
 /// A frame moved to another thread only to be dropped later on its owner's thread.
-struct Corpse(#[allow(dead_code)] Frame);
-
-// SAFETY: a `Corpse` is never used; it is only stored until the owner thread drops it
-// (see the module docs).
-unsafe impl Send for Corpse {}
+pub(crate) struct Corpse(#[allow(dead_code)] Frame);
 
 /// Frames released on foreign threads, waiting to be dropped by their agent's owner
 /// thread; plus the number of this agent's frames alive anywhere (held or buried).
@@ -89,12 +85,6 @@ impl Drop for OwnedFrame {
         }
     }
 }
-
-// SAFETY: see the module docs: every thread only reads the frame (header and pixels are
-// memory nobody writes while it is held), and `Drop` moves it back to the owner thread.
-unsafe impl Send for OwnedFrame {}
-// SAFETY: as above; shared access is read-only.
-unsafe impl Sync for OwnedFrame {}
 
 /// One sensor frame: the cycle, simulated time, pose and the other sensors, and the
 /// camera images as read-only numpy arrays that view the frame's memory without a copy.

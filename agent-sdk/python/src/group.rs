@@ -40,14 +40,7 @@ const WAIT_SLICE: Duration = Duration::from_millis(50);
 
 /// The agents, used only through `&mut AgentGroup` (PyO3's borrow flag makes every use
 /// exclusive) and never holding a frame between calls.
-struct Agents(Vec<Agent>);
-// SAFETY: an agent is used by one thread at a time (PyO3's exclusive borrow of the
-// group), and no frame of it outlives a call of the group (frames are copied and dropped
-// inside `step`), which is the condition under which `vrsync.Agent` also lets an agent
-// move to another thread.
-unsafe impl Send for Agents {}
-// SAFETY: as above; there is no shared (`&`) use of the agents.
-unsafe impl Sync for Agents {}
+pub(crate) struct Agents(Vec<Agent>);
 
 impl Drop for Agents {
     /// The agents leave together: the closes that wait for the host overlap

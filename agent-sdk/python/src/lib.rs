@@ -25,11 +25,13 @@ mod agent;
 mod buffer;
 mod channels;
 mod commands;
+mod detach;
 mod errors;
 mod frame;
 mod group;
 mod host;
 mod sensors;
+mod threads;
 
 use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;

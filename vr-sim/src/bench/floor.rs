@@ -1,7 +1,7 @@
 //! The floor rows: the raw iceoryx2, TCP and zenoh round trips the vrsync rows are
 //! compared with, and numpy's row reads alone (`floor-numpy`) beside the Python agent.
 
-use super::vrsync::{histogram_of, python_bench};
+use super::vrsync::{histogram_of, loopback_endpoint, python_bench};
 use super::*;
 
 /// The raw iceoryx2 round trip.
@@ -55,15 +55,6 @@ fn floor_args(mode: &str, case: &Case, id: Option<u32>) -> Vec<String> {
         a.extend([flag.to_string(), value.to_string()]);
     }
     a
-}
-
-/// `tcp/127.0.0.1:<a port free a moment ago>`.
-pub(super) fn loopback_endpoint() -> anyhow::Result<String> {
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .context("find a free loopback port")?
-        .port();
-    Ok(format!("tcp/127.0.0.1:{port}"))
 }
 
 /// The raw zenoh round trip (put → subscriber → 8-byte reply, same fan-out).

@@ -2,7 +2,6 @@
 //! Python, the Python vector env) over every transport, and through the Python host API
 //! (`python-host`) with Rust bench agents.
 
-use super::floor::loopback_endpoint;
 use super::*;
 
 /// Render work per measurement of [`measure_render`]: about this many rays (at least one
@@ -424,4 +423,13 @@ fn measure_cycles(case: &Case, host: &mut Host) -> anyhow::Result<(Histogram<u64
         }
         Ok(())
     })
+}
+
+/// `tcp/127.0.0.1:<a port free a moment ago>`.
+pub(super) fn loopback_endpoint() -> anyhow::Result<String> {
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .context("find a free loopback port")?
+        .port();
+    Ok(format!("tcp/127.0.0.1:{port}"))
 }
