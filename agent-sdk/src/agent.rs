@@ -632,38 +632,6 @@ impl Agent {
     /// # Errors
     /// [`StopError`].
     pub fn stop(&mut self) -> Result<(), StopError> {
-        self.stop_with(true)
-    }
-
-    /// [`Agent::stop`], except that the host is not woken yet: for a process that stops
-    /// several agents of one host in a row (a vector env), which then wakes the host once
-    /// with [`Agent::wake_host`] — on shared memory one system call (and one wake-up of
-    /// the host) for all of them instead of one per agent. The batch is in place at once;
-    /// on a transport whose batch is its own wake-up (TCP, zenoh) this is `stop`.
-    ///
-    /// # Errors
-    /// [`StopError`].
-    pub fn stop_unannounced(&mut self) -> Result<(), StopError> {
-        self.stop_with(false)
-    }
-
-    /// Wakes the host for this agent's [unannounced](Agent::stop_unannounced) stop, if
-    /// any; returns whether it did. One wake-up serves every agent of the host on this
-    /// agent's transport, so after stopping several agents unannounced, call it on each in
-    /// turn until one returns `true` (the others' pending wake-ups are then moot: the next
-    /// stop or wake of each forgets it).
-    ///
-    /// # Errors
-    /// [`StopError::HostClosed`], [`StopError::Transport`].
-    pub fn wake_host(&mut self) -> Result<bool, StopError> {
-        self.backend.wake_host().map_err(|e| match e {
-            AgentSendError::HostClosed => StopError::HostClosed,
-            e => StopError::Transport(e.to_string()),
-        })
-    }
-
-    /// Sends the stop batch, waking the host with it (`announce`) or not.
-    fn stop_with(&mut self, announce: bool) -> Result<(), StopError> {
         let cycle = self.last_cycle.ok_or(StopError::NoFrame)?;
         if self.stopped_cycle == Some(cycle) {
             return Err(StopError::AlreadyStopped { cycle });
@@ -676,11 +644,7 @@ impl Agent {
             command_count: self.queue.len() as u32,
             ack_cycle: cycle,
         };
-        let sent = if announce {
-            self.backend.send_batch(&header, &self.queue)
-        } else {
-            self.backend.send_batch_unannounced(&header, &self.queue)
-        };
+        let sent = self.backend.send_batch(&header, &self.queue);
         match sent {
             Ok(()) => {}
             Err(AgentSendError::HostClosed) => return Err(StopError::HostClosed),

@@ -7,8 +7,7 @@
 //! Checked here, over the public host and agent APIs and, where the SDK cannot misbehave on
 //! purpose, over the transport's own agent side ([`AgentTransport`]):
 //! - every cycle arrives once and in order, with no lost wake-up, and each stop brings its
-//!   whole batch (a stop is visible only after its batch); stops sent unannounced by
-//!   several agents reach the host after one agent's wake (a vector env's step);
+//!   whole batch (a stop is visible only after its batch);
 //! - a slow agent gets the newest frame and the older ones are dropped;
 //! - a late stop never completes the next cycle (it is dropped and counted);
 //! - a batch naming a future cycle is dropped and counted, and nothing of it is applied;
@@ -40,8 +39,7 @@ use std::time::{Duration, Instant};
 use vrsync_agent::{AgentBuilder, Command, SignalHandling, WaitStartError};
 use vrsync_bridge::{
     ActionValue, AgentFrame, AgentOutcome, AgentTransport, Config, Host, MOTOR_FLAG_LEAVE,
-    MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION, WaitForStop,
-    wait_for_newer_frame,
+    MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION, wait_for_newer_frame,
 };
 
 const WAIT: Duration = Duration::from_secs(20);
@@ -147,50 +145,6 @@ fn every_cycle_arrives_once_in_order_with_its_whole_batch(kind: &str) {
     // The host is gone (dropped cleanly): the agent is told, not left waiting.
     let err = agent.wait_start(Some(WAIT)).unwrap_err();
     assert!(matches!(err, WaitStartError::HostClosed), "{kind}: {err:?}");
-}
-
-/// Two agents of one process stop unannounced, then the first wakes the host once: on
-/// shared memory that one notification serves both (it says it woke the host); on the
-/// network transports each batch is its own wake-up (nothing to wake). Every cycle ends by
-/// both stops, none by the stop timeout (the agents are waited for by timeout, so a lost
-/// wake-up fails the test instead of hanging it).
-fn stops_sent_unannounced_reach_the_host_after_one_wake(kind: &str) {
-    const CYCLES: u64 = 20;
-    let mut config = config(kind, true);
-    let mut second = config.agents[0].clone();
-    second.id = 5;
-    config.agents.push(second);
-    for a in &mut config.agents {
-        a.wait_for_stop = WaitForStop::Timeout;
-    }
-    let (config, host) = with_host(config, |host| {
-        for cycle in 0..CYCLES {
-            for id in [4, 5] {
-                let frame = host.loan_frame(id).unwrap();
-                host.publish(frame).unwrap();
-            }
-            host.start().unwrap();
-            let report = host.collect().unwrap();
-            assert!(!report.timed_out, "cycle {cycle}");
-            for a in report.agents() {
-                assert_eq!(a.outcome, AgentOutcome::Stopped, "cycle {cycle}: {a:?}");
-                assert_eq!(a.commands().len(), 1, "cycle {cycle}: {a:?}");
-            }
-        }
-    });
-    let mut agents = [4, 5].map(|id| AgentBuilder::new(&config, id).connect().unwrap());
-    for cycle in 0..CYCLES {
-        for agent in &mut agents {
-            let frame = agent.wait_start(Some(WAIT)).unwrap();
-            assert_eq!(frame.cycle(), cycle);
-            drop(frame);
-            agent.send(Command::Turn { angle_deg: 1.0 }).unwrap();
-            agent.stop_unannounced().unwrap();
-        }
-        let woke = agents[0].wake_host().unwrap();
-        assert_eq!(woke, kind == "shm", "{kind}, cycle {cycle}");
-    }
-    host.join().unwrap();
 }
 
 /// Frames the host publishes while the slow agent reads none.
@@ -790,7 +744,6 @@ macro_rules! conformance {
         mod $kind {
             by_kind!($kind:
                 every_cycle_arrives_once_in_order_with_its_whole_batch,
-                stops_sent_unannounced_reach_the_host_after_one_wake,
                 a_slow_agent_gets_the_newest_frame,
                 an_agent_that_goes_away_leaves_without_a_timeout,
                 a_closed_agent_leaves_and_its_id_reconnects_at_the_next_cycle,

@@ -140,22 +140,6 @@ macro_rules! any_agent_methods {
             }
         }
 
-        fn send_batch_unannounced(
-            &mut self,
-            header: &MotorHeader,
-            commands: &[MotorCommand],
-        ) -> Result<(), AgentSendError> {
-            match self {
-                $(Self::$kind(t) => t.send_batch_unannounced(header, commands),)*
-            }
-        }
-
-        fn wake_host(&mut self) -> Result<bool, AgentSendError> {
-            match self {
-                $(Self::$kind(t) => t.wake_host(),)*
-            }
-        }
-
         fn termination_requested(&self) -> bool {
             match self {
                 $(Self::$kind(t) => t.termination_requested(),)*

@@ -555,32 +555,6 @@ pub trait AgentTransport {
         header: &MotorHeader,
         commands: &[MotorCommand],
     ) -> Result<(), AgentSendError>;
-    /// Sends a motor batch as [`AgentTransport::send_batch`] does, except that a stop does
-    /// not wake the host yet: for a process that stops several agents of one host in a
-    /// row, which then wakes the host once ([`AgentTransport::wake_host`]) instead of once
-    /// per agent. The batch is in place at once: a host that wakes for any reason finds it.
-    /// The default, for transports whose batch is its own wake-up (a socket that becomes
-    /// readable), is `send_batch`.
-    ///
-    /// # Errors
-    /// [`AgentSendError`].
-    fn send_batch_unannounced(
-        &mut self,
-        header: &MotorHeader,
-        commands: &[MotorCommand],
-    ) -> Result<(), AgentSendError> {
-        self.send_batch(header, commands)
-    }
-    /// Wakes the host for the stops this agent sent unannounced, if any: returns whether
-    /// it did. One wake-up serves every agent of the host on this transport (the host
-    /// drains them all when it wakes), so the caller stops at the first agent that returns
-    /// `true`. The default (no unannounced stops) returns `false`.
-    ///
-    /// # Errors
-    /// [`AgentSendError`].
-    fn wake_host(&mut self) -> Result<bool, AgentSendError> {
-        Ok(false)
-    }
     /// Whether SIGINT/SIGTERM arrived (never, with [`crate::SignalHandling::Leave`]).
     fn termination_requested(&self) -> bool;
     /// Starts closing the connection without waiting for it; dropping the transport then

@@ -48,9 +48,6 @@ pub struct ShmAgent {
     _motor_service: ps_factory::PortFactory<Svc, [MotorCommand], MotorHeader>,
     motor_pub: Publisher<Svc, [MotorCommand], MotorHeader>,
     max_commands: usize,
-    /// A stop was published without waking the host (`send_batch_unannounced`), and no
-    /// `wake_host` since.
-    unannounced: bool,
     spin: bool,
     spin_before_block: Duration,
     shutdown_seen: bool,
@@ -325,7 +322,6 @@ impl AgentTransport for ShmAgent {
             _motor_service: motor_service,
             motor_pub,
             max_commands,
-            unannounced: false,
             spin: config.sync.wait == crate::config::WaitMode::Spin,
             spin_before_block: config.sync.effective_spin_before_block(config.agents.len()),
             shutdown_seen: false,
@@ -423,50 +419,6 @@ impl AgentTransport for ShmAgent {
         header: &MotorHeader,
         commands: &[MotorCommand],
     ) -> Result<(), AgentSendError> {
-        self.publish_batch(header, commands)?;
-        if header.is_stop() {
-            self.unannounced = true;
-            self.wake_host()?;
-        }
-        Ok(())
-    }
-
-    fn send_batch_unannounced(
-        &mut self,
-        header: &MotorHeader,
-        commands: &[MotorCommand],
-    ) -> Result<(), AgentSendError> {
-        self.publish_batch(header, commands)?;
-        self.unannounced |= header.is_stop();
-        Ok(())
-    }
-
-    fn wake_host(&mut self) -> Result<bool, AgentSendError> {
-        if !core::mem::replace(&mut self.unannounced, false) {
-            return Ok(false);
-        }
-        // No notification while the host polls the motor queues itself: it finds the batch
-        // (one system call less per agent and cycle; see `WakeWord::set_host_polling`).
-        if !self.wake.host_polling() {
-            self.stop
-                .notify()
-                .map_err(|e| AgentSendError::Transport(format!("cannot notify stop: {e:?}")))?;
-        }
-        Ok(true)
-    }
-
-    fn termination_requested(&self) -> bool {
-        self.signals.termination_requested()
-    }
-}
-
-impl ShmAgent {
-    /// Publishes a motor batch (at most `max_commands` of `commands`) without notifying.
-    fn publish_batch(
-        &mut self,
-        header: &MotorHeader,
-        commands: &[MotorCommand],
-    ) -> Result<(), AgentSendError> {
         let fail = AgentSendError::Transport;
         let n = commands.len().min(self.max_commands);
         let mut sample = self
@@ -481,6 +433,17 @@ impl ShmAgent {
         sample
             .send()
             .map_err(|e| fail(format!("cannot send the motor batch: {e:?}")))?;
+        // No notification while the host polls the motor queues itself: it finds the batch
+        // (one system call less per agent and cycle; see `WakeWord::set_host_polling`).
+        if header.is_stop() && !self.wake.host_polling() {
+            self.stop
+                .notify()
+                .map_err(|e| fail(format!("cannot notify stop: {e:?}")))?;
+        }
         Ok(())
+    }
+
+    fn termination_requested(&self) -> bool {
+        self.signals.termination_requested()
     }
 }

@@ -4,7 +4,7 @@
 use std::time::Instant;
 
 use pyo3::prelude::*;
-use vrsync_agent::{Agent, SendError, StopError, WaitStartError};
+use vrsync_agent::{Agent, WaitStartError};
 use vrsync_bridge::Command;
 
 use super::out::Out;
@@ -41,23 +41,19 @@ impl AgentGroup {
         let Some(Agents(agents)) = agents.as_mut() else {
             return Err(closed(session));
         };
-        // 1. every agent's commands and stop, the host woken once after the last (on
-        // shared memory one notification for the group instead of one per agent), also
-        // when an agent's send fails half-way: the stops before it are in place.
-        let mut sent = Ok(());
+        // 1. every agent's commands and stop
         for (k, agent) in agents.iter_mut().enumerate() {
             buffer.clear();
             if !commands(k, rotations[k], buffer) {
                 continue;
             }
-            sent = send_and_stop(agent, buffer).map_err(|e| e.into_py(py, session, ids[k]));
-            if sent.is_err() {
-                break;
+            for &c in buffer.iter() {
+                agent.send(c).map_err(|e| send_error(py, e, ids[k]))?;
             }
+            agent
+                .stop()
+                .map_err(|e| stop_error(py, e, session, ids[k]))?;
         }
-        let woken = wake_host(agents).map_err(|(e, k)| stop_error(py, e, session, ids[k]));
-        sent?;
-        woken?;
         // 2. every agent's next frame, copied into the outputs and dropped at once
         pending.clear();
         pending.extend(0..ids.len());
@@ -119,47 +115,4 @@ impl AgentGroup {
         }
         Ok(())
     }
-}
-
-/// Why an agent's commands or stop were not sent.
-enum SendOrStop {
-    Send(SendError),
-    Stop(StopError),
-}
-
-impl SendOrStop {
-    /// The Python error for agent `id` of `session`.
-    fn into_py(self, py: Python<'_>, session: &str, id: u32) -> PyErr {
-        match self {
-            Self::Send(e) => send_error(py, e, id),
-            Self::Stop(e) => stop_error(py, e, session, id),
-        }
-    }
-}
-
-/// Queues `commands` on `agent` and sends them with its stop, without waking the host
-/// (`wake_host` does, once for the group).
-fn send_and_stop(agent: &mut Agent, commands: &[Command]) -> Result<(), SendOrStop> {
-    for &c in commands {
-        agent.send(c).map_err(SendOrStop::Send)?;
-    }
-    agent.stop_unannounced().map_err(SendOrStop::Stop)
-}
-
-/// Wakes the host for the group's unannounced stops: asks the agents in turn until one
-/// did (one wake-up serves every agent of the host on its transport); an agent that
-/// cannot wake it is passed over for the next. The first error, with the agent's index,
-/// when none could.
-fn wake_host(agents: &mut [Agent]) -> Result<(), (StopError, usize)> {
-    let mut first_error = None;
-    for (k, agent) in agents.iter_mut().enumerate() {
-        match agent.wake_host() {
-            Ok(true) => return Ok(()),
-            Ok(false) => {}
-            Err(e) => {
-                first_error.get_or_insert((e, k));
-            }
-        }
-    }
-    first_error.map_or(Ok(()), Err)
 }
