@@ -327,7 +327,8 @@ fn eyes_sharing_their_set_up_give_the_brute_force_bytes() {
                 )
             })
             .collect();
-        let groups = super::group_images(w, jobs);
+        let capacity = jobs.len();
+        let groups = super::group_images(w, jobs, capacity);
         let paired = groups.iter().filter(|g| g.second.is_some()).count();
         assert_eq!(paired, *pairs, "world {k}: eye pairs sharing a set-up");
         for threads in [1, 2] {

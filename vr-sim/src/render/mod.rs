@@ -310,26 +310,40 @@ impl Renderer {
         world: &World,
         agents: impl IntoIterator<Item = (u32, ImagesMut<'a>)>,
     ) {
-        let mut jobs: Vec<(&Body, ImageMut<'a>)> = Vec::new();
-        for (id, images) in agents {
-            if let Some(body) = world.bodies().iter().find(|b| b.id == id) {
-                jobs.extend(images.map(|image| (body, image)));
-            }
-        }
-        self.render_images(world, jobs);
+        let agents = agents.into_iter();
+        // One list per call, sized for one image per agent (the common case), built
+        // straight from the frames: a cycle's only allocation here.
+        let capacity = agents.size_hint().0;
+        let jobs = agents.flat_map(|(id, images)| {
+            let body = world.bodies().iter().find(|b| b.id == id);
+            images.filter_map(move |image| body.map(|body| (body, image)))
+        });
+        self.render_groups(world, group_images(world, jobs, capacity));
     }
 
     /// Renders images of bodies' cameras in place, like [`Renderer::render_agents`] (in
     /// parallel when they have at least [`MIN_POOL_PIXELS`] pixels together). Two
     /// neighbouring images of one body through cameras that differ only in their position
     /// (an agent's two eyes looking the same way) share their set-up ([`Group`]).
-    pub fn render_images(&mut self, world: &World, jobs: Vec<(&Body, ImageMut<'_>)>) {
-        let pixels: u64 = jobs
+    #[cfg(test)]
+    pub(crate) fn render_images(&mut self, world: &World, jobs: Vec<(&Body, ImageMut<'_>)>) {
+        let capacity = jobs.len();
+        self.render_groups(world, group_images(world, jobs, capacity));
+    }
+
+    /// Renders `groups`, in parallel when they have more than one image and at least
+    /// [`MIN_POOL_PIXELS`] pixels together.
+    fn render_groups(&mut self, world: &World, groups: Vec<Group<'_, '_>>) {
+        let images = |g: &Group<'_, '_>| 1 + usize::from(g.second.is_some());
+        let pixels_of = |(_, i): &(Camera, ImageMut<'_>)| {
+            u64::from(i.desc.width_px) * u64::from(i.desc.height_px)
+        };
+        let pixels: u64 = groups
             .iter()
-            .map(|(_, i)| u64::from(i.desc.width_px) * u64::from(i.desc.height_px))
+            .map(|g| pixels_of(&g.first) + g.second.as_ref().map_or(0, pixels_of))
             .sum();
-        let parallel = jobs.len() > 1 && pixels >= u64::from(MIN_POOL_PIXELS);
-        let groups = group_images(world, jobs);
+        let count: usize = groups.iter().map(images).sum();
+        let parallel = count > 1 && pixels >= u64::from(MIN_POOL_PIXELS);
         match &self.pool {
             Some(pool) if parallel => {
                 let (workers, shader) = (&self.workers, self.shader);
@@ -380,9 +394,14 @@ struct Group<'b, 'i> {
 const MAX_GROUP_OFFSET_M: f32 = 0.5;
 
 /// `jobs` as [`Group`]s: neighbours of one body with cameras that differ only in their
-/// origin (by less than [`MAX_GROUP_OFFSET_M`]) in pairs, the others alone.
-fn group_images<'b, 'i>(world: &World, jobs: Vec<(&'b Body, ImageMut<'i>)>) -> Vec<Group<'b, 'i>> {
-    let mut groups: Vec<Group<'b, 'i>> = Vec::with_capacity(jobs.len());
+/// origin (by less than [`MAX_GROUP_OFFSET_M`]) in pairs, the others alone; the list is
+/// allocated for `capacity` groups.
+fn group_images<'b, 'i>(
+    world: &World,
+    jobs: impl IntoIterator<Item = (&'b Body, ImageMut<'i>)>,
+    capacity: usize,
+) -> Vec<Group<'b, 'i>> {
+    let mut groups: Vec<Group<'b, 'i>> = Vec::with_capacity(capacity);
     for (body, image) in jobs {
         let cam = camera_of(world, body, &image.desc);
         if let Some(last) = groups.last_mut()

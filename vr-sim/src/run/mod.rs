@@ -9,7 +9,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use tracing::{info, warn};
-use vrsync_bridge::{Config, CycleReport, Host, HostCycleError, HostWaitError, SignalHandling};
+use vrsync_bridge::{
+    Config, CycleReport, Host, HostCycleError, HostWaitError, SensorFrameMut, SignalHandling,
+};
 
 use crate::events::{CYCLE_EVENT_EVERY, Event, Events};
 use crate::picture::{Trails, dump_image, write_map};
@@ -139,6 +141,9 @@ struct Run {
     roster: Roster,
     /// Scratch of [`Run::frame1`]: the roster indices of the agents rendered together.
     batch: Vec<usize>,
+    /// Scratch of [`Run::render_and_publish`]: the batch's loaned frames (reused, so a
+    /// cycle allocates no list of its own).
+    frames: Vec<(usize, SensorFrameMut)>,
     commands: CommandTally,
     /// Every agent's pose and status after every cycle.
     hasher: blake3::Hasher,
@@ -257,6 +262,7 @@ impl Run {
                 evicted: vec![false; agent_count],
             },
             batch: Vec::with_capacity(agent_count),
+            frames: Vec::with_capacity(agent_count),
             commands: CommandTally {
                 applied: 0,
                 rejected: 0,
@@ -409,7 +415,8 @@ impl Run {
     /// PNG every `--dump-frames` cycles, then publishes them in order. Returns whether an
     /// evicted agent rejoined.
     fn render_and_publish(&mut self, batch: &[usize]) -> anyhow::Result<bool> {
-        let mut frames = Vec::with_capacity(batch.len());
+        let mut frames = std::mem::take(&mut self.frames);
+        frames.clear();
         for &i in batch {
             frames.push((i, self.host.loan_frame(self.roster.ids[i])?));
         }
@@ -425,7 +432,7 @@ impl Run {
         );
         self.render_time += t.elapsed();
         let mut rejoined = false;
-        for (i, mut frame) in frames {
+        for (i, mut frame) in frames.drain(..) {
             let id = self.roster.ids[i];
             let cycle = frame.header().cycle;
             if let Some((dir, every)) = &self.opts.dump_frames
@@ -450,6 +457,7 @@ impl Run {
                     .emit(Event::AgentRejoined { agent: id, cycle })?;
             }
         }
+        self.frames = frames;
         Ok(rejoined)
     }
 
@@ -590,6 +598,7 @@ impl Run {
             events: _,
             roster,
             batch: _,
+            frames: _,
             commands,
             hasher,
             render_time,
