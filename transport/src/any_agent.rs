@@ -19,7 +19,8 @@ macro_rules! any_types {
     ($(
         $(#[$attr:meta])*
         $kind:ident $name:literal $module:ident:
-            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident;
+            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident
+            $props:tt;
     )*) => {
         use super::{$($module::{$agent, $frame}),*};
 
@@ -69,7 +70,8 @@ macro_rules! any_agent_connect {
     ($(
         $(#[$attr:meta])*
         $kind:ident $name:literal $module:ident:
-            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident;
+            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident
+            $props:tt;
     )*) => {
         /// Connects over agent `id`'s transport. A transport without an agent side in
         /// this SDK (the original protocol's, which serves programs written for the
@@ -98,7 +100,8 @@ macro_rules! any_agent_methods {
     ($(
         $(#[$attr:meta])*
         $kind:ident $name:literal $module:ident:
-            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident;
+            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident
+            $props:tt;
     )*) => {
         fn try_receive_newest(&mut self) -> Result<Option<AnyFrame>, AgentReceiveError> {
             Ok(match self {

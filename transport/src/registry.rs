@@ -62,8 +62,13 @@
 /// ```text
 /// /// docs of the TransportKind variant
 /// #[default]   (on one entry: the default `[transport] kind`)
-/// Kind "config-name" module: Host, Loan, HostCreateError, Agent, Frame;
+/// Kind "config-name" module: Host, Loan, HostCreateError, Agent, Frame
+///     [channels: bool, wait_for_stop: WaitForStop variant];
 /// ```
+///
+/// The bracket holds what the config needs to know of the transport: whether its agents
+/// can have channels, and the `wait_for_stop` its agents get by default
+/// (`TransportKind::carries_channels`, `TransportKind::default_wait_for_stop`).
 ///
 /// The types are those of the caller's `<module>` (see the module docs).
 #[doc(hidden)]
@@ -73,16 +78,21 @@ macro_rules! transports {
         $then! {
             /// iceoryx2 shared memory (default).
             #[default]
-            Shm "shm" shm: ShmHost, ShmFrameLoan, ShmHostCreateError, ShmAgent, ShmFrame;
+            Shm "shm" shm: ShmHost, ShmFrameLoan, ShmHostCreateError, ShmAgent, ShmFrame
+                [channels: true, wait_for_stop: Alive];
             /// TCP, the measured baseline.
-            Tcp "tcp" tcp: TcpHost, TcpFrameLoan, TcpHostCreateError, TcpAgent, TcpFrame;
+            Tcp "tcp" tcp: TcpHost, TcpFrameLoan, TcpHostCreateError, TcpAgent, TcpFrame
+                [channels: true, wait_for_stop: Alive];
             /// The original system's protobuf/TCP protocol, for agents written for it
-            /// (`[transport.legacy]`; see [`crate::legacy`]).
+            /// (`[transport.legacy]`; see [`crate::legacy`]). Its clients may block on a
+            /// final status, so they are waited for up to the stop timeout only.
             Legacy "legacy" legacy:
-                LegacyHost, LegacyFrameLoan, LegacyHostCreateError, LegacyAgent, LegacyFrame;
+                LegacyHost, LegacyFrameLoan, LegacyHostCreateError, LegacyAgent, LegacyFrame
+                [channels: false, wait_for_stop: Timeout];
             /// zenoh, for agents on other machines (`[transport.zenoh]`).
             Zenoh "zenoh" zenoh:
-                ZenohHost, ZenohFrameLoan, ZenohHostCreateError, ZenohAgent, ZenohFrame;
+                ZenohHost, ZenohFrameLoan, ZenohHostCreateError, ZenohAgent, ZenohFrame
+                [channels: true, wait_for_stop: Alive];
         }
     };
 }

@@ -108,7 +108,8 @@ macro_rules! mixed_types {
     ($(
         $(#[$attr:meta])*
         $kind:ident $name:literal $module:ident:
-            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident;
+            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident
+            $props:tt;
     )*) => {
         use super::{$($module::{$host, $loan, $create_error}),*};
 
@@ -158,7 +159,8 @@ macro_rules! mixed_parts {
     ($(
         $(#[$attr:meta])*
         $kind:ident $name:literal $module:ident:
-            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident;
+            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident
+            $props:tt;
     )*) => {
         /// One part per transport of the registry, `None` when no agent uses it.
         struct Parts {
@@ -193,7 +195,8 @@ macro_rules! mixed_routed {
     ($(
         $(#[$attr:meta])*
         $kind:ident $name:literal $module:ident:
-            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident;
+            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident
+            $props:tt;
     )*) => {
         impl Parts {
             fn is_connected(&self, r: Route) -> bool {
@@ -249,7 +252,8 @@ macro_rules! mixed_each {
     ($(
         $(#[$attr:meta])*
         $kind:ident $name:literal $module:ident:
-            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident;
+            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident
+            $props:tt;
     )*) => {
         impl Parts {
             fn signal_start(&mut self) -> Result<(), HostTransportError> {
@@ -312,7 +316,8 @@ macro_rules! mixed_first {
     ($(
         $(#[$attr:meta])*
         $kind:ident $name:literal $module:ident:
-            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident;
+            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident
+            $props:tt;
     )*) => {
         impl Parts {
             /// Each transport's activity descriptor, `None` for a transport no agent uses.

@@ -165,14 +165,15 @@ impl Ctx<'_> {
         let has_channels = !a.vector.is_empty() || !a.action.is_empty();
         let vectors = self.vectors(a.vector, id)?;
         let actions = self.actions(a.action, id)?;
-        if has_channels && transport == TransportKind::Legacy {
+        if has_channels && !transport.carries_channels() {
             return Err(self.invalid(
                 agent_span,
                 "agent.transport",
                 format!(
-                    "agent {id} is served over the original protocol (legacy), which has no \
-                     channels: remove its [[agent.vector]] / [[agent.action]] entries or \
-                     give it another transport"
+                    "agent {id} is served over the {} transport, which carries no channels: \
+                     remove its [[agent.vector]] / [[agent.action]] entries or give it \
+                     another transport",
+                    transport.as_str()
                 ),
             ));
         }

@@ -60,7 +60,8 @@ macro_rules! transport_kind {
     ($(
         $(#[$attr:meta])*
         $kind:ident $name:literal $module:ident:
-            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident;
+            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident
+            [channels: $channels:literal, wait_for_stop: $wait:ident];
     )*) => {
         /// Transport selected by `[transport] kind` (and `[[agent]] transport`), spelled
         /// as [`TransportKind::as_str`] says.
@@ -82,6 +83,22 @@ macro_rules! transport_kind {
             pub fn as_str(self) -> &'static str {
                 match self {
                     $(Self::$kind => $name,)*
+                }
+            }
+
+            /// Whether agents on this transport can have channels (`[[agent.vector]]`,
+            /// `[[agent.action]]`).
+            pub fn carries_channels(self) -> bool {
+                match self {
+                    $(Self::$kind => $channels,)*
+                }
+            }
+
+            /// The `wait_for_stop` of an agent on this transport when neither its
+            /// `[[agent]]` entry nor `[sync]` sets one.
+            pub fn default_wait_for_stop(self) -> WaitForStop {
+                match self {
+                    $(Self::$kind => WaitForStop::$wait,)*
                 }
             }
         }
@@ -139,8 +156,7 @@ impl WaitForStop {
     pub fn default_for(sync: Option<WaitForStop>, transport: TransportKind) -> Self {
         match (sync, transport) {
             (Some(w), _) => w,
-            (None, TransportKind::Legacy) => Self::Timeout,
-            (None, _) => Self::Alive,
+            (None, transport) => transport.default_wait_for_stop(),
         }
     }
 
@@ -454,16 +470,16 @@ impl Config {
                     }
                 }
             };
-            if agent.transport == TransportKind::Legacy
-                && !(agent.vectors.is_empty() && agent.actions.is_empty())
-            {
+            let has_channels = !(agent.vectors.is_empty() && agent.actions.is_empty());
+            if has_channels && !agent.transport.carries_channels() {
                 return Err(ConfigLoadError::Invalid {
                     path: self.source.clone(),
                     line: 1,
                     key: "agent".into(),
                     reason: format!(
                         "added agent {id} would copy the channels of the last agent but is \
-                         served over the original protocol (legacy), which has no channels"
+                         served over the {} transport, which carries no channels",
+                        agent.transport.as_str()
                     ),
                 });
             }
