@@ -4,7 +4,7 @@
 //! connect over it gets an error saying so. The types are uninhabited: no value of them
 //! exists, so every method but `connect` is unreachable by construction.
 
-use crate::absent_agent;
+use crate::{TransportKind, absent_agent};
 
 pub(crate) mod section;
 pub use section::{LegacyConfig, LegacyDialect, PngCompression};
@@ -16,11 +16,26 @@ absent_agent!(
     /// [`AgentTransport::connect`]: crate::AgentTransport::connect
     LegacyAgent,
     LegacyFrame,
-    "its [[agent]] transport is \"legacy\": the host serves it the original system's \
-     protocol for agents written for that system; use \"shm\", \"tcp\" or \"zenoh\" for a \
-     vrsync agent"
-        .into()
+    format!(
+        "its [[agent]] transport is \"legacy\": the host serves it the original system's \
+         protocol for agents written for that system; use {} for a vrsync agent",
+        vrsync_transports()
+    )
 );
+
+/// The transports a vrsync agent can connect over, as a config spells them: `"a", "b" or
+/// "c"` (every transport of the registry but this one).
+fn vrsync_transports() -> String {
+    let names: Vec<String> = (TransportKind::ALL.iter())
+        .filter(|k| **k != TransportKind::Legacy)
+        .map(|k| format!("{:?}", k.as_str()))
+        .collect();
+    match names.split_last() {
+        Some((last, [])) => last.clone(),
+        Some((last, rest)) => format!("{} or {last}", rest.join(", ")),
+        None => String::new(),
+    }
+}
 
 #[cfg(test)]
 mod tests {
