@@ -3,8 +3,9 @@
 //! How vrsync's sensor frames, motor batches, *start* and *stop* move between a host and
 //! its agents, and the session configuration both sides read.
 //!
-//! - The **contract** every transport keeps: [`HostTransport`] (host side) and
-//!   [`AgentTransport`] (agent side), with what is written once over it
+//! - The **contract** every transport keeps: on the host side [`HostTransport`] (the data
+//!   path) with [`HostReadiness`] (how the host waits for it) and [`HostConnections`] (who
+//!   is attached), on the agent side [`AgentTransport`]; with what is written once over it
 //!   ([`wait_for_newer_frame`], [`retry_until`]).
 //! - The transports, each in its own module with its host and agent halves: shared memory
 //!   ([`shm`], iceoryx2) for agents on this machine, TCP ([`tcp`]) as the measured
@@ -17,9 +18,10 @@
 //!
 //! The host side (the barrier, the routing of a host over several transports at once, the
 //! host API) is the `vrsync-bridge` crate, above this one; the agent SDK (`vrsync-agent`)
-//! needs only this crate. Inside the crate, modules import one way: the wire types (from
-//! `vrsync-protocol`) ← `config` ← the contract (`contract`, with `signal`, `wait`) ← the
-//! transports.
+//! needs only this crate. Inside the crate, files import one way: the wire types (from
+//! `vrsync-protocol`) ← the transports' config sections (`zenoh/section.rs`,
+//! `legacy/section.rs`) ← `config` ← the contract (`contract`, with `signal`, `wait`) ← the
+//! transports' host and agent halves.
 
 mod absent;
 mod any_agent;
