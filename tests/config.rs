@@ -651,9 +651,11 @@ fn a_missing_file_is_named_with_its_cause_once() {
     // An output path in a missing directory (the map is written through the picture
     // writer's error type, the other outputs through anyhow context).
     let dir = tempfile::tempdir().unwrap();
-    let config = dir.path().join("one.toml");
-    std::fs::write(&config, TestConfig::new("missing-path", 1).toml()).unwrap();
     for flag in ["--map", "--events", "--summary-json"] {
+        // A session per run: the agent the last run spawned may still be closing its ports.
+        let config = dir.path().join(format!("{}.toml", &flag[2..]));
+        let session = format!("missing-path{flag}");
+        std::fs::write(&config, TestConfig::new(&session, 1).toml()).unwrap();
         let out = util::run(
             "vr-sim",
             &[
