@@ -63,8 +63,6 @@ pub use config::{
 };
 pub use contract::*;
 pub use legacy::{LegacyConfig, LegacyDialect, PngCompression};
-#[cfg(feature = "zenoh")]
-pub use logging::refusal_layer;
 pub use logging::{QUIET_ZENOH, default_log_filter};
 pub use refusal::{MAX_KEPT_REFUSALS, PeerRefusal, RefusalKind, Refusals};
 pub use rounded::Rounded;
@@ -80,6 +78,11 @@ pub use wire::{
     action_chunks, bounds_hash, discrete_action_chunk, image_layout, kind as command_kind,
     kind_name, vector_layout,
 };
+/// The `tracing` layer a host's subscriber needs for the refusals its transports see only
+/// as log events (zenoh's TLS handshake failures, counted as refused peers whatever the
+/// filter): [`zenoh::tls_refusal_layer`].
+#[cfg(feature = "zenoh")]
+pub use zenoh::tls_refusal_layer as refusal_layer;
 pub use zenoh::{DEFAULT_ZENOH_ENDPOINT, ZenohConfig, ZenohTls};
 
 /// For the routing of a host over several transports (`vrsync-bridge`) and for the

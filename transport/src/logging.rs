@@ -1,5 +1,4 @@
-//! What the transports add to a program's logging: the default log filter of vrsync's
-//! programs and C ABIs, and the layer that counts the peers a TLS handshake dropped.
+//! The default log filter of vrsync's programs and C ABIs.
 
 /// zenoh's events that say nothing to a vrsync user, each silenced below `error`:
 /// `zenoh::net::routing::hat::peer` warns "Gossip is disabled: cannot de-duplicate data
@@ -19,17 +18,6 @@ pub fn default_log_filter(level: &str) -> String {
         text.push_str(directive);
     }
     text
-}
-
-/// The `tracing` layer a host's subscriber needs for the refusals its transports see only
-/// as log events (zenoh's TLS handshake failures, counted as refused peers whatever the
-/// filter): add it beside the program's own layers.
-#[cfg(feature = "zenoh")]
-pub fn refusal_layer<S>() -> impl tracing_subscriber::Layer<S> + Send + Sync + 'static
-where
-    S: tracing::Subscriber + for<'a> tracing_subscriber::registry::LookupSpan<'a>,
-{
-    crate::zenoh::tls_refusal_layer()
 }
 
 #[cfg(test)]
