@@ -166,6 +166,51 @@ fn a_killed_host_is_noticed_and_a_new_host_starts(t: Transport) {
     assert_eq!(summary(&s)["frames"], 5);
 }
 
+/// A SIGKILLed host cannot remove its wake word (its page in /dev/shm); the next host of
+/// any session does, not only one of its own: sessions are often one-off.
+#[test]
+fn a_killed_hosts_wake_word_is_removed_by_another_sessions_host() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = TestConfig::new("sweptword", 1);
+    let config_path = cfg.write(dir.path());
+    let events = Events::in_dir(dir.path());
+    let host = spawn_host(&config_path, &events, &[]);
+    events.wait_for("waiting_for_agents", EVENT_DEADLINE);
+    let page =
+        std::path::Path::new("/dev/shm").join(vrsync_bridge::shm::wake_word_name(&cfg.session));
+    assert!(
+        page.exists(),
+        "{} missing while its host runs",
+        page.display()
+    );
+    host.signal(libc::SIGKILL);
+    let _ = host.wait(Duration::from_secs(10));
+    assert!(page.exists(), "a killed host left nothing to sweep");
+
+    let other_dir = tempfile::tempdir().unwrap();
+    let other = TestConfig::new("sweeper", 1).write(other_dir.path());
+    let out = util::run(
+        "vr-sim",
+        &[
+            "run",
+            "--config",
+            other.to_str().unwrap(),
+            "--frames",
+            "2",
+            "--spawn-agents",
+            "1",
+            "--quiet",
+        ],
+        RUN_DEADLINE,
+    );
+    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    assert!(
+        !page.exists(),
+        "{} outlived its killed host",
+        page.display()
+    );
+}
+
 #[test]
 fn two_live_hosts_for_one_session_are_refused() {
     let dir = tempfile::tempdir().unwrap();

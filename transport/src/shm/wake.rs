@@ -27,10 +27,20 @@
 //! then made when nobody sleeps, which costs those system calls and nothing else.
 //!
 //! The page is named after the session (`vrsync_<hash of the session name>.wake` in
-//! `/dev/shm`); the host owns it and removes it when it ends. A host that crashed leaves
-//! it behind: the next host of the session replaces it, and [`super::cleanup_dead_nodes`]
-//! removes it with the dead host's node.
+//! `/dev/shm`); the host owns it and removes it when it ends. A host that crashed (or was
+//! killed) leaves it behind: the next host of the session replaces it, and
+//! [`super::cleanup_dead_nodes`] removes it with the dead host's node. Sessions are often
+//! one-off (a test, a sweep of configs): their pages would never see a next host. So a
+//! host also holds an advisory lock (`flock`) on its page for as long as it lives, which
+//! the kernel releases when the process ends however it ends, and every host at its
+//! start removes the pages of other sessions that say they were locked by their host and
+//! are not locked now (`sweep_orphans`): their host is gone. The lock works across PID
+//! namespaces (containers sharing `/dev/shm`), where a process id would not.
 
+use std::fs::File;
+use std::os::fd::AsRawFd;
+use std::os::unix::fs::{FileExt, MetadataExt};
+use std::path::Path;
 use std::ptr::NonNull;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
@@ -55,6 +65,14 @@ const HOST_POLLING_AT: usize = 192;
 /// Written by the host once the page is set up: an agent that opens a page without it
 /// (another program's file of the same name, or one being created) does not use it.
 const MAGIC: u32 = u32::from_le_bytes(*b"vrsW");
+/// Byte offset of [`LOCKED`].
+const LOCKED_AT: usize = 132;
+/// Written by a host once it holds the page's lock, before [`MAGIC`]: only a page with it
+/// is removed by another host's sweep when nobody holds its lock (a page of an older
+/// build, or one still being created, is left alone).
+const LOCKED: u32 = u32::from_le_bytes(*b"vrsL");
+/// Where the pages are (iceoryx2's POSIX shared memory: `shm_open`).
+const SHM_DIR: &str = "/dev/shm";
 /// Bytes of the page.
 const SIZE: usize = 4096;
 
@@ -103,9 +121,63 @@ pub fn remove_wake_word(session: &str) {
     }
 }
 
+/// Whether `name` is a wake word's file name (`vrsync_<16 hex digits>.wake`).
+fn is_wake_name(name: &str) -> bool {
+    name.strip_prefix("vrsync_")
+        .and_then(|rest| rest.strip_suffix(".wake"))
+        .is_some_and(|hash| hash.len() == 16 && hash.bytes().all(|b| b.is_ascii_hexdigit()))
+}
+
+/// Takes the advisory lock of the page at `path` without waiting; `Some` while held.
+fn try_lock(path: &Path) -> Option<File> {
+    let file = File::open(path).ok()?;
+    // SAFETY: flock on a descriptor this function owns; no memory is passed.
+    let locked = unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0;
+    locked.then_some(file)
+}
+
+/// Removes the wake words in `/dev/shm` whose host is gone: pages (other than `own`) that
+/// say their host locked them ([`LOCKED`]) and that nobody holds locked now. Returns how
+/// many it removed. A page whose name a new host of its session took over in the
+/// meantime is left (the name must still be the file it locked).
+pub(crate) fn sweep_orphans(own: &str) -> usize {
+    let Ok(dir) = std::fs::read_dir(SHM_DIR) else {
+        return 0;
+    };
+    let mut removed = 0;
+    for entry in dir.flatten() {
+        let name = entry.file_name();
+        if name.to_str().is_none_or(|n| n == own || !is_wake_name(n)) {
+            continue;
+        }
+        let path = entry.path();
+        let mut mark = [0u8; 4];
+        let marked = File::open(&path)
+            .and_then(|f| f.read_exact_at(&mut mark, LOCKED_AT as u64))
+            .is_ok_and(|()| u32::from_le_bytes(mark) == LOCKED);
+        if !marked {
+            continue;
+        }
+        let Some(locked) = try_lock(&path) else {
+            continue; // its host lives
+        };
+        let same_file = match (locked.metadata(), std::fs::symlink_metadata(&path)) {
+            (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
+            _ => false,
+        };
+        if same_file && std::fs::remove_file(&path).is_ok() {
+            removed += 1;
+        }
+    }
+    removed
+}
+
 /// One side's mapping of the session's wake word.
 pub struct WakeWord {
     shm: SharedMemory,
+    /// The host's lock on its page (`None` for agents, or if the page could not be
+    /// locked: it is then never swept by another host, see the module docs).
+    lock: Option<File>,
 }
 
 impl core::fmt::Debug for WakeWord {
@@ -133,11 +205,21 @@ impl WakeWord {
             .create()
             .map_err(|e| WakeWordError::Shm {
                 action: "create",
-                name,
+                name: name.clone(),
                 reason: format!("{e:?}"),
             })?;
-        let word = Self { shm };
+        let lock = try_lock(&Path::new(SHM_DIR).join(&name));
+        let word = Self { shm, lock };
+        if word.lock.is_some() {
+            word.at(LOCKED_AT).store(LOCKED, Ordering::Release);
+        } else {
+            tracing::debug!("wake word {name}: no lock taken; it is not swept if this host dies");
+        }
         word.at(MAGIC_AT).store(MAGIC, Ordering::Release);
+        let swept = sweep_orphans(&name);
+        if swept > 0 {
+            tracing::debug!("removed {swept} wake words in {SHM_DIR} whose hosts are gone");
+        }
         Ok(word)
     }
 
@@ -157,7 +239,7 @@ impl WakeWord {
         if shm.size() < SIZE {
             return Err(WakeWordError::NotSetUp(name));
         }
-        let word = Self { shm };
+        let word = Self { shm, lock: None };
         if word.at(MAGIC_AT).load(Ordering::Acquire) != MAGIC {
             return Err(WakeWordError::NotSetUp(name));
         }
@@ -386,6 +468,58 @@ mod tests {
         assert!(agent.host_polling());
         host.set_host_polling(false);
         assert!(!agent.host_polling());
+    }
+
+    #[test]
+    fn a_sweep_removes_the_pages_of_gone_hosts_only() {
+        let path = |s: &str| Path::new(SHM_DIR).join(wake_word_name(s));
+        let live = session("sweep-live");
+        let gone = session("sweep-gone");
+        let unmarked = session("sweep-unmarked");
+        let _live = WakeWord::create(&live).unwrap();
+        // A host that died: its page stays (no owner removes it), its lock goes with it.
+        let dead = WakeWord::create(&gone).unwrap();
+        dead.shm.release_ownership();
+        drop(dead);
+        // A page of that name no host of this build locked (an older build's, or one
+        // being created): left alone.
+        let (file, _) = file_name(&unmarked).unwrap();
+        let other = SharedMemoryBuilder::new(&file)
+            .creation_mode(CreationMode::PurgeAndCreate)
+            .size(SIZE)
+            .permission(Permission::OWNER_READ | Permission::OWNER_WRITE)
+            .zero_memory(true)
+            .has_ownership(true)
+            .create()
+            .unwrap();
+        assert!(path(&gone).exists() && path(&unmarked).exists());
+        assert!(sweep_orphans("") >= 1);
+        assert!(!path(&gone).exists(), "the dead host's page was swept");
+        assert!(path(&live).exists(), "a live host's page stays");
+        assert!(WakeWord::open(&live).is_ok());
+        assert!(
+            path(&unmarked).exists(),
+            "a page without the lock mark stays"
+        );
+        drop(other);
+    }
+
+    #[test]
+    fn a_new_host_sweeps_what_a_killed_one_left() {
+        let gone = session("killed");
+        let dead = WakeWord::create(&gone).unwrap();
+        dead.shm.release_ownership();
+        drop(dead);
+        let _next = WakeWord::create(&session("next")).unwrap();
+        assert!(!Path::new(SHM_DIR).join(wake_word_name(&gone)).exists());
+    }
+
+    #[test]
+    fn wake_names_are_recognised() {
+        assert!(is_wake_name(&wake_word_name("any")));
+        assert!(!is_wake_name("vrsync_0123.wake"));
+        assert!(!is_wake_name("iox2_0354a209029e7d09.data"));
+        assert!(!is_wake_name("vrsync_0123456789abcdeg.wake"));
     }
 
     #[test]
