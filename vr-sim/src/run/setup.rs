@@ -181,11 +181,24 @@ pub(super) fn agents_missing(opts: &RunOptions, missing: &[u32], gone: &[u32]) -
              programs against port {port} (agent N listens on {port} + 1 + N)"
         ));
     }
-    anyhow::anyhow!(
-        "{}; start them with `vr-agent --config {} --id <id>`",
-        why.join("; "),
-        opts.agent_config_path.display()
-    )
+    // vr-agent's hint only for the agents vr-agent can be (not the legacy ones).
+    let ours: Vec<u32> = missing
+        .iter()
+        .copied()
+        .filter(|id| !legacy.contains(id))
+        .collect();
+    if !ours.is_empty() {
+        let whom = if legacy.is_empty() {
+            "them".to_string()
+        } else {
+            format!("agents {ours:?}")
+        };
+        why.push(format!(
+            "start {whom} with `vr-agent --config {} --id <id>`",
+            opts.agent_config_path.display()
+        ));
+    }
+    anyhow::anyhow!("{}", why.join("; "))
 }
 
 /// The progress bar of `--progress`: a bar of `frames` cycles, or a spinner without them.
@@ -201,4 +214,66 @@ pub(super) fn progress_bar(frames: Option<u64>) -> indicatif::ProgressBar {
         .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
     bar
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use vrsync_bridge::TransportKind;
+
+    fn opts(transports: &[TransportKind]) -> RunOptions {
+        let mut config = Config::embedded_default().unwrap();
+        let first = config.agents[0].clone();
+        config.agents = (0u32..)
+            .zip(transports)
+            .map(|(id, &transport)| {
+                let mut a = first.clone();
+                a.id = id;
+                a.transport = transport;
+                a
+            })
+            .collect();
+        RunOptions {
+            config,
+            agent_config_path: "agents.toml".into(),
+            frames: None,
+            spawn: false,
+            agent_args: Vec::new(),
+            record: None,
+            progress: false,
+            map: None,
+            dump_frames: None,
+            render_threads: 1,
+            render_affinity: crate::render::Affinity::Auto,
+            rerun: None,
+        }
+    }
+
+    #[test]
+    fn missing_agents_are_told_how_to_start_each() {
+        let o = opts(&[TransportKind::Shm, TransportKind::Legacy]);
+        let text = agents_missing(&o, &[0, 1], &[]).to_string();
+        assert!(text.contains("agents [0, 1] did not connect"), "{text}");
+        assert!(
+            text.contains("agents [1] use the original system's protocol"),
+            "{text}"
+        );
+        assert!(
+            text.contains("start agents [0] with `vr-agent --config agents.toml"),
+            "{text}"
+        );
+
+        let text = agents_missing(&o, &[1], &[]).to_string();
+        assert!(
+            !text.contains("vr-agent"),
+            "a legacy agent is not a vr-agent: {text}"
+        );
+
+        let o = opts(&[TransportKind::Shm]);
+        let text = agents_missing(&o, &[0], &[]).to_string();
+        assert!(
+            text.contains("start them with `vr-agent --config agents.toml --id <id>`"),
+            "{text}"
+        );
+    }
 }
