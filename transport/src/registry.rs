@@ -12,6 +12,8 @@
 //!
 //! - `TransportKind` with `ALL` and `as_str` (`config/mod.rs`; serde reads it by the same
 //!   names);
+//! - the transports' sections of `[transport]`, fields of `TransportConfig`
+//!   (`config/transport.rs`);
 //! - the host's routing per agent (`vrsync-bridge`'s `transport/mixed.rs`): `AnyLoan` and
 //!   its `FrameLoanMut`, one part per transport in `Parts` (inside `Transports`) and every
 //!   `HostTransport` method over them, and the create error `TransportsCreateError` (also
@@ -26,8 +28,9 @@
 //! Adding a transport: its folder in this crate (host and agent side; a transport without
 //! an agent side, like legacy, gives an uninhabited agent whose `connect` says why:
 //! `absent.rs`'s `absent_agent!`), one entry here, its config section if it has keys
-//! (`section.rs` in its folder: the typed and raw forms, the checks, the text; and its
-//! field in `config/transport.rs`), and its line in the conformance suite. A transport behind a cargo feature (zenoh,
+//! (`section.rs` in its folder: the typed and raw forms with `check`, `write_toml` and
+//! `forget_secrets`; named in its entry's `section:`), and its line in the conformance
+//! suite. A transport behind a cargo feature (zenoh,
 //! legacy) keeps its entry in every build: without the feature its types are stand-ins
 //! (`absent_host!`, `absent_agent!`) whose constructors fail naming the feature.
 //!
@@ -63,12 +66,16 @@
 /// /// docs of the TransportKind variant
 /// #[default]   (on one entry: the default `[transport] kind`)
 /// Kind "config-name" module: Host, Loan, HostCreateError, Agent, Frame
-///     [channels: bool, wait_for_stop: WaitForStop variant];
+///     [channels: bool, wait_for_stop: WaitForStop variant
+///      (, section: Config Raw)?];
 /// ```
 ///
 /// The bracket holds what the config needs to know of the transport: whether its agents
-/// can have channels, and the `wait_for_stop` its agents get by default
-/// (`TransportKind::carries_channels`, `TransportKind::default_wait_for_stop`).
+/// can have channels, the `wait_for_stop` its agents get by default
+/// (`TransportKind::carries_channels`, `TransportKind::default_wait_for_stop`), and for a
+/// transport with a `[transport.<name>]` section the typed and raw forms of it, types of
+/// its module's `section` (`config/transport.rs` makes the section a field of
+/// `TransportConfig` named after the module, read, checked and written by those types).
 ///
 /// The types are those of the caller's `<module>` (see the module docs).
 #[doc(hidden)]
@@ -88,11 +95,11 @@ macro_rules! transports {
             /// final status, so they are waited for up to the stop timeout only.
             Legacy "legacy" legacy:
                 LegacyHost, LegacyFrameLoan, LegacyHostCreateError, LegacyAgent, LegacyFrame
-                [channels: false, wait_for_stop: Timeout];
+                [channels: false, wait_for_stop: Timeout, section: LegacyConfig RawLegacy];
             /// zenoh, for agents on other machines (`[transport.zenoh]`).
             Zenoh "zenoh" zenoh:
                 ZenohHost, ZenohFrameLoan, ZenohHostCreateError, ZenohAgent, ZenohFrame
-                [channels: true, wait_for_stop: Alive];
+                [channels: true, wait_for_stop: Alive, section: ZenohConfig RawZenoh];
         }
     };
 }

@@ -61,7 +61,7 @@ macro_rules! transport_kind {
         $(#[$attr:meta])*
         $kind:ident $name:literal $module:ident:
             $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident
-            [channels: $channels:literal, wait_for_stop: $wait:ident];
+            [channels: $channels:literal, wait_for_stop: $wait:ident $(, $($section:tt)*)?];
     )*) => {
         /// Transport selected by `[transport] kind` (and `[[agent]] transport`), spelled
         /// as [`TransportKind::as_str`] says.

@@ -1,6 +1,7 @@
 //! `[transport]`: which transport agents use by default, TCP's keys, and the sections of
-//! the transports that have one (`[transport.legacy]`, `[transport.zenoh]`), each defined,
-//! checked and written by its transport (`legacy/section.rs`, `zenoh/section.rs`).
+//! the transports that have one (`[transport.<name>]`), each defined, checked and written
+//! by its transport (`<module>/section.rs`) and named in its registry entry: the fields
+//! and the code over them are generated from the registry (`transport_sections!`).
 
 use std::fmt::Write;
 use std::net::SocketAddr;
@@ -11,57 +12,96 @@ use toml::Spanned;
 use super::ctx::{Ctx, toml_string};
 use super::error::ConfigLoadError;
 use crate::TransportKind;
-use crate::legacy::section::{LegacyConfig, RawLegacy};
 use crate::wire::MAX_TOKEN;
-use crate::zenoh::section::{RawZenoh, ZenohConfig};
 
-/// `[transport]` section.
-#[derive(Debug, Clone, PartialEq)]
-pub struct TransportConfig {
-    /// Which transport.
-    pub kind: TransportKind,
-    /// TCP listen address of the host (and the address agents connect to).
-    pub tcp_listen: SocketAddr,
-    /// Most commands an agent may send in one cycle.
-    pub max_commands_per_cycle: u32,
-    /// Shared secret TCP agents must present in their hello (`tcp_token`); `None`: none.
-    pub tcp_token: Option<String>,
-    /// `[transport.zenoh]`.
-    pub zenoh: ZenohConfig,
-    /// `[transport.legacy]`: the original system's protocol.
-    pub legacy: LegacyConfig,
+/// `TransportConfig` and `RawTransport` with a field per transport section of the
+/// registry, and what goes through every section: read and check, write, forget secrets.
+macro_rules! transport_sections {
+    ($(
+        $(#[$attr:meta])*
+        $kind:ident $name:literal $module:ident:
+            $host:ident, $loan:ident, $create_error:ident, $agent:ident, $frame:ident
+            [channels: $channels:literal, wait_for_stop: $wait:ident
+             $(, section: $section:ident $raw:ident)?];
+    )*) => {
+        /// `[transport]` section.
+        #[derive(Debug, Clone, PartialEq)]
+        pub struct TransportConfig {
+            /// Which transport.
+            pub kind: TransportKind,
+            /// TCP listen address of the host (and the address agents connect to).
+            pub tcp_listen: SocketAddr,
+            /// Most commands an agent may send in one cycle.
+            pub max_commands_per_cycle: u32,
+            /// Shared secret TCP agents must present in their hello (`tcp_token`); `None`:
+            /// none.
+            pub tcp_token: Option<String>,
+            $($(
+                #[doc = concat!("`[transport.", $name, "]`.")]
+                pub $module: crate::$module::section::$section,
+            )?)*
+        }
+
+        #[derive(Deserialize, Default)]
+        #[serde(deny_unknown_fields)]
+        pub(super) struct RawTransport {
+            pub(super) kind: Option<TransportKind>,
+            pub(super) tcp_listen: Option<Spanned<String>>,
+            pub(super) max_commands_per_cycle: Option<Spanned<i64>>,
+            pub(super) tcp_token: Option<Spanned<String>>,
+            $($(
+                #[serde(rename = $name)]
+                pub(super) $module: Option<crate::$module::section::$raw>,
+            )?)*
+        }
+
+        impl TransportConfig {
+            /// Forgets the shared secrets (`tcp_token`, and those of the transports'
+            /// sections, e.g. `[transport.zenoh] token`): for a config that is written
+            /// where others read it (a run's record).
+            pub fn forget_secrets(&mut self) {
+                self.tcp_token = None;
+                $($( crate::$module::section::$section::forget_secrets(&mut self.$module); )?)*
+            }
+
+            /// The transports' sections, as TOML.
+            fn write_sections(&self, s: &mut String) {
+                $($( crate::$module::section::$section::write_toml(&self.$module, s); )?)*
+            }
+        }
+
+        impl Ctx<'_> {
+            /// The `[transport]` section with the transports' sections, with their
+            /// defaults.
+            pub(super) fn transport(
+                &self,
+                rt: Option<RawTransport>,
+            ) -> Result<TransportConfig, ConfigLoadError> {
+                let rt = rt.unwrap_or_default();
+                Ok(TransportConfig {
+                    kind: rt.kind.unwrap_or_default(),
+                    tcp_listen: self.tcp_listen(rt.tcp_listen)?,
+                    max_commands_per_cycle: self.max_commands_per_cycle(rt.max_commands_per_cycle)?,
+                    tcp_token: self.tcp_token(rt.tcp_token)?,
+                    $($(
+                        $module: match rt.$module {
+                            None => crate::$module::section::$section::default(),
+                            Some(raw) => crate::$module::section::$section::check(self, raw)?,
+                        },
+                    )?)*
+                })
+            }
+        }
+    };
 }
 
-#[derive(Deserialize, Default)]
-#[serde(deny_unknown_fields)]
-pub(super) struct RawTransport {
-    pub(super) kind: Option<TransportKind>,
-    pub(super) tcp_listen: Option<Spanned<String>>,
-    pub(super) max_commands_per_cycle: Option<Spanned<i64>>,
-    pub(super) tcp_token: Option<Spanned<String>>,
-    pub(super) legacy: Option<RawLegacy>,
-    pub(super) zenoh: Option<RawZenoh>,
-}
-
-impl TransportConfig {
-    /// Forgets the shared secrets (`tcp_token`, `[transport.zenoh] token`): for a config
-    /// that is written where others read it (a run's record).
-    pub fn forget_secrets(&mut self) {
-        self.tcp_token = None;
-        self.zenoh.token = None;
-    }
-}
+crate::transports!(transport_sections);
 
 impl Ctx<'_> {
-    /// The `[transport]` section with `[transport.legacy]` and `[transport.zenoh]`, with
-    /// their defaults.
-    pub(super) fn transport(
-        &self,
-        rt: Option<RawTransport>,
-    ) -> Result<TransportConfig, ConfigLoadError> {
-        let rt = rt.unwrap_or_default();
-        let tcp_listen = match rt.tcp_listen {
-            None => SocketAddr::from(([127, 0, 0, 1], 7400)),
+    /// `tcp_listen` (default `127.0.0.1:7400`).
+    fn tcp_listen(&self, raw: Option<Spanned<String>>) -> Result<SocketAddr, ConfigLoadError> {
+        match raw {
+            None => Ok(SocketAddr::from(([127, 0, 0, 1], 7400))),
             Some(s) => s.get_ref().parse().map_err(|e| {
                 self.invalid(
                     s.span(),
@@ -71,56 +111,44 @@ impl Ctx<'_> {
                         s.get_ref()
                     ),
                 )
-            })?,
+            }),
+        }
+    }
+
+    /// `max_commands_per_cycle` (default 64).
+    fn max_commands_per_cycle(&self, raw: Option<Spanned<i64>>) -> Result<u32, ConfigLoadError> {
+        let Some(v) = raw else {
+            return Ok(64);
         };
-        let max_commands_per_cycle = match rt.max_commands_per_cycle {
-            None => 64,
-            Some(v) => {
-                let n = *v.get_ref();
-                if !(1..=4096).contains(&n) {
-                    return Err(self.invalid(
-                        v.span(),
-                        "transport.max_commands_per_cycle",
-                        format!("must be 1..=4096, found {n}"),
-                    ));
-                }
-                n as u32
-            }
+        let n = *v.get_ref();
+        if !(1..=4096).contains(&n) {
+            return Err(self.invalid(
+                v.span(),
+                "transport.max_commands_per_cycle",
+                format!("must be 1..=4096, found {n}"),
+            ));
+        }
+        Ok(n as u32)
+    }
+
+    /// `tcp_token` (default: none).
+    fn tcp_token(&self, raw: Option<Spanned<String>>) -> Result<Option<String>, ConfigLoadError> {
+        let Some(t) = raw else {
+            return Ok(None);
         };
-        let tcp_token = match rt.tcp_token {
-            None => None,
-            Some(t) => {
-                let len = t.get_ref().len();
-                if len == 0 || len > MAX_TOKEN {
-                    return Err(self.invalid(
-                        t.span(),
-                        "transport.tcp_token",
-                        format!("must be 1..={} bytes, found {len}", MAX_TOKEN),
-                    ));
-                }
-                Some(t.into_inner())
-            }
-        };
-        let legacy = match rt.legacy {
-            None => LegacyConfig::default(),
-            Some(l) => LegacyConfig::check(self, l)?,
-        };
-        let zenoh = match rt.zenoh {
-            None => ZenohConfig::default(),
-            Some(rz) => ZenohConfig::check(self, rz)?,
-        };
-        Ok(TransportConfig {
-            kind: rt.kind.unwrap_or_default(),
-            tcp_listen,
-            max_commands_per_cycle,
-            tcp_token,
-            legacy,
-            zenoh,
-        })
+        let len = t.get_ref().len();
+        if len == 0 || len > MAX_TOKEN {
+            return Err(self.invalid(
+                t.span(),
+                "transport.tcp_token",
+                format!("must be 1..={} bytes, found {len}", MAX_TOKEN),
+            ));
+        }
+        Ok(Some(t.into_inner()))
     }
 }
 
-/// `[transport]`, `[transport.legacy]` and `[transport.zenoh]`.
+/// `[transport]` and the transports' sections.
 pub(super) fn write_transport(s: &mut String, transport: &TransportConfig) {
     let _ = writeln!(
         s,
@@ -132,6 +160,5 @@ pub(super) fn write_transport(s: &mut String, transport: &TransportConfig) {
     if let Some(token) = &transport.tcp_token {
         let _ = writeln!(s, "tcp_token = {}", toml_string(token));
     }
-    transport.legacy.write_toml(s);
-    transport.zenoh.write_toml(s);
+    transport.write_sections(s);
 }

@@ -136,6 +136,9 @@ impl LegacyConfig {
         })
     }
 
+    /// The section has no secrets (for `TransportConfig::forget_secrets`).
+    pub(crate) fn forget_secrets(&mut self) {}
+
     /// `[transport.legacy]` as TOML, appended to `s`.
     pub(crate) fn write_toml(&self, s: &mut String) {
         use std::fmt::Write;

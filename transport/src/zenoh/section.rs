@@ -137,6 +137,11 @@ impl ZenohConfig {
         })
     }
 
+    /// Forgets the shared secret, `token` (for `TransportConfig::forget_secrets`).
+    pub(crate) fn forget_secrets(&mut self) {
+        self.token = None;
+    }
+
     /// `[transport.zenoh]` as TOML, appended to `s`.
     pub(crate) fn write_toml(&self, s: &mut String) {
         use std::fmt::Write;
