@@ -493,7 +493,9 @@ mod tests {
             .create()
             .unwrap();
         assert!(path(&gone).exists() && path(&unmarked).exists());
-        assert!(sweep_orphans("") >= 1);
+        // (Not its count: a host created by a test running beside this one may sweep
+        // first.)
+        sweep_orphans("");
         assert!(!path(&gone).exists(), "the dead host's page was swept");
         assert!(path(&live).exists(), "a live host's page stays");
         assert!(WakeWord::open(&live).is_ok());
