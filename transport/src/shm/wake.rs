@@ -448,8 +448,11 @@ mod tests {
             WakeWord::open(&s),
             Err(WakeWordError::Shm { action: "open", .. })
         ));
-        // A word left behind (here: released by its host) is removed by name.
+        // A word left behind (here: released by its host) is removed by name. (Without
+        // its lock mark, so that no host's sweep, of a test beside this one, takes it
+        // first.)
         let host = WakeWord::create(&s).unwrap();
+        host.at(LOCKED_AT).store(0, Ordering::Release);
         host.shm.release_ownership();
         drop(host);
         assert!(WakeWord::open(&s).is_ok());
@@ -477,8 +480,11 @@ mod tests {
         let gone = session("sweep-gone");
         let unmarked = session("sweep-unmarked");
         let _live = WakeWord::create(&live).unwrap();
-        // A host that died: its page stays (no owner removes it), its lock goes with it.
-        let dead = WakeWord::create(&gone).unwrap();
+        // A host that died: its page stays (no owner removes it), its lock goes with it
+        // (here: the test holds it until the page is shown to be there, so that no sweep
+        // of a host beside this test takes it before).
+        let mut dead = WakeWord::create(&gone).unwrap();
+        let held = dead.lock.take().unwrap();
         dead.shm.release_ownership();
         drop(dead);
         // A page of that name no host of this build locked (an older build's, or one
@@ -493,6 +499,7 @@ mod tests {
             .create()
             .unwrap();
         assert!(path(&gone).exists() && path(&unmarked).exists());
+        drop(held);
         // (Not its count: a host created by a test running beside this one may sweep
         // first.)
         sweep_orphans("");
