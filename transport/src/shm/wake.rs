@@ -473,6 +473,20 @@ mod tests {
         assert!(!agent.host_polling());
     }
 
+    /// A page with `session`'s wake word name that no host set up (another program's, or
+    /// one being created), removed when dropped.
+    fn foreign_page(session: &str) -> SharedMemory {
+        let (file, _) = file_name(session).unwrap();
+        SharedMemoryBuilder::new(&file)
+            .creation_mode(CreationMode::PurgeAndCreate)
+            .size(SIZE)
+            .permission(Permission::OWNER_READ | Permission::OWNER_WRITE)
+            .zero_memory(true)
+            .has_ownership(true)
+            .create()
+            .unwrap()
+    }
+
     #[test]
     fn a_sweep_removes_the_pages_of_gone_hosts_only() {
         let path = |s: &str| Path::new(SHM_DIR).join(wake_word_name(s));
@@ -489,15 +503,7 @@ mod tests {
         drop(dead);
         // A page of that name no host of this build locked (an older build's, or one
         // being created): left alone.
-        let (file, _) = file_name(&unmarked).unwrap();
-        let other = SharedMemoryBuilder::new(&file)
-            .creation_mode(CreationMode::PurgeAndCreate)
-            .size(SIZE)
-            .permission(Permission::OWNER_READ | Permission::OWNER_WRITE)
-            .zero_memory(true)
-            .has_ownership(true)
-            .create()
-            .unwrap();
+        let other = foreign_page(&unmarked);
         assert!(path(&gone).exists() && path(&unmarked).exists());
         drop(held);
         // (Not its count: a host created by a test running beside this one may sweep
@@ -534,15 +540,7 @@ mod tests {
     #[test]
     fn a_page_that_is_not_set_up_is_not_used() {
         let s = session("foreign");
-        let (file, _) = file_name(&s).unwrap();
-        let other = SharedMemoryBuilder::new(&file)
-            .creation_mode(CreationMode::PurgeAndCreate)
-            .size(SIZE)
-            .permission(Permission::OWNER_READ | Permission::OWNER_WRITE)
-            .zero_memory(true)
-            .has_ownership(true)
-            .create()
-            .unwrap();
+        let other = foreign_page(&s);
         assert!(matches!(
             WakeWord::open(&s),
             Err(WakeWordError::NotSetUp(_))
