@@ -185,7 +185,8 @@ fn a_killed_hosts_wake_word_is_removed_by_another_sessions_host() {
     );
     host.signal(libc::SIGKILL);
     let _ = host.wait(Duration::from_secs(10));
-    assert!(page.exists(), "a killed host left nothing to sweep");
+    // (The page is not checked for here: a host of a test running beside this one may
+    // already have swept it.)
 
     let other_dir = tempfile::tempdir().unwrap();
     let other = TestConfig::new("sweeper", 1).write(other_dir.path());
