@@ -30,9 +30,9 @@
 //! `absent.rs`'s `absent_agent!`), one entry here, its config section if it has keys
 //! (`section.rs` in its folder: the typed and raw forms with `check`, `write_toml` and
 //! `forget_secrets`; named in its entry's `section:`), and its line in the conformance
-//! suite. A transport behind a cargo feature (zenoh,
-//! legacy) keeps its entry in every build: without the feature its types are stand-ins
-//! (`absent_host!`, `absent_agent!`) whose constructors fail naming the feature.
+//! suite. A transport behind a cargo feature (zenoh, legacy) keeps its entry in every
+//! build: without the feature its types are stand-ins (`absent_host!`, `absent_agent!`)
+//! whose constructors fail naming the feature.
 //!
 //! # Why a macro and not trait objects
 //!

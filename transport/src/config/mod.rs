@@ -150,14 +150,12 @@ pub enum WaitForStop {
 
 impl WaitForStop {
     /// The policy of an agent on `transport` that does not choose its own, given
-    /// `[sync] wait_for_stop` (`None`: not set): `[sync]`'s, else `Alive`, except on the
-    /// legacy transport, whose clients (written for the original system) may block on an
-    /// action's end before they stop and so rely on the stop timeout: `Timeout` there.
+    /// `[sync] wait_for_stop` (`None`: not set): `[sync]`'s, else the transport's
+    /// ([`TransportKind::default_wait_for_stop`]: `Alive`, except on the legacy transport,
+    /// whose clients, written for the original system, may block on an action's end
+    /// before they stop and so rely on the stop timeout: `Timeout` there).
     pub fn default_for(sync: Option<WaitForStop>, transport: TransportKind) -> Self {
-        match (sync, transport) {
-            (Some(w), _) => w,
-            (None, transport) => transport.default_wait_for_stop(),
-        }
+        sync.unwrap_or_else(|| transport.default_wait_for_stop())
     }
 
     /// The config spelling.
