@@ -128,12 +128,10 @@ fn is_wake_name(name: &str) -> bool {
         .is_some_and(|hash| hash.len() == 16 && hash.bytes().all(|b| b.is_ascii_hexdigit()))
 }
 
-/// Takes the advisory lock of the page at `path` without waiting; `Some` while held.
-fn try_lock(path: &Path) -> Option<File> {
-    let file = File::open(path).ok()?;
-    // SAFETY: flock on a descriptor this function owns; no memory is passed.
-    let locked = unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0;
-    locked.then_some(file)
+/// Takes the advisory lock of `file` (a page) without waiting; held until it is closed.
+fn try_lock(file: &File) -> bool {
+    // SAFETY: flock on a descriptor `file` owns for the call; no memory is passed.
+    unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) == 0 }
 }
 
 /// Removes the wake words in `/dev/shm` whose host is gone: pages (other than `own`) that
@@ -151,17 +149,17 @@ pub(crate) fn sweep_orphans(own: &str) -> usize {
             continue;
         }
         let path = entry.path();
-        let mut mark = [0u8; 4];
-        let marked = File::open(&path)
-            .and_then(|f| f.read_exact_at(&mut mark, LOCKED_AT as u64))
-            .is_ok_and(|()| u32::from_le_bytes(mark) == LOCKED);
-        if !marked {
+        let Ok(page) = File::open(&path) else {
             continue;
-        }
-        let Some(locked) = try_lock(&path) else {
-            continue; // its host lives
         };
-        let same_file = match (locked.metadata(), std::fs::symlink_metadata(&path)) {
+        let mut mark = [0u8; 4];
+        let marked = page
+            .read_exact_at(&mut mark, LOCKED_AT as u64)
+            .is_ok_and(|()| u32::from_le_bytes(mark) == LOCKED);
+        if !marked || !try_lock(&page) {
+            continue; // not a page of this build's hosts, or its host lives
+        }
+        let same_file = match (page.metadata(), std::fs::symlink_metadata(&path)) {
             (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
             _ => false,
         };
@@ -208,7 +206,9 @@ impl WakeWord {
                 name: name.clone(),
                 reason: format!("{e:?}"),
             })?;
-        let lock = try_lock(&Path::new(SHM_DIR).join(&name));
+        let lock = File::open(Path::new(SHM_DIR).join(&name))
+            .ok()
+            .filter(try_lock);
         let word = Self { shm, lock };
         if word.lock.is_some() {
             word.at(LOCKED_AT).store(LOCKED, Ordering::Release);
