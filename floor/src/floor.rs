@@ -9,7 +9,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as ps_factory};
-use vrsync_transport::shm::WakeWord;
+use vrsync_transport::shm::{PollWindow, WakeWord};
 
 type Svc = ipc::Service;
 
@@ -212,7 +212,9 @@ impl ShmFloorHost {
         let mut missing = self.seen.len();
         let wait_started = Instant::now();
         let deadline = wait_started + timeout;
-        let mut polled = Duration::ZERO;
+        // Poll before sleeping as vrsync does (same waiting strategy).
+        let window = PollWindow::new(self.spin_before_block);
+        let mut polling = true;
         while missing > 0 {
             let seen = &mut self.seen;
             let mut mark = |e: EventActivation| {
@@ -224,11 +226,13 @@ impl ShmFloorHost {
                     missing -= 1;
                 }
             };
-            if self.spin || polled < self.spin_before_block {
-                // Busy-poll, or poll before sleeping as vrsync does (same waiting strategy).
+            if self.spin || polling {
                 let _ = self.back.try_wait(&mut mark);
-                std::hint::spin_loop();
-                polled = wait_started.elapsed();
+                if self.spin {
+                    std::hint::spin_loop();
+                } else {
+                    polling = window.pause();
+                }
             } else {
                 let left = deadline.saturating_duration_since(Instant::now());
                 let _ = self.back.timed_wait(&mut mark, left);
@@ -326,10 +330,8 @@ pub fn shm_floor_agent(
         }
         if !spin {
             // Poll before sleeping, as vrsync agents do (same waiting strategy).
-            let until = Instant::now() + spin_before_block;
-            while Instant::now() < until && !sub.has_samples().unwrap_or(true) {
-                std::hint::spin_loop();
-            }
+            let window = PollWindow::new(spin_before_block);
+            while !sub.has_samples().unwrap_or(true) && window.pause() {}
             // The word's value before the last look: a frame sent after it bumped it.
             let seen = wake.value();
             if !sub.has_samples().unwrap_or(true) {

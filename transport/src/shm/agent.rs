@@ -366,12 +366,14 @@ impl AgentTransport for ShmAgent {
         }
         // Poll for a frame for up to `spin_before_block_us` first.
         if !self.spin_before_block.is_zero() {
-            let until = Instant::now() + self.spin_before_block.min(timeout);
-            while Instant::now() < until {
+            let window = super::PollWindow::new(self.spin_before_block.min(timeout));
+            loop {
                 if self.has_frame() {
                     return;
                 }
-                std::hint::spin_loop();
+                if !window.pause() {
+                    break;
+                }
             }
         }
         // A frame published since the last `discard_wakeups` (or wake) has bumped the word

@@ -533,15 +533,14 @@ impl HostReadiness for ShmHost {
         // while the host works on what it found: it polls again before it sleeps).
         if !self.spin_before_block.is_zero() {
             self.wake.set_host_polling(true);
-            let until = Instant::now() + self.spin_before_block.min(timeout);
+            let window = super::PollWindow::new(self.spin_before_block.min(timeout));
             loop {
                 if self.any_batch_waiting() {
                     return Ok(());
                 }
-                if Instant::now() >= until {
+                if !window.pause() {
                     break;
                 }
-                std::hint::spin_loop();
             }
             // About to sleep: agents notify again from here on. A batch published before
             // an agent saw the flag cleared is found by this last look.

@@ -1,0 +1,125 @@
+"""One agent's cycle with host and agent on one CPU, on two, or where the kernel puts them.
+
+    python bench/poll_colocation.py --python A:BIN_A [--python B:BIN_B ...]
+        [--place same --place split --place free] [--size 320x240] [--rounds 2]
+        [--cycles 4000]
+
+The `shm` case of `vr-sim bench` at 1 agent (3 rgb8 cameras of `--size`, sync mode over
+shared memory, `wait = "block"` with the default `spin_before_block_us`): the host is
+`python -m vrsync.bench_host` of interpreter A, the agent `vr-bench-agent --mode sdk` from
+folder BIN_A (the same tree's build: the protocol versions must match). Both start
+unpinned, so each reads the machine's two CPUs and polls before it sleeps; during the
+host's warm-up both are then moved (every thread, `sched_setaffinity`) to CPU 0 (`same`),
+the host to CPU 0 and the agent to CPU 1 (`split`), or left where they are (`free`). The
+host's round trips of the measured cycles are printed: p50, mean and p90, µs.
+
+`same` is what a kernel's wake-up placement can do on its own: the host's *start* and the
+agent's *stop* wake a sleeping process, and a kernel may run it on the waker's CPU while
+the other CPU is idle. The `--python` builds take turns within each round.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+# Warm-up cycles: enough to outlast the move of the processes (`PIN_AFTER_S`) at a few µs
+# per cycle; measured cycles begin after it.
+WARMUP = 300_000
+PIN_AFTER_S = 1.0
+
+
+def config_text(session: str, width: int, height: int) -> str:
+    cam = '[[agent.camera]]\nname = "c{}"\nwidth = {}\nheight = {}\nformat = "rgb8"\n'
+    return (
+        f'session = "{session}"\n[sync]\nsync_mode = true\nsimulation_time_per_frame = 0.01\n'
+        'stop_timeout = 10.0\nconnect_timeout = 60.0\nwait = "block"\n[transport]\n'
+        'kind = "shm"\nmax_commands_per_cycle = 8\n[[agent]]\nid = 0\n'
+        + "".join(cam.format(c, width, height) for c in range(3))
+    )
+
+
+def pin(pid: int, cpu: int) -> None:
+    """Moves every thread of process `pid` to `cpu`."""
+    for task in os.listdir(f"/proc/{pid}/task"):
+        try:
+            os.sched_setaffinity(int(task), {cpu})
+        except ProcessLookupError:
+            pass  # a thread that ended meanwhile
+
+
+def one(python: str, bindir: str, place: str, width: int, height: int, cycles: int) -> dict:
+    with tempfile.TemporaryDirectory() as d:
+        session = f"coloc-{os.getpid()}-{time.monotonic_ns()}"
+        config = Path(d) / "c.toml"
+        config.write_text(config_text(session, width, height))
+        out = Path(d) / "host.json"
+        host = subprocess.Popen(
+            [python, "-m", "vrsync.bench_host", "--config", str(config), "--warmup",
+             str(WARMUP), "--cycles", str(cycles), "--out", str(out)],
+        )
+        agent = subprocess.Popen(
+            [f"{bindir}/vr-bench-agent", "--mode", "sdk", "--id", "0", "--config",
+             str(config), "--warmup", "100"],
+            stdout=subprocess.DEVNULL,
+        )
+        try:
+            time.sleep(PIN_AFTER_S)
+            if place == "same":
+                pin(host.pid, 0)
+                pin(agent.pid, 0)
+            elif place == "split":
+                pin(host.pid, 0)
+                pin(agent.pid, 1)
+            host.wait(timeout=600)
+            agent.wait(timeout=60)
+        finally:
+            for p in (host, agent):
+                if p.poll() is None:
+                    p.kill()
+                    p.wait()
+        if host.returncode != 0 or agent.returncode != 0:
+            sys.exit(f"{place}: host {host.returncode}, agent {agent.returncode}")
+        rt = sorted(json.loads(out.read_text())["round_trip_ns"])
+    return {
+        "p50": statistics.median(rt) / 1e3,
+        "mean": statistics.fmean(rt) / 1e3,
+        "p90": rt[int(len(rt) * 0.9)] / 1e3,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--python", action="append", required=True,
+                        help="INTERPRETER:BIN (vrsync installed; BIN holds vr-bench-agent)")
+    parser.add_argument("--place", action="append", choices=["same", "split", "free"])
+    parser.add_argument("--size", default="320x240", help="WxH of each of 3 cameras")
+    parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument("--cycles", type=int, default=4000, help="measured cycles per run")
+    args = parser.parse_args()
+    if (os.cpu_count() or 1) < 2:
+        sys.exit("needs 2 CPUs")
+    width, height = (int(v) for v in args.size.split("x"))
+    builds = []
+    for spec in args.python:
+        python, sep, bindir = spec.partition(":")
+        if not sep or not Path(bindir, "vr-bench-agent").exists():
+            sys.exit(f"--python {spec}: want INTERPRETER:BIN with BIN/vr-bench-agent")
+        builds.append((python, bindir))
+    for r in range(args.rounds):
+        for place in args.place or ["same", "split", "free"]:
+            for python, bindir in builds:
+                m = one(python, bindir, place, width, height, args.cycles)
+                print(f"round {r} {place:5s} {args.size} {python}: p50 {m['p50']:.1f} "
+                      f"mean {m['mean']:.1f} p90 {m['p90']:.1f} µs", flush=True)
+
+
+if __name__ == "__main__":
+    main()
