@@ -439,13 +439,16 @@ pub struct PollWindow {
 /// comes within it is seen without a system call.
 pub const POLL_SPIN_ONLY: Duration = Duration::from_micros(5);
 
+/// The longest [`PollWindow`] (`spin_before_block_us` is at most 10 ms).
+pub const POLL_WINDOW_MAX: Duration = Duration::from_secs(1);
+
 impl PollWindow {
-    /// A window of `length` from now.
+    /// A window of `length` from now (at most [`POLL_WINDOW_MAX`]).
     pub fn new(length: Duration) -> Self {
         let start = Instant::now();
         Self {
             busy_until: start + POLL_SPIN_ONLY,
-            until: start + length,
+            until: start + length.min(POLL_WINDOW_MAX),
         }
     }
 
@@ -483,7 +486,8 @@ mod tests {
     #[test]
     fn a_poll_window_pauses_until_it_has_passed() {
         assert!(!PollWindow::new(Duration::ZERO).pause());
-        let window = PollWindow::new(Duration::from_secs(3600));
+        // A length too long for an `Instant` is cut to the longest window.
+        let window = PollWindow::new(Duration::MAX);
         // In the busy head and after it (where it yields), the window is still open.
         assert!(window.pause());
         let past_head = PollWindow {
