@@ -98,6 +98,17 @@ def config_text(session: str, agents: int) -> str:
     return text
 
 
+def python_builds(ap: argparse.ArgumentParser, specs: list[str], program: str) -> list[tuple[str, str]]:
+    """The `--python PYTHON:BIN_DIR` pairs, each BIN_DIR checked for `program` (else a usage error)."""
+    pairs = []
+    for spec in specs:
+        python, sep, bindir = spec.partition(":")
+        if not sep or not Path(bindir, program).is_file():
+            ap.error(f"--python {spec!r}: expected PYTHON:BIN_DIR with BIN_DIR/{program}")
+        pairs.append((python, bindir))
+    return pairs
+
+
 def main() -> int:
     """Runs the rounds and prints one line per interpreter and round."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -112,12 +123,7 @@ def main() -> int:
     ap.add_argument("--cycles", type=int, default=3000)
     ap.add_argument("--rounds", type=int, default=2)
     args = ap.parse_args()
-    pairs = []
-    for spec in args.python:
-        python, sep, bindir = spec.partition(":")
-        if not sep or not Path(bindir, "vr-agent").is_file():
-            ap.error(f"--python {spec!r}: expected PYTHON:BIN_DIR with BIN_DIR/vr-agent")
-        pairs.append((python, bindir))
+    pairs = python_builds(ap, args.python, "vr-agent")
     print(
         f"{args.agents} agents, {args.cycles} cycles; µs per agent-cycle outside collect(): "
         "wall (start) / thread CPU (start)"

@@ -30,6 +30,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from host_own_time import python_builds
+
 # Warm-up cycles: enough to outlast the move of the processes (`PIN_AFTER_S`) at a few µs
 # per cycle; measured cycles begin after it.
 WARMUP = 300_000
@@ -107,12 +109,7 @@ def main() -> None:
     if (os.cpu_count() or 1) < 2:
         sys.exit("needs 2 CPUs")
     width, height = (int(v) for v in args.size.split("x"))
-    builds = []
-    for spec in args.python:
-        python, sep, bindir = spec.partition(":")
-        if not sep or not Path(bindir, "vr-bench-agent").exists():
-            sys.exit(f"--python {spec}: want INTERPRETER:BIN with BIN/vr-bench-agent")
-        builds.append((python, bindir))
+    builds = python_builds(parser, args.python, "vr-bench-agent")
     for r in range(args.rounds):
         for place in args.place or ["same", "split", "free"]:
             for python, bindir in builds:
