@@ -9,7 +9,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as ps_factory};
-use vrsync_transport::shm::{PollWindow, WakeWord};
+use vrsync_transport::shm::{PollLength, PollWindow, WakeWord};
 
 type Svc = ipc::Service;
 
@@ -71,7 +71,7 @@ pub struct ShmFloorHost {
     publishers: Vec<Publisher<Svc, [u8], u64>>,
     frame_bytes: usize,
     spin: bool,
-    spin_before_block: Duration,
+    poll: PollLength,
     seen: Vec<bool>,
 }
 
@@ -158,7 +158,7 @@ impl ShmFloorHost {
             publishers,
             frame_bytes,
             spin,
-            spin_before_block,
+            poll: PollLength::new(spin_before_block),
             seen: vec![false; n],
         })
     }
@@ -213,7 +213,7 @@ impl ShmFloorHost {
         let wait_started = Instant::now();
         let deadline = wait_started + timeout;
         // Poll before sleeping as vrsync does (same waiting strategy).
-        let window = PollWindow::new(self.spin_before_block);
+        let window = PollWindow::new(self.poll.length());
         let mut polling = true;
         while missing > 0 {
             let seen = &mut self.seen;
@@ -241,6 +241,7 @@ impl ShmFloorHost {
                 return Err(FloorError::Timeout(timeout));
             }
         }
+        self.poll.record(wait_started.elapsed());
         Ok(())
     }
 }
@@ -318,6 +319,7 @@ pub fn shm_floor_agent(
         .create()
         .map_err(|e| ice("subscriber", e))?;
     let _ = back.notify();
+    let mut poll = PollLength::new(spin_before_block);
     let mut sum = 0u64;
     let mut done = 0u64;
     let mut allocs_at_warmup = None;
@@ -330,13 +332,15 @@ pub fn shm_floor_agent(
         }
         if !spin {
             // Poll before sleeping, as vrsync agents do (same waiting strategy).
-            let window = PollWindow::new(spin_before_block);
+            let started = Instant::now();
+            let window = PollWindow::new(poll.length());
             while !sub.has_samples().unwrap_or(true) && window.pause() {}
             // The word's value before the last look: a frame sent after it bumped it.
             let seen = wake.value();
             if !sub.has_samples().unwrap_or(true) {
                 wake.wait_change(seen, Duration::from_millis(100));
             }
+            poll.record(started.elapsed());
         }
         while let Some(sample) = sub.receive().map_err(|e| ice("receive", e))? {
             sum = sum.wrapping_add(touch_rows(sample.payload(), row_len));

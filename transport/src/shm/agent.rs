@@ -49,7 +49,7 @@ pub struct ShmAgent {
     motor_pub: Publisher<Svc, [MotorCommand], MotorHeader>,
     max_commands: usize,
     spin: bool,
-    spin_before_block: Duration,
+    poll: super::PollLength,
     shutdown_seen: bool,
 }
 
@@ -323,7 +323,9 @@ impl AgentTransport for ShmAgent {
             motor_pub,
             max_commands,
             spin: config.sync.wait == crate::config::WaitMode::Spin,
-            spin_before_block: config.sync.effective_spin_before_block(config.agents.len()),
+            poll: super::PollLength::new(
+                config.sync.effective_spin_before_block(config.agents.len()),
+            ),
             shutdown_seen: false,
         })
     }
@@ -364,11 +366,14 @@ impl AgentTransport for ShmAgent {
             self.shutdown_seen |= self.wake.closed();
             return;
         }
-        // Poll for a frame for up to `spin_before_block_us` first.
-        if !self.spin_before_block.is_zero() {
-            let window = super::PollWindow::new(self.spin_before_block.min(timeout));
+        // Poll for a frame first (`spin_before_block_us`, or longer: see `PollLength`).
+        let started = Instant::now();
+        let poll = self.poll.length().min(timeout);
+        if !poll.is_zero() {
+            let window = super::PollWindow::new(poll);
             loop {
                 if self.has_frame() {
+                    self.poll.record(started.elapsed());
                     return;
                 }
                 if !window.pause() {
@@ -379,6 +384,7 @@ impl AgentTransport for ShmAgent {
         // A frame published since the last `discard_wakeups` (or wake) has bumped the word
         // past `seen`: the sleep then ends at once.
         self.seen = self.wake.wait_change(self.seen, timeout);
+        self.poll.record(started.elapsed());
         self.shutdown_seen |= self.wake.closed();
     }
 

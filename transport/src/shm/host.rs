@@ -83,7 +83,7 @@ const IDENTITY_CHECK_PERIOD: Duration = Duration::from_millis(20);
 /// The host side of the shared-memory transport.
 pub struct ShmHost {
     _node: Node<Svc>,
-    spin_before_block: Duration,
+    poll: super::PollLength,
     signals: SignalHandling,
     agent_node_names: Vec<String>,
     spin: bool,
@@ -269,7 +269,9 @@ impl ShmHost {
             .map_err(|e| exists("start", &e))?;
         Ok(Self {
             _node: node,
-            spin_before_block: config.sync.effective_spin_before_block(config.agents.len()),
+            poll: super::PollLength::new(
+                config.sync.effective_spin_before_block(config.agents.len()),
+            ),
             signals,
             agent_node_names: config
                 .agents
@@ -531,11 +533,14 @@ impl HostReadiness for ShmHost {
         // for a sleep and a wake-up (see `spin_before_block_us`).
         // While it polls, agents leave out their *stop* notifications (the flag stays set
         // while the host works on what it found: it polls again before it sleeps).
-        if !self.spin_before_block.is_zero() {
+        let started = Instant::now();
+        let poll = self.poll.length().min(timeout);
+        if !poll.is_zero() {
             self.wake.set_host_polling(true);
-            let window = super::PollWindow::new(self.spin_before_block.min(timeout));
+            let window = super::PollWindow::new(poll);
             loop {
                 if self.any_batch_waiting() {
+                    self.poll.record(started.elapsed());
                     return Ok(());
                 }
                 if !window.pause() {
@@ -546,6 +551,7 @@ impl HostReadiness for ShmHost {
             // an agent saw the flag cleared is found by this last look.
             self.wake.set_host_polling(false);
             if self.any_batch_waiting() {
+                self.poll.record(started.elapsed());
                 return Ok(());
             }
         }
@@ -567,6 +573,10 @@ impl HostReadiness for ShmHost {
         // Drain every id that is already pending: counts merge and carry no information
         // we rely on, and a pending id would make the next wait return at once.
         let _ = self.stop.try_wait(|_| {});
+        if !timeout.is_zero() {
+            // A look without a wait (zero timeout) says nothing of how long answers take.
+            self.poll.record(started.elapsed());
+        }
         if self.signals.termination_requested() {
             return Err(HostTransportError::Terminated);
         }
