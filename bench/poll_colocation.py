@@ -2,7 +2,7 @@
 
     python bench/poll_colocation.py --python A:BIN_A [--python B:BIN_B ...]
         [--place same --place split --place free] [--size 320x240] [--rounds 2]
-        [--cycles 4000]
+        [--cycles 4000] [--agent rust|python]
 
 The `shm` case of `vr-sim bench` at 1 agent (3 rgb8 cameras of `--size`, sync mode over
 shared memory, `wait = "block"` with the default `spin_before_block_us`): the host is
@@ -15,7 +15,9 @@ host's round trips of the measured cycles are printed: p50, mean and p90, µs.
 
 `same` is what a kernel's wake-up placement can do on its own: the host's *start* and the
 agent's *stop* wake a sleeping process, and a kernel may run it on the waker's CPU while
-the other CPU is idle. The `--python` builds take turns within each round.
+the other CPU is idle. The `--python` builds take turns within each round. With `--agent
+python` the agent is `python -m vrsync.bench_agent` of the same interpreter (the `python`
+case of `vr-sim bench`: numpy's row reads instead of the Rust agent's).
 """
 
 from __future__ import annotations
@@ -57,7 +59,9 @@ def pin(pid: int, cpu: int) -> None:
             pass  # a thread that ended meanwhile
 
 
-def one(python: str, bindir: str, place: str, width: int, height: int, cycles: int) -> dict:
+def one(
+    python: str, bindir: str, place: str, width: int, height: int, cycles: int, kind: str
+) -> dict:
     with tempfile.TemporaryDirectory() as d:
         session = f"coloc-{os.getpid()}-{time.monotonic_ns()}"
         config = Path(d) / "c.toml"
@@ -67,11 +71,12 @@ def one(python: str, bindir: str, place: str, width: int, height: int, cycles: i
             [python, "-m", "vrsync.bench_host", "--config", str(config), "--warmup",
              str(WARMUP), "--cycles", str(cycles), "--out", str(out)],
         )
-        agent = subprocess.Popen(
-            [f"{bindir}/vr-bench-agent", "--mode", "sdk", "--id", "0", "--config",
-             str(config), "--warmup", "100"],
-            stdout=subprocess.DEVNULL,
-        )
+        if kind == "python":
+            command = [python, "-m", "vrsync.bench_agent", "--config", str(config), "--id", "0"]
+        else:
+            command = [f"{bindir}/vr-bench-agent", "--mode", "sdk", "--id", "0", "--config",
+                       str(config), "--warmup", "100"]
+        agent = subprocess.Popen(command, stdout=subprocess.DEVNULL)
         try:
             time.sleep(PIN_AFTER_S)
             if place == "same":
@@ -105,6 +110,8 @@ def main() -> None:
     parser.add_argument("--size", default="320x240", help="WxH of each of 3 cameras")
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--cycles", type=int, default=4000, help="measured cycles per run")
+    parser.add_argument("--agent", choices=["rust", "python"], default="rust",
+                        help="the bench agent: vr-bench-agent, or vrsync.bench_agent")
     args = parser.parse_args()
     if (os.cpu_count() or 1) < 2:
         sys.exit("needs 2 CPUs")
@@ -113,8 +120,8 @@ def main() -> None:
     for r in range(args.rounds):
         for place in args.place or ["same", "split", "free"]:
             for python, bindir in builds:
-                m = one(python, bindir, place, width, height, args.cycles)
-                print(f"round {r} {place:5s} {args.size} {python}: p50 {m['p50']:.1f} "
+                m = one(python, bindir, place, width, height, args.cycles, args.agent)
+                print(f"round {r} {place:5s} {args.size} {args.agent} {python}: p50 {m['p50']:.1f} "
                       f"mean {m['mean']:.1f} p90 {m['p90']:.1f} µs", flush=True)
 
 
