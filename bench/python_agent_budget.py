@@ -12,8 +12,9 @@ trip (p50 and mean), and the agent's parts (medians): the wait for the frame (`n
 `Agent.frames`: the SDK's receive, and polling or sleeping until the host's start), the
 three numpy views (`frame.images`), the row reads (`touch_rows`), `send` + `stop`.
 Each `--spin-us` runs every size once more per round with that `[sync]
-spin_before_block_us` (how long host and agent poll before they sleep; default 50): the
-cycle's sensitivity to the agent's time crossing the host's polling window.
+spin_before_block_us` (how long host and agent poll before they sleep at least; default
+50; each side's window grows to twice its recent waits' mean, up to 500 µs): the cycle's
+sensitivity to the agent's time crossing the host's polling window.
 """
 
 from __future__ import annotations

@@ -419,8 +419,9 @@ fn for_each_dead_node(mut f: impl FnMut(iceoryx2::node::DeadNodeView<Svc>, &str)
     });
 }
 
-/// A poll-before-sleep window (`[sync] spin_before_block_us`): busy-polls for its first
-/// [`POLL_SPIN_ONLY`], then gives the CPU away between looks.
+/// A poll-before-sleep window (`[sync] spin_before_block_us`, or longer: see
+/// [`PollLength`]): busy-polls for its first [`POLL_SPIN_ONLY`], then gives the CPU away
+/// between looks.
 ///
 /// Polling pays off only when the peer runs on another CPU. A kernel may wake the peer on
 /// the waker's own CPU (the host's *start* and an agent's *stop* wake a process that
