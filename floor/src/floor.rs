@@ -9,7 +9,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as ps_factory};
-use vrsync_transport::shm::{PollLength, PollWindow, WakeWord};
+use vrsync_transport::shm::{POLL_WINDOW_MAX, PollLength, WakeWord};
 
 type Svc = ipc::Service;
 
@@ -213,7 +213,7 @@ impl ShmFloorHost {
         let wait_started = Instant::now();
         let deadline = wait_started + timeout;
         // Poll before sleeping as vrsync does (same waiting strategy).
-        let window = PollWindow::new(self.poll.length());
+        let window = self.poll.window(POLL_WINDOW_MAX);
         let mut polling = true;
         while missing > 0 {
             let seen = &mut self.seen;
@@ -332,15 +332,14 @@ pub fn shm_floor_agent(
         }
         if !spin {
             // Poll before sleeping, as vrsync agents do (same waiting strategy).
-            let started = Instant::now();
-            let window = PollWindow::new(poll.length());
+            let window = poll.window(POLL_WINDOW_MAX);
             while !sub.has_samples().unwrap_or(true) && window.pause() {}
             // The word's value before the last look: a frame sent after it bumped it.
             let seen = wake.value();
             if !sub.has_samples().unwrap_or(true) {
                 wake.wait_change(seen, Duration::from_millis(100));
             }
-            poll.record(started.elapsed());
+            poll.record(window.elapsed());
         }
         while let Some(sample) = sub.receive().map_err(|e| ice("receive", e))? {
             sum = sum.wrapping_add(touch_rows(sample.payload(), row_len));

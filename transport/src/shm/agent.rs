@@ -367,13 +367,11 @@ impl AgentTransport for ShmAgent {
             return;
         }
         // Poll for a frame first (`spin_before_block_us`, or longer: see `PollLength`).
-        let started = Instant::now();
-        let poll = self.poll.length().min(timeout);
-        if !poll.is_zero() {
-            let window = super::PollWindow::new(poll);
+        let window = self.poll.window(timeout);
+        if !window.is_empty() {
             loop {
                 if self.has_frame() {
-                    self.poll.record(started.elapsed());
+                    self.poll.record(window.elapsed());
                     return;
                 }
                 if !window.pause() {
@@ -384,7 +382,7 @@ impl AgentTransport for ShmAgent {
         // A frame published since the last `discard_wakeups` (or wake) has bumped the word
         // past `seen`: the sleep then ends at once.
         self.seen = self.wake.wait_change(self.seen, timeout);
-        self.poll.record(started.elapsed());
+        self.poll.record(window.elapsed());
         self.shutdown_seen |= self.wake.closed();
     }
 

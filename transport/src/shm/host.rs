@@ -533,14 +533,12 @@ impl HostReadiness for ShmHost {
         // for a sleep and a wake-up (see `spin_before_block_us`).
         // While it polls, agents leave out their *stop* notifications (the flag stays set
         // while the host works on what it found: it polls again before it sleeps).
-        let started = Instant::now();
-        let poll = self.poll.length().min(timeout);
-        if !poll.is_zero() {
+        let window = self.poll.window(timeout);
+        if !window.is_empty() {
             self.wake.set_host_polling(true);
-            let window = super::PollWindow::new(poll);
             loop {
                 if self.any_batch_waiting() {
-                    self.poll.record(started.elapsed());
+                    self.poll.record(window.elapsed());
                     return Ok(());
                 }
                 if !window.pause() {
@@ -551,7 +549,7 @@ impl HostReadiness for ShmHost {
             // an agent saw the flag cleared is found by this last look.
             self.wake.set_host_polling(false);
             if self.any_batch_waiting() {
-                self.poll.record(started.elapsed());
+                self.poll.record(window.elapsed());
                 return Ok(());
             }
         }
@@ -575,7 +573,7 @@ impl HostReadiness for ShmHost {
         let _ = self.stop.try_wait(|_| {});
         if !timeout.is_zero() {
             // A look without a wait (zero timeout) says nothing of how long answers take.
-            self.poll.record(started.elapsed());
+            self.poll.record(window.elapsed());
         }
         if self.signals.termination_requested() {
             return Err(HostTransportError::Terminated);

@@ -432,6 +432,7 @@ fn for_each_dead_node(mut f: impl FnMut(iceoryx2::node::DeadNodeView<Svc>, &str)
 /// once when nothing else is runnable.
 #[derive(Debug, Clone, Copy)]
 pub struct PollWindow {
+    start: Instant,
     busy_until: Instant,
     until: Instant,
 }
@@ -448,9 +449,20 @@ impl PollWindow {
     pub fn new(length: Duration) -> Self {
         let start = Instant::now();
         Self {
+            start,
             busy_until: start + POLL_SPIN_ONLY,
             until: start + length.min(POLL_WINDOW_MAX),
         }
+    }
+
+    /// Whether the window has no length (polling off, or a look without a wait).
+    pub fn is_empty(&self) -> bool {
+        self.until == self.start
+    }
+
+    /// The time since the window opened (the wait so far, for [`PollLength::record`]).
+    pub fn elapsed(&self) -> Duration {
+        self.start.elapsed()
     }
 
     /// Pauses between two looks: `false` (at once) once the window has passed.
@@ -509,6 +521,11 @@ impl PollLength {
         }
     }
 
+    /// A window of the next length from now, at most `limit`.
+    pub fn window(&self, limit: Duration) -> PollWindow {
+        PollWindow::new(self.length().min(limit))
+    }
+
     /// Counts one wait that took `waited` (until the answer, or until it gave up).
     pub fn record(&mut self, waited: Duration) {
         let waited = u64::try_from(waited.as_nanos()).unwrap_or(u64::MAX);
@@ -536,17 +553,22 @@ mod tests {
 
     #[test]
     fn a_poll_window_pauses_until_it_has_passed() {
-        assert!(!PollWindow::new(Duration::ZERO).pause());
+        let empty = PollWindow::new(Duration::ZERO);
+        assert!(empty.is_empty());
+        assert!(!empty.pause());
         // A length too long for an `Instant` is cut to the longest window.
         let window = PollWindow::new(Duration::MAX);
+        assert!(!window.is_empty());
         // In the busy head and after it (where it yields), the window is still open.
         assert!(window.pause());
         let past_head = PollWindow {
+            start: Instant::now(),
             busy_until: Instant::now(),
             until: Instant::now() + Duration::from_secs(3600),
         };
         assert!(past_head.pause());
         let ended = PollWindow {
+            start: Instant::now(),
             busy_until: Instant::now(),
             until: Instant::now(),
         };
@@ -580,6 +602,8 @@ mod tests {
         // An hour-long (or longer) wait neither overflows nor panics.
         length.record(Duration::MAX);
         assert_eq!(length.length(), configured);
+        assert!(length.window(Duration::ZERO).is_empty());
+        assert!(!length.window(Duration::from_secs(1)).is_empty());
         // Polling off stays off.
         let mut off = PollLength::new(Duration::ZERO);
         off.record(Duration::from_micros(40));
