@@ -293,15 +293,21 @@ pub struct SyncConfig {
 }
 
 impl SyncConfig {
-    /// The poll-before-sleep time to use with `agents` agents: `spin_before_block`, or zero
-    /// when the host and the agents together outnumber the cores (polling would then steal
-    /// the CPU from the process that has work to do).
+    /// The poll-before-sleep time to use with `agents` agents, each in a process of its
+    /// own: see [`Self::spin_for_processes`].
     pub fn effective_spin_before_block(&self, agents: usize) -> Duration {
+        Self::spin_for_processes(self.spin_before_block, agents)
+    }
+
+    /// The poll-before-sleep time to use when the agents run in `processes` processes:
+    /// `spin_before_block`, or zero when those and the host together outnumber the cores
+    /// (polling would then steal the CPU from the process that has work to do).
+    pub fn spin_for_processes(spin_before_block: Duration, processes: usize) -> Duration {
         let cores = std::thread::available_parallelism().map_or(1, usize::from);
-        if agents + 1 > cores {
+        if processes + 1 > cores {
             Duration::ZERO
         } else {
-            self.spin_before_block
+            spin_before_block
         }
     }
 }

@@ -72,6 +72,10 @@ struct HostAgentPorts {
     /// from another one (a replaced connection) clears [`Self::sole`] and makes the next
     /// check list the subscribers.
     motor_from: Cell<Option<UniquePublisherId>>,
+    /// The process of the served connection (iceoryx2 writes its creator's process id
+    /// into a node's id), found with it: the agents of one process (a vector env) count
+    /// as one waiting process for the host's poll (see [`ShmHost::count_processes`]).
+    process: Option<i32>,
 }
 
 /// How often the host checks that the subscriber it serves is still the one attached:
@@ -84,6 +88,9 @@ const IDENTITY_CHECK_PERIOD: Duration = Duration::from_millis(20);
 pub struct ShmHost {
     _node: Node<Svc>,
     poll: super::PollLength,
+    /// `[sync] spin_before_block_us`; the poll uses it when the processes of the
+    /// connected agents and the host do not outnumber the cores.
+    spin_before_block: Duration,
     signals: SignalHandling,
     agent_node_names: Vec<String>,
     spin: bool,
@@ -253,6 +260,7 @@ impl ShmHost {
                 verified: Cell::new(None),
                 sole: Cell::new(false),
                 motor_from: Cell::new(None),
+                process: None,
             });
         }
         let wake = WakeWord::create(session)?;
@@ -269,9 +277,11 @@ impl ShmHost {
             .map_err(|e| exists("start", &e))?;
         Ok(Self {
             _node: node,
+            // Until connections say otherwise, every agent counts as a process of its own.
             poll: super::PollLength::new(
                 config.sync.effective_spin_before_block(config.agents.len()),
             ),
+            spin_before_block: config.sync.spin_before_block,
             signals,
             agent_node_names: config
                 .agents
@@ -286,6 +296,27 @@ impl ShmHost {
             stop,
             agents,
         })
+    }
+
+    /// Sets the poll for the processes the agents run in: the connections' processes,
+    /// each agent without a known one counted as a process of its own. A vector env
+    /// steps all of its agents in one process, so the host may poll while it waits for
+    /// their stops (they then need no notification) without taking a core from an agent.
+    /// Processes in different PID namespaces may share a number and are then counted as
+    /// one (a poll yields between its looks, so such a count costs little).
+    fn count_processes(&mut self) {
+        let mut known: Vec<i32> = self.agents.iter().filter_map(|p| p.process).collect();
+        known.sort_unstable();
+        known.dedup();
+        let unknown = self.agents.iter().filter(|p| p.process.is_none()).count();
+        let processes = known.len() + unknown;
+        let spin = crate::config::SyncConfig::spin_for_processes(self.spin_before_block, processes);
+        self.poll.set_configured(spin);
+        debug!(
+            processes,
+            ?spin,
+            "agent processes counted for the host's poll"
+        );
     }
 
     /// Whether some agent's motor queue holds a batch (or cannot be read: look).
@@ -389,16 +420,18 @@ fn any_subscriber(p: &HostAgentPorts, mut pred: impl FnMut(UniqueSubscriberId) -
     found
 }
 
-/// The agent's sensor subscriber when exactly one is attached. With more (a killed
-/// agent's port stays until its dead node is cleaned up, next to its successor's) the
-/// connection is not told apart by identity until one is left.
-fn sole_subscriber(p: &HostAgentPorts) -> Option<UniqueSubscriberId> {
+/// The agent's sensor subscriber when exactly one is attached, and its process (the id
+/// of the process that created its node). With more (a killed agent's port stays until
+/// its dead node is cleaned up, next to its successor's) the connection is not told apart
+/// by identity until one is left.
+fn sole_subscriber(p: &HostAgentPorts) -> Option<(UniqueSubscriberId, Option<i32>)> {
     use iceoryx2::service::port_factory::PortFactory as _;
     let mut found = None;
     let mut count = 0usize;
     p.sensor_service.dynamic_config().list_subscribers(|d| {
         count += 1;
-        found = Some(d.subscriber_id);
+        let process = d.node_id.pid::<Svc>().ok().map(|pid| pid.value());
+        found = Some((d.subscriber_id, process));
         if count > 1 {
             CallbackProgression::Stop
         } else {
@@ -444,6 +477,7 @@ impl HostTransport for ShmHost {
 
     fn publish(&mut self, slot: usize, frame: ShmFrameLoan) -> Result<bool, HostTransportError> {
         let id = self.agent(slot)?.id;
+        let mut processes_changed = false;
         let delivered = frame
             .sample
             .send()
@@ -463,9 +497,15 @@ impl HostTransport for ShmHost {
             if p.served.is_some() && due && still_sole(p) {
                 p.verified.set(Some(now));
             } else if p.served.is_none() || due {
-                p.served = sole_subscriber(p).filter(|&s| Some(s) != p.departed);
+                let sole = sole_subscriber(p).filter(|&(s, _)| Some(s) != p.departed);
+                let process = sole.and_then(|(_, process)| process);
+                p.served = sole.map(|(s, _)| s);
                 if p.served.is_some() {
                     p.departed = None;
+                }
+                if p.process != process {
+                    p.process = process;
+                    processes_changed = true;
                 }
                 p.sole.set(p.served.is_some());
                 p.verified.set(Some(now));
@@ -475,6 +515,9 @@ impl HostTransport for ShmHost {
             if p.served.is_none() && !not_only_departed(p) {
                 return Ok(false);
             }
+        }
+        if processes_changed {
+            self.count_processes();
         }
         Ok(delivered)
     }
@@ -597,10 +640,18 @@ impl HostConnections for ShmHost {
     }
 
     fn forget_connection(&mut self, slot: usize) {
+        let mut left = false;
         if let Some(p) = self.agents.get_mut(slot) {
-            p.departed = p.served.take().or_else(|| sole_subscriber(p));
+            p.departed = p
+                .served
+                .take()
+                .or_else(|| sole_subscriber(p).map(|(s, _)| s));
+            left = p.process.take().is_some();
             p.verified.set(None);
             p.sole.set(false);
+        }
+        if left {
+            self.count_processes();
         }
     }
 
@@ -631,5 +682,47 @@ impl HostConnections for ShmHost {
                 .map_err(|e| connect("motor subscriber", &e))?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::SyncConfig;
+
+    #[test]
+    fn the_agents_of_one_process_count_as_one_for_the_hosts_poll() {
+        let session = format!("shm-processes-{}", std::process::id());
+        let mut text = format!(
+            "session = {session:?}\n[sync]\nsync_mode = true\nwait = \"block\"\n\
+             spin_before_block_us = 50\n[transport]\nkind = \"shm\"\n"
+        );
+        for id in 0..4 {
+            text += &format!(
+                "[[agent]]\nid = {id}\n[[agent.camera]]\nname = \"c\"\nwidth = 8\nheight = 8\n"
+            );
+        }
+        let config = Config::from_toml_str(&text, std::path::Path::new("<test>")).unwrap();
+        let spin = config.sync.spin_before_block;
+        let polls = |processes| SyncConfig::spin_for_processes(spin, processes);
+        let mut host = ShmHost::create(&config, SignalHandling::Leave).unwrap();
+        // Nothing connected: each agent counts as a process of its own.
+        assert_eq!(host.poll.length(), polls(4));
+        // Four agents of this one process connect and get a frame each.
+        let _agents: Vec<ShmAgent> = (0..4)
+            .map(|id| {
+                ShmAgent::connect(&config, id, Duration::from_secs(20), SignalHandling::Leave)
+                    .unwrap()
+            })
+            .collect();
+        host.update_connections().unwrap();
+        for slot in 0..4 {
+            let frame = host.loan(slot).unwrap();
+            assert!(host.publish(slot, frame).unwrap());
+        }
+        assert_eq!(host.poll.length(), polls(1));
+        // One leaves: until a connection of its id is served, it counts on its own.
+        host.forget_connection(0);
+        assert_eq!(host.poll.length(), polls(2));
     }
 }

@@ -508,6 +508,11 @@ impl PollLength {
         }
     }
 
+    /// Changes the configured window (the followed mean stays).
+    pub fn set_configured(&mut self, configured: Duration) {
+        self.configured = configured;
+    }
+
     /// The length of the next window.
     pub fn length(&self) -> Duration {
         if self.configured.is_zero() {
