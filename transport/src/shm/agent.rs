@@ -331,25 +331,17 @@ impl AgentTransport for ShmAgent {
     }
 
     fn try_receive_newest(&mut self) -> Result<Option<ShmFrame>, AgentReceiveError> {
-        let mut newest = None;
-        loop {
-            match self.sensor_sub.receive() {
-                Ok(Some(sample)) => newest = Some(ShmFrame { sample }),
-                Ok(None) => return Ok(newest),
-                Err(e) => {
-                    if newest.is_some() {
-                        return Ok(newest);
-                    }
-                    return Err(match e {
-                        iceoryx2::port::ReceiveError::ExceedsMaxBorrows => {
-                            AgentReceiveError::TooManyFramesHeld {
-                                max: AGENT_BORROWED_FRAMES,
-                            }
-                        }
-                        other => AgentReceiveError::Transport(format!("iceoryx2: {other:?}")),
-                    });
-                }
+        // The subscriber's queue holds one frame (`SENSOR_QUEUE`; a newer one replaces
+        // it): what it holds is the newest, and one look is enough.
+        const _: () = assert!(SENSOR_QUEUE == 1);
+        match self.sensor_sub.receive() {
+            Ok(sample) => Ok(sample.map(|sample| ShmFrame { sample })),
+            Err(iceoryx2::port::ReceiveError::ExceedsMaxBorrows) => {
+                Err(AgentReceiveError::TooManyFramesHeld {
+                    max: AGENT_BORROWED_FRAMES,
+                })
             }
+            Err(other) => Err(AgentReceiveError::Transport(format!("iceoryx2: {other:?}"))),
         }
     }
 
