@@ -612,7 +612,7 @@ impl Bench<'_> {
         // The whole loop with rendering: `vr-sim run`'s loop serving the vector env,
         // against the same renderer alone in the same round.
         for agents in LOOP_AGENTS {
-            let case = vec_case("python-loop", agents, self.quick);
+            let case = loop_case(agents, self.quick);
             measure_interleaved(&[case], rows, |case, _round| {
                 let session = self.session();
                 bench_python_loop(case, &session, self.dir, python)
@@ -680,6 +680,19 @@ fn vec_case(transport: &'static str, agents: u32, quick: bool) -> Case {
         warmup: (cycles / ROUNDS / 10).max(20),
         cycles: (cycles / ROUNDS).max(10),
     }
+}
+
+/// A `python-loop` case: as [`vec_case`], with more cycles in a quick run (400 measured
+/// per round): a 16-agent cycle takes well under a millisecond, so 120 of them (a quick
+/// vector case's round) last under a tenth of a second, short enough for a burst of
+/// another process's work to move the round's p50.
+fn loop_case(agents: u32, quick: bool) -> Case {
+    let mut case = vec_case("python-loop", agents, quick);
+    if quick {
+        case.warmup = 40;
+        case.cycles = 400;
+    }
+    case
 }
 
 /// The one measurement loop of every row (vrsync and floors): runs `cycle` for the warm-up and measured
