@@ -10,7 +10,9 @@ shared memory, `wait = "block"` with the default `spin_before_block_us`): the ho
 folder BIN_A (the same tree's build: the protocol versions must match). Both start
 unpinned, so each reads the machine's two CPUs and polls before it sleeps; during the
 host's warm-up both are then moved (every thread, `sched_setaffinity`) to CPU 0 (`same`),
-the host to CPU 0 and the agent to CPU 1 (`split`), or left where they are (`free`). The
+the host to CPU 0 and the agent to CPU 1 (`split`), left where they are (`free`), or put on
+CPU 0 together for `UNPIN_AFTER_S` and then let run anywhere again (`joined`: whether the
+pair leaves a shared CPU on its own). The
 host's round trips of the measured cycles are printed: p50, mean and p90, µs.
 
 `same` is what a kernel's wake-up placement can do on its own: the host's *start* and the
@@ -38,6 +40,8 @@ from host_own_time import python_builds
 # per cycle; measured cycles begin after it.
 WARMUP = 300_000
 PIN_AFTER_S = 1.0
+# `joined`: how long host and agent share CPU 0 before both may run anywhere again.
+UNPIN_AFTER_S = 0.5
 
 
 def config_text(session: str, width: int, height: int) -> str:
@@ -85,6 +89,17 @@ def one(
             elif place == "split":
                 pin(host.pid, 0)
                 pin(agent.pid, 1)
+            elif place == "joined":
+                pin(host.pid, 0)
+                pin(agent.pid, 0)
+                time.sleep(UNPIN_AFTER_S)
+                every = set(range(os.cpu_count() or 1))
+                for pid in (host.pid, agent.pid):
+                    for task in os.listdir(f"/proc/{pid}/task"):
+                        try:
+                            os.sched_setaffinity(int(task), every)
+                        except ProcessLookupError:
+                            pass
             host.wait(timeout=600)
             agent.wait(timeout=60)
         finally:
@@ -106,7 +121,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--python", action="append", required=True,
                         help="INTERPRETER:BIN (vrsync installed; BIN holds vr-bench-agent)")
-    parser.add_argument("--place", action="append", choices=["same", "split", "free"])
+    parser.add_argument("--place", action="append", choices=["same", "split", "free", "joined"])
     parser.add_argument("--size", default="320x240", help="WxH of each of 3 cameras")
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--cycles", type=int, default=4000, help="measured cycles per run")

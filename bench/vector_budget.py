@@ -1,14 +1,14 @@
 """Where the time of a vector-env cycle goes: the `python-vec` case of `vr-sim bench`, longer.
 
     python bench/vector_budget.py --python A [--python B ...] [--agents 16] [--cycles 20000]
-        [--rounds 3] [--perf DIR]
+        [--rounds 3] [--perf DIR] [--own-host]
 
 Runs the `python-vec` case (N agents, one 84x84 rgb8 camera each, sync mode over shared
 memory; the agents in one process through `vrsync.vector.VrsyncVectorEnv` with
 `copy_observations=False`, doing `vrsync.bench_vector`'s work: the first and last byte of
 every image row, one command, stop) for many more cycles than the bench, served by
 `python -m vrsync.bench_host` (the host's loop of the bench in Python) run by the first
-interpreter. Each `--python` is an interpreter with its own build of the `vrsync` package
+interpreter (with `--own-host`, by each interpreter for its own runs). Each `--python` is an interpreter with its own build of the `vrsync` package
 (say, before and after a change); they take turns within each round, so a change of the
 machine's state hits all alike. Per interpreter and round it prints, per cycle (µs): the
 host's round trip (p50), the agent process's step split into the SDK's Rust code
@@ -178,6 +178,9 @@ def main() -> None:
     parser.add_argument("--warmup", type=int, default=500)
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--perf", type=Path)
+    parser.add_argument("--own-host", action="store_true",
+                        help="each interpreter's own bench_host serves its agents (the host's "
+                        "side of a build is part of the comparison)")
     parser.add_argument("--agent", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.agent:
@@ -193,7 +196,8 @@ def main() -> None:
     for r in range(args.rounds):
         for i, python in enumerate(pythons):
             tag = f"p{i}-r{r}"
-            res = one(python, pythons[0], args.agents, args.warmup, args.cycles,
+            host_python = python if args.own_host else pythons[0]
+            res = one(python, host_python, args.agents, args.warmup, args.cycles,
                       args.perf if r == 0 else None, tag)
             steps[i] = steps.get(i, res.get("steps", 0)) if r == 0 else steps.get(i, 0)
             vals = " ".join(
