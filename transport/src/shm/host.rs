@@ -478,6 +478,7 @@ impl HostTransport for ShmHost {
     fn publish(&mut self, slot: usize, frame: ShmFrameLoan) -> Result<bool, HostTransportError> {
         let id = self.agent(slot)?.id;
         let mut processes_changed = false;
+        let mut delivered_to_departed = false;
         let delivered = frame
             .sample
             .send()
@@ -512,14 +513,12 @@ impl HostTransport for ShmHost {
             }
             // Only the ports of a connection that left got it, in the moment before they
             // close: not a new connection, so not delivered (as `is_connected` says).
-            if p.served.is_none() && !not_only_departed(p) {
-                return Ok(false);
-            }
+            delivered_to_departed = p.served.is_none() && !not_only_departed(p);
         }
         if processes_changed {
             self.count_processes();
         }
-        Ok(delivered)
+        Ok(delivered && !delivered_to_departed)
     }
 
     fn signal_start(&mut self) -> Result<(), HostTransportError> {
