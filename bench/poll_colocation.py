@@ -54,11 +54,11 @@ def config_text(session: str, width: int, height: int) -> str:
     )
 
 
-def pin(pid: int, cpu: int) -> None:
-    """Moves every thread of process `pid` to `cpu`."""
+def pin(pid: int, cpus: set[int]) -> None:
+    """Lets every thread of process `pid` run on `cpus` only."""
     for task in os.listdir(f"/proc/{pid}/task"):
         try:
-            os.sched_setaffinity(int(task), {cpu})
+            os.sched_setaffinity(int(task), cpus)
         except ProcessLookupError:
             pass  # a thread that ended meanwhile
 
@@ -84,22 +84,18 @@ def one(
         try:
             time.sleep(PIN_AFTER_S)
             if place == "same":
-                pin(host.pid, 0)
-                pin(agent.pid, 0)
+                pin(host.pid, {0})
+                pin(agent.pid, {0})
             elif place == "split":
-                pin(host.pid, 0)
-                pin(agent.pid, 1)
+                pin(host.pid, {0})
+                pin(agent.pid, {1})
             elif place == "joined":
-                pin(host.pid, 0)
-                pin(agent.pid, 0)
+                pin(host.pid, {0})
+                pin(agent.pid, {0})
                 time.sleep(UNPIN_AFTER_S)
                 every = set(range(os.cpu_count() or 1))
-                for pid in (host.pid, agent.pid):
-                    for task in os.listdir(f"/proc/{pid}/task"):
-                        try:
-                            os.sched_setaffinity(int(task), every)
-                        except ProcessLookupError:
-                            pass
+                pin(host.pid, every)
+                pin(agent.pid, every)
             host.wait(timeout=600)
             agent.wait(timeout=60)
         finally:

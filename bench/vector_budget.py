@@ -7,16 +7,16 @@ Runs the `python-vec` case (N agents, one 84x84 rgb8 camera each, sync mode over
 memory; the agents in one process through `vrsync.vector.VrsyncVectorEnv` with
 `copy_observations=False`, doing `vrsync.bench_vector`'s work: the first and last byte of
 every image row, one command, stop) for many more cycles than the bench, served by
-`python -m vrsync.bench_host` (the host's loop of the bench in Python) run by the first
-interpreter (with `--own-host`, by each interpreter for its own runs). Each `--python` is an interpreter with its own build of the `vrsync` package
-(say, before and after a change); they take turns within each round, so a change of the
-machine's state hits all alike. Per interpreter and round it prints, per cycle (µs): the
-host's round trip (p50), the agent process's step split into the SDK's Rust code
-(`AgentGroup.timing`'s SDK time), blocked waiting, the env's Python code around it, and
-the row reads; the SDK time per agent-step; and the allocations of the extension's Rust
-code per agent-step (if the build counts them). With `--perf DIR` it also records the
-agent process with `perf record` over the measured cycles only and prints the top symbols
-(the share of the process's samples).
+`python -m vrsync.bench_host` (the host's loop of the bench in Python) run by the first interpreter
+(with `--own-host`, by each interpreter for its own runs). Each `--python` is an interpreter
+with its own build of the `vrsync` package (say, before and after a change); they take turns
+within each round, so a change of the machine's state hits all alike. Per interpreter and
+round it prints, per cycle (µs): the host's round trip (p50), the agent process's step split
+into the SDK's Rust code (`AgentGroup.timing`'s SDK time), blocked waiting, the env's Python
+code around it, and the row reads; the SDK time per agent-step; and the allocations of the
+extension's Rust code per agent-step (if the build counts them). With `--perf DIR` it also
+records the agent process with `perf record` over the measured cycles only and prints the
+top symbols (the share of the process's samples).
 """
 
 from __future__ import annotations
