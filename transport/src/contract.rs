@@ -250,7 +250,9 @@ pub type BatchSink<'a> = dyn FnMut(usize, &MotorHeader, &[MotorCommand]) + 'a;
 ///   frame of the cycle has been published, so an agent woken by *start* finds its frame.
 ///   (On TCP the frame record itself is the start.)
 /// - [`HostTransport::drain`] hands every motor batch that arrived since the last call to
-///   the sink, per agent in the order the agent sent them, without blocking.
+///   the sink, per agent in the order the agent sent them, without blocking. (Over shared
+///   memory a batch arrives with the notification its agent sends after it — or, while
+///   the host polls, with the host's look — so a drain need not look at every queue.)
 /// - [`HostReadiness::wait_activity`] blocks until a batch may have arrived or the timeout
 ///   passed. It may wake spuriously; it never spins (unless the transport is asked to) and
 ///   never loses a wake-up: a batch published before or during the call ends the wait.

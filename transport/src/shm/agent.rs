@@ -410,8 +410,9 @@ impl AgentTransport for ShmAgent {
         }
     }
 
-    /// Publishes the batch and, if it carries the stop flag, notifies *stop* (unless the
-    /// host polls the motor queues: see [`WakeWord::host_polling`]).
+    /// Publishes the batch and, if it carries the stop or the leave flag, notifies *stop*
+    /// (unless the host polls the motor queues: see [`WakeWord::host_polling`]): the host
+    /// drains the queues of the agents that notified.
     fn send_batch(
         &mut self,
         header: &MotorHeader,
@@ -433,7 +434,7 @@ impl AgentTransport for ShmAgent {
             .map_err(|e| fail(format!("cannot send the motor batch: {e:?}")))?;
         // No notification while the host polls the motor queues itself: it finds the batch
         // (one system call less per agent and cycle; see `WakeWord::set_host_polling`).
-        if header.is_stop() && !self.wake.host_polling() {
+        if (header.is_stop() || header.is_leave()) && !self.wake.host_polling() {
             self.stop
                 .notify()
                 .map_err(|e| fail(format!("cannot notify stop: {e:?}")))?;

@@ -100,6 +100,28 @@ pub struct ShmHost {
     _stop_service: event_factory::PortFactory<Svc>,
     stop: Listener<Svc>,
     agents: Vec<HostAgentPorts>,
+    /// Per slot: its agent notified *stop* (or *leave*) since the last drain. A drain
+    /// looks only at these queues unless [`Self::sweep`] is set: with many agents the
+    /// host wakes up many times per cycle, and looking at every agent's queue on each
+    /// wake-up (an iceoryx2 connection update and a lock per queue) was most of its time.
+    notified: Vec<bool>,
+    /// The next drain looks at every queue: batches may have come without a notification
+    /// (while the host polled, agents leave it out; an agent of an older build sends its
+    /// leave batch without one), or a wait ended without one (a timeout, a signal). Set by
+    /// `signal_start`, so every cycle's first drain looks at all.
+    sweep: Cell<bool>,
+    /// Whether the page says the host polls ([`WakeWord::set_host_polling`]).
+    polling: bool,
+}
+
+/// Marks the slot of agent `id` (a *stop* listener's event id) as notified; ids the host
+/// does not serve are ignored.
+fn mark_notified(agents: &[HostAgentPorts], notified: &mut [bool], id: usize) {
+    if let Ok(slot) = agents.binary_search_by_key(&id, |p| p.id as usize)
+        && let Some(n) = notified.get_mut(slot)
+    {
+        *n = true;
+    }
 }
 
 impl core::fmt::Debug for ShmHost {
@@ -294,6 +316,9 @@ impl ShmHost {
             wake,
             _stop_service: stop_service,
             stop,
+            notified: vec![false; agents.len()],
+            sweep: Cell::new(true),
+            polling: false,
             agents,
         })
     }
@@ -523,11 +548,22 @@ impl HostTransport for ShmHost {
 
     fn signal_start(&mut self) -> Result<(), HostTransportError> {
         self.wake.bump();
+        self.sweep.set(true);
         Ok(())
     }
 
+    /// Over shared memory a batch has arrived once its agent's *stop* (or *leave*)
+    /// notification has: agents notify after publishing. So a drain looks at the queues
+    /// of the agents that notified since the last one, and at every queue when batches
+    /// may have come without a notification: while the host polls (agents then leave
+    /// the notification out), at each cycle's first drain, after a wait that ended
+    /// without one, and after an agent was found disconnected.
     fn drain(&mut self, sink: &mut BatchSink<'_>) -> Result<(), HostTransportError> {
-        for (slot, p) in self.agents.iter().enumerate() {
+        let sweep = self.sweep.replace(false) || self.polling;
+        for ((slot, p), notified) in self.agents.iter().enumerate().zip(&mut self.notified) {
+            if !core::mem::take(notified) && !sweep {
+                continue;
+            }
             loop {
                 match p.motor_sub.receive() {
                     Ok(Some(sample)) => {
@@ -560,9 +596,10 @@ impl HostReadiness for ShmHost {
             // Busy-poll: the caller drains the subscribers again right away. Check for a
             // termination request now and then only (it costs a syscall).
             let _ = timeout;
-            if self.spins == 0 {
+            if !self.polling {
                 // The host never sleeps on the stop listener: agents need not notify.
                 self.wake.set_host_polling(true);
+                self.polling = true;
             }
             std::hint::spin_loop();
             self.spins = self.spins.wrapping_add(1);
@@ -577,7 +614,10 @@ impl HostReadiness for ShmHost {
         // while the host works on what it found: it polls again before it sleeps).
         let window = self.poll.window(timeout);
         if !window.is_empty() {
-            self.wake.set_host_polling(true);
+            if !self.polling {
+                self.wake.set_host_polling(true);
+                self.polling = true;
+            }
             loop {
                 if self.any_batch_waiting() {
                     self.poll.record(window.elapsed());
@@ -587,19 +627,35 @@ impl HostReadiness for ShmHost {
                     break;
                 }
             }
+        }
+        if self.polling {
             // About to sleep: agents notify again from here on. A batch published before
-            // an agent saw the flag cleared is found by this last look.
+            // an agent saw the flag cleared is found by this last look (also when the
+            // poll was just turned off: more processes than cores).
             self.wake.set_host_polling(false);
+            self.polling = false;
             if self.any_batch_waiting() {
+                self.sweep.set(true);
                 self.poll.record(window.elapsed());
                 return Ok(());
             }
         }
+        let Self {
+            stop,
+            agents,
+            notified,
+            ..
+        } = self;
+        let mut woken = false;
+        let mut on_event = |e: EventActivation| {
+            woken = true;
+            mark_notified(agents, notified, e.id.as_value());
+        };
         // A zero timeout polls: iceoryx2's timed wait does not return at once for it.
         let waited = if timeout.is_zero() {
-            self.stop.try_wait(|_| {})
+            stop.try_wait(&mut on_event)
         } else {
-            self.stop.timed_wait(|_| {}, timeout)
+            stop.timed_wait(&mut on_event, timeout)
         };
         match waited {
             Ok(_) => {}
@@ -610,9 +666,13 @@ impl HostReadiness for ShmHost {
                 });
             }
         }
-        // Drain every id that is already pending: counts merge and carry no information
-        // we rely on, and a pending id would make the next wait return at once.
-        let _ = self.stop.try_wait(|_| {});
+        // Take every id that is already pending: a pending id would make the next wait
+        // return at once.
+        let _ = stop.try_wait(&mut on_event);
+        if !woken {
+            // A timeout, a signal or a spurious wake-up: look at every queue once.
+            self.sweep.set(true);
+        }
         if !timeout.is_zero() {
             // A look without a wait (zero timeout) says nothing of how long answers take.
             self.poll.record(window.elapsed());
@@ -629,13 +689,32 @@ impl HostReadiness for ShmHost {
     }
 
     fn after_wait(&mut self) {
-        let _ = self.stop.try_wait(|_| {});
+        let Self {
+            stop,
+            agents,
+            notified,
+            ..
+        } = self;
+        let mut woken = false;
+        let _ = stop.try_wait(|e: EventActivation| {
+            woken = true;
+            mark_notified(agents, notified, e.id.as_value());
+        });
+        if !woken {
+            self.sweep.set(true);
+        }
     }
 }
 
 impl HostConnections for ShmHost {
     fn is_connected(&self, slot: usize) -> bool {
-        self.agents.get(slot).is_some_and(is_dyn_connected)
+        let connected = self.agents.get(slot).is_some_and(is_dyn_connected);
+        if !connected {
+            // A connection that went away may have left a batch (its leave) that the
+            // host was not notified of: the next drain looks at every queue.
+            self.sweep.set(true);
+        }
+        connected
     }
 
     fn forget_connection(&mut self, slot: usize) {
@@ -723,5 +802,66 @@ mod tests {
         // One leaves: until a connection of its id is served, it counts on its own.
         host.forget_connection(0);
         assert_eq!(host.poll.length(), polls(2));
+    }
+
+    /// The slots whose batches one drain hands out, with each batch's flags.
+    fn drained(host: &mut ShmHost) -> Vec<(usize, u32)> {
+        let mut got = Vec::new();
+        host.drain(&mut |slot, h: &MotorHeader, _| got.push((slot, h.flags)))
+            .unwrap();
+        got
+    }
+
+    #[test]
+    fn a_drain_takes_what_notified_and_the_cycles_first_takes_every_queue() {
+        use crate::wire::{MOTOR_FLAG_LEAVE, MOTOR_FLAG_STOP};
+        let session = format!("shm-drain-{}", std::process::id());
+        let mut text = format!(
+            "session = {session:?}\n[sync]\nsync_mode = true\nwait = \"block\"\n\
+             spin_before_block_us = 0\n[transport]\nkind = \"shm\"\n"
+        );
+        for id in 0..2 {
+            text += &format!(
+                "[[agent]]\nid = {id}\n[[agent.camera]]\nname = \"c\"\nwidth = 8\nheight = 8\n"
+            );
+        }
+        let config = Config::from_toml_str(&text, std::path::Path::new("<test>")).unwrap();
+        let mut host = ShmHost::create(&config, SignalHandling::Leave).unwrap();
+        let mut agents: Vec<ShmAgent> = (0..2)
+            .map(|id| {
+                ShmAgent::connect(&config, id, Duration::from_secs(20), SignalHandling::Leave)
+                    .unwrap()
+            })
+            .collect();
+        host.update_connections().unwrap();
+        // The agents' "here" notifications at connect, taken in.
+        host.wait_activity(Duration::ZERO).unwrap();
+        assert!(drained(&mut host).is_empty());
+        let batch = |id: u32, flags: u32| MotorHeader {
+            protocol_version: PROTOCOL_VERSION,
+            agent_id: id,
+            cycle: 0,
+            flags,
+            command_count: 0,
+            ack_cycle: 0,
+        };
+        // Agent 1's batch carries no stop: no notification. Agent 0's stop notifies.
+        agents[1].send_batch(&batch(1, 0), &[]).unwrap();
+        agents[0]
+            .send_batch(&batch(0, MOTOR_FLAG_STOP), &[])
+            .unwrap();
+        // The wait ends at agent 0's notification (long before its timeout); the drain
+        // looks at the queue of the agent that notified only.
+        host.wait_activity(Duration::from_secs(30)).unwrap();
+        assert_eq!(drained(&mut host), [(0, MOTOR_FLAG_STOP)]);
+        // The next cycle's first drain looks at every queue.
+        host.signal_start().unwrap();
+        assert_eq!(drained(&mut host), [(1, 0)]);
+        // A leave notifies as a stop does: the host need not find it by a timeout.
+        agents[1]
+            .send_batch(&batch(1, MOTOR_FLAG_LEAVE), &[])
+            .unwrap();
+        host.wait_activity(Duration::from_secs(30)).unwrap();
+        assert_eq!(drained(&mut host), [(1, MOTOR_FLAG_LEAVE)]);
     }
 }
