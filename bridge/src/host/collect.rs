@@ -126,9 +126,15 @@ impl<T: HostTransport> Host<T> {
         self.leaving.clear();
     }
 
-    /// Evicts awaited agents that disconnected or whose process died; lets those that said
-    /// they leave go.
-    pub(super) fn check_lost(&mut self, sync: bool, reap: bool) -> Result<(), HostCycleError> {
+    /// Evicts awaited agents that disconnected (when `connections`: it asks the
+    /// transports about every agent) or whose process died (when `reap`); lets those that
+    /// said they leave go.
+    pub(super) fn check_lost(
+        &mut self,
+        sync: bool,
+        reap: bool,
+        connections: bool,
+    ) -> Result<(), HostCycleError> {
         self.take_refusals();
         self.handle_leaves();
         self.dead.clear();
@@ -137,7 +143,8 @@ impl<T: HostTransport> Host<T> {
         }
         // Awaited agents that disconnected, and agents that left between cycles.
         let mut disconnected = false;
-        for slot in 0..self.slots.len() {
+        let asked = if connections { self.slots.len() } else { 0 };
+        for slot in 0..asked {
             let pending = self.barrier.outcome(slot) == AgentOutcome::TimedOut;
             let known = pending || (self.slots[slot].seen && !self.slots[slot].evicted);
             if known && !self.backend.is_connected(slot) && !self.dead.contains(&slot) {
@@ -195,6 +202,8 @@ impl<T: HostTransport> Host<T> {
     ) -> Result<(), HostCycleError> {
         let timeout = until.saturating_duration_since(started);
         let mut next_reap = started + REAP_PERIOD;
+        // The first look of the wait asks about every connection.
+        let mut next_connection_check = started;
         // Past the stop timeout (sync mode): when the next slow report is due.
         let mut past_timeout = false;
         let mut next_report = until;
@@ -213,7 +222,11 @@ impl<T: HostTransport> Host<T> {
             if reap {
                 next_reap = now + REAP_PERIOD;
             }
-            self.check_lost(sync, reap)?;
+            let connections = reap || now >= next_connection_check;
+            if connections {
+                next_connection_check = now + CONNECTION_CHECK_PERIOD;
+            }
+            self.check_lost(sync, reap, connections)?;
             if sync && self.barrier.is_complete() {
                 break;
             }
@@ -240,6 +253,9 @@ impl<T: HostTransport> Host<T> {
                     next_report = started + timeout.saturating_mul(1u32 << reports.min(20));
                 }
                 wake = next_report;
+            }
+            if !connections {
+                wake = wake.min(next_connection_check);
             }
             self.wait_activity(wake.min(next_reap).saturating_duration_since(now))?;
         }
