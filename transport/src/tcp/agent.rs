@@ -29,34 +29,44 @@ type Pool = std::rc::Rc<std::cell::RefCell<Vec<RecordBuf>>>;
 pub const RECONNECT_ATTEMPT: Duration = Duration::from_millis(250);
 
 /// A received TCP frame. Its buffer goes back to the agent's pool when dropped, so
-/// receiving allocates nothing in steady state.
+/// receiving allocates nothing in steady state. The header is read where it arrived
+/// (the record's body starts 8-aligned), not copied: a frame is moved several times on
+/// its way to the caller, and a copied header (1.3 KB) made each move a copy of it.
 #[derive(Debug)]
 pub struct TcpFrame {
-    header: SensorHeader,
-    buf: Option<RecordBuf>,
+    /// The record; its body starts with a whole header (checked by [`TcpFrame::new`]).
+    buf: RecordBuf,
     pool: Pool,
 }
 
+/// What [`TcpFrame::header`] would give for a body without a header: never, as
+/// [`TcpFrame::new`] checks that it has one.
+static NO_HEADER: SensorHeader = zerocopy::transmute!([0u8; HEADER]);
+
 impl TcpFrame {
+    /// The frame of a received record, if its body starts with a whole, aligned header.
+    fn new(buf: RecordBuf, pool: Pool) -> Result<Self, (RecordBuf, AgentReceiveError)> {
+        if SensorHeader::ref_from_prefix(buf.body()).is_err() {
+            return Err((buf, AgentReceiveError::Protocol("frame header".into())));
+        }
+        Ok(Self { buf, pool })
+    }
+
     /// The header.
     pub fn header(&self) -> &SensorHeader {
-        &self.header
+        SensorHeader::ref_from_prefix(self.buf.body()).map_or(&NO_HEADER, |(h, _)| h)
     }
 
     /// The image bytes.
     pub fn payload(&self) -> &[u8] {
-        self.buf
-            .as_ref()
-            .and_then(|b| b.body().get(HEADER..))
-            .unwrap_or(&[])
+        self.buf.body().get(HEADER..).unwrap_or(&[])
     }
 }
 
 impl Drop for TcpFrame {
     fn drop(&mut self) {
-        if let Some(buf) = self.buf.take()
-            && let Ok(mut pool) = self.pool.try_borrow_mut()
-        {
+        let buf = core::mem::take(&mut self.buf);
+        if let Ok(mut pool) = self.pool.try_borrow_mut() {
             pool.push(buf);
         }
     }
@@ -415,20 +425,22 @@ impl TcpAgent {
                     }
                     let mut buf = self.pool.borrow_mut().pop().unwrap_or_default();
                     self.reader.take_record(&mut buf);
-                    let header = SensorHeader::read_from_bytes(&buf.body()[..HEADER])
-                        .map_err(|_| AgentReceiveError::Protocol("frame header".into()))?;
-                    if self.stop_cycle == Some(header.cycle) {
-                        // The host, back after a lost link, did not get this cycle's stop.
-                        self.pool.borrow_mut().push(buf);
+                    let frame = match TcpFrame::new(buf, self.pool.clone()) {
+                        Ok(frame) => frame,
+                        Err((buf, e)) => {
+                            self.pool.borrow_mut().push(buf);
+                            return Err(e);
+                        }
+                    };
+                    if self.stop_cycle == Some(frame.header().cycle) {
+                        // The host, back after a lost link, did not get this cycle's stop
+                        // (dropping the frame returns its buffer to the pool).
+                        drop(frame);
                         self.resend_stop();
                         continue;
                     }
                     // Dropping an older frame returns its buffer to the pool.
-                    newest = Some(TcpFrame {
-                        header,
-                        buf: Some(buf),
-                        pool: self.pool.clone(),
-                    });
+                    newest = Some(frame);
                 }
                 Ok(ReadProgress::Record(kind::SHUTDOWN)) => self.closed = true,
                 Ok(ReadProgress::Record(other)) => {
@@ -550,7 +562,7 @@ impl TcpAgent {
 
 impl AgentFrame for TcpFrame {
     fn header(&self) -> &SensorHeader {
-        &self.header
+        TcpFrame::header(self)
     }
 
     fn payload(&self) -> &[u8] {

@@ -280,7 +280,10 @@ impl AgentShared {
 /// agent's pool when dropped.
 #[derive(Debug)]
 pub struct ZenohFrame {
-    header: SensorHeader,
+    /// Copied out of zenoh's buffer (which need not be aligned), and boxed: a frame is
+    /// moved several times on its way to the caller, and an inline header (1.3 KB) made
+    /// each move a copy of it (and every transport's frame as large, shared memory's too).
+    header: Box<SensorHeader>,
     buf: Option<Body>,
     shared: Arc<AgentShared>,
     _held: Rc<()>,
@@ -623,7 +626,7 @@ impl AgentTransport for ZenohAgent {
             .and_then(|h| SensorHeader::read_from_bytes(h).ok())
             .ok_or_else(|| AgentReceiveError::Protocol("frame header".into()))?;
         Ok(Some(ZenohFrame {
-            header,
+            header: Box::new(header),
             buf: Some(buf),
             shared: self.shared.clone(),
             _held: self.held.clone(),
