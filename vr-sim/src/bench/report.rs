@@ -171,9 +171,13 @@ pub(super) fn ratio_lines(rows: &[Row]) -> Vec<(String, Option<f64>, &'static st
             v.push((what, p(("mixed", 4, w), (den, 4, w)), target));
         }
     }
-    for w in [320, 1920] {
+    // Issue 37's target is at 1080p. At 320x240 a Rust agent whose host polls answers in
+    // ~4 µs, less than half of numpy's own row reads of the same images (`floor-numpy`,
+    // ~10 µs): no Python agent can be within 2x there, so that line is reported (the
+    // `(python - shm) / floor-numpy` line below says how much of it is numpy's).
+    for (w, target) in [(320, "report"), (1920, "<= 2")] {
         let what = format!("python / shm (Rust agent), 1 agent, {}", size_name(w));
-        v.push((what, p(("python", 1, w), ("shm", 1, w)), "<= 2"));
+        v.push((what, p(("python", 1, w), ("shm", 1, w)), target));
     }
     if let (Some(py), Some(rust)) = (growth("python"), shm) {
         let what = "python 1080p/320x240 growth / Rust agent's growth";

@@ -505,6 +505,16 @@ fn the_numpy_floor_explains_the_python_agents_extra_time_over_the_rust_agent() {
         value("floor-numpy 1080p/320x240 growth / Rust agent's growth"),
         Some(2.0)
     );
+    // Issue 37's python / shm target is at 1080p; at 320x240 the line is reported.
+    let target = |what: &str| lines.iter().find(|(w, _, _)| w == what).map(|l| l.2);
+    assert_eq!(
+        target("python / shm (Rust agent), 1 agent, 3x1920x1080"),
+        Some("<= 2")
+    );
+    assert_eq!(
+        target("python / shm (Rust agent), 1 agent, 3x320x240"),
+        Some("report")
+    );
 }
 
 #[test]
