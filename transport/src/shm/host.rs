@@ -344,6 +344,38 @@ impl ShmHost {
         );
     }
 
+    /// Waits on the stop listener for up to `timeout` (zero: takes only what is there),
+    /// then takes the notifications already pending too (a pending one would end the
+    /// next wait at once), marking the slot of each agent that notified. When none did (a
+    /// timeout, a signal, a spurious wake-up), the next drain looks at every queue.
+    fn take_notifications(
+        &mut self,
+        timeout: Duration,
+    ) -> Result<(), iceoryx2::port::listener::ListenerWaitError> {
+        let Self {
+            stop,
+            agents,
+            notified,
+            ..
+        } = self;
+        let mut woken = false;
+        let mut on_event = |e: EventActivation| {
+            woken = true;
+            mark_notified(agents, notified, e.id.as_value());
+        };
+        // A zero timeout polls: iceoryx2's timed wait does not return at once for it.
+        let waited = if timeout.is_zero() {
+            stop.try_wait(&mut on_event)
+        } else {
+            stop.timed_wait(&mut on_event, timeout)
+        };
+        let _ = stop.try_wait(&mut on_event);
+        if !woken {
+            self.sweep.set(true);
+        }
+        waited.map(|_| ())
+    }
+
     /// Whether some agent's motor queue holds a batch (or cannot be read: look).
     fn any_batch_waiting(&self) -> bool {
         self.agents
@@ -640,38 +672,14 @@ impl HostReadiness for ShmHost {
                 return Ok(());
             }
         }
-        let Self {
-            stop,
-            agents,
-            notified,
-            ..
-        } = self;
-        let mut woken = false;
-        let mut on_event = |e: EventActivation| {
-            woken = true;
-            mark_notified(agents, notified, e.id.as_value());
-        };
-        // A zero timeout polls: iceoryx2's timed wait does not return at once for it.
-        let waited = if timeout.is_zero() {
-            stop.try_wait(&mut on_event)
-        } else {
-            stop.timed_wait(&mut on_event, timeout)
-        };
-        match waited {
-            Ok(_) => {}
+        match self.take_notifications(timeout) {
+            Ok(()) => {}
             Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => {}
             Err(e) => {
                 return Err(HostTransportError::Wait {
                     reason: format!("stop listener: {e:?}"),
                 });
             }
-        }
-        // Take every id that is already pending: a pending id would make the next wait
-        // return at once.
-        let _ = stop.try_wait(&mut on_event);
-        if !woken {
-            // A timeout, a signal or a spurious wake-up: look at every queue once.
-            self.sweep.set(true);
         }
         if !timeout.is_zero() {
             // A look without a wait (zero timeout) says nothing of how long answers take.
@@ -689,20 +697,7 @@ impl HostReadiness for ShmHost {
     }
 
     fn after_wait(&mut self) {
-        let Self {
-            stop,
-            agents,
-            notified,
-            ..
-        } = self;
-        let mut woken = false;
-        let _ = stop.try_wait(|e: EventActivation| {
-            woken = true;
-            mark_notified(agents, notified, e.id.as_value());
-        });
-        if !woken {
-            self.sweep.set(true);
-        }
+        let _ = self.take_notifications(Duration::ZERO);
     }
 }
 
@@ -768,31 +763,42 @@ mod tests {
     use super::*;
     use crate::config::SyncConfig;
 
-    #[test]
-    fn the_agents_of_one_process_count_as_one_for_the_hosts_poll() {
-        let session = format!("shm-processes-{}", std::process::id());
+    /// A sync-mode config of agents `0..agents` (one 8x8 camera each) in a session of its
+    /// own, whose waits poll for `spin_us` µs before they sleep.
+    fn config(tag: &str, agents: u32, spin_us: u32) -> Config {
+        let session = format!("shm-{tag}-{}", std::process::id());
         let mut text = format!(
             "session = {session:?}\n[sync]\nsync_mode = true\nwait = \"block\"\n\
-             spin_before_block_us = 50\n[transport]\nkind = \"shm\"\n"
+             spin_before_block_us = {spin_us}\n[transport]\nkind = \"shm\"\n"
         );
-        for id in 0..4 {
+        for id in 0..agents {
             text += &format!(
                 "[[agent]]\nid = {id}\n[[agent.camera]]\nname = \"c\"\nwidth = 8\nheight = 8\n"
             );
         }
-        let config = Config::from_toml_str(&text, std::path::Path::new("<test>")).unwrap();
+        Config::from_toml_str(&text, std::path::Path::new("<test>")).unwrap()
+    }
+
+    /// Every agent of `config`, connected from this process.
+    fn connect_all(config: &Config) -> Vec<ShmAgent> {
+        (config.agents.iter())
+            .map(|a| {
+                ShmAgent::connect(config, a.id, Duration::from_secs(20), SignalHandling::Leave)
+                    .unwrap()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_agents_of_one_process_count_as_one_for_the_hosts_poll() {
+        let config = config("processes", 4, 50);
         let spin = config.sync.spin_before_block;
         let polls = |processes| SyncConfig::spin_for_processes(spin, processes);
         let mut host = ShmHost::create(&config, SignalHandling::Leave).unwrap();
         // Nothing connected: each agent counts as a process of its own.
         assert_eq!(host.poll.length(), polls(4));
         // Four agents of this one process connect and get a frame each.
-        let _agents: Vec<ShmAgent> = (0..4)
-            .map(|id| {
-                ShmAgent::connect(&config, id, Duration::from_secs(20), SignalHandling::Leave)
-                    .unwrap()
-            })
-            .collect();
+        let _agents = connect_all(&config);
         host.update_connections().unwrap();
         for slot in 0..4 {
             let frame = host.loan(slot).unwrap();
@@ -815,24 +821,10 @@ mod tests {
     #[test]
     fn a_drain_takes_what_notified_and_the_cycles_first_takes_every_queue() {
         use crate::wire::{MOTOR_FLAG_LEAVE, MOTOR_FLAG_STOP};
-        let session = format!("shm-drain-{}", std::process::id());
-        let mut text = format!(
-            "session = {session:?}\n[sync]\nsync_mode = true\nwait = \"block\"\n\
-             spin_before_block_us = 0\n[transport]\nkind = \"shm\"\n"
-        );
-        for id in 0..2 {
-            text += &format!(
-                "[[agent]]\nid = {id}\n[[agent.camera]]\nname = \"c\"\nwidth = 8\nheight = 8\n"
-            );
-        }
-        let config = Config::from_toml_str(&text, std::path::Path::new("<test>")).unwrap();
+        // No poll: the host sleeps on the stop listener.
+        let config = config("drain", 2, 0);
         let mut host = ShmHost::create(&config, SignalHandling::Leave).unwrap();
-        let mut agents: Vec<ShmAgent> = (0..2)
-            .map(|id| {
-                ShmAgent::connect(&config, id, Duration::from_secs(20), SignalHandling::Leave)
-                    .unwrap()
-            })
-            .collect();
+        let mut agents = connect_all(&config);
         host.update_connections().unwrap();
         // The agents' "here" notifications at connect, taken in.
         host.wait_activity(Duration::ZERO).unwrap();
