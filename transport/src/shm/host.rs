@@ -344,6 +344,15 @@ impl ShmHost {
         );
     }
 
+    /// Says on the wake page whether the host polls (agents then leave out their stop
+    /// notifications); writes the page only when that changes.
+    fn set_polling(&mut self, polling: bool) {
+        if self.polling != polling {
+            self.wake.set_host_polling(polling);
+            self.polling = polling;
+        }
+    }
+
     /// Waits on the stop listener for up to `timeout` (zero: takes only what is there),
     /// then takes the notifications already pending too (a pending one would end the
     /// next wait at once), marking the slot of each agent that notified. When none did (a
@@ -628,11 +637,8 @@ impl HostReadiness for ShmHost {
             // Busy-poll: the caller drains the subscribers again right away. Check for a
             // termination request now and then only (it costs a syscall).
             let _ = timeout;
-            if !self.polling {
-                // The host never sleeps on the stop listener: agents need not notify.
-                self.wake.set_host_polling(true);
-                self.polling = true;
-            }
+            // The host never sleeps on the stop listener: agents need not notify.
+            self.set_polling(true);
             std::hint::spin_loop();
             self.spins = self.spins.wrapping_add(1);
             if self.spins.is_multiple_of(4096) && self.signals.termination_requested() {
@@ -646,10 +652,7 @@ impl HostReadiness for ShmHost {
         // while the host works on what it found: it polls again before it sleeps).
         let window = self.poll.window(timeout);
         if !window.is_empty() {
-            if !self.polling {
-                self.wake.set_host_polling(true);
-                self.polling = true;
-            }
+            self.set_polling(true);
             loop {
                 if self.any_batch_waiting() {
                     self.poll.record(window.elapsed());
@@ -664,8 +667,7 @@ impl HostReadiness for ShmHost {
             // About to sleep: agents notify again from here on. A batch published before
             // an agent saw the flag cleared is found by this last look (also when the
             // poll was just turned off: more processes than cores).
-            self.wake.set_host_polling(false);
-            self.polling = false;
+            self.set_polling(false);
             if self.any_batch_waiting() {
                 self.sweep.set(true);
                 self.poll.record(window.elapsed());
