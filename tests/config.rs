@@ -49,6 +49,8 @@ fn default_toml_documents_every_key() {
         "png_compression",
         "send_eye_position",
         "send_head_motion",
+        "[transport.shm]",
+        "stacked_images",
         "[transport.zenoh]",
         "listen",
         "connect",
@@ -707,4 +709,39 @@ fn effective_config_writes_names_and_tokens_as_toml_strings() {
     let back = Config::from_toml_str(&c.to_toml_string(), Path::new("e.toml")).unwrap();
     assert_eq!(back.agents[0].cameras[0].name, "\u{3347a}\u{7f}");
     assert_eq!(back.transport.tcp_token.as_deref(), Some("a\tb\u{1}\""));
+}
+
+/// A stacked config's agents are read by one process: `--spawn-agents` (a process per
+/// agent) is refused before anything starts, naming the key and the way out.
+#[test]
+fn spawned_agents_of_a_stacked_config_are_refused_up_front() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("stacked.toml");
+    let text = TestConfig::new("stacked-spawn", 2).toml();
+    let text = text.replacen(
+        "[[agent]]",
+        "[transport.shm]\nstacked_images = true\n[[agent]]",
+        1,
+    );
+    std::fs::write(&config, text).unwrap();
+    let out = util::run(
+        "vr-sim",
+        &[
+            "run",
+            "--config",
+            config.to_str().unwrap(),
+            "--frames",
+            "1",
+            "--spawn-agents",
+            "2",
+            "--quiet",
+        ],
+        Duration::from_secs(60),
+    );
+    assert_ne!(out.code(), Some(0), "{}", out.stderr);
+    assert!(
+        out.stderr.contains("stacked_images") && out.stderr.contains("--spawn-agents"),
+        "{}",
+        out.stderr
+    );
 }

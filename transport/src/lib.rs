@@ -66,6 +66,7 @@ pub use legacy::{LegacyConfig, LegacyDialect, PngCompression};
 pub use logging::{QUIET_ZENOH, default_log_filter};
 pub use refusal::{MAX_KEPT_REFUSALS, PeerRefusal, RefusalKind, Refusals};
 pub use rounded::Rounded;
+pub use shm::ShmConfig;
 pub use shm::{ShmBudgetError, check_shm_budget};
 pub use signal::SignalHandling;
 pub use wire::{

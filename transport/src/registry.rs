@@ -83,10 +83,10 @@
 macro_rules! transports {
     ($then:ident) => {
         $then! {
-            /// iceoryx2 shared memory (default).
+            /// iceoryx2 shared memory (default; `[transport.shm]`).
             #[default]
             Shm "shm" shm: ShmHost, ShmFrameLoan, ShmHostCreateError, ShmAgent, ShmFrame
-                [channels: true, wait_for_stop: Alive];
+                [channels: true, wait_for_stop: Alive, section: ShmConfig RawShm];
             /// TCP, the measured baseline.
             Tcp "tcp" tcp: TcpHost, TcpFrameLoan, TcpHostCreateError, TcpAgent, TcpFrame
                 [channels: true, wait_for_stop: Alive];

@@ -123,6 +123,34 @@ impl Ctx<'_> {
         Ok(agents)
     }
 
+    /// `[transport.shm] stacked_images` (at `span`): every shared-memory agent's payload
+    /// has the same layout (cameras and vectors), so that their payloads stack.
+    pub(super) fn stacked(
+        &self,
+        span: core::ops::Range<usize>,
+        agents: &[AgentConfig],
+    ) -> Result<(), ConfigLoadError> {
+        let mut shm = agents.iter().filter(|a| a.transport == TransportKind::Shm);
+        let Some(first) = shm.next() else {
+            return Ok(());
+        };
+        let layout = |a: &AgentConfig| (a.image_layout(), a.vector_layout());
+        let want = layout(first);
+        match shm.find(|a| layout(a) != want) {
+            None => Ok(()),
+            Some(other) => Err(self.invalid(
+                span,
+                "transport.shm.stacked_images",
+                format!(
+                    "the shared-memory agents' images and vectors are stacked, so every such \
+                     agent needs the same cameras (names, sizes, formats) and vectors, but \
+                     agent {} has other ones than agent {}",
+                    other.id, first.id
+                ),
+            )),
+        }
+    }
+
     /// One `[[agent]]` entry; `seen` holds the ids of the entries before it.
     fn agent(
         &self,

@@ -390,8 +390,17 @@ impl Config {
         let raw = ctx.parse()?;
         let session = ctx.session(raw.session)?;
         let sync = ctx.sync(raw.sync)?;
+        let stacked_span = raw
+            .transport
+            .as_ref()
+            .and_then(|t| t.shm.as_ref())
+            .and_then(|s| s.stacked_images.as_ref())
+            .map(toml::Spanned::span);
         let transport = ctx.transport(raw.transport)?;
         let agents = ctx.agents(raw.agent, &sync, transport.kind)?;
+        if transport.shm.stacked_images {
+            ctx.stacked(stacked_span.unwrap_or(0..0), &agents)?;
+        }
         Ok(Self {
             source: path.to_path_buf(),
             session,

@@ -9,6 +9,8 @@ use super::*;
 /// A received sensor frame in shared memory, owned by the agent until dropped.
 pub struct ShmFrame {
     sample: Sample<Svc, [u8], SensorHeader>,
+    /// A stacked agent's payload: its block of the cycle's stacked sample.
+    block: Option<(std::rc::Rc<StackSample>, core::ops::Range<usize>)>,
 }
 
 impl core::fmt::Debug for ShmFrame {
@@ -26,7 +28,16 @@ impl ShmFrame {
     }
     /// The image bytes, straight from shared memory.
     pub fn payload(&self) -> &[u8] {
-        self.sample.payload()
+        match &self.block {
+            Some((stack, range)) => stack.payload().get(range.clone()).unwrap_or(&[]),
+            None => self.sample.payload(),
+        }
+    }
+
+    /// The stacked sample this frame's payload is in, and the payload's place in it
+    /// (`[transport.shm] stacked_images`); `None` for a payload of its own.
+    pub fn stacked(&self) -> Option<(&std::rc::Rc<StackSample>, core::ops::Range<usize>)> {
+        self.block.as_ref().map(|(s, r)| (s, r.clone()))
     }
 }
 
@@ -47,6 +58,13 @@ pub struct ShmAgent {
     sensor_sub: Subscriber<Svc, [u8], SensorHeader>,
     _motor_service: ps_factory::PortFactory<Svc, [MotorCommand], MotorHeader>,
     motor_pub: Publisher<Svc, [MotorCommand], MotorHeader>,
+    /// This agent's block of the stacked sample, if the host puts its payload there (see
+    /// [`ShmStack`]).
+    stack_index: Option<usize>,
+    /// The stacked sample's reader and this agent's block in it, once joined.
+    stack: Option<(SharedStack, usize)>,
+    /// A stacked agent's header whose stacked sample had not come yet.
+    pending: Option<Sample<Svc, [u8], SensorHeader>>,
     max_commands: usize,
     spin: bool,
     poll: super::PollLength,
@@ -62,7 +80,7 @@ impl core::fmt::Debug for ShmAgent {
     }
 }
 
-fn attr(attrs: &AttributeSet, key: &str) -> String {
+pub(super) fn attr(attrs: &AttributeSet, key: &str) -> String {
     AttributeKey::try_from(key)
         .ok()
         .and_then(|k| attrs.key_value(&k, 0).map(|v| v.to_string()))
@@ -131,6 +149,114 @@ fn served_agent_ids(session: &str) -> Vec<u32> {
 }
 
 impl ShmAgent {
+    /// Makes this stacked agent's frames take their payload from `stack`'s samples
+    /// (`[transport.shm] stacked_images`): the agents of one group share one reader.
+    ///
+    /// # Errors
+    /// [`AgentConnectError::Transport`] if the host does not stack this agent, or
+    /// `stack` is another session's.
+    pub fn join_stack(&mut self, stack: &SharedStack) -> Result<(), AgentConnectError> {
+        let fail = |detail: String| AgentConnectError::Transport {
+            session: self.session.clone(),
+            agent: self.id,
+            detail,
+        };
+        let Some(index) = self.stack_index else {
+            return Err(fail("the host does not stack this agent's payload".into()));
+        };
+        if stack.borrow().session() != self.session {
+            return Err(fail(format!(
+                "the stacked sample's reader is session {:?}'s",
+                stack.borrow().session()
+            )));
+        }
+        self.stack = Some((std::rc::Rc::clone(stack), index));
+        Ok(())
+    }
+
+    /// The stacked sample's reader this agent joined ([`Self::join_stack`]).
+    pub fn stack(&self) -> Option<&SharedStack> {
+        self.stack.as_ref().map(|(s, _)| s)
+    }
+
+    /// Whether this agent's payload comes in the session's stacked sample.
+    pub fn is_stacked(&self) -> bool {
+        self.stack_index.is_some()
+    }
+
+    /// The newest sample of the subscriber, if one is there.
+    fn receive_sample(
+        &mut self,
+    ) -> Result<Option<Sample<Svc, [u8], SensorHeader>>, AgentReceiveError> {
+        // The subscriber's queue holds one frame (`SENSOR_QUEUE`; a newer one replaces
+        // it): what it holds is the newest, and one look is enough.
+        const _: () = assert!(SENSOR_QUEUE == 1);
+        match self.sensor_sub.receive() {
+            Ok(sample) => Ok(sample),
+            Err(iceoryx2::port::ReceiveError::ExceedsMaxBorrows) => {
+                Err(AgentReceiveError::TooManyFramesHeld {
+                    max: AGENT_BORROWED_FRAMES,
+                })
+            }
+            Err(other) => Err(AgentReceiveError::Transport(format!("iceoryx2: {other:?}"))),
+        }
+    }
+
+    /// A stacked agent's newest frame: its header, with its block of the stacked sample
+    /// of the same cycle. The host publishes the headers first and sends the stacked
+    /// sample at *start*: a header whose stacked sample has not come is kept until it
+    /// has; one whose stacked sample was replaced by a newer cycle's (the agent read too
+    /// late) is skipped.
+    fn receive_stacked(&mut self) -> Result<Option<ShmFrame>, AgentReceiveError> {
+        let Some((stack, index)) = self.stack.clone() else {
+            return Err(AgentReceiveError::Transport(format!(
+                "agent {}'s images come in the session's stacked sample ([transport.shm] \
+                 stacked_images): read it through a group that drives every stacked agent \
+                 (vrsync.AgentGroup, VrsyncVectorEnv; in Rust `ShmAgent::join_stack`)",
+                self.id
+            )));
+        };
+        // A newer header replaces a kept one (released first: the kept one counts
+        // against the agent's borrowed frames).
+        if self.pending.is_some() && self.has_frame() {
+            self.pending = None;
+        }
+        for _ in 0..2 {
+            let header = match self.pending.take() {
+                Some(h) => h,
+                None => match self.receive_sample()? {
+                    Some(h) => h,
+                    None => return Ok(None),
+                },
+            };
+            let mut s = stack.borrow_mut();
+            let looked = match s.lookup(header.user_header().cycle) {
+                Ok(looked) => looked,
+                Err(e) => {
+                    // Too many stacked samples held: the header waits for the next try.
+                    self.pending = Some(header);
+                    return Err(e);
+                }
+            };
+            match looked {
+                StackLookup::Found(sample) => {
+                    let range = s.block_range(index);
+                    return Ok(Some(ShmFrame {
+                        sample: header,
+                        block: Some((sample, range)),
+                    }));
+                }
+                StackLookup::NotYet => {
+                    self.pending = Some(header);
+                    return Ok(None);
+                }
+                // The newer cycle's header came before its stacked sample: look again.
+                StackLookup::Gone => {}
+            }
+        }
+        Ok(None)
+    }
+
     /// Whether the host's "session closed" event was ever seen (sticky: a call that
     /// returned a frame may have consumed it).
     pub fn shutdown_seen(&self) -> bool {
@@ -175,7 +301,7 @@ impl AgentFrame for ShmFrame {
     }
 
     fn payload(&self) -> &[u8] {
-        self.sample.payload()
+        ShmFrame::payload(self)
     }
 }
 
@@ -262,6 +388,16 @@ impl AgentTransport for ShmAgent {
             .open()
             .map_err(|e| open_err(&sensors, &e))?;
         check_channels(sensor_service.attributes(), config, session, id)?;
+        let stacked = attr(sensor_service.attributes(), ATTR_STACKED) == "1";
+        let stack_index = stack_index(config, id);
+        if stacked != stack_index.is_some() {
+            return Err(ice(format!(
+                "the host {} this agent's payload ([transport.shm] stacked_images), this \
+                 config {}: host and agent read different configs",
+                if stacked { "stacks" } else { "does not stack" },
+                if stacked { "does not" } else { "does" },
+            )));
+        }
         let motor_service = node
             .service_builder(&svc_name(session, &motor).map_err(ice)?)
             .publish_subscribe::<[MotorCommand]>()
@@ -321,6 +457,9 @@ impl AgentTransport for ShmAgent {
             sensor_sub,
             _motor_service: motor_service,
             motor_pub,
+            stack_index,
+            stack: None,
+            pending: None,
             max_commands,
             spin: config.sync.wait == crate::config::WaitMode::Spin,
             poll: super::PollLength::new(
@@ -331,18 +470,13 @@ impl AgentTransport for ShmAgent {
     }
 
     fn try_receive_newest(&mut self) -> Result<Option<ShmFrame>, AgentReceiveError> {
-        // The subscriber's queue holds one frame (`SENSOR_QUEUE`; a newer one replaces
-        // it): what it holds is the newest, and one look is enough.
-        const _: () = assert!(SENSOR_QUEUE == 1);
-        match self.sensor_sub.receive() {
-            Ok(sample) => Ok(sample.map(|sample| ShmFrame { sample })),
-            Err(iceoryx2::port::ReceiveError::ExceedsMaxBorrows) => {
-                Err(AgentReceiveError::TooManyFramesHeld {
-                    max: AGENT_BORROWED_FRAMES,
-                })
-            }
-            Err(other) => Err(AgentReceiveError::Transport(format!("iceoryx2: {other:?}"))),
+        if self.stack_index.is_some() {
+            return self.receive_stacked();
         }
+        Ok(self.receive_sample()?.map(|sample| ShmFrame {
+            sample,
+            block: None,
+        }))
     }
 
     fn wait_readable(&mut self, timeout: Duration) {

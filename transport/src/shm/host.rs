@@ -11,6 +11,9 @@ use std::cell::Cell;
 /// A loaned sensor sample, initialised (see [`ShmHost::loan`]).
 pub struct ShmFrameLoan {
     sample: SampleMut<Svc, [u8], SensorHeader>,
+    /// A stacked agent's payload: its block of the cycle's stacked sample (its own
+    /// sample then carries the header only).
+    block: Option<StackBlock>,
 }
 
 impl core::fmt::Debug for ShmFrameLoan {
@@ -24,6 +27,9 @@ impl core::fmt::Debug for ShmFrameLoan {
 
 impl FrameLoanMut for ShmFrameLoan {
     fn parts_mut(&mut self) -> (&mut SensorHeader, &mut [u8]) {
+        if let Some(block) = &mut self.block {
+            return (self.sample.user_header_mut(), block.bytes_mut());
+        }
         let payload = self.sample.payload_mut();
         let (ptr, len) = (payload.as_mut_ptr(), payload.len());
         let header = self.sample.user_header_mut();
@@ -42,6 +48,8 @@ impl FrameLoanMut for ShmFrameLoan {
 struct HostAgentPorts {
     id: u32,
     frame_bytes: usize,
+    /// Its block of the stacked sample, if its payload goes there (see [`HostStack`]).
+    stack_index: Option<usize>,
     sensor_pub: Publisher<Svc, [u8], SensorHeader>,
     motor_service: ps_factory::PortFactory<Svc, [MotorCommand], MotorHeader>,
     motor_sub: Subscriber<Svc, [MotorCommand], MotorHeader>,
@@ -112,6 +120,8 @@ pub struct ShmHost {
     sweep: Cell<bool>,
     /// Whether the page says the host polls ([`WakeWord::set_host_polling`]).
     polling: bool,
+    /// The stacked sample's publisher (`[transport.shm] stacked_images`).
+    stack: Option<HostStack>,
 }
 
 /// Marks the slot of agent `id` (a *stop* listener's event id) as notified; ids the host
@@ -212,9 +222,16 @@ impl ShmHost {
             .create()
             .map_err(|e| ice(format!("cannot create the stop listener: {e:?}")))?;
 
+        let stack = HostStack::create(&node, config)?;
         let mut agents = Vec::with_capacity(n);
         for a in &config.agents {
-            let frame_bytes = a.frame_bytes();
+            let stack_index = stack.as_ref().and(stack_index(config, a.id));
+            // A stacked agent's own sample carries the header only.
+            let frame_bytes = if stack_index.is_some() {
+                0
+            } else {
+                a.frame_bytes()
+            };
             let sensors = format!("agent/{}/sensors", a.id);
             let mut builder = node
                 .service_builder(&svc_name(session, &sensors).map_err(ice)?)
@@ -230,8 +247,17 @@ impl ShmHost {
             if let Some(align) = Alignment::new(crate::wire::IMAGE_ALIGN) {
                 builder = builder.payload_alignment(align);
             }
+            let mut sensor_attrs = with_channels(&a.channel_layout()).map_err(ice)?;
+            if stack_index.is_some() {
+                let key =
+                    AttributeKey::try_from(ATTR_STACKED).map_err(|e| ice(format!("{e:?}")))?;
+                let val = AttributeValue::try_from("1").map_err(|e| ice(format!("{e:?}")))?;
+                sensor_attrs = sensor_attrs
+                    .define(&key, &val)
+                    .map_err(|e| ice(format!("{e:?}")))?;
+            }
             let sensor_service = builder
-                .create_with_attributes(&with_channels(&a.channel_layout()).map_err(ice)?)
+                .create_with_attributes(&sensor_attrs)
                 .map_err(|e| exists(&sensors, &e))?;
             let sensor_pub = sensor_service
                 .publisher_builder()
@@ -272,6 +298,7 @@ impl ShmHost {
             agents.push(HostAgentPorts {
                 id: a.id,
                 frame_bytes,
+                stack_index,
                 sensor_service,
                 sensor_pub,
                 motor_service,
@@ -320,6 +347,7 @@ impl ShmHost {
             sweep: Cell::new(true),
             polling: false,
             agents,
+            stack,
         })
     }
 
@@ -538,21 +566,33 @@ impl HostTransport for ShmHost {
         // the same chunk); shared memory is never de-initialised by anyone afterwards.
         let mut sample = unsafe { sample.assume_init() };
         *sample.user_header_mut() = SensorHeader::default();
-        Ok(ShmFrameLoan { sample })
+        let block = match (p.stack_index, &mut self.stack) {
+            (Some(index), Some(stack)) => Some(stack.block(index, id)?),
+            _ => None,
+        };
+        Ok(ShmFrameLoan { sample, block })
     }
 
     fn publish(&mut self, slot: usize, frame: ShmFrameLoan) -> Result<bool, HostTransportError> {
         let id = self.agent(slot)?.id;
         let mut processes_changed = false;
         let mut delivered_to_departed = false;
-        let delivered = frame
-            .sample
-            .send()
-            .map(|receivers| receivers > 0)
-            .map_err(|e| HostTransportError::Send {
-                what: format!("the sensor frame of agent {id}"),
-                reason: format!("{e:?}"),
-            })?;
+        if frame.block.is_some()
+            && let Some(stack) = &mut self.stack
+        {
+            stack.published(frame.sample.user_header().cycle);
+        }
+        let ShmFrameLoan { sample, block } = frame;
+        // The block is written: its loan ends here (the stacked sample goes at start).
+        drop(block);
+        let delivered =
+            sample
+                .send()
+                .map(|receivers| receivers > 0)
+                .map_err(|e| HostTransportError::Send {
+                    what: format!("the sensor frame of agent {id}"),
+                    reason: format!("{e:?}"),
+                })?;
         // The frame went to the subscriber attached now: it is the connection served (as
         // listing allocates, looked up again only when the identity check is due).
         if delivered && let Some(p) = self.agents.get_mut(slot) {
@@ -588,6 +628,10 @@ impl HostTransport for ShmHost {
     }
 
     fn signal_start(&mut self) -> Result<(), HostTransportError> {
+        // Before the wake-up: an agent woken finds its cycle's stacked sample there.
+        if let Some(stack) = &mut self.stack {
+            stack.send()?;
+        }
         self.wake.bump();
         self.sweep.set(true);
         Ok(())

@@ -94,14 +94,24 @@ pub fn reserved_bytes(config: &Config) -> u64 {
         .iter()
         .filter(|a| a.transport == crate::config::TransportKind::Shm)
         .map(|a| {
-            let frame = a.frame_bytes().max(1) as u64 + header;
+            // A stacked agent's own sample carries the header only; its payload is in the
+            // stacked sample (added below).
+            let payload = if stack_index(config, a.id).is_some() {
+                1
+            } else {
+                a.frame_bytes().max(1)
+            };
+            let frame = payload as u64 + header;
             let motor = (u64::from(config.transport.max_commands_per_cycle)
                 * core::mem::size_of::<MotorCommand>() as u64
                 + 64)
                 * (MOTOR_QUEUE as u64 + 2);
             frame * SENSOR_POOL_SAMPLES as u64 + motor
         })
-        .sum()
+        .sum::<u64>()
+        + stack_shape(config).map_or(0, |(blocks, frame_bytes)| {
+            (blocks as u64 * stack_stride(frame_bytes) as u64 + 64) * SENSOR_POOL_SAMPLES as u64
+        })
 }
 
 /// Free bytes of the tmpfs behind `/dev/shm` (where iceoryx2 keeps its segments), if known.
@@ -372,10 +382,12 @@ pub fn host_alive(session: &str) -> bool {
     host_state(session) == HostState::Alive
 }
 
-/// Whether iceoryx2 node `name` is the host or an agent of `session` (a session name may
-/// contain dots: an agent's node name is `vrsync-agent.<session>.<id>`, digits only after).
+/// Whether iceoryx2 node `name` is the host, an agent or the stacked sample's reader of
+/// `session` (a session name may contain dots: an agent's node name is
+/// `vrsync-agent.<session>.<id>`, digits only after).
 fn node_of_session(name: &str, session: &str) -> bool {
     name == host_node_name(session)
+        || name == stack_node_name(session)
         || name
             .strip_prefix("vrsync-agent.")
             .and_then(|rest| rest.strip_prefix(session))
@@ -542,7 +554,12 @@ impl PollLength {
 mod agent;
 mod host;
 mod ice_errors;
+pub(crate) mod section;
+mod stack;
 mod wake;
+
+pub use section::ShmConfig;
+pub use stack::*;
 
 use wake::remove_wake_word;
 pub use wake::{WakeWord, WakeWordError, wake_word_name};
@@ -625,6 +642,8 @@ mod tests {
         assert!(!node_of_session("vrsync-agent.ab.3", "a"));
         assert!(!node_of_session("vrsync-agent.a.", "a"));
         assert!(!node_of_session("floor-node", "a"));
+        assert!(node_of_session("vrsync-stack.a", "a"));
+        assert!(!node_of_session("vrsync-stack.ab", "a"));
     }
 
     const CHILD_ENV: &str = "VRSYNC_TEST_DEAD_NODE_SESSION";
