@@ -3,6 +3,7 @@
 use std::time::{Duration, Instant};
 
 pub use vrsync_transport::HOST_LIVENESS_PERIOD;
+pub use vrsync_transport::shm::{SharedStack, ShmStack, StackSample};
 use vrsync_transport::{
     ActionState, ActionStatus, Collision, Command, ImageDesc, MOTOR_FLAG_ACK, MOTOR_FLAG_LEAVE,
     MOTOR_FLAG_STOP, MotorCommand, MotorHeader, PROTOCOL_VERSION, PixelFormat, Pose, SensorHeader,
@@ -299,6 +300,7 @@ pub struct AgentBuilder<'c> {
     id: u32,
     connect_timeout: Option<Duration>,
     signals: SignalHandling,
+    stack: Option<SharedStack>,
 }
 
 impl<'c> AgentBuilder<'c> {
@@ -309,7 +311,18 @@ impl<'c> AgentBuilder<'c> {
             id,
             connect_timeout: None,
             signals: SignalHandling::default(),
+            stack: None,
         }
+    }
+
+    /// The reader of the session's stacked sample this agent shares with the other
+    /// agents of its group (`[transport.shm] stacked_images`; see [`Agent::stack`]). An
+    /// agent whose payload is stacked and that is given none opens its own reader: the
+    /// stacked sample has one reader, so that works for the one process that drives the
+    /// stacked agents. Ignored for an agent whose payload is not stacked.
+    pub fn stack(mut self, stack: &SharedStack) -> Self {
+        self.stack = Some(SharedStack::clone(stack));
+        self
     }
 
     /// Whether the agent installs SIGINT/SIGTERM handlers. Default:
@@ -360,7 +373,16 @@ impl<'c> AgentBuilder<'c> {
 
     fn connect_once(&self, timeout: Duration) -> Result<Agent, AgentConnectError> {
         // The agent's own transport (`[[agent]] transport`), else `[transport] kind`.
-        let backend = AnyAgent::connect(self.config, self.id, timeout, self.signals)?;
+        let mut backend = AnyAgent::connect(self.config, self.id, timeout, self.signals)?;
+        if let AnyAgent::Shm(shm) = &mut backend
+            && shm.is_stacked()
+        {
+            let stack = match &self.stack {
+                Some(stack) => SharedStack::clone(stack),
+                None => SharedStack::new(std::cell::RefCell::new(ShmStack::open(self.config)?)),
+            };
+            shm.join_stack(&stack)?;
+        }
         let max = self.config.transport.max_commands_per_cycle as usize;
         Ok(Agent {
             id: self.id,
@@ -457,6 +479,27 @@ impl Agent {
     /// This agent's id.
     pub fn id(&self) -> u32 {
         self.id
+    }
+
+    /// The reader of the session's stacked sample this agent's frames take their payload
+    /// from (`[transport.shm] stacked_images`), to share with the other agents of a group
+    /// ([`AgentBuilder::stack`]); `None` if its payload is not stacked.
+    pub fn stack(&self) -> Option<&SharedStack> {
+        match &self.backend {
+            AnyAgent::Shm(shm) => shm.stack(),
+            _ => None,
+        }
+    }
+
+    /// The frame's stacked sample and its payload's place there (`[transport.shm]
+    /// stacked_images`); `None` if its payload is its own.
+    pub fn stacked_payload(
+        frame: &Frame,
+    ) -> Option<(&std::rc::Rc<StackSample>, core::ops::Range<usize>)> {
+        match &frame.inner {
+            AnyFrame::Shm(f) => f.stacked(),
+            _ => None,
+        }
     }
 
     /// How long the host waits for this agent's stop (its `[[agent]] wait_for_stop`, else

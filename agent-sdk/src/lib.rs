@@ -42,8 +42,8 @@ pub mod log;
 
 pub use agent::{
     ACTION_STATES_CAPACITY, ActError, Agent, AgentBuilder, AgentConnectError, Frame,
-    HOST_LIVENESS_PERIOD, Image, REJOIN_GRACE, SendError, SignalHandling, StopError,
-    WaitStartError, close_all,
+    HOST_LIVENESS_PERIOD, Image, REJOIN_GRACE, SendError, SharedStack, ShmStack, SignalHandling,
+    StackSample, StopError, WaitStartError, close_all,
 };
 /// The [glam](https://docs.rs/glam) this SDK uses for poses and targets ([`Pose::position`],
 /// [`Command::MoveTo`]): use `vrsync_agent::glam` instead of pinning the same version.

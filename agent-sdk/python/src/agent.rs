@@ -194,27 +194,32 @@ pub(crate) fn cameras_of(agent: &vrsync_bridge::AgentConfig) -> Vec<PyCamera> {
 }
 
 /// Connects agent `id` of `cfg`, waiting up to `timeout` for the host, in slices so that
-/// Ctrl-C raises `KeyboardInterrupt` while the host is not up yet.
+/// Ctrl-C raises `KeyboardInterrupt` while the host is not up yet; a stacked agent shares
+/// `stack` (the reader of its group's other agents), else opens its own.
 pub(crate) fn connect_one(
     py: Python<'_>,
     cfg: &Config,
     id: u32,
     timeout: Duration,
+    stack: Option<&vrsync_agent::SharedStack>,
 ) -> PyResult<Agent> {
     let started = Instant::now();
     loop {
         let left = timeout.saturating_sub(started.elapsed());
         // Slices as short as a wait's: Ctrl-C is seen between two attempts.
         let slice = left.min(WAIT_SLICE);
-        let attempt = py.detach(|| {
-            SameThread(
-                AgentBuilder::new(cfg, id)
-                    .connect_timeout(slice)
-                    // Python keeps its own SIGINT/SIGTERM handlers (Ctrl-C raises
-                    // KeyboardInterrupt while waiting, see `PyAgent::wait_frame`).
-                    .signal_handling(SignalHandling::Leave)
-                    .connect(),
-            )
+        let stack = SameThread(stack);
+        let attempt = py.detach(move || {
+            let stack = stack;
+            let mut builder = AgentBuilder::new(cfg, id)
+                .connect_timeout(slice)
+                // Python keeps its own SIGINT/SIGTERM handlers (Ctrl-C raises
+                // KeyboardInterrupt while waiting, see `PyAgent::wait_frame`).
+                .signal_handling(SignalHandling::Leave);
+            if let Some(stack) = stack.0 {
+                builder = builder.stack(stack);
+            }
+            SameThread(builder.connect())
         });
         match attempt.0 {
             Ok(agent) => return Ok(agent),
@@ -347,7 +352,7 @@ impl PyAgent {
         let wait_for_stop = agent_cfg.wait_for_stop;
         let cameras = cameras_of(agent_cfg);
         let (vectors, actions) = channels_of(agent_cfg);
-        let agent = AgentCell(connect_one(py, &cfg, id, timeout)?);
+        let agent = AgentCell(connect_one(py, &cfg, id, timeout, None)?);
         Ok(Self {
             agent: Some(agent),
             owner: thread::current().id(),

@@ -22,13 +22,13 @@ enum Item {
     F32,
 }
 
-/// The shape of an up to 3-dimensional array of one item type; strides in bytes.
+/// The shape of an up to 4-dimensional array of one item type; strides in bytes.
 #[derive(Debug, Clone)]
 pub(crate) struct Layout {
     item: Item,
     ndim: c_int,
-    shape: [npy_intp; 3],
-    strides: [npy_intp; 3],
+    shape: [npy_intp; 4],
+    strides: [npy_intp; 4],
 }
 
 impl Layout {
@@ -37,14 +37,37 @@ impl Layout {
     pub(crate) fn image(format: PixelFormat, width: u32, height: u32, stride: usize) -> Self {
         let (w, h, stride) = (width as npy_intp, height as npy_intp, stride as npy_intp);
         let (item, ndim, shape, strides) = match format {
-            PixelFormat::Rgb8 => (Item::U8, 3, [h, w, 3], [stride, 3, 1]),
-            PixelFormat::Rgba8 => (Item::U8, 3, [h, w, 4], [stride, 4, 1]),
-            PixelFormat::Gray8 => (Item::U8, 2, [h, w, 0], [stride, 1, 0]),
-            PixelFormat::Depth32f => (Item::F32, 2, [h, w, 0], [stride, 4, 0]),
+            PixelFormat::Rgb8 => (Item::U8, 3, [h, w, 3, 0], [stride, 3, 1, 0]),
+            PixelFormat::Rgba8 => (Item::U8, 3, [h, w, 4, 0], [stride, 4, 1, 0]),
+            PixelFormat::Gray8 => (Item::U8, 2, [h, w, 0, 0], [stride, 1, 0, 0]),
+            PixelFormat::Depth32f => (Item::F32, 2, [h, w, 0, 0], [stride, 4, 0, 0]),
         };
         Self {
             item,
             ndim,
+            shape,
+            strides,
+        }
+    }
+
+    /// `n` images of [`Layout::image`]'s shape, `block` bytes from one to the next:
+    /// `(n, H, W[, C])`.
+    pub(crate) fn stacked_image(
+        format: PixelFormat,
+        width: u32,
+        height: u32,
+        stride: usize,
+        n: usize,
+        block: usize,
+    ) -> Self {
+        let one = Self::image(format, width, height, stride);
+        let mut shape = [n as npy_intp, 0, 0, 0];
+        let mut strides = [block as npy_intp, 0, 0, 0];
+        shape[1..].copy_from_slice(&one.shape[..3]);
+        strides[1..].copy_from_slice(&one.strides[..3]);
+        Self {
+            item: one.item,
+            ndim: one.ndim + 1,
             shape,
             strides,
         }
@@ -55,8 +78,8 @@ impl Layout {
         Self {
             item: Item::F32,
             ndim: 1,
-            shape: [len as npy_intp, 0, 0],
-            strides: [4, 0, 0],
+            shape: [len as npy_intp, 0, 0, 0],
+            strides: [4, 0, 0, 0],
         }
     }
 }

@@ -25,8 +25,14 @@ use crate::sensors::{
     PyActionState, PyActionStatus, PyCollision, PyEyePosition, PyGridPosition, PyHeadMotion, PyPose,
 };
 
-/// A frame moved to another thread only to be dropped later on its owner's thread.
-pub(crate) struct Corpse(#[allow(dead_code)] Frame);
+/// A frame (or a group's stacked sample) moved to another thread only to be dropped later
+/// on its owner's thread.
+pub(crate) enum Corpse {
+    /// An agent's frame.
+    Frame(#[allow(dead_code)] Frame),
+    /// The stacked sample of a group's zero-copy images.
+    Stack(#[allow(dead_code)] std::rc::Rc<vrsync_agent::StackSample>),
+}
 
 /// Frames released on foreign threads, waiting to be dropped by their agent's owner
 /// thread; plus the number of this agent's frames alive anywhere (held or buried).
@@ -49,6 +55,24 @@ impl Graveyard {
     pub(crate) fn alive(&self) -> usize {
         self.alive.load(Ordering::Acquire)
     }
+
+    /// Counts one more held value.
+    pub(crate) fn born(&self) {
+        self.alive.fetch_add(1, Ordering::AcqRel);
+    }
+
+    /// Counts a held value dropped on its owner thread.
+    pub(crate) fn died(&self) {
+        self.alive.fetch_sub(1, Ordering::AcqRel);
+    }
+
+    /// Keeps a value released on a foreign thread until the owner's next `drain`.
+    pub(crate) fn bury(&self, corpse: Corpse) {
+        self.corpses
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push(corpse);
+    }
 }
 
 /// A frame with the thread that may drop it.
@@ -60,7 +84,7 @@ pub(crate) struct OwnedFrame {
 
 impl OwnedFrame {
     pub(crate) fn new(frame: Frame, graveyard: Arc<Graveyard>) -> Self {
-        graveyard.alive.fetch_add(1, Ordering::AcqRel);
+        graveyard.born();
         Self {
             frame: ManuallyDrop::new(frame),
             owner: thread::current().id(),
@@ -75,13 +99,9 @@ impl Drop for OwnedFrame {
         let frame = unsafe { ManuallyDrop::take(&mut self.frame) };
         if thread::current().id() == self.owner {
             drop(frame);
-            self.graveyard.alive.fetch_sub(1, Ordering::AcqRel);
+            self.graveyard.died();
         } else {
-            self.graveyard
-                .corpses
-                .lock()
-                .unwrap_or_else(PoisonError::into_inner)
-                .push(Corpse(frame));
+            self.graveyard.bury(Corpse::Frame(frame));
         }
     }
 }

@@ -23,8 +23,11 @@ mod args;
 mod channels;
 mod out;
 mod sink;
+mod stacked;
 mod step;
 mod wait;
+
+pub(crate) use stacked::{Held, OwnedStack};
 
 use args::{Planned, indices, mask, planned, reset_command};
 use channels::{GroupChannels, act_row};
@@ -88,6 +91,18 @@ pub(crate) struct AgentGroup {
     images: Vec<(String, Out)>,
     /// Whether every step writes the images into new arrays (`fresh_images`).
     fresh: bool,
+    /// Whether the agents' payloads are stacked, block after block in the group's order,
+    /// with the block stride: zero-copy images are possible.
+    stacked: Option<usize>,
+    /// Whether the images are views of the stacked sample (`zero_copy`).
+    zero_copy: bool,
+    /// The step's stacked samples, until its images are made.
+    held: Held,
+    /// The zero-copy images of the last step, per camera (`None`: the group's arrays).
+    views: Option<Vec<Py<PyAny>>>,
+    /// The stacked samples that zero-copy images hold, and the thread that may drop them.
+    graveyard: std::sync::Arc<crate::frame::Graveyard>,
+    owner: std::thread::ThreadId,
     numpy: Py<PyModule>,
     outs: Vec<(&'static str, Out)>,
     channels: GroupChannels,
@@ -102,7 +117,26 @@ pub(crate) struct AgentGroup {
     resets: Vec<bool>,
 }
 
+/// The block stride of the stacked sample if `agents` (ids `ids`) are stacked in the
+/// group's order: consecutive blocks, so that one stride steps from each to the next.
+fn stacked_in_order(cfg: &Config, ids: &[u32], agents: &[Agent]) -> Option<usize> {
+    let stride = agents.first()?.stack()?.borrow().stride();
+    let first = vrsync_bridge::shm::stack_index(cfg, *ids.first()?)?;
+    let in_order = ids.iter().zip(agents).enumerate().all(|(k, (&id, a))| {
+        a.stack().is_some() && vrsync_bridge::shm::stack_index(cfg, id) == Some(first + k)
+    });
+    in_order.then_some(stride)
+}
+
 impl AgentGroup {
+    /// Camera `k`'s current images: the step's zero-copy view, else the group's array.
+    fn image_array<'py>(&self, py: Python<'py>, k: usize, out: &Out) -> Bound<'py, PyAny> {
+        match self.views.as_ref().and_then(|v| v.get(k)) {
+            Some(view) => view.bind(py).clone(),
+            None => out.array.bind(py).clone(),
+        }
+    }
+
     fn agents(&mut self) -> PyResult<&mut Vec<Agent>> {
         match self.agents.as_mut() {
             Some(a) => Ok(&mut a.0),
@@ -248,11 +282,15 @@ impl AgentGroup {
             Some(_) => secs("step_timeout", step_timeout)?,
             None => default_frame_wait(&cfg),
         };
-        let mut agents = Vec::with_capacity(n);
+        let mut agents: Vec<Agent> = Vec::with_capacity(n);
         for id in &ids {
-            // On an error the agents connected so far are dropped (they leave).
-            agents.push(connect_one(py, &cfg, *id, timeout)?);
+            // On an error the agents connected so far are dropped (they leave). Stacked
+            // agents share the first one's reader of the stacked sample.
+            let stack = agents.first().and_then(Agent::stack).cloned();
+            agents.push(connect_one(py, &cfg, *id, timeout, stack.as_ref())?);
         }
+        let stacked = stacked_in_order(&cfg, &ids, &agents);
+        let held = Held::new(n, cameras.len());
         Ok(Self {
             agents: Some(Agents(agents)),
             primed: vec![false; n],
@@ -267,9 +305,15 @@ impl AgentGroup {
             cameras,
             transports,
             table: Vec::new(),
+            held,
             sink,
             images,
             fresh: false,
+            stacked,
+            zero_copy: false,
+            views: None,
+            graveyard: Default::default(),
+            owner: std::thread::current().id(),
             numpy: numpy.unbind(),
             outs,
             channels,
@@ -394,14 +438,52 @@ impl AgentGroup {
     }
 
     /// Camera name → its stacked images, `(N, H, W, 3)`/`(N, H, W, 4)` `uint8` or
-    /// `(N, H, W)` `uint8`/`float32`: the same arrays every step, overwritten in place.
+    /// `(N, H, W)` `uint8`/`float32`: the same arrays every step, overwritten in place
+    /// (new arrays each step with `fresh_images` or `zero_copy`).
     #[getter]
     fn images<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
-        for (name, out) in &self.images {
-            d.set_item(name, out.array.bind(py))?;
+        for (k, (name, out)) in self.images.iter().enumerate() {
+            d.set_item(name, self.image_array(py, k, out))?;
         }
         Ok(d)
+    }
+
+    /// Whether the group's agents are stacked (`[transport.shm] stacked_images`, every
+    /// agent of the group on shared memory, in id order, none left out between two of
+    /// them): then `zero_copy` can be turned on.
+    #[getter]
+    fn stacked(&self) -> bool {
+        self.stacked.is_some()
+    }
+
+    /// Whether `images` are read-only views of the shared memory the host wrote (default
+    /// `False`): no copy at all. Each step gives new arrays, valid as long as they are
+    /// held; like frames, at most 2 steps' images can be held at once (keep copies of
+    /// what you keep longer, or the next step raises `TooManyFramesHeldError`). Needs
+    /// `stacked`. A step whose frames are of different cycles (async mode) copies into
+    /// the group's arrays instead. `fresh_images` does not apply to it.
+    #[getter]
+    fn zero_copy(&self) -> bool {
+        self.zero_copy
+    }
+
+    #[setter]
+    fn set_zero_copy(&mut self, on: bool) -> PyResult<()> {
+        if on && self.stacked.is_none() {
+            return Err(PyValueError::new_err(format!(
+                "zero-copy images need the group's agents stacked: [transport.shm] \
+                 stacked_images = true in {}, every agent of the group on shared memory and \
+                 the group's ids the config's shared-memory agents in id order (got {:?})",
+                self.config_path.display(),
+                self.ids
+            )));
+        }
+        self.zero_copy = on;
+        if !on {
+            self.views = None;
+        }
+        Ok(())
     }
 
     /// Whether every step writes the images into new arrays (default `False`: the same
@@ -424,8 +506,9 @@ impl AgentGroup {
     fn image<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyAny>> {
         self.images
             .iter()
-            .find(|(n, _)| n == name)
-            .map(|(_, o)| o.array.bind(py).clone())
+            .enumerate()
+            .find(|(_, (n, _))| n == name)
+            .map(|(k, (_, o))| self.image_array(py, k, o))
             .ok_or_else(|| {
                 let names: Vec<&str> = self.images.iter().map(|(n, _)| n.as_str()).collect();
                 pyo3::exceptions::PyKeyError::new_err(format!(
@@ -683,5 +766,6 @@ impl AgentGroup {
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<AgentGroup>()?;
+    m.add_class::<stacked::PyStackedSample>()?;
     Ok(())
 }

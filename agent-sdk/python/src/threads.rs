@@ -13,7 +13,7 @@
 use crate::agent::AgentCell;
 use crate::detach::SameThread;
 use crate::frame::{Corpse, OwnedFrame};
-use crate::group::Agents;
+use crate::group::{Agents, Held, OwnedStack};
 
 // SAFETY: only used to pass values into and out of `Python::detach`, whose closure runs
 // synchronously on the current thread.
@@ -29,7 +29,9 @@ unsafe impl Sync for AgentCell {}
 // SAFETY: an agent is used by one thread at a time (PyO3's exclusive borrow of the
 // group), and no frame of it outlives a call of the group (frames are copied and dropped
 // inside `step`), which is the condition under which `vrsync.Agent` also lets an agent
-// move to another thread.
+// move to another thread. The stacked samples that a group's zero-copy images hold
+// outlive calls; they are `OwnedStack`s, and the group moves to another thread only
+// when none is alive (`AgentGroup::enter`).
 unsafe impl Send for Agents {}
 // SAFETY: as above; there is no shared (`&`) use of the agents.
 unsafe impl Sync for Agents {}
@@ -43,3 +45,16 @@ unsafe impl Send for Corpse {}
 unsafe impl Send for OwnedFrame {}
 // SAFETY: as above; shared access is read-only.
 unsafe impl Sync for OwnedFrame {}
+
+// SAFETY: as `OwnedFrame`: every thread only reads the stacked sample (shared memory nobody
+// writes while it is held), and `Drop` moves it back to the group's thread.
+unsafe impl Send for OwnedStack {}
+// SAFETY: as above; shared access is read-only.
+unsafe impl Sync for OwnedStack {}
+
+// SAFETY: the stacked samples a group keeps during a step are its own (shared only with
+// its agents' reader and with `OwnedStack`s); the group is used by one thread at a time
+// and moves to another only when no `OwnedStack` of it is alive (`AgentGroup::enter`).
+unsafe impl Send for Held {}
+// SAFETY: as above; there is no shared (`&`) use across threads.
+unsafe impl Sync for Held {}

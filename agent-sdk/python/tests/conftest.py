@@ -84,6 +84,7 @@ def write_config(
     agent_transports: dict[int, str] | None = None,
     zenoh_endpoint: str | None = None,
     wait_for_stop: str | None = None,
+    stacked: bool = False,
 ) -> tuple[Path, str]:
     """Writes a config for `agents` agents with `cameras` ((name, width, format), height
     from a 120°×90° field of view, or (name, width, format, height)) and returns (path, session). `agent_transports` gives
@@ -91,7 +92,8 @@ def write_config(
     unless `tcp_port` is given; `start_host` puts the bound port into the file.
     `zenoh_endpoint` (e.g. ``"tcp/10.0.0.1:7447"``) is where a zenoh host listens and
     its agents connect (lease 1 s; default for a zenoh session: a free loopback port). `wait_for_stop` (``"alive"``/``"timeout"``) sets
-    `[sync] wait_for_stop` (default: not written, i.e. ``"alive"``)."""
+    `[sync] wait_for_stop` (default: not written, i.e. ``"alive"``). `stacked` sets
+    `[transport.shm] stacked_images`."""
     name = session(tag)
     port = tcp_port
     lines = [
@@ -107,6 +109,8 @@ def write_config(
         f'kind = "{transport}"',
         f'tcp_listen = "127.0.0.1:{port}"',
     ]
+    if stacked:
+        lines += ["[transport.shm]", "stacked_images = true"]
     uses_zenoh = transport == "zenoh" or "zenoh" in (agent_transports or {}).values()
     if zenoh_endpoint is None and uses_zenoh:
         zenoh_endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"

@@ -93,6 +93,115 @@ def test_group_fresh_images_leave_the_arrays_of_earlier_steps_alone(
     assert summary["stop_timeouts"] == 0
 
 
+def _run_group(
+    tmp_path: Path, start_host, tag: str, stacked: bool, steps: int
+) -> tuple[list[np.ndarray], str]:
+    """Steps a 3-agent group through a fixed action sequence; returns each step's images
+    (copies) and the world's trajectory hash."""
+    config, _ = write_config(tmp_path, tag, agents=3, cameras=CAM84, stacked=stacked)
+    host = start_host(config, steps + 2)
+    kept = []
+    with vrsync.AgentGroup.connect(config, connect_timeout=20) as group:
+        assert group.stacked is stacked
+        group.zero_copy = stacked
+        group.set_action_table(vrsync.gym.DEFAULT_ACTIONS)
+        group.reset()
+        for step in range(steps):
+            group.step([(step + k) % 4 for k in range(3)])
+            left = group.images["left"]
+            if stacked:
+                # A read-only view of the host's stacked sample, agent after agent.
+                assert isinstance(left.base, vrsync._vrsync.StackedSample)
+                assert left.base.cycle == int(group.cycles[0])
+                assert not left.flags.writeable and not left.flags.owndata
+                assert left.strides[0] >= left[0].nbytes
+                assert np.shares_memory(group.image("left"), left)
+            kept.append(left.copy())
+            del left
+    summary = host.finish()
+    assert summary["stop_timeouts"] == 0
+    return kept, summary["trajectory_hash"]
+
+
+def test_group_zero_copy_images_are_the_stacked_samples_and_match_the_copies(
+    tmp_path: Path, start_host
+) -> None:
+    copied, copied_hash = _run_group(tmp_path, start_host, "gcopy", False, 12)
+    viewed, viewed_hash = _run_group(tmp_path, start_host, "gview", True, 12)
+    assert copied_hash == viewed_hash, "the same world"
+    assert any(a.any() for a in viewed), "the images were rendered"
+    for step, (a, b) in enumerate(zip(copied, viewed)):
+        assert a.shape == b.shape and a.shape[0] == 3
+        assert np.array_equal(a, b), f"step {step}: the views show the copied pixels"
+
+
+def test_group_zero_copy_holds_at_most_one_earlier_step_and_needs_stacked_agents(
+    tmp_path: Path, start_host
+) -> None:
+    plain, _ = write_config(tmp_path, "gplain", agents=2, cameras=CAM84)
+    host = start_host(plain, 4)
+    with vrsync.AgentGroup.connect(plain, connect_timeout=20) as group:
+        assert not group.stacked
+        with pytest.raises(ValueError, match="stacked_images"):
+            group.zero_copy = True
+        group.reset()
+    host.finish()
+    config, _ = write_config(tmp_path, "gheld", agents=2, cameras=CAM84, stacked=True)
+    host = start_host(config, 30)
+    group = vrsync.AgentGroup.connect(config, connect_timeout=20)
+    group.zero_copy = True
+    group.set_action_table([None])
+    group.reset()
+    first = group.images["left"]
+    group.step([0, 0])
+    second = group.images["left"]
+    assert first.base.cycle + 1 == second.base.cycle
+    # The images of two earlier steps held: the next step cannot take a third sample.
+    with pytest.raises(vrsync.TooManyFramesHeldError):
+        group.step([0, 0])
+    group.close()
+    host.kill()
+
+
+def test_vector_env_without_copies_views_the_stacked_images(tmp_path: Path, start_host) -> None:
+    config, _ = write_config(tmp_path, "vecview", agents=3, cameras=CAM84, stacked=True)
+    host = start_host(config, 12)
+    envs = VrsyncVectorEnv(
+        config, observation="camera", camera="left", copy_observations=False, connect_timeout=20
+    )
+    assert envs.group.zero_copy
+    obs, _ = envs.reset(seed=1)
+    for _ in range(6):
+        assert isinstance(obs.base, vrsync._vrsync.StackedSample)
+        assert envs.observation_space.contains(obs)
+        obs, *_ = envs.step(np.ones(3, dtype=np.int64))
+    envs.close()
+    # With copies (the default) the env never views shared memory.
+    host.finish()
+    config, _ = write_config(tmp_path, "veccopy", agents=3, cameras=CAM84, stacked=True)
+    host = start_host(config, 4)
+    envs = VrsyncVectorEnv(config, observation="camera", camera="left", connect_timeout=20)
+    assert not envs.group.zero_copy
+    obs, _ = envs.reset(seed=1)
+    assert obs.flags.owndata
+    envs.close()
+    host.finish()
+
+
+def test_stacked_agents_are_read_by_one_group_only(tmp_path: Path, start_host) -> None:
+    config, _ = write_config(tmp_path, "gone", agents=2, cameras=CAM84, stacked=True)
+    host = start_host(config)
+    # A group of the stacked agents in another order cannot view them, but reads them.
+    with vrsync.AgentGroup.connect(config, [1, 0], connect_timeout=20) as group:
+        assert not group.stacked
+    # One agent alone reads the stacked sample; a second reader is refused.
+    agent = vrsync.Agent.connect(config, 0, connect_timeout=20)
+    with pytest.raises(vrsync.VrsyncError, match="one group in one process"):
+        vrsync.Agent.connect(config, 1, connect_timeout=20)
+    agent.close()
+    host.kill()
+
+
 def test_group_over_tcp_and_mixed_transports_matches_the_all_shm_world(
     tmp_path: Path, start_host
 ) -> None:

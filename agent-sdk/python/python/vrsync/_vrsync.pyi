@@ -443,6 +443,14 @@ class MoveAhead:
     @property
     def heading_offset_deg(self) -> float: ...
 
+@final
+class StackedSample:
+    """The shared memory of a group's zero-copy images (their ``base``): one sample with
+    every stacked agent's payload of one cycle."""
+
+    @property
+    def cycle(self) -> int: ...
+
 _Entry = Command | MoveAhead | Sequence[Command | MoveAhead] | None
 
 @final
@@ -489,6 +497,18 @@ class AgentGroup:
         contents."""
     @fresh_images.setter
     def fresh_images(self, fresh: bool) -> None: ...
+    @property
+    def stacked(self) -> bool:
+        """Whether the agents' payloads are stacked (``[transport.shm] stacked_images``,
+        the group's ids the config's shared-memory agents in id order): ``zero_copy``
+        can be turned on."""
+    @property
+    def zero_copy(self) -> bool:
+        """Whether ``images`` are read-only views of the shared memory the host wrote
+        (no copy): new arrays each step, valid while held; at most 2 steps' images held
+        at once, else the next step raises ``TooManyFramesHeldError``."""
+    @zero_copy.setter
+    def zero_copy(self, on: bool) -> None: ...
     def step_actions(
         self,
         values: dict[str, npt.ArrayLike],

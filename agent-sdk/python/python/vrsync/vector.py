@@ -128,7 +128,10 @@ class VrsyncVectorEnv(VectorEnv):  # type: ignore[type-arg]
               observations are in ``infos["final_obs"]`` (and ``infos["final_info"]``).
         copy_observations: return fresh arrays each step (default). ``False`` returns
             the group's own arrays, which the next step overwrites in place (fastest;
-            never keep them across steps).
+            never keep them across steps); when the config stacks the agents' images
+            (``[transport.shm] stacked_images = true``) the images are read-only views of
+            the shared memory the host wrote, with no copy at all
+            (:attr:`vrsync.AgentGroup.zero_copy`).
         reset_kind: ``"trial"`` (default) or ``"environment"``: the reset command sent.
         session, connect_timeout, step_timeout: as for :class:`vrsync.AgentGroup`.
 
@@ -211,6 +214,8 @@ class VrsyncVectorEnv(VectorEnv):  # type: ignore[type-arg]
         # Fresh observations with one copy from shared memory: the group writes each
         # step's images into new arrays (copying the group's arrays would be a second).
         self.group.fresh_images = copy_observations
+        # No copy at all where the host stacks the agents' images in one sample.
+        self.group.zero_copy = not copy_observations and self.group.stacked
         self._reset_kind = reset_kind
         self._reset_command: Command = (
             TrialReset() if reset_kind == "trial" else EnvironmentReset()

@@ -98,34 +98,51 @@ pub(super) fn check_frame(sink: &Sink, frame: &Frame) -> Result<(), String> {
     check_vectors(&sink.vectors, frame)
 }
 
+impl ImageSink {
+    /// Copies one image (`data`, rows `stride` bytes apart) into row `k` of this camera's
+    /// array.
+    ///
+    /// # Safety
+    /// `ptr` points to the group's live `(N, H, W[, C])` array of this camera, `k` < N.
+    pub(super) unsafe fn write(&self, k: usize, data: &[u8], stride: usize) {
+        // SAFETY: row `k` of the array lies inside it (k < N, shape as built); the array
+        // is C-contiguous; only bytes of `data` are read.
+        unsafe {
+            let dst = (self.ptr as *mut u8).add(k * self.row_bytes * self.height as usize);
+            if stride == self.row_bytes {
+                let n = self.row_bytes * self.height as usize;
+                std::ptr::copy_nonoverlapping(data.as_ptr(), dst, n.min(data.len()));
+            } else {
+                for y in 0..self.height as usize {
+                    if let Some(row) = data.get(y * stride..y * stride + self.row_bytes) {
+                        std::ptr::copy_nonoverlapping(
+                            row.as_ptr(),
+                            dst.add(y * self.row_bytes),
+                            self.row_bytes,
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
 impl Sink {
-    /// Copies agent `k`'s `frame` into row `k` of every output array.
+    /// Copies agent `k`'s `frame` into row `k` of every output array (the images only
+    /// with `images`: a group with zero-copy images leaves them in the frame's stacked
+    /// sample).
     ///
     /// # Safety
     /// The pointers must point to the group's live output arrays (shapes as built in
     /// `AgentGroup::connect`), `k` < N, and `check_frame` must have passed.
-    pub(super) unsafe fn write(&self, k: usize, frame: &Frame, skipped: u64) {
+    pub(super) unsafe fn write(&self, k: usize, frame: &Frame, skipped: u64, images: bool) {
         let h = frame.header();
         // SAFETY (whole block): row `k` of each array lies inside it (k < N, shapes as
         // built); the arrays are C-contiguous and aligned for their dtype (numpy).
         unsafe {
-            for (img, s) in frame.images().zip(&self.images) {
-                let dst = (s.ptr as *mut u8).add(k * s.row_bytes * s.height as usize);
-                let data = img.data();
-                let stride = img.stride();
-                if stride == s.row_bytes {
-                    let n = s.row_bytes * s.height as usize;
-                    std::ptr::copy_nonoverlapping(data.as_ptr(), dst, n.min(data.len()));
-                } else {
-                    for y in 0..s.height as usize {
-                        if let Some(row) = data.get(y * stride..y * stride + s.row_bytes) {
-                            std::ptr::copy_nonoverlapping(
-                                row.as_ptr(),
-                                dst.add(y * s.row_bytes),
-                                s.row_bytes,
-                            );
-                        }
-                    }
+            if images {
+                for (img, s) in frame.images().zip(&self.images) {
+                    s.write(k, img.data(), img.stride());
                 }
             }
             let pos = (self.positions as *mut f32).add(3 * k);

@@ -8,6 +8,7 @@ use vrsync_agent::{Agent, WaitStartError};
 use vrsync_bridge::Command;
 
 use super::out::Out;
+use super::stacked;
 use super::wait::{Waited, wait_all};
 use super::{AgentGroup, Agents, WAIT_SLICE, closed};
 use crate::agent::{SameThread, stop_error, wait_error};
@@ -24,9 +25,15 @@ impl AgentGroup {
         mut commands: impl FnMut(usize, [f32; 4], &mut Vec<Command>) -> bool,
     ) -> PyResult<()> {
         let started = Instant::now();
-        if self.fresh {
+        self.enter()?;
+        if self.fresh && !self.zero_copy {
             self.renew_images(py)?;
         }
+        // The last step's views are the caller's now (the group's reference would count
+        // against the held-frame limit).
+        self.views = None;
+        self.held.clear();
+        let zero_copy = self.zero_copy;
         let Self {
             agents,
             ids,
@@ -36,6 +43,7 @@ impl AgentGroup {
             commands: buffer,
             sink,
             step_timeout,
+            held,
             ..
         } = self;
         let Some(Agents(agents)) = agents.as_mut() else {
@@ -63,12 +71,13 @@ impl AgentGroup {
             let slice_end = deadline.map_or(Instant::now() + WAIT_SLICE, |d| {
                 (Instant::now() + WAIT_SLICE).min(d)
             });
-            let job = SameThread((&mut *agents, &mut *pending, &mut *rotations, &*sink));
+            let held = zero_copy.then_some(&mut *held);
+            let job = SameThread((&mut *agents, &mut *pending, &mut *rotations, &*sink, held));
             let (outcome, waited) = py
                 .detach(move || {
                     let job = job;
-                    let (agents, pending, rotations, sink) = job.0;
-                    SameThread(wait_all(agents, pending, rotations, sink, slice_end))
+                    let (agents, pending, rotations, sink, held) = job.0;
+                    SameThread(wait_all(agents, pending, rotations, sink, held, slice_end))
                 })
                 .0;
             wait_ns += waited;
@@ -91,6 +100,9 @@ impl AgentGroup {
                 }
             }
         }
+        if zero_copy {
+            self.make_views(py)?;
+        }
         self.primed.iter_mut().for_each(|p| *p = true);
         let total = u64::try_from(started.elapsed().as_nanos()).unwrap_or(u64::MAX);
         self.sdk_ns += total.saturating_sub(wait_ns);
@@ -98,6 +110,45 @@ impl AgentGroup {
         self.steps += 1;
         Ok(())
     }
+    /// The step's zero-copy images: views of the stacked sample, or (frames of different
+    /// cycles) copies into the group's arrays.
+    fn make_views(&mut self, py: Python<'_>) -> PyResult<()> {
+        let stride = self.stacked.unwrap_or(0);
+        let n = self.ids.len();
+        let result = match self.held.viewable(stride) {
+            Some(v) => stacked::views(py, v, &self.sink.images, &self.held, n, &self.graveyard)
+                .map(|views| self.views = Some(views)),
+            None => {
+                // SAFETY: the sinks point to the group's live arrays (it holds them).
+                unsafe { self.held.copy_into(&self.sink.images) };
+                Ok(())
+            }
+        };
+        self.held.clear();
+        result
+    }
+
+    /// Admits a call on this thread: the group's zero-copy images are dropped on the
+    /// thread that made them, so it moves to another thread only when none is held.
+    fn enter(&mut self) -> PyResult<()> {
+        let here = std::thread::current().id();
+        if here == self.owner {
+            self.graveyard.drain();
+            return Ok(());
+        }
+        if self.graveyard.alive() > 0 {
+            return Err(pyo3::exceptions::PyRuntimeError::new_err(format!(
+                "the AgentGroup of session {:?} is used from another thread while {} of its \
+                 zero-copy image sets made on its first thread are alive: drop them there \
+                 first (or keep copies)",
+                self.session,
+                self.graveyard.alive()
+            )));
+        }
+        self.owner = here;
+        Ok(())
+    }
+
     /// New (uninitialised) image arrays, which the next wait fills: the arrays handed out
     /// before keep their contents.
     pub(super) fn renew_images(&mut self, py: Python<'_>) -> PyResult<()> {

@@ -5,6 +5,7 @@ use std::time::Instant;
 use vrsync_agent::{Agent, Frame, WaitStartError};
 
 use super::sink::{Sink, check_frame};
+use super::stacked::Held;
 
 /// How one wait phase ended.
 pub(super) enum Waited {
@@ -28,8 +29,10 @@ pub(super) fn wait_all(
     pending: &mut Vec<usize>,
     rotations: &mut [[f32; 4]],
     sink: &Sink,
+    held: Option<&mut Held>,
     slice_end: Instant,
 ) -> (Waited, u64) {
+    let mut held = held;
     let mut blocked = 0u64;
     loop {
         // 1. every frame that is there, keeping the others' order
@@ -41,7 +44,9 @@ pub(super) fn wait_all(
             };
             match agent.try_next_frame() {
                 Ok(Some(frame)) => {
-                    if let Err(failed) = take(k, agent, &frame, rotations, sink) {
+                    if let Err(failed) =
+                        take(k, agent, &frame, rotations, sink, held.as_deref_mut())
+                    {
                         return (failed, blocked);
                     }
                 }
@@ -69,7 +74,7 @@ pub(super) fn wait_all(
         blocked += u64::try_from(tried.elapsed().as_nanos()).unwrap_or(u64::MAX);
         match r {
             Ok(frame) => {
-                if let Err(failed) = take(k, agent, &frame, rotations, sink) {
+                if let Err(failed) = take(k, agent, &frame, rotations, sink, held.as_deref_mut()) {
                     return (failed, blocked);
                 }
                 pending.remove(0);
@@ -80,13 +85,15 @@ pub(super) fn wait_all(
     }
 }
 
-/// Checks agent `k`'s new frame and copies it into row `k` of the outputs.
+/// Checks agent `k`'s new frame and copies it into row `k` of the outputs; with `held`
+/// (zero-copy images) its images stay in its stacked sample, which `held` keeps.
 fn take(
     k: usize,
     agent: &Agent,
     frame: &Frame,
     rotations: &mut [[f32; 4]],
     sink: &Sink,
+    held: Option<&mut Held>,
 ) -> Result<(), Waited> {
     if let Err(reason) = check_frame(sink, frame) {
         let cycle = frame.cycle();
@@ -97,7 +104,10 @@ fn take(
     }
     // SAFETY: the sink points to the group's output arrays (alive: the group holds them
     // and is exclusively borrowed), k < N, and the frame was checked.
-    unsafe { sink.write(k, frame, agent.frames_skipped()) };
+    unsafe { sink.write(k, frame, agent.frames_skipped(), held.is_none()) };
+    if let Some(held) = held {
+        held.note(k, frame);
+    }
     if let Some(r) = rotations.get_mut(k) {
         *r = frame.header().pose.rotation;
     }
