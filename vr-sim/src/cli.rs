@@ -32,8 +32,10 @@ pub enum Command {
     /// render each cycle's images and the bridge's share of the cycle),
     /// plus the original protocol, the Python agent and the batched Python vector env
     /// (`python-vec`: one process for 4 and 16 agents of one 84x84 camera, against as many
-    /// Rust agent processes and the raw floor; `python-loop`: the same process served by
-    /// `vr-sim run`'s loop with rendering, 16 and 64 agents, against the rendering alone).
+    /// Rust agent processes and the raw floor; `python-vec-stacked`: the same with the
+    /// agents' images stacked by the host and viewed without a copy; `python-loop`: the
+    /// same process served by `vr-sim run`'s loop with rendering, 16 and 64 agents,
+    /// against the rendering alone).
     /// Build with --release: it spawns `vr-bench-agent` from the same folder.
     Bench(BenchArgs),
     /// Replay a `run --record` file without agents: apply its commands to the world cycle
@@ -139,8 +141,8 @@ pub struct BenchArgs {
     )]
     pub python: PathBuf,
     /// Leave out the Python rows (`python`, `floor-numpy`, and the vector-env section:
-    /// `python-vec` with its `shm` and `floor-shm` rows at 1x84x84, `python-host`,
-    /// `python-loop`).
+    /// `python-vec` and `python-vec-stacked` with their `shm` and `floor-shm` rows at
+    /// 1x84x84, `python-host`, `python-loop`).
     #[arg(long)]
     pub no_python: bool,
     /// Run only these sections (repeatable; default all): `images` (every transport at 1

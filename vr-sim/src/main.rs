@@ -216,6 +216,18 @@ fn run_with_events(args: &RunArgs, events: &mut events::Events) -> anyhow::Resul
     if let Some(n) = args.spawn_agents {
         config = config.with_agent_count(n)?;
         changed = true;
+        // Each spawned agent is a process of its own; the stacked sample has one reader.
+        if let Some((stacked, _)) = vrsync_bridge::shm::stack_shape(&config)
+            && stacked > 1
+        {
+            anyhow::bail!(
+                "{}: [transport.shm] stacked_images = true: the {stacked} shared-memory agents' \
+                 images are read by one process (a vrsync.AgentGroup or VrsyncVectorEnv), but \
+                 --spawn-agents starts a process per agent; run without --spawn-agents and \
+                 start that one process, or turn stacked_images off",
+                args.config.display()
+            );
+        }
     }
     if let Some(s) = &args.session {
         config = config.with_session(s)?;

@@ -70,7 +70,9 @@ pub enum Section {
 pub struct Row {
     /// `shm`, `shm-spin`, `tcp`, `zenoh`, `zenoh-tls` (mutual TLS), `mixed` (agents over
     /// shm, shm, tcp, zenoh), `floor-shm`, `floor-shm-spin`, `floor-tcp`, `floor-zenoh`,
-    /// `legacy`, `python`, `python-vec`, `python-host` (the host is a Python process,
+    /// `legacy`, `python`, `python-vec`, `python-vec-stacked` (the same vector env, the
+    /// host stacking the agents' images: `[transport.shm] stacked_images`, viewed with no
+    /// copy), `python-host` (the host is a Python process,
     /// `vrsync.Host`; the agents are the `shm` rows' Rust bench agents), `python-loop`
     /// (`vr-sim run`'s loop, rendering, serving one `python-vec` process), `floor-numpy`
     /// (numpy's row reads of the `python` agent alone, on shared memory, no SDK).
@@ -109,9 +111,10 @@ pub struct Row {
     /// (measured separately; `null` elsewhere).
     pub png_us: f64,
     /// The Python SDK's own time per agent and cycle, µs (median of the rounds; `null`
-    /// elsewhere). `python-vec` rows: the time per agent-step spent inside the Python
-    /// SDK's Rust code (`AgentGroup.step`: sends, stops, receives, copies; blocked waits
-    /// for the host excluded), as the agent process reports it. `python-host` rows: the
+    /// elsewhere). `python-vec` (and `python-vec-stacked`) rows: the time per agent-step
+    /// spent inside the Python SDK's Rust code (`AgentGroup.step`: sends, stops,
+    /// receives, copies or views; blocked waits for the host excluded), as the agent
+    /// process reports it. `python-host` rows: the
     /// Python host's time per agent-cycle outside `Host.collect` (loans, one byte written
     /// per image, publishes, `start`, the report's check: everything but the wait for
     /// the agents), as `vrsync.bench_host` reports it (its `host_us_per_agent_cycle`):
@@ -659,13 +662,21 @@ impl Bench<'_> {
 }
 
 /// The cases of [`Bench::vector_env`] at `agents` agents, one 84x84 rgb8 camera each, in
-/// the order of each round: the vector env, the Python host, the Rust host (`shm`, the
-/// reference of both) and the raw floor.
+/// the order of each round: the vector env (its images copied into the stacked arrays,
+/// then `python-vec-stacked`: the host stacks them, `[transport.shm] stacked_images`, and
+/// the env views them with no copy), the Python host, the Rust host (`shm`, the
+/// reference of all) and the raw floor.
 fn vector_env_cases(agents: u32, quick: bool) -> Vec<Case> {
-    ["python-vec", "python-host", "shm", "floor-shm"]
-        .into_iter()
-        .map(|transport| vec_case(transport, agents, quick))
-        .collect()
+    [
+        "python-vec",
+        "python-vec-stacked",
+        "python-host",
+        "shm",
+        "floor-shm",
+    ]
+    .into_iter()
+    .map(|transport| vec_case(transport, agents, quick))
+    .collect()
 }
 
 /// A case of the vector-env section (`python-loop` too): `agents` agents of one 84x84

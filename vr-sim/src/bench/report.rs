@@ -227,6 +227,12 @@ pub(super) fn ratio_lines(rows: &[Row]) -> Vec<(String, Option<f64>, &'static st
         let what = format!("python-vec SDK µs per agent-step, {a} agents");
         let sdk = find_vec(rows, "python-vec", a).map(|r| r.sdk_us_per_agent_step);
         v.push((what, sdk, target("<= 5")));
+        // The same env viewing the host's stacked images (no copy) against copying them.
+        let what = format!("python-vec-stacked SDK µs per agent-step, {a} agents");
+        let stacked = find_vec(rows, "python-vec-stacked", a).map(|r| r.sdk_us_per_agent_step);
+        v.push((what, stacked, "report"));
+        let what = format!("python-vec-stacked / python-vec SDK µs per agent-step, {a} agents");
+        v.push((what, stacked.zip(sdk).map(|(s, c)| s / c), "report"));
         // The Python host (`vrsync.Host` in a Python process) against vr-sim's Rust host,
         // the same Rust agents; its own time per agent-cycle (DESIGN §9: <= 5 µs): the
         // host thread's CPU time, and the wall time of the same parts (which also holds

@@ -295,8 +295,17 @@ fn the_python_host_rows_share_their_rounds_with_the_rust_host_at_the_same_case()
         for quick in [false, true] {
             let cases = vector_env_cases(agents, quick);
             let names: Vec<&str> = cases.iter().map(|c| c.transport).collect();
-            assert_eq!(names, ["python-vec", "python-host", "shm", "floor-shm"]);
-            let (py, rust) = (&cases[1], &cases[2]);
+            assert_eq!(
+                names,
+                [
+                    "python-vec",
+                    "python-vec-stacked",
+                    "python-host",
+                    "shm",
+                    "floor-shm"
+                ]
+            );
+            let (py, rust) = (&cases[2], &cases[3]);
             assert_eq!(
                 (py.agents, py.cameras, py.width, py.height),
                 (agents, 1, VEC_SIZE, VEC_SIZE)

@@ -109,6 +109,9 @@ pub(super) fn config_text(case: &Case, session: &str, certs: &Path) -> String {
          stop_timeout = 10.0\nconnect_timeout = 30.0\nwait = {wait:?}\n[transport]\nkind = {kind:?}\n\
          tcp_listen = \"127.0.0.1:0\"\nmax_commands_per_cycle = 8\n"
     );
+    if case.transport == "python-vec-stacked" {
+        s += "[transport.shm]\nstacked_images = true\n";
+    }
     if kind == "zenoh" || mixed {
         // Loopback, a port free a moment ago (zenoh's stable API cannot report the port
         // of a port-0 listener), scouting off (the default).
@@ -365,7 +368,12 @@ pub(super) fn spawn_agents(
     match python {
         // One Python process drives every agent through the batched vector env, doing
         // the same work per agent (`python-loop`: served by `vr-sim run`'s loop).
-        Some(python) if matches!(case.transport, "python-vec" | "python-loop") => {
+        Some(python)
+            if matches!(
+                case.transport,
+                "python-vec" | "python-vec-stacked" | "python-loop"
+            ) =>
+        {
             Agents::spawn_program(
                 python,
                 |_| args(&["-m", "vrsync.bench_vector", "--warmup", &warmup]),
