@@ -1,7 +1,7 @@
 """Where the time of a vector-env cycle goes: the `python-vec` case of `vr-sim bench`, longer.
 
-    python bench/vector_budget.py --python A [--python B ...] [--agents 16] [--cycles 20000]
-        [--rounds 3] [--perf DIR] [--own-host]
+    python bench/vector_budget.py --python A [--python B ...] [--python-stacked C ...]
+        [--agents 16] [--cycles 20000] [--rounds 3] [--perf DIR] [--own-host]
 
 Runs the `python-vec` case (N agents, one 84x84 rgb8 camera each, sync mode over shared
 memory; the agents in one process through `vrsync.vector.VrsyncVectorEnv` with
@@ -16,7 +16,9 @@ into the SDK's Rust code (`AgentGroup.timing`'s SDK time), blocked waiting, the 
 code around it, and the row reads; the SDK time per agent-step; and the allocations of the
 extension's Rust code per agent-step (if the build counts them). With `--perf DIR` it also
 records the agent process with `perf record` over the measured cycles only and prints the
-top symbols (the share of the process's samples).
+top symbols (the share of the process's samples). A `--python-stacked` interpreter runs the
+same case with the host stacking the agents' images (`[transport.shm] stacked_images`), so
+that the env views them with no copy; it takes its turn after the `--python` ones.
 """
 
 from __future__ import annotations
@@ -32,12 +34,14 @@ import time
 from pathlib import Path
 
 
-def config_text(session: str, agents: int) -> str:
+def config_text(session: str, agents: int, stacked: bool = False) -> str:
     head = (
         f'session = "{session}"\n[sync]\nsync_mode = true\nsimulation_time_per_frame = 0.01\n'
         'stop_timeout = 10.0\nconnect_timeout = 60.0\nwait = "block"\n[transport]\n'
         'kind = "shm"\nmax_commands_per_cycle = 8\n'
     )
+    if stacked:
+        head += "[transport.shm]\nstacked_images = true\n"
     cam = '[[agent.camera]]\nname = "c0"\nwidth = 84\nheight = 84\nformat = "rgb8"\n'
     return head + "".join(f"[[agent]]\nid = {i}\n{cam}" for i in range(agents))
 
@@ -138,11 +142,11 @@ def host_result(tag: str, host: subprocess.Popen, agent: subprocess.Popen | subp
 
 
 def one(python: str, host_python: str, agents: int, warmup: int, cycles: int,
-        perf: Path | None, tag: str) -> dict:
+        perf: Path | None, tag: str, stacked: bool) -> dict:
     with tempfile.TemporaryDirectory() as d:
         session = f"budget-{os.getpid()}-{tag}"
         config = Path(d) / "c.toml"
-        config.write_text(config_text(session, agents))
+        config.write_text(config_text(session, agents, stacked))
         out = Path(d) / "host.json"
         host = start_host(host_python, config, warmup, cycles, out)
         agent = subprocess.Popen(
@@ -173,6 +177,8 @@ def one(python: str, host_python: str, agents: int, warmup: int, cycles: int,
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--python", action="append", default=[])
+    parser.add_argument("--python-stacked", action="append", default=[],
+                        help="an interpreter whose runs use a config with stacked images")
     parser.add_argument("--agents", type=int, default=16)
     parser.add_argument("--cycles", type=int, default=20000)
     parser.add_argument("--warmup", type=int, default=500)
@@ -186,7 +192,9 @@ def main() -> None:
     if args.agent:
         agent_main(args.agent, args.warmup)
         return
-    pythons = args.python or [sys.executable]
+    runs = [(p, False) for p in args.python or ([] if args.python_stacked else [sys.executable])]
+    runs += [(p, True) for p in args.python_stacked]
+    pythons = [p for p, _ in runs]
     if args.perf:
         args.perf.mkdir(parents=True, exist_ok=True)
     steps: dict[int, int] = {}
@@ -194,11 +202,11 @@ def main() -> None:
             "allocs_per_agent_step"]
     print("python round " + " ".join(keys))
     for r in range(args.rounds):
-        for i, python in enumerate(pythons):
+        for i, (python, stacked) in enumerate(runs):
             tag = f"p{i}-r{r}"
             host_python = python if args.own_host else pythons[0]
             res = one(python, host_python, args.agents, args.warmup, args.cycles,
-                      args.perf if r == 0 else None, tag)
+                      args.perf if r == 0 else None, tag, stacked)
             steps[i] = steps.get(i, res.get("steps", 0)) if r == 0 else steps.get(i, 0)
             vals = " ".join(
                 "-" if res.get(k) is None else f"{res[k]:.2f}" for k in keys

@@ -75,33 +75,60 @@ impl Graveyard {
     }
 }
 
-/// A frame with the thread that may drop it.
-pub(crate) struct OwnedFrame {
-    frame: ManuallyDrop<Frame>,
+/// A value that must be dropped on its owner's thread, and the corpse it becomes when
+/// released on another.
+pub(crate) trait Buried {
+    fn corpse(self) -> Corpse;
+}
+
+impl Buried for Frame {
+    fn corpse(self) -> Corpse {
+        Corpse::Frame(self)
+    }
+}
+
+impl Buried for std::rc::Rc<vrsync_agent::StackSample> {
+    fn corpse(self) -> Corpse {
+        Corpse::Stack(self)
+    }
+}
+
+/// A value (a frame, a group's stacked sample) with the thread that may drop it, counted
+/// in its graveyard while it lives.
+pub(crate) struct Owned<T: Buried> {
+    value: ManuallyDrop<T>,
     owner: ThreadId,
     graveyard: Arc<Graveyard>,
 }
 
-impl OwnedFrame {
-    pub(crate) fn new(frame: Frame, graveyard: Arc<Graveyard>) -> Self {
+/// A frame with the thread that may drop it.
+pub(crate) type OwnedFrame = Owned<Frame>;
+
+impl<T: Buried> Owned<T> {
+    pub(crate) fn new(value: T, graveyard: Arc<Graveyard>) -> Self {
         graveyard.born();
         Self {
-            frame: ManuallyDrop::new(frame),
+            value: ManuallyDrop::new(value),
             owner: thread::current().id(),
             graveyard,
         }
     }
+
+    /// The value.
+    pub(crate) fn get(&self) -> &T {
+        &self.value
+    }
 }
 
-impl Drop for OwnedFrame {
+impl<T: Buried> Drop for Owned<T> {
     fn drop(&mut self) {
-        // SAFETY: `drop` runs once, and `frame` is not used after this.
-        let frame = unsafe { ManuallyDrop::take(&mut self.frame) };
+        // SAFETY: `drop` runs once, and `value` is not used after this.
+        let value = unsafe { ManuallyDrop::take(&mut self.value) };
         if thread::current().id() == self.owner {
-            drop(frame);
+            drop(value);
             self.graveyard.died();
         } else {
-            self.graveyard.bury(Corpse::Frame(frame));
+            self.graveyard.bury(value.corpse());
         }
     }
 }
@@ -129,7 +156,7 @@ impl PyFrame {
     }
 
     fn frame(&self) -> &Frame {
-        &self.owned.frame
+        self.owned.get()
     }
 
     pub(crate) fn header(&self) -> &vrsync_agent::SensorHeader {

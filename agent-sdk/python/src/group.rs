@@ -27,7 +27,7 @@ mod stacked;
 mod step;
 mod wait;
 
-pub(crate) use stacked::{Held, OwnedStack};
+pub(crate) use stacked::Held;
 
 use args::{Planned, indices, mask, planned, reset_command};
 use channels::{GroupChannels, act_row};
@@ -98,8 +98,8 @@ pub(crate) struct AgentGroup {
     zero_copy: bool,
     /// The step's stacked samples, until its images are made.
     held: Held,
-    /// The zero-copy images of the last step, per camera (`None`: the group's arrays).
-    views: Option<Vec<Py<PyAny>>>,
+    /// The zero-copy images of the last step, per camera (empty: the group's arrays).
+    views: Vec<Py<PyAny>>,
     /// The stacked samples that zero-copy images hold, and the thread that may drop them.
     graveyard: std::sync::Arc<crate::frame::Graveyard>,
     owner: std::thread::ThreadId,
@@ -131,7 +131,7 @@ fn stacked_in_order(cfg: &Config, ids: &[u32], agents: &[Agent]) -> Option<usize
 impl AgentGroup {
     /// Camera `k`'s current images: the step's zero-copy view, else the group's array.
     fn image_array<'py>(&self, py: Python<'py>, k: usize, out: &Out) -> Bound<'py, PyAny> {
-        match self.views.as_ref().and_then(|v| v.get(k)) {
+        match self.views.get(k) {
             Some(view) => view.bind(py).clone(),
             None => out.array.bind(py).clone(),
         }
@@ -291,6 +291,7 @@ impl AgentGroup {
         }
         let stacked = stacked_in_order(&cfg, &ids, &agents);
         let held = Held::new(n, cameras.len());
+        let camera_count = cameras.len();
         Ok(Self {
             agents: Some(Agents(agents)),
             primed: vec![false; n],
@@ -311,7 +312,7 @@ impl AgentGroup {
             fresh: false,
             stacked,
             zero_copy: false,
-            views: None,
+            views: Vec::with_capacity(camera_count),
             graveyard: Default::default(),
             owner: std::thread::current().id(),
             numpy: numpy.unbind(),
@@ -481,7 +482,7 @@ impl AgentGroup {
         }
         self.zero_copy = on;
         if !on {
-            self.views = None;
+            self.views.clear();
         }
         Ok(())
     }

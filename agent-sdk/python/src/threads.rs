@@ -12,8 +12,8 @@
 
 use crate::agent::AgentCell;
 use crate::detach::SameThread;
-use crate::frame::{Corpse, OwnedFrame};
-use crate::group::{Agents, Held, OwnedStack};
+use crate::frame::{Buried, Corpse, Owned};
+use crate::group::{Agents, Held};
 
 // SAFETY: only used to pass values into and out of `Python::detach`, whose closure runs
 // synchronously on the current thread.
@@ -40,17 +40,12 @@ unsafe impl Sync for Agents {}
 // (see the module docs).
 unsafe impl Send for Corpse {}
 
-// SAFETY: see the module docs: every thread only reads the frame (header and pixels are
-// memory nobody writes while it is held), and `Drop` moves it back to the owner thread.
-unsafe impl Send for OwnedFrame {}
+// SAFETY: see the module docs: every thread only reads the frame (or a group's stacked
+// sample: shared memory nobody writes while it is held), and `Drop` moves it back to the
+// owner thread. `Buried` is implemented for those two only.
+unsafe impl<T: Buried> Send for Owned<T> {}
 // SAFETY: as above; shared access is read-only.
-unsafe impl Sync for OwnedFrame {}
-
-// SAFETY: as `OwnedFrame`: every thread only reads the stacked sample (shared memory nobody
-// writes while it is held), and `Drop` moves it back to the group's thread.
-unsafe impl Send for OwnedStack {}
-// SAFETY: as above; shared access is read-only.
-unsafe impl Sync for OwnedStack {}
+unsafe impl<T: Buried> Sync for Owned<T> {}
 
 // SAFETY: the stacked samples a group keeps during a step are its own (shared only with
 // its agents' reader and with `OwnedStack`s); the group is used by one thread at a time

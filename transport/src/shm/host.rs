@@ -124,6 +124,31 @@ pub struct ShmHost {
     stack: Option<HostStack>,
 }
 
+/// The builder of a service of frames from the host to one reader (an agent's sensor
+/// service, the stacked sample): one publisher and one subscriber, the newest frame
+/// queued (older ones replaced), [`AGENT_BORROWED_FRAMES`] held by the reader, payloads
+/// aligned for images; user header `H`.
+pub(super) fn frame_service<H: core::fmt::Debug + ZeroCopySend>(
+    node: &Node<Svc>,
+    name: &ServiceName,
+) -> iceoryx2::service::builder::publish_subscribe::Builder<[u8], H, Svc> {
+    let builder = node
+        .service_builder(name)
+        .publish_subscribe::<[u8]>()
+        .user_header::<H>()
+        .max_publishers(1)
+        .max_subscribers(1)
+        .max_nodes(4)
+        .history_size(0)
+        .subscriber_max_buffer_size(SENSOR_QUEUE)
+        .subscriber_max_borrowed_samples(AGENT_BORROWED_FRAMES)
+        .enable_safe_overflow(true);
+    match Alignment::new(crate::wire::IMAGE_ALIGN) {
+        Some(align) => builder.payload_alignment(align),
+        None => builder,
+    }
+}
+
 /// Marks the slot of agent `id` (a *stop* listener's event id) as notified; ids the host
 /// does not serve are ignored.
 fn mark_notified(agents: &[HostAgentPorts], notified: &mut [bool], id: usize) {
@@ -233,20 +258,8 @@ impl ShmHost {
                 a.frame_bytes()
             };
             let sensors = format!("agent/{}/sensors", a.id);
-            let mut builder = node
-                .service_builder(&svc_name(session, &sensors).map_err(ice)?)
-                .publish_subscribe::<[u8]>()
-                .user_header::<SensorHeader>()
-                .max_publishers(1)
-                .max_subscribers(1)
-                .max_nodes(4)
-                .history_size(0)
-                .subscriber_max_buffer_size(SENSOR_QUEUE)
-                .subscriber_max_borrowed_samples(AGENT_BORROWED_FRAMES)
-                .enable_safe_overflow(true);
-            if let Some(align) = Alignment::new(crate::wire::IMAGE_ALIGN) {
-                builder = builder.payload_alignment(align);
-            }
+            let builder =
+                frame_service::<SensorHeader>(&node, &svc_name(session, &sensors).map_err(ice)?);
             let mut sensor_attrs = with_channels(&a.channel_layout()).map_err(ice)?;
             if stack_index.is_some() {
                 let key =

@@ -81,19 +81,29 @@ pub(super) struct HostStack {
     frame_bytes: usize,
     /// Addresses of pool chunks already written once (as `HostAgentPorts::initialised`).
     initialised: Vec<usize>,
-    /// This cycle's sample, loaned with the cycle's first stacked agent's frame.
-    current: Option<Rc<StackLoan>>,
+    /// This cycle's sample (loaned with the cycle's first stacked agent's frame) and the
+    /// blocks lent out, shared with the frame loans; one for the host's life, so that a
+    /// cycle allocates nothing but iceoryx2's loan.
+    shared: Rc<StackLoan>,
     /// The cycle of the stacked agents' frames published since the last send.
     cycle: Option<u64>,
 }
 
-/// A loaned stacked sample, shared by the frame loans of its agents.
+/// The loaned stacked sample of a cycle, shared by the frame loans of its agents.
 pub(super) struct StackLoan {
-    sample: UnsafeCell<SampleMut<Svc, [u8], u64>>,
-    /// The payload's first byte, taken once while the sample was exclusively held.
-    base: *mut u8,
+    /// Set and taken by [`HostStack`] only while no block is lent (see `taken`).
+    sample: UnsafeCell<Option<SampleMut<Svc, [u8], u64>>>,
+    /// The payload's first byte, taken while the sample was exclusively held.
+    base: Cell<*mut u8>,
     /// Per block: a frame loan writes it now (at most one at a time).
     taken: Vec<Cell<bool>>,
+}
+
+impl StackLoan {
+    /// The first block lent out, if one is.
+    fn lent(&self) -> Option<usize> {
+        self.taken.iter().position(Cell::get)
+    }
 }
 
 /// One agent's block of a [`StackLoan`], lent to its frame loan.
@@ -111,7 +121,7 @@ impl StackBlock {
         // was made), the sample lives as long as `self.loan`, and `taken` admits one
         // block of an index at a time, so no other `&mut` to these bytes exists; blocks
         // of other indices are disjoint (`len <= stride`).
-        unsafe { core::slice::from_raw_parts_mut(self.loan.base.add(self.offset), self.len) }
+        unsafe { core::slice::from_raw_parts_mut(self.loan.base.get().add(self.offset), self.len) }
     }
 }
 
@@ -142,20 +152,7 @@ impl HostStack {
             .define(&key(ATTR_STACK)?, &val(&stack_attribute(blocks, stride))?)
             .map_err(|e| ice(format!("{e:?}")))?;
         let name = svc_name(&config.session, STACK_SERVICE).map_err(ice)?;
-        let mut builder = node
-            .service_builder(&name)
-            .publish_subscribe::<[u8]>()
-            .user_header::<u64>()
-            .max_publishers(1)
-            .max_subscribers(1)
-            .max_nodes(4)
-            .history_size(0)
-            .subscriber_max_buffer_size(SENSOR_QUEUE)
-            .subscriber_max_borrowed_samples(AGENT_BORROWED_FRAMES)
-            .enable_safe_overflow(true);
-        if let Some(align) = Alignment::new(crate::wire::IMAGE_ALIGN) {
-            builder = builder.payload_alignment(align);
-        }
+        let builder = super::host::frame_service::<u64>(node, &name);
         let service = builder.create_with_attributes(&attrs).map_err(|e| {
             if e.already_exists() {
                 ShmHostCreateError::SessionInUse {
@@ -183,7 +180,11 @@ impl HostStack {
             stride,
             frame_bytes,
             initialised: Vec::with_capacity(SENSOR_POOL_SAMPLES * 2),
-            current: None,
+            shared: Rc::new(StackLoan {
+                sample: UnsafeCell::new(None),
+                base: Cell::new(core::ptr::null_mut()),
+                taken: (0..blocks).map(|_| Cell::new(false)).collect(),
+            }),
             cycle: None,
         }))
     }
@@ -204,14 +205,12 @@ impl HostStack {
                 self.blocks
             )));
         }
-        let loan = match &self.current {
-            Some(loan) => Rc::clone(loan),
-            None => {
-                let loan = Rc::new(self.loan().map_err(loan_err)?);
-                self.current = Some(Rc::clone(&loan));
-                loan
-            }
-        };
+        // SAFETY: a shared read of the option; no `&mut` to it exists (only `loan` and
+        // `send` make one, within their own bodies).
+        if unsafe { (*self.shared.sample.get()).is_none() } {
+            self.loan().map_err(loan_err)?;
+        }
+        let loan = Rc::clone(&self.shared);
         let Some(taken) = loan.taken.get(index) else {
             return Err(loan_err(format!("no block {index}")));
         };
@@ -229,7 +228,9 @@ impl HostStack {
         })
     }
 
-    fn loan(&mut self) -> Result<StackLoan, String> {
+    /// Loans this cycle's sample into [`Self::shared`] (which holds none, so no block is
+    /// lent).
+    fn loan(&mut self) -> Result<(), String> {
         let len = self.blocks * self.stride;
         let mut sample = self
             .publisher
@@ -247,12 +248,11 @@ impl HostStack {
         // of the same chunk); shared memory is never de-initialised afterwards.
         let mut sample = unsafe { sample.assume_init() };
         *sample.user_header_mut() = 0;
-        let base = sample.payload_mut().as_mut_ptr();
-        Ok(StackLoan {
-            sample: UnsafeCell::new(sample),
-            base,
-            taken: (0..self.blocks).map(|_| Cell::new(false)).collect(),
-        })
+        self.shared.base.set(sample.payload_mut().as_mut_ptr());
+        // SAFETY: the option holds no sample, so no block is lent and nothing refers to
+        // it; this is the only reference for the assignment.
+        unsafe { *self.shared.sample.get() = Some(sample) };
+        Ok(())
     }
 
     /// Notes that a stacked agent's frame of `cycle` was published: the stacked sample
@@ -265,26 +265,26 @@ impl HostStack {
     /// frames were all dropped is returned to the pool unsent). Every frame loan of the
     /// cycle must be published or dropped by now.
     pub(super) fn send(&mut self) -> Result<(), HostTransportError> {
-        let Some(loan) = self.current.take() else {
-            return Ok(());
-        };
-        let loan = Rc::try_unwrap(loan).map_err(|loan| {
-            let held = loan.taken.iter().position(Cell::get);
-            // Put it back: the frame may still be published and the cycle started again.
-            self.current = Some(loan);
-            HostTransportError::Send {
+        if let Some(held) = self.shared.lent() {
+            // The sample stays: the frame may still be published and the cycle started.
+            return Err(HostTransportError::Send {
                 what: "the stacked sample of this cycle".into(),
                 reason: format!(
-                    "the frame of stacked agent {} is still loaned: publish or drop every \
-                     frame of the cycle before start",
-                    held.map_or_else(|| "?".into(), |i| format!("#{i}"))
+                    "the frame of stacked agent #{held} is still loaned: publish or drop \
+                     every frame of the cycle before start"
                 ),
-            }
-        })?;
+            });
+        }
+        // SAFETY: no block is lent (checked above), so nothing refers to the sample; this
+        // is the only reference for the take.
+        let Some(mut sample) = (unsafe { (*self.shared.sample.get()).take() }) else {
+            return Ok(());
+        };
+        self.shared.base.set(core::ptr::null_mut());
+        // A sample whose frames were all dropped goes back to the pool unsent.
         let Some(cycle) = self.cycle.take() else {
             return Ok(());
         };
-        let mut sample = loan.sample.into_inner();
         *sample.user_header_mut() = cycle;
         sample
             .send()
@@ -300,16 +300,18 @@ impl HostStack {
 // Agent side
 // ---------------------------------------------------------------------------------------
 
-/// A received stacked sample: every stacked agent's payload of one cycle.
+/// A received stacked sample: every stacked agent's payload of one cycle. (The reader
+/// keeps a few of these and refills one nobody holds, so that a cycle allocates nothing;
+/// one it has released holds no sample: cycle 0, no payload.)
 pub struct StackSample {
-    sample: Sample<Svc, [u8], u64>,
+    sample: Option<Sample<Svc, [u8], u64>>,
 }
 
 impl core::fmt::Debug for StackSample {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.debug_struct("StackSample")
             .field("cycle", &self.cycle())
-            .field("bytes", &self.sample.payload().len())
+            .field("bytes", &self.payload().len())
             .finish()
     }
 }
@@ -317,12 +319,12 @@ impl core::fmt::Debug for StackSample {
 impl StackSample {
     /// The cycle of the frames it holds.
     pub fn cycle(&self) -> u64 {
-        *self.sample.user_header()
+        self.sample.as_ref().map_or(0, |s| *s.user_header())
     }
 
     /// Every block, one after the other.
     pub fn payload(&self) -> &[u8] {
-        self.sample.payload()
+        self.sample.as_ref().map_or(&[], |s| s.payload())
     }
 }
 
@@ -337,7 +339,11 @@ pub struct ShmStack {
     blocks: usize,
     stride: usize,
     frame_bytes: usize,
-    newest: Option<Rc<StackSample>>,
+    /// The samples received and not yet released: a few `Rc`s, each refilled once only
+    /// the pool refers to it (at most [`AGENT_BORROWED_FRAMES`] + 1).
+    pool: Vec<Rc<StackSample>>,
+    /// The pool entry of the newest sample.
+    newest: Option<usize>,
 }
 
 impl core::fmt::Debug for ShmStack {
@@ -442,6 +448,7 @@ impl ShmStack {
             blocks,
             stride,
             frame_bytes,
+            pool: Vec::with_capacity(AGENT_BORROWED_FRAMES + 1),
             newest: None,
         })
     }
@@ -463,9 +470,14 @@ impl ShmStack {
 
     /// The stacked sample of `cycle`: receives what came since the last look.
     pub(super) fn lookup(&mut self, cycle: u64) -> Result<StackLookup, AgentReceiveError> {
-        if self.newest.as_ref().is_none_or(|s| s.cycle() < cycle) {
+        if self.newest().is_none_or(|s| s.cycle() < cycle) {
+            // What nobody holds goes back first, the newest too when a newer one is
+            // waiting: it is then replaced, and its borrow would count against the
+            // frames the agents may hold.
+            let newer_waiting = self.sub.has_samples().unwrap_or(true);
+            self.release_idle(newer_waiting);
             match self.sub.receive() {
-                Ok(Some(sample)) => self.newest = Some(Rc::new(StackSample { sample })),
+                Ok(Some(sample)) => self.store(sample),
                 Ok(None) => {}
                 Err(iceoryx2::port::ReceiveError::ExceedsMaxBorrows) => {
                     return Err(AgentReceiveError::TooManyFramesHeld {
@@ -479,11 +491,60 @@ impl ShmStack {
                 }
             }
         }
-        Ok(match &self.newest {
+        Ok(match self.newest() {
             Some(s) if s.cycle() == cycle => StackLookup::Found(Rc::clone(s)),
             Some(s) if s.cycle() > cycle => StackLookup::Gone,
             _ => StackLookup::NotYet,
         })
+    }
+
+    fn newest(&self) -> Option<&Rc<StackSample>> {
+        self.newest.and_then(|i| self.pool.get(i))
+    }
+
+    /// Returns the samples nobody but the pool holds to iceoryx2 (the newest only with
+    /// `newest_too`).
+    fn release_idle(&mut self, newest_too: bool) {
+        for (i, rc) in self.pool.iter_mut().enumerate() {
+            if (newest_too || Some(i) != self.newest)
+                && let Some(s) = Rc::get_mut(rc)
+            {
+                s.sample = None;
+                if Some(i) == self.newest {
+                    self.newest = None;
+                }
+            }
+        }
+    }
+
+    /// Makes `sample` the newest, in a pool entry nobody else holds if there is one.
+    fn store(&mut self, sample: Sample<Svc, [u8], u64>) {
+        let newest = self.newest;
+        let free = (0..self.pool.len()).find(|&i| {
+            Some(i) != newest
+                && self
+                    .pool
+                    .get_mut(i)
+                    .and_then(Rc::get_mut)
+                    .is_some_and(|s| s.sample.is_none())
+        });
+        let free = free.or(newest.filter(|&i| {
+            self.pool
+                .get_mut(i)
+                .is_some_and(|rc| Rc::get_mut(rc).is_some())
+        }));
+        match free.and_then(|i| self.pool.get_mut(i).and_then(Rc::get_mut).map(|s| (i, s))) {
+            Some((i, s)) => {
+                s.sample = Some(sample);
+                self.newest = Some(i);
+            }
+            None => {
+                self.pool.push(Rc::new(StackSample {
+                    sample: Some(sample),
+                }));
+                self.newest = Some(self.pool.len() - 1);
+            }
+        }
     }
 
     /// The byte range of block `index` in a stacked sample.

@@ -4,17 +4,15 @@
 //! `k - 1`'s. The arrays hold the sample (their base is a `StackedSample`), so they stay
 //! valid as long as they live; like a frame, it counts against the held-frame limit.
 
-use std::mem::ManuallyDrop;
 use std::rc::Rc;
 use std::sync::Arc;
-use std::thread::{self, ThreadId};
 
 use pyo3::prelude::*;
 use vrsync_agent::{Agent, Frame, StackSample};
 
 use super::sink::ImageSink;
 use crate::buffer::{Layout, array};
-use crate::frame::{Corpse, Graveyard};
+use crate::frame::{Graveyard, Owned};
 
 /// The stacked payloads of one step's frames, kept until the step's images are made.
 pub(crate) struct Held {
@@ -124,37 +122,9 @@ impl Held {
     }
 }
 
-/// A stacked sample held by Python arrays, dropped only on its group's thread (as
-/// `OwnedFrame`; see `frame.rs`).
-pub(crate) struct OwnedStack {
-    sample: ManuallyDrop<Rc<StackSample>>,
-    owner: ThreadId,
-    graveyard: Arc<Graveyard>,
-}
-
-impl OwnedStack {
-    fn new(sample: Rc<StackSample>, graveyard: Arc<Graveyard>) -> Self {
-        graveyard.born();
-        Self {
-            sample: ManuallyDrop::new(sample),
-            owner: thread::current().id(),
-            graveyard,
-        }
-    }
-}
-
-impl Drop for OwnedStack {
-    fn drop(&mut self) {
-        // SAFETY: `drop` runs once, and `sample` is not used after this.
-        let sample = unsafe { ManuallyDrop::take(&mut self.sample) };
-        if thread::current().id() == self.owner {
-            drop(sample);
-            self.graveyard.died();
-        } else {
-            self.graveyard.bury(Corpse::Stack(sample));
-        }
-    }
-}
+/// A stacked sample held by Python arrays, dropped only on its group's thread (as a
+/// frame; see `frame.rs`).
+pub(crate) type OwnedStack = Owned<Rc<StackSample>>;
 
 /// The memory of a group's zero-copy images: one stacked sample of shared memory.
 #[pyclass(module = "vrsync._vrsync", name = "StackedSample", frozen)]
@@ -167,11 +137,12 @@ impl PyStackedSample {
     /// The cycle of the frames whose payloads it holds.
     #[getter]
     fn cycle(&self) -> u64 {
-        self.owned.sample.cycle()
+        self.owned.get().cycle()
     }
 }
 
-/// The step's images as arrays over `v`'s sample, one per camera of `sinks`.
+/// The step's images as arrays over `v`'s sample, one per camera of `sinks`, into `out`
+/// (empty; on an error it is left empty).
 pub(super) fn views(
     py: Python<'_>,
     v: Viewable,
@@ -179,7 +150,8 @@ pub(super) fn views(
     layout: &Held,
     n: usize,
     graveyard: &Arc<Graveyard>,
-) -> PyResult<Vec<Py<PyAny>>> {
+    out: &mut Vec<Py<PyAny>>,
+) -> PyResult<()> {
     let base = Bound::new(
         py,
         PyStackedSample {
@@ -187,11 +159,12 @@ pub(super) fn views(
         },
     )?;
     let payload = v.sample.payload();
-    let mut out = Vec::with_capacity(sinks.len());
+    out.clear();
     for (s, &(offset, stride)) in sinks.iter().zip(&layout.layout) {
         let start = v.first + offset as usize;
         let last = (n.saturating_sub(1)) * v.stride + stride * s.height as usize;
         if payload.len() < start + last {
+            out.clear();
             return Err(pyo3::exceptions::PyRuntimeError::new_err(format!(
                 "camera {:?}: the stacked sample holds {} bytes, the images need {}",
                 s.name,
@@ -209,9 +182,15 @@ pub(super) fn views(
                 payload.as_ptr().add(start).cast_mut(),
                 &layout,
                 false,
-            )?
+            )
         };
-        out.push(a.unbind());
+        match a {
+            Ok(a) => out.push(a.unbind()),
+            Err(e) => {
+                out.clear();
+                return Err(e);
+            }
+        }
     }
-    Ok(out)
+    Ok(())
 }

@@ -31,7 +31,7 @@ impl AgentGroup {
         }
         // The last step's views are the caller's now (the group's reference would count
         // against the held-frame limit).
-        self.views = None;
+        self.views.clear();
         self.held.clear();
         let zero_copy = self.zero_copy;
         let Self {
@@ -116,8 +116,15 @@ impl AgentGroup {
         let stride = self.stacked.unwrap_or(0);
         let n = self.ids.len();
         let result = match self.held.viewable(stride) {
-            Some(v) => stacked::views(py, v, &self.sink.images, &self.held, n, &self.graveyard)
-                .map(|views| self.views = Some(views)),
+            Some(v) => stacked::views(
+                py,
+                v,
+                &self.sink.images,
+                &self.held,
+                n,
+                &self.graveyard,
+                &mut self.views,
+            ),
             None => {
                 // SAFETY: the sinks point to the group's live arrays (it holds them).
                 unsafe { self.held.copy_into(&self.sink.images) };

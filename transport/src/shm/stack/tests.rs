@@ -26,6 +26,22 @@ fn connect(config: &Config, id: u32) -> ShmAgent {
     ShmAgent::connect(config, id, Duration::from_secs(20), SignalHandling::Leave).unwrap()
 }
 
+/// A host of `config`, every agent connected and joined to one reader, and the reader.
+fn joined(config: &Config) -> (ShmHost, Vec<ShmAgent>, SharedStack) {
+    let mut host = ShmHost::create(config, SignalHandling::Leave).unwrap();
+    let mut agents: Vec<ShmAgent> = config
+        .agents
+        .iter()
+        .map(|a| connect(config, a.id))
+        .collect();
+    let stack: SharedStack = Rc::new(RefCell::new(ShmStack::open(config).unwrap()));
+    for a in &mut agents {
+        a.join_stack(&stack).unwrap();
+    }
+    host.update_connections().unwrap();
+    (host, agents, stack)
+}
+
 /// One cycle: every slot's frame loaned, its payload filled with `fill(slot)` and its
 /// cycle set, published, then *start*.
 fn cycle(host: &mut ShmHost, slots: usize, cycle: u64, fill: impl Fn(usize) -> u8) {
@@ -42,14 +58,8 @@ fn cycle(host: &mut ShmHost, slots: usize, cycle: u64, fill: impl Fn(usize) -> u
 #[test]
 fn each_agents_payload_is_its_block_of_one_stacked_sample() {
     let config = config("blocks", 3, true, None);
-    let mut host = ShmHost::create(&config, SignalHandling::Leave).unwrap();
-    let mut agents: Vec<ShmAgent> = (0..3).map(|id| connect(&config, id)).collect();
-    let stack: SharedStack = Rc::new(RefCell::new(ShmStack::open(&config).unwrap()));
-    for a in &mut agents {
-        assert!(a.is_stacked());
-        a.join_stack(&stack).unwrap();
-    }
-    host.update_connections().unwrap();
+    let (mut host, mut agents, stack) = joined(&config);
+    assert!(agents.iter().all(ShmAgent::is_stacked));
     let stride = stack_stride(8 * 4 * 3);
     assert_eq!(stride, 128);
     assert_eq!(stack.borrow().stride(), stride);
@@ -70,16 +80,52 @@ fn each_agents_payload_is_its_block_of_one_stacked_sample() {
             assert_eq!(range, k * stride..k * stride + 96);
         }
     }
+    // Released samples are refilled: the reader allocated one or two, not one per cycle.
+    assert!(
+        stack.borrow().pool.len() <= 2,
+        "{}",
+        stack.borrow().pool.len()
+    );
+}
+
+#[test]
+fn a_held_frame_keeps_its_payload_while_later_cycles_come() {
+    let config = config("held-frame", 1, true, None);
+    let (mut host, mut agents, _stack) = joined(&config);
+    let agent = &mut agents[0];
+    cycle(&mut host, 1, 1, |_| 1);
+    let held = agent.try_receive_newest().unwrap().unwrap();
+    for c in 2..=6u64 {
+        cycle(&mut host, 1, c, |_| c as u8);
+        let f = agent.try_receive_newest().unwrap().unwrap();
+        assert_eq!((f.header().cycle, f.payload()[0]), (c, c as u8));
+    }
+    assert_eq!((held.header().cycle, held.payload()[0]), (1, 1));
+    assert!(held.payload().iter().all(|&b| b == 1), "never overwritten");
+    // Two held and a third wanted: refused, and the header waits for the next look.
+    let second = agent.try_receive_newest().unwrap();
+    assert!(second.is_none(), "nothing new");
+    cycle(&mut host, 1, 7, |_| 7);
+    let seventh = agent.try_receive_newest().unwrap().unwrap();
+    cycle(&mut host, 1, 8, |_| 8);
+    assert!(matches!(
+        agent.try_receive_newest(),
+        Err(AgentReceiveError::TooManyFramesHeld { .. })
+    ));
+    drop(held);
+    drop(seventh);
+    let f = agent
+        .try_receive_newest()
+        .unwrap()
+        .expect("the kept header, now paired");
+    assert_eq!((f.header().cycle, f.payload()[0]), (8, 8));
 }
 
 #[test]
 fn a_header_waits_for_its_stacked_sample_and_a_replaced_one_is_skipped() {
     let config = config("pairing", 1, true, None);
-    let mut host = ShmHost::create(&config, SignalHandling::Leave).unwrap();
-    let mut agent = connect(&config, 0);
-    let stack: SharedStack = Rc::new(RefCell::new(ShmStack::open(&config).unwrap()));
-    agent.join_stack(&stack).unwrap();
-    host.update_connections().unwrap();
+    let (mut host, mut agents, _stack) = joined(&config);
+    let agent = &mut agents[0];
     // The header is published, the stacked sample not yet (it goes at start).
     let mut loan = host.loan(0).unwrap();
     loan.parts_mut().0.cycle = 1;
