@@ -111,7 +111,7 @@ def _run_group(
             left = group.images["left"]
             if stacked:
                 # A read-only view of the host's stacked sample, agent after agent.
-                assert isinstance(left.base, vrsync._vrsync.StackedSample)
+                assert isinstance(left.base, vrsync.StackedSample)
                 assert left.base.cycle == int(group.cycles[0])
                 assert not left.flags.writeable and not left.flags.owndata
                 assert left.strides[0] >= left[0].nbytes
@@ -172,7 +172,7 @@ def test_vector_env_without_copies_views_the_stacked_images(tmp_path: Path, star
     assert envs.group.zero_copy
     obs, _ = envs.reset(seed=1)
     for _ in range(6):
-        assert isinstance(obs.base, vrsync._vrsync.StackedSample)
+        assert isinstance(obs.base, vrsync.StackedSample)
         assert envs.observation_space.contains(obs)
         obs, *_ = envs.step(np.ones(3, dtype=np.int64))
     envs.close()
