@@ -218,7 +218,7 @@ impl ShmAgent {
         };
         // A newer header replaces a kept one (released first: the kept one counts
         // against the agent's borrowed frames).
-        if self.pending.is_some() && self.has_frame() {
+        if self.pending.is_some() && self.has_header() {
             self.pending = None;
         }
         for _ in 0..2 {
@@ -263,8 +263,19 @@ impl ShmAgent {
         self.shutdown_seen
     }
 
-    /// Whether a frame is waiting (cheap, non-blocking).
+    /// Whether a frame is waiting (cheap, non-blocking): a new header, or for a kept
+    /// header of a stacked agent, a new stacked sample.
     pub fn has_frame(&self) -> bool {
+        self.has_header()
+            || (self.pending.is_some()
+                && self
+                    .stack
+                    .as_ref()
+                    .is_some_and(|(s, _)| s.borrow().has_sample()))
+    }
+
+    /// Whether a new header (a frame's sample) is waiting.
+    fn has_header(&self) -> bool {
         self.sensor_sub.has_samples().unwrap_or(true)
     }
 

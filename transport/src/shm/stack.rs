@@ -458,6 +458,11 @@ impl ShmStack {
         &self.session
     }
 
+    /// Whether a sample not received yet is waiting.
+    pub fn has_sample(&self) -> bool {
+        self.sub.has_samples().unwrap_or(true)
+    }
+
     /// The number of stacked agents.
     pub fn blocks(&self) -> usize {
         self.blocks

@@ -48,8 +48,8 @@ impl Held {
         self.uniform = true;
     }
 
-    /// Keeps agent `k`'s frame's stacked sample (a frame with a payload of its own makes
-    /// the step not viewable).
+    /// Keeps agent `k`'s frame's stacked sample (a frame with a payload of its own, copied
+    /// into the group's arrays by the caller, makes the step not viewable).
     pub(super) fn note(&mut self, k: usize, frame: &Frame) {
         let Some(slot) = self.blocks.get_mut(k) else {
             return;

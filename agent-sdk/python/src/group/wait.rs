@@ -102,9 +102,12 @@ fn take(
             WaitStartError::BadFrame { cycle, reason },
         ));
     }
+    // With zero-copy images a stacked frame's images stay where they are (a frame with a
+    // payload of its own, which a stacked group does not get, is copied as usual).
+    let viewed = held.is_some() && Agent::stacked_payload(frame).is_some();
     // SAFETY: the sink points to the group's output arrays (alive: the group holds them
     // and is exclusively borrowed), k < N, and the frame was checked.
-    unsafe { sink.write(k, frame, agent.frames_skipped(), held.is_none()) };
+    unsafe { sink.write(k, frame, agent.frames_skipped(), !viewed) };
     if let Some(held) = held {
         held.note(k, frame);
     }

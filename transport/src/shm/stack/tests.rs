@@ -212,3 +212,39 @@ fn the_config_stacks_only_agents_of_one_layout_and_only_shared_memory_ones() {
         "{e}"
     );
 }
+
+const CHILD_ENV: &str = "VRSYNC_TEST_STACK_READER_SESSION";
+
+/// A reader whose process was killed leaves its port behind; the next reader of the
+/// session still gets the stacked sample (iceoryx2 cleans a dead node's ports when the
+/// service is opened).
+#[test]
+fn a_killed_readers_place_goes_to_the_next_reader() {
+    if let Ok(session) = std::env::var(CHILD_ENV) {
+        // The child: open the reader of `session`, then die without cleaning up.
+        let mut config = config("killed", 1, true, None);
+        config.session = session;
+        let _reader = ShmStack::open(&config).unwrap();
+        // SAFETY: kills this (child) process on purpose.
+        unsafe { libc::raise(libc::SIGKILL) };
+        return;
+    }
+    let config = config("killed", 1, true, None);
+    let _host = ShmHost::create(&config, SignalHandling::Leave).unwrap();
+    let status = std::process::Command::new(std::env::current_exe().unwrap())
+        .args([
+            "--exact",
+            "shm::stack::tests::a_killed_readers_place_goes_to_the_next_reader",
+            "--test-threads=1",
+        ])
+        .env(CHILD_ENV, &config.session)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .status()
+        .unwrap();
+    assert_eq!(
+        std::os::unix::process::ExitStatusExt::signal(&status),
+        Some(libc::SIGKILL)
+    );
+    ShmStack::open(&config).expect("the dead reader's place is free again");
+}
