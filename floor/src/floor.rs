@@ -9,7 +9,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as ps_factory};
-use vrsync_transport::shm::{POLL_WINDOW_MAX, PollLength, WakeWord};
+use vrsync_transport::shm::{POLL_WINDOW_MAX, PollLength, WakeWord, wait_events};
 
 type Svc = ipc::Service;
 
@@ -180,9 +180,7 @@ impl ShmFloorHost {
                 return Err(FloorError::Timeout(timeout));
             }
             // Agents notify "back" once connected.
-            let _ = self
-                .back
-                .timed_wait(|_| {}, left.min(Duration::from_millis(100)));
+            let _ = wait_events(&self.back, |_| {}, left.min(Duration::from_millis(100)));
         }
         Ok(())
     }
@@ -235,7 +233,7 @@ impl ShmFloorHost {
                 }
             } else {
                 let left = deadline.saturating_duration_since(Instant::now());
-                let _ = self.back.timed_wait(&mut mark, left);
+                let _ = wait_events(&self.back, &mut mark, left);
             }
             if Instant::now() >= deadline && missing > 0 {
                 return Err(FloorError::Timeout(timeout));

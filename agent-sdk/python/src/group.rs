@@ -5,6 +5,9 @@
 //! for one that has not come), copying each frame into preallocated, stacked numpy
 //! arrays (one `memcpy` per image row block) and dropping it at once: no Python object
 //! per agent or frame, no frame held between steps, and no allocation of ours per step.
+//! With `zero_copy` (the host stacks the agents' images, `[transport.shm]
+//! stacked_images`) the images are not copied at all: each camera's are one view of the
+//! cycle's stacked sample (`stacked.rs`).
 
 use std::path::PathBuf;
 use std::time::Duration;
@@ -69,7 +72,8 @@ impl Drop for Agents {
 /// `sim_time_ns`, `cycles`, `collisions`, `previous_outcome`, `previous_rejected`,
 /// `frames_skipped`) hold every agent's new frame, row `k` for `ids[k]`. They are the same
 /// arrays every step, overwritten in place: copy what you keep. No frame is held between
-/// steps, so the held-frame limit never applies to a group.
+/// steps, so the held-frame limit never applies to a group — except to the images of
+/// `zero_copy`, which are views of shared memory (see there).
 #[pyclass(module = "vrsync._vrsync", name = "AgentGroup")]
 pub(crate) struct AgentGroup {
     agents: Option<Agents>,

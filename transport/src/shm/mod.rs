@@ -431,6 +431,27 @@ fn for_each_dead_node(mut f: impl FnMut(iceoryx2::node::DeadNodeView<Svc>, &str)
     });
 }
 
+/// Waits on `listener` for up to `timeout`, calling `callback` for every event that came;
+/// returns how many. iceoryx2's timed wait sets the socket's `SO_RCVTIMEO` from the timeout
+/// cut to whole microseconds, and a zero `SO_RCVTIMEO` means *no* timeout: a wait of less
+/// than 1 µs (zero included) blocked until the next notification, if one ever came (a host
+/// between two cycles of an async run stalled until its agents gave up). Such a wait only
+/// looks ([`Listener::try_wait`]).
+///
+/// # Errors
+/// iceoryx2's.
+pub fn wait_events<F: FnMut(EventActivation)>(
+    listener: &Listener<Svc>,
+    callback: F,
+    timeout: Duration,
+) -> Result<u64, iceoryx2::port::listener::ListenerWaitError> {
+    if timeout < Duration::from_micros(1) {
+        listener.try_wait(callback)
+    } else {
+        listener.timed_wait(callback, timeout)
+    }
+}
+
 /// A poll-before-sleep window (`[sync] spin_before_block_us`, or longer: see
 /// [`PollLength`]): busy-polls for its first [`POLL_SPIN_ONLY`], then gives the CPU away
 /// between looks.
@@ -630,6 +651,54 @@ mod tests {
         let mut off = PollLength::new(Duration::ZERO);
         off.record(Duration::from_micros(40));
         assert_eq!(off.length(), Duration::ZERO);
+    }
+
+    /// A wait shorter than a microsecond returns at once: iceoryx2 would have turned it
+    /// into a wait without end. A watchdog thread notifies after 10 s so that a wait that
+    /// blocks ends (and fails the test) instead of hanging.
+    #[test]
+    fn a_wait_under_a_microsecond_only_looks() {
+        let name = format!("vrsync/waittest{}/e", std::process::id());
+        let service_name = ServiceName::new(&name).unwrap();
+        let node_a = node(&format!("waittest{}.a", std::process::id())).unwrap();
+        let service = node_a
+            .service_builder(&service_name)
+            .event()
+            .create()
+            .unwrap();
+        let listener = service.listener_builder().create().unwrap();
+        let (done_tx, done_rx) = std::sync::mpsc::channel::<()>();
+        let watchdog = std::thread::spawn(move || {
+            let node_b = node(&format!("waittest{}.b", std::process::id())).unwrap();
+            let service = node_b
+                .service_builder(&ServiceName::new(&name).unwrap())
+                .event()
+                .open()
+                .unwrap();
+            let notifier = service.notifier_builder().create().unwrap();
+            if done_rx.recv_timeout(Duration::from_secs(10)).is_err() {
+                let _ = notifier.notify();
+            }
+        });
+        for timeout in [
+            Duration::ZERO,
+            Duration::from_nanos(1),
+            Duration::from_nanos(999),
+        ] {
+            let started = Instant::now();
+            assert_eq!(wait_events(&listener, |_| {}, timeout).unwrap(), 0);
+            assert!(
+                started.elapsed() < Duration::from_secs(5),
+                "{timeout:?} blocked"
+            );
+        }
+        // A real timeout still waits and ends.
+        assert_eq!(
+            wait_events(&listener, |_| {}, Duration::from_millis(2)).unwrap(),
+            0
+        );
+        done_tx.send(()).unwrap();
+        watchdog.join().unwrap();
     }
 
     #[test]

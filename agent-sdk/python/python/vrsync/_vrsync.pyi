@@ -457,7 +457,8 @@ _Entry = Command | MoveAhead | Sequence[Command | MoveAhead] | None
 class AgentGroup:
     """N agents of one session, stepped together with one call into Rust per cycle; their
     frames are written into stacked numpy arrays (row ``k`` = ``ids[k]``), overwritten
-    in place by every ``reset``/``step``."""
+    in place by every ``reset``/``step`` (with ``zero_copy`` the images are views of the
+    host's stacked sample instead)."""
 
     @staticmethod
     def connect(
