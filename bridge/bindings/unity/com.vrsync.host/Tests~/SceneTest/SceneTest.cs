@@ -234,9 +234,14 @@ namespace Vrsync.SceneTest
                 if (DateTime.UtcNow > deadline)
                     throw new TimeoutException(string.Format(
                         "{0} of {1} cycles after {2} s (phase {3})", host.CyclesCompleted, cycles, deadlineSeconds, host.Phase));
+                // A frame's deltaTime is fixed when it begins: the frame in which the host
+                // opened (its Start sets Time.captureDeltaTime, for the frames after it) may
+                // also be the one in which every agent connected, so only the frames that
+                // began with the session running count.
+                bool running = host.Phase == VrsyncHostPhase.Running;
                 player.Frame();
                 frames++;
-                if (host.Phase == VrsyncHostPhase.Running)
+                if (running)
                     frameTimes.Add(Time.deltaTime);
             }
             float captureDeltaTime = Time.captureDeltaTime;
